@@ -1,0 +1,77 @@
+# The two commands for users: `sudo make experiment` and `sudo make test`.
+# Both install what they need first (make setup), idempotently.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+# Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
+APT_PACKAGES := iproute2 nftables tcpdump tshark babeld nanomsg-utils iputils-ping \
+	iperf3 procps python3-venv
+# Only for `make vm-test` (netem under Debian's stock kernel).
+VM_APT_PACKAGES := qemu-system-x86 linux-image-amd64 busybox-static
+
+NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
+
+.PHONY: setup apt venv test unit integration experiment experiment-short bench lint format vm-test clean
+
+setup: apt venv
+
+apt:
+	@missing=$$(for p in $(APT_PACKAGES); do \
+		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		[ "$$(id -u)" = 0 ] || { echo "missing Debian packages ($$missing): run 'sudo make setup'"; exit 2; }; \
+		echo "installing Debian packages: $$missing"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+	fi
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt
+	@[ -x $(PY) ] || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+	@touch $(STAMP)
+
+test: setup
+	$(NEED_ROOT)
+	$(PY) -m pytest -q tests/unit tests/integration
+
+unit: venv
+	$(PY) -m pytest -q tests/unit
+
+integration: setup
+	$(NEED_ROOT)
+	$(PY) -m pytest -q tests/integration
+
+experiment: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/paper.toml --out results/paper --resume
+	$(VENV)/bin/testbed report results/paper
+
+experiment-short: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/short.toml --out results/short --resume
+	$(VENV)/bin/testbed report results/short
+
+bench: setup
+	$(NEED_ROOT)
+	$(PY) -m testbed.bench
+
+lint: venv
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/ruff check .
+
+format: venv
+	$(VENV)/bin/ruff format .
+	$(VENV)/bin/ruff check --fix .
+
+vm-test: setup
+	$(NEED_ROOT)
+	bash tests/vm/run-netem-tests
+
+clean:
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed clean
