@@ -1,0 +1,44 @@
+"""`testbed clean`: remove what dead or abandoned testbeds left behind, and only that.
+
+A testbed is found by its names (topology.names) and its state file (topology.state):
+- a state file whose owner process is gone and which was never handed over as persistent
+  (a run or test that crashed or was SIGKILLed, or a `net up` killed half-way);
+- namespaces matching our pattern that have no state file at all (a state dir wiped by hand);
+- a state file of a persistent testbed whose namespaces are gone (stale record).
+Persistent testbeds that are up, and testbeds whose owner still runs, are left alone unless
+`everything` is set (`testbed clean --all`).
+"""
+
+import logging
+
+from topology import names, netns, state
+from topology.network import destroy
+
+log = logging.getLogger(__name__)
+
+
+def leftovers(everything: bool = False) -> list[str]:
+    """Names of the testbeds that clean would remove."""
+    found = set()
+    recorded = set(state.names())
+    for name in recorded:
+        st = state.read(name)
+        if everything or st is None or st.abandoned() or st.persistent and not netns.exists(names.medium_ns(name)):
+            found.add(name)
+    for ns in netns.list_names():
+        parsed = names.parse_ns(ns)
+        if parsed and (everything or parsed[0] not in recorded):
+            found.add(parsed[0])
+    return sorted(found)
+
+
+def clean(everything: bool = False) -> list[str]:
+    removed = []
+    for name in leftovers(everything):
+        with state.locked(name):
+            # Re-check under the lock: the owner may have finished a bring-up meanwhile.
+            if name in leftovers(everything):
+                destroy(name)
+                removed.append(name)
+                log.info("removed testbed %s", name)
+    return removed

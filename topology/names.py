@@ -1,0 +1,86 @@
+"""Names are a contract between the code that creates kernel objects and the code that cleans.
+
+Every namespace a testbed creates carries the testbed's name: `tb-NAME-m` is the medium,
+`tb-NAME-rK` is robot K. `testbed clean` finds leftovers by `NAMESPACE_PATTERN` and nothing
+else, so the two sides share this module. Interfaces live only inside those namespaces (none in
+the host), so their names need no run id; they fit in 15 characters for up to 999 robots.
+"""
+
+import re
+
+PREFIX = "tb"
+NAME_PATTERN = re.compile(r"^[a-z][a-z0-9]{0,9}$")
+NAMESPACE_PATTERN = re.compile(rf"^{PREFIX}-(?P<name>[a-z][a-z0-9]{{0,9}})-(?P<role>m|r\d+)$")
+MAX_ROBOTS = 999
+
+# Inside a robot namespace.
+ROBOT_IFACE = "wlan0"
+
+
+def check_name(name: str) -> str:
+    """Return `name` if it is a valid testbed name, else raise ValueError."""
+    if not NAME_PATTERN.match(name):
+        raise ValueError(
+            f"testbed name {name!r} must be 1-10 characters, lowercase letters and digits, "
+            "starting with a letter"
+        )
+    return name
+
+
+def medium_ns(name: str) -> str:
+    return f"{PREFIX}-{name}-m"
+
+
+def robot_ns(name: str, k: int) -> str:
+    return f"{PREFIX}-{name}-r{k}"
+
+
+def parse_ns(ns: str) -> tuple[str, str] | None:
+    """(testbed name, role) of one of our namespaces, or None for anything else."""
+    m = NAMESPACE_PATTERN.match(ns)
+    return (m["name"], m["role"]) if m else None
+
+
+def robot_addr(k: int) -> str:
+    """Robot k (1-based) is 10.0.0.k; past 254 the third octet counts up (10.0.1.1, ...)."""
+    if not 1 <= k <= MAX_ROBOTS:
+        raise ValueError(f"robot number {k} out of range 1..{MAX_ROBOTS}")
+    hi, lo = divmod(k - 1, 254)
+    return f"10.0.{hi}.{lo + 1}"
+
+
+def robot_of_addr(addr: str) -> int | None:
+    """Inverse of robot_addr, None if addr is not a robot address."""
+    parts = addr.split(".")
+    if len(parts) != 4 or parts[:2] != ["10", "0"]:
+        return None
+    try:
+        hi, lo = int(parts[2]), int(parts[3])
+    except ValueError:
+        return None
+    if not 1 <= lo <= 254 or hi < 0:
+        return None
+    k = hi * 254 + lo
+    return k if k <= MAX_ROBOTS else None
+
+
+# Inside the medium namespace: robot K's bridge and the port that leads to its wlan0.
+def bridge(k: int) -> str:
+    return f"br{k}"
+
+
+def robot_port(k: int) -> str:
+    return f"rp{k}"
+
+
+def link_end(i: int, j: int) -> str:
+    """The end of link i-j that sits in bridge i; frames leaving through it go i -> j."""
+    return f"l{i}x{j}"
+
+
+LINK_END_PATTERN = re.compile(r"^l(\d+)x(\d+)$")
+
+
+def parse_link_end(ifname: str) -> tuple[int, int] | None:
+    m = LINK_END_PATTERN.match(ifname)
+    return (int(m[1]), int(m[2])) if m else None

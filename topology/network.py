@@ -1,0 +1,282 @@
+"""A testbed's network: robot namespaces on the radio medium, captures and routing daemons.
+
+Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kernel objects:
+
+1. claim the name: the state file is created exclusively *before* anything else, so a
+   crash at any later point leaves a record that `testbed clean` can act on;
+2. create the medium namespace and one namespace per robot (names from topology.names);
+3. per robot, a bridge in the medium and a veth whose far end is the robot's wlan0
+   (topology.medium), addressed 10.0.0.K/32 with the sysctls DESIGN.md lists;
+4. the links the range model wants for the initial positions, with their impairments;
+5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing).
+
+Teardown (`destroy`) is the same function for a clean exit, an exception during bring-up,
+`testbed net down` and `testbed clean`: stop the recorded processes (SIGTERM, then SIGKILL),
+then any other process still inside our namespaces, then remove the namespaces (which takes
+every interface with them) and the state. It works from names and the state file alone, so
+it needs nothing from the process that built the testbed.
+
+Moving robots recomputes the wanted links and applies only the difference.
+"""
+
+import logging
+import os
+import shutil
+import subprocess
+import time
+
+from testbed.errors import TestbedError, UsageError
+from topology import capture, names, netns, processes, ranges, routing, state
+from topology.impair import MissingKernelFeature
+from topology.medium import Medium
+from topology.spec import Impairment, NetworkSpec, Position
+
+log = logging.getLogger(__name__)
+
+Pair = tuple[int, int]
+
+
+class Network:
+    """One testbed's network. Use as a context manager, or up()/down() explicitly."""
+
+    def __init__(self, spec: NetworkSpec, *, persistent: bool = False):
+        self.spec = spec
+        self.persistent = persistent
+        self.positions: list[Position] = list(spec.positions)
+        self.medium = Medium(spec.name, spec.time_scale)
+        self.current: dict[Pair, Impairment] = {}
+        self.state: state.TestbedState | None = None
+        self.children: dict[int, subprocess.Popen] = {}
+        self._owner = False
+
+    # -- names ------------------------------------------------------------------------------
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def robot_ns(self, k: int) -> str:
+        self._check_robot(k)
+        return names.robot_ns(self.name, k)
+
+    @property
+    def state_dir(self) -> str:
+        return state.run_dir(self.name)
+
+    def _check_robot(self, k: int) -> None:
+        if not 1 <= k <= self.spec.robots:
+            raise UsageError(f"testbed {self.name} has robots r1..r{self.spec.robots}, not r{k}")
+
+    # -- bring-up ---------------------------------------------------------------------------
+
+    def __enter__(self) -> "Network":
+        self.up()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.down()
+
+    def up(self) -> None:
+        preflight(self.spec)
+        self.state = state.TestbedState.new(self.spec)
+        try:
+            state.create(self.name, self.state)
+        except FileExistsError:
+            raise UsageError(f"testbed name {self.name!r} is already in use") from None
+        self._owner = True
+        try:
+            self._build()
+        except BaseException:
+            self.down()
+            raise
+        if self.persistent:
+            self.state.persistent = True
+            self._save()
+
+    def _build(self) -> None:
+        t0 = time.perf_counter()
+        os.makedirs(self.state_dir, exist_ok=True)
+        for ns in [names.medium_ns(self.name)] + [
+            names.robot_ns(self.name, k) for k in self.spec.robot_ids()
+        ]:
+            try:
+                netns.create(ns)
+            except FileExistsError:
+                raise UsageError(f"namespace {ns} already exists (try `testbed clean`)") from None
+        self.medium.open()
+        self.medium.setup()
+        if not self.spec.impairment.is_none:
+            try:
+                self.medium.impairer.check(self.spec.impairment)
+            except MissingKernelFeature as exc:
+                raise UsageError(str(exc)) from None
+            if not self.medium.impairer.netem and shutil.which("nft") is None:
+                raise UsageError("loss without sch_netem needs nftables: `nft` is not installed")
+        for k in self.spec.robot_ids():
+            self.medium.add_robot(k)
+        self._apply_positions()
+        if self.spec.capture_dir:
+            self._start_captures()
+        self._start_routing()
+        log.info(
+            "%s: %d robots, %d links up in %.0f ms",
+            self.name, self.spec.robots, len(self.current), 1000 * (time.perf_counter() - t0),
+        )  # fmt: skip
+
+    def _start_captures(self) -> None:
+        cdir = self.spec.capture_dir
+        os.makedirs(cdir, exist_ok=True)
+        started = []
+        for k in self.spec.robot_ids():
+            logp = os.path.join(self.state_dir, f"r{k}.tcpdump.log")
+            with open(logp, "w") as logf:
+                proc = self.spawn(k, capture.tcpdump_argv(cdir, k), role="tcpdump",
+                                  stdout=subprocess.DEVNULL, stderr=logf)  # fmt: skip
+            started.append((logp, proc))
+        for logp, proc in started:
+            try:
+                capture.wait_ready(logp, proc)
+            except RuntimeError as exc:
+                raise TestbedError(f"packet capture: {exc}") from None
+
+    def _start_routing(self) -> None:
+        for k in self.spec.robot_ids():
+            argv = routing.argv_for(self.spec.routing, k, self.state_dir, self.spec.time_scale)
+            if argv is None:
+                continue
+            logp = os.path.join(self.state_dir, f"r{k}.{self.spec.routing}.log")
+            with open(logp, "w") as logf:
+                self.spawn(k, argv, role=self.spec.routing, stdout=logf, stderr=subprocess.STDOUT)
+
+    # -- processes --------------------------------------------------------------------------
+
+    def spawn(self, k: int, argv: list[str], *, role: str, **popen_kwargs) -> subprocess.Popen:
+        """Start argv inside robot k's namespace; it is stopped at teardown."""
+        self._check_robot(k)
+        proc = processes.spawn(self.robot_ns(k), argv, **popen_kwargs)
+        self.children[proc.pid] = proc
+        with state.locked(self.name):
+            self.state = state.read(self.name) or self.state
+            self.state.processes.append(processes.record(proc, k, role))
+            state.write(self.name, self.state)
+        return proc
+
+    def exec(self, k: int, argv: list[str], **run_kwargs) -> subprocess.CompletedProcess:
+        """Run argv inside robot k's namespace to completion."""
+        self._check_robot(k)
+        return subprocess.run(netns.popen_argv(self.robot_ns(k), argv), **run_kwargs)
+
+    # -- positions and links ----------------------------------------------------------------
+
+    def wanted(self) -> dict[Pair, Impairment]:
+        links = ranges.wanted_links(self.positions, self.spec.comm_range, self.spec.range_model)
+        base = self.spec.impairment
+        return {p: base.combined(imp) for p, imp in links.items()}
+
+    def _apply_positions(self) -> tuple[list[Pair], list[Pair]]:
+        wanted = self.wanted()
+        add, remove, change = ranges.diff(self.current, wanted)
+        for i, j in remove:
+            self.medium.remove_link(i, j)
+            del self.current[(i, j)]
+        for i, j in add:
+            self.medium.add_link(i, j)
+            self.current[(i, j)] = Impairment()
+        for p in add + change:
+            if wanted[p] != self.current[p]:
+                self.medium.set_link_impairment(*p, wanted[p])
+                self.current[p] = wanted[p]
+        return add, remove
+
+    def move(self, k: int, xy: Position) -> tuple[list[Pair], list[Pair]]:
+        """Move robot k; links follow before this returns. Returns (added, removed)."""
+        self._check_robot(k)
+        self.positions[k - 1] = (float(xy[0]), float(xy[1]))
+        return self._moved()
+
+    def set_positions(self, positions: list[Position]) -> tuple[list[Pair], list[Pair]]:
+        """Move every robot at once (one world step). Returns (added, removed) links."""
+        if len(positions) != self.spec.robots:
+            raise ValueError(f"{len(positions)} positions for {self.spec.robots} robots")
+        self.positions = [(float(x), float(y)) for x, y in positions]
+        return self._moved()
+
+    def _moved(self) -> tuple[list[Pair], list[Pair]]:
+        diff = self._apply_positions()
+        if self.persistent:
+            self._save()
+        return diff
+
+    def links(self) -> set[Pair]:
+        return set(self.current)
+
+    def _save(self) -> None:
+        with state.locked(self.name):
+            st = state.read(self.name) or self.state
+            st.positions = [list(p) for p in self.positions]
+            st.persistent = self.state.persistent
+            self.state = st
+            state.write(self.name, st)
+
+    # -- attach, detach, teardown -----------------------------------------------------------
+
+    @classmethod
+    def attach(cls, name: str) -> "Network":
+        """Take up an existing testbed (made by `testbed net up`) from its state file."""
+        st = state.read(name)
+        if st is None or not netns.exists(names.medium_ns(name)):
+            raise UsageError(f"no testbed named {name!r} is up")
+        net = cls(state.spec_from_dict(st.spec), persistent=st.persistent)
+        net.state = st
+        net.positions = [tuple(p) for p in st.positions]
+        net.medium.open()
+        kernel = net.medium.kernel_links()
+        wanted = net.wanted()
+        net.current = {p: wanted.get(p, Impairment()) for p in kernel}
+        return net
+
+    def detach(self) -> None:
+        """Let go of the testbed without tearing it down."""
+        self.medium.close()
+        self._owner = False
+
+    def down(self) -> None:
+        self.medium.close()
+        destroy(self.name, self.children)
+        self._owner = False
+
+
+def preflight(spec: NetworkSpec) -> None:
+    """What can be checked before touching the kernel: privileges and tools."""
+    if os.geteuid() != 0:
+        raise UsageError("network namespaces need root: run this under sudo")
+    missing = [t for t in ("ip",) if shutil.which(t) is None]
+    if spec.capture_dir and shutil.which("tcpdump") is None:
+        missing.append("tcpdump")
+    missing += routing.missing_tools(spec.routing)
+    if missing:
+        raise UsageError(f"missing tool(s): {', '.join(missing)} (run `sudo make setup`)")
+
+
+def our_namespaces(name: str) -> list[str]:
+    return [ns for ns in netns.list_names() if (names.parse_ns(ns) or ("",))[0] == name]
+
+
+def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> None:
+    """Remove everything testbed `name` made: processes, namespaces, run dir, state."""
+    st = state.read(name)
+    namespaces = our_namespaces(name)
+    if st is not None:
+        processes.stop(st.processes, children)
+    stray = [
+        pid for ns in namespaces for pid in processes.pids_in_namespace(ns) if pid != os.getpid()
+    ]
+    if stray:
+        processes.stop(
+            [state.ProcessRecord(pid, state.proc_start_time(pid), 0, "stray") for pid in stray],
+            children,
+        )
+    for ns in namespaces:
+        netns.remove(ns)
+    shutil.rmtree(state.run_dir(name), ignore_errors=True)
+    state.remove(name)

@@ -1,0 +1,64 @@
+"""The routing choice, behind one small interface: what to run in each robot's namespace.
+
+A routing protocol is an argv per robot (or none). The Network starts it with the other
+per-robot processes, records its pid and stops it at teardown, so adding a protocol means
+adding one function here.
+
+- none:  nothing; routes are the user's business (only direct neighbours on a /32 need none
+         either: they still need a route, so with `none` even one hop needs `ip route add`).
+- babel: Debian's babeld (RFC 8966), proactive, on wlan0 declared *wireless*: that turns off
+         split horizon, which would be wrong on a medium where neighbours of a robot need not
+         hear each other, and uses ETX link costs. Hello interval scales with the time scale.
+- aodv:  this project's AODV daemon (python -m aodv), on demand.
+"""
+
+import shutil
+import sys
+from collections.abc import Callable
+
+from topology import names
+
+BABEL_HELLO_S = 1.0  # babeld's wireless default is 4 s; 1 s converges a 5-hop chain in ~5 s
+
+
+def babel_argv(k: int, run_dir: str, time_scale: float) -> list[str]:
+    hello = max(0.05, BABEL_HELLO_S / time_scale)
+    return [
+        "babeld",
+        "-I", f"{run_dir}/r{k}.babeld.pid",
+        "-S", f"{run_dir}/r{k}.babeld.state",
+        "-C", f"interface {names.ROBOT_IFACE} type wireless hello-interval {hello:.2f}",
+        "-C", "redistribute local ip 10.0.0.0/16 ge 32 allow",
+        "-C", "redistribute local deny",
+        names.ROBOT_IFACE,
+    ]  # fmt: skip
+
+
+def aodv_argv(k: int, run_dir: str, time_scale: float) -> list[str]:
+    return [
+        sys.executable, "-m", "aodv",
+        "--robot", f"r{k}",
+        "--iface", names.ROBOT_IFACE,
+        "--time-scale", repr(time_scale),
+        "--stats", f"{run_dir}/r{k}.aodv.json",
+    ]  # fmt: skip
+
+
+ArgvBuilder = Callable[[int, str, float], list[str]]
+
+PROTOCOLS: dict[str, ArgvBuilder | None] = {
+    "none": None,
+    "babel": babel_argv,
+    "aodv": aodv_argv,
+}
+
+REQUIRED_TOOLS = {"none": [], "babel": ["babeld"], "aodv": []}
+
+
+def missing_tools(routing: str) -> list[str]:
+    return [t for t in REQUIRED_TOOLS.get(routing, []) if shutil.which(t) is None]
+
+
+def argv_for(routing: str, k: int, run_dir: str, time_scale: float) -> list[str] | None:
+    builder = PROTOCOLS[routing]
+    return builder(k, run_dir, time_scale) if builder else None

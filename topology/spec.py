@@ -1,0 +1,138 @@
+"""A testbed described as plain data: robots, positions, range model, impairments, routing.
+
+Nothing here touches the kernel (STYLE.md example 5: describe first, build second). The
+`layout_positions` helpers turn the CLI's `--layout` into positions.
+"""
+
+import math
+import random
+from dataclasses import dataclass, field
+
+from topology import names
+
+ROUTINGS = ("none", "babel", "aodv")
+RANGE_MODELS = ("disc", "lossy")
+LAYOUTS = ("chain", "grid", "random")
+
+
+@dataclass(frozen=True)
+class Impairment:
+    """What one direction of one link does to frames: loss, delay, jitter, rate."""
+
+    loss_pct: float = 0.0
+    delay_ms: float = 0.0
+    jitter_ms: float = 0.0
+    rate_kbit: float = 0.0  # 0: unlimited
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.loss_pct <= 100.0:
+            raise ValueError(f"loss {self.loss_pct}% is not in 0..100")
+        for what, value in (
+            ("delay", self.delay_ms),
+            ("jitter", self.jitter_ms),
+            ("rate", self.rate_kbit),
+        ):
+            if value < 0 or not math.isfinite(value):
+                raise ValueError(f"{what} {value} must be a finite number >= 0")
+
+    @property
+    def is_none(self) -> bool:
+        return self == Impairment()
+
+    @property
+    def needs_netem(self) -> bool:
+        """Loss alone can go through nftables; anything timed needs sch_netem."""
+        return self.delay_ms > 0 or self.jitter_ms > 0 or self.rate_kbit > 0
+
+    def scaled(self, time_scale: float) -> "Impairment":
+        """Emulated time runs time_scale times faster than the wall clock: so do delays."""
+        if time_scale == 1.0:
+            return self
+        return Impairment(
+            loss_pct=self.loss_pct,
+            delay_ms=self.delay_ms / time_scale,
+            jitter_ms=self.jitter_ms / time_scale,
+            rate_kbit=self.rate_kbit * time_scale,
+        )
+
+    def combined(self, other: "Impairment") -> "Impairment":
+        """Both impairments in series: losses compound, delays add, the slower rate wins."""
+        keep = (1 - self.loss_pct / 100) * (1 - other.loss_pct / 100)
+        rates = [r for r in (self.rate_kbit, other.rate_kbit) if r > 0]
+        return Impairment(
+            loss_pct=round(100 * (1 - keep), 6),
+            delay_ms=self.delay_ms + other.delay_ms,
+            jitter_ms=self.jitter_ms + other.jitter_ms,
+            rate_kbit=min(rates) if rates else 0.0,
+        )
+
+
+Position = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """Everything needed to build one testbed's network."""
+
+    name: str
+    positions: tuple[Position, ...]
+    comm_range: float
+    routing: str = "none"
+    impairment: Impairment = field(default_factory=Impairment)
+    range_model: str = "disc"
+    capture_dir: str | None = None
+    time_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        names.check_name(self.name)
+        if not self.positions:
+            raise ValueError("a testbed needs at least one robot")
+        if len(self.positions) > names.MAX_ROBOTS:
+            raise ValueError(f"at most {names.MAX_ROBOTS} robots")
+        object.__setattr__(
+            self, "positions", tuple((float(x), float(y)) for x, y in self.positions)
+        )
+        if not (self.comm_range > 0 and math.isfinite(self.comm_range)):
+            raise ValueError(
+                f"communication range must be a positive number, not {self.comm_range}"
+            )
+        if self.routing not in ROUTINGS:
+            raise ValueError(
+                f"unknown routing {self.routing!r} (choose from {', '.join(ROUTINGS)})"
+            )
+        if self.range_model not in RANGE_MODELS:
+            raise ValueError(
+                f"unknown range model {self.range_model!r} (choose from {', '.join(RANGE_MODELS)})"
+            )
+        if not (self.time_scale > 0 and math.isfinite(self.time_scale)):
+            raise ValueError(f"time scale must be a positive number, not {self.time_scale}")
+
+    @property
+    def robots(self) -> int:
+        return len(self.positions)
+
+    def robot_ids(self) -> range:
+        return range(1, self.robots + 1)
+
+
+def layout_positions(
+    layout: str, robots: int, spacing: float, seed: int | None = None
+) -> list[Position]:
+    """Positions for `robots` robots: a chain along x, a square-ish grid, or uniform random
+    in a square whose side grows with the team so that density stays that of `spacing`."""
+    if robots < 1:
+        raise ValueError("a testbed needs at least one robot")
+    if not (spacing > 0 and math.isfinite(spacing)):
+        raise ValueError(f"spacing must be a positive number, not {spacing}")
+    if layout == "chain":
+        return [(i * spacing, 0.0) for i in range(robots)]
+    if layout == "grid":
+        cols = math.ceil(math.sqrt(robots))
+        return [((i % cols) * spacing, (i // cols) * spacing) for i in range(robots)]
+    if layout == "random":
+        rng = random.Random(seed)
+        side = spacing * math.sqrt(robots)
+        return [
+            (round(rng.uniform(0, side), 3), round(rng.uniform(0, side), 3)) for _ in range(robots)
+        ]
+    raise ValueError(f"unknown layout {layout!r} (choose from {', '.join(LAYOUTS)})")
