@@ -23,7 +23,8 @@ def leftovers(everything: bool = False) -> list[str]:
     recorded = set(state.names())
     for name in recorded:
         st = state.read(name)
-        if everything or st is None or st.abandoned() or st.persistent and not netns.exists(names.medium_ns(name)):
+        stale = st is not None and st.persistent and not netns.exists(names.medium_ns(name))
+        if everything or st is None or st.abandoned() or stale:
             found.add(name)
     for ns in netns.list_names():
         parsed = names.parse_ns(ns)

@@ -80,7 +80,8 @@ def nft_unloss_rules(ifname: str) -> str:
 NFT_SETUP = (
     f"add table bridge {NFT_TABLE}\n"
     f"add map bridge {NFT_TABLE} {NFT_MAP} {{ type ifname : verdict; }}\n"
-    f"add chain bridge {NFT_TABLE} forward {{ type filter hook forward priority 0; policy accept; }}\n"
+    f"add chain bridge {NFT_TABLE} forward"
+    " { type filter hook forward priority 0; policy accept; }\n"
     f"flush chain bridge {NFT_TABLE} forward\n"  # idempotent when a second process attaches
     f"add rule bridge {NFT_TABLE} forward oifname vmap @{NFT_MAP}\n"
 )

@@ -1,5 +1,6 @@
 """Starting programs inside a robot's namespace and stopping them by their recorded pids."""
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -58,10 +59,8 @@ def stop(
 
 
 def _signal(pid: int, sig: int) -> None:
-    try:
+    with contextlib.suppress(ProcessLookupError):
         os.kill(pid, sig)
-    except ProcessLookupError:
-        pass
 
 
 def pids_in_namespace(ns: str) -> list[int]:
