@@ -1,0 +1,621 @@
+"""`testbed sweep FILE --out DIR`: run every run of a sweep file, resumably.
+
+Theory of operation. The sweep file expands (testbed.sweepfile) into planned runs, each with an
+id derived from its parameters. Run `R` lives in `DIR/runs/R/` and is *done* iff
+`DIR/runs/R/result.json` exists: `testbed run` writes that file last and atomically (see
+notes/run-results.md), so the file system alone says what is finished. `plan` sorts the planned
+runs into done, to do (absent, or partial: a directory without result.json, deleted before the
+run is redone) and skipped (points this machine cannot run, e.g. delay without sch_netem, with
+the reason recorded).
+
+Each run is a child process, `testbed run ... --out DIR/runs/R`, with its output in
+`DIR/logs/R.log`. Children run in their own session (a Ctrl-C in the terminal reaches only
+the sweep, which forwards it) and with PR_SET_PDEATHSIG=SIGTERM, so a SIGKILLed sweep takes its
+runs down with it instead of leaving them writing into directories a resumed sweep redoes.
+On SIGINT or SIGTERM the sweep starts nothing new, forwards SIGINT to each running child,
+waits, escalates to SIGTERM and then SIGKILL of the child's process group, and exits 130.
+A run that finishes during that grace period still counts.
+
+Concurrency starts at --jobs (default from the core count) and backs off: a run that reports
+deadline_miss_fraction above 1% while other runs shared the machine lowers the concurrency by
+one, and is redone once at the lower concurrency (a run that misses deadlines alone is kept:
+more concurrency would not help it). `DIR/sweep.json` holds the expanded plan and each run's
+status, rewritten atomically whenever something changes; a lock file keeps two sweeps out of
+one directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ctypes
+import fcntl
+import functools
+import json
+import logging
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from testbed import sweepfile
+from testbed.errors import TestbedError, UsageError
+from testbed.sweepfile import PlannedRun
+
+log = logging.getLogger(__name__)
+
+DEADLINE_MISS_LIMIT = 0.01
+# Environment variable naming the command that runs one run (tests use a stand-in program).
+RUN_COMMAND_ENV = "TESTBED_SWEEP_RUN_COMMAND"
+# Config keys that are passed to `testbed run` as --flag VALUE (booleans as bare flags).
+_FLAGS = {
+    "robots": "--robots",
+    "comm_range": "--comm-range",
+    "laser_range": "--laser-range",
+    "seed": "--seed",
+    "time_scale": "--time-scale",
+    "routing": "--routing",
+    "max_steps": "--max-steps",
+    "loss_pct": "--loss-pct",
+    "delay_ms": "--delay-ms",
+    "map": "--map",
+    "capture": "--capture",
+}
+# Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
+GRACE_INT = 30.0
+GRACE_TERM = 10.0
+_PR_SET_PDEATHSIG = 1
+
+
+# ---------------------------------------------------------------- planning (pure, file system)
+
+
+def run_dir(out: Path, run_id: str) -> Path:
+    return out / "runs" / run_id
+
+
+def is_done(out: Path, run_id: str) -> bool:
+    """A run is done iff its result.json exists (the contract's completion marker)."""
+    return (run_dir(out, run_id) / "result.json").is_file()
+
+
+@dataclass
+class Plan:
+    done: list[PlannedRun] = field(default_factory=list)
+    todo: list[PlannedRun] = field(default_factory=list)
+    partial: list[PlannedRun] = field(default_factory=list)  # subset of todo: dir to delete
+    skipped: dict[str, str] = field(default_factory=dict)  # run id -> reason
+
+
+def skip_reason(run: PlannedRun, netem: bool) -> str | None:
+    """Why this machine cannot do `run`, or None."""
+    if run.config["delay_ms"] > 0 and not netem:
+        return "delay needs the sch_netem kernel module, which this kernel lacks"
+    return None
+
+
+def plan(runs: list[PlannedRun], out: Path, netem: bool) -> Plan:
+    """Sort planned runs into done / to do / skipped by what is on disk."""
+    p = Plan()
+    for run in runs:
+        reason = skip_reason(run, netem)
+        if is_done(out, run.run_id):
+            p.done.append(run)
+        elif reason:
+            p.skipped[run.run_id] = reason
+        else:
+            p.todo.append(run)
+            if run_dir(out, run.run_id).exists():
+                p.partial.append(run)
+    return p
+
+
+def config_mismatch(out: Path, run: PlannedRun) -> str | None:
+    """How a finished run's recorded config differs from the planned one, or None."""
+    try:
+        recorded = json.loads((run_dir(out, run.run_id) / "result.json").read_text())["config"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None  # unreadable results are the report's problem, not a reason to stop
+    for key, want in run.config.items():
+        if key in recorded and recorded[key] != want:
+            return f"{key} is {recorded[key]!r} there, {want!r} in the sweep file"
+    return None
+
+
+def default_jobs(cores: int | None = None) -> int:
+    """Concurrent runs to start with: half the cores (a run is a world plus N robots)."""
+    cores = cores or os.cpu_count() or 1
+    return max(1, cores // 2)
+
+
+def netem_available() -> bool:
+    """True if a netem qdisc can be made (tried in a throwaway network namespace)."""
+    try:
+        r = subprocess.run(
+            [
+                "unshare",
+                "--net",
+                "tc",
+                "qdisc",
+                "add",
+                "dev",
+                "lo",
+                "root",
+                "netem",
+                "delay",
+                "1ms",
+            ],
+            capture_output=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return r.returncode == 0
+
+
+def run_command() -> list[str]:
+    """The argv prefix that runs one run: `testbed run` from this interpreter's environment."""
+    override = os.environ.get(RUN_COMMAND_ENV)
+    if override:
+        return shlex.split(override)
+    script = Path(sys.executable).parent / "testbed"
+    if script.is_file() and os.access(script, os.X_OK):
+        return [str(script), "run"]
+    return [
+        sys.executable,
+        "-c",
+        "import sys; from testbed.cli import main; sys.exit(main())",
+        "run",
+    ]
+
+
+def run_argv(prefix: list[str], config: dict, out_dir: Path) -> list[str]:
+    """The full command line for one run (the one place that knows `testbed run`'s flags)."""
+    argv = list(prefix)
+    for key, flag in _FLAGS.items():
+        value = config.get(key)
+        if value is None or value is False:
+            continue
+        if value is True:
+            argv.append(flag)
+        else:
+            argv += [flag, sweepfile.fmt(value) if isinstance(value, float) else str(value)]
+    return argv + ["--out", str(out_dir)]
+
+
+# ---------------------------------------------------------------- progress
+
+
+def _hms(seconds: float) -> str:
+    seconds = int(max(0, seconds))
+    h, rem = divmod(seconds, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h{m:02d}m{s:02d}s" if h else f"{m}m{s:02d}s"
+
+
+class Progress:
+    """A plain-text progress bar with ETA on a stream: \\r-updated on a TTY, else one line per
+    finished run."""
+
+    WIDTH = 24
+
+    def __init__(self, total: int, stream=None):
+        self.total = total
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.start = time.monotonic()
+        self.durations: dict[int, list[float]] = {}  # robots -> wall times this session
+        self._last = ""
+
+    def record(self, robots: int, seconds: float) -> None:
+        self.durations.setdefault(robots, []).append(seconds)
+
+    def eta(self, remaining: list[PlannedRun], running: int, jobs: int) -> float | None:
+        """Seconds left: each remaining run costs the mean time of finished runs with the same
+        team size (or the overall mean), shared over the concurrency."""
+        all_d = [d for ds in self.durations.values() for d in ds]
+        if not all_d:
+            return None
+        overall = sum(all_d) / len(all_d)
+        total = 0.0
+        for run in remaining:
+            ds = self.durations.get(run.config["robots"])
+            total += sum(ds) / len(ds) if ds else overall
+        total += running * overall / 2  # runs in flight are half done on average
+        return total / max(1, jobs)
+
+    def line(self, done: int, running: int, failed: int, eta: float | None) -> str:
+        frac = done / self.total if self.total else 1.0
+        filled = int(round(frac * self.WIDTH))
+        bar = "#" * filled + "-" * (self.WIDTH - filled)
+        eta_s = _hms(eta) if eta is not None else "?"
+        elapsed = _hms(time.monotonic() - self.start)
+        text = f"[{bar}] {done}/{self.total} done, {running} running"
+        if failed:
+            text += f", {failed} failed"
+        return text + f", elapsed {elapsed}, ETA {eta_s}"
+
+    def update(self, done, running, failed, eta, event: str | None = None) -> None:
+        text = self.line(done, running, failed, eta)
+        if self.tty:
+            pad = max(0, len(self._last) - len(text))
+            if event:
+                self.stream.write("\r" + event + " " * max(0, len(self._last) - len(event)) + "\n")
+                pad = 0
+            self.stream.write("\r" + text + " " * pad)
+            self._last = text
+        elif event:
+            self.stream.write(f"{event}  | {text}\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty and self._last:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# ---------------------------------------------------------------- the runner
+
+
+def _child_setup(parent_pid: int) -> None:  # runs in the child between fork and exec
+    os.setsid()
+    with contextlib.suppress(Exception):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != parent_pid:  # the sweep died before prctl took effect
+        os._exit(1)
+
+
+@dataclass
+class _Child:
+    run: PlannedRun
+    proc: subprocess.Popen
+    started: float
+    jobs_at_start: int
+    log_file: object
+
+
+def _atomic_write_json(path: Path, data) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n")
+    os.replace(tmp, path)
+
+
+class Sweep:
+    """Runs the to-do runs of one sweep directory; `run()` returns the process exit status."""
+
+    def __init__(
+        self,
+        spec,
+        runs: list[PlannedRun],
+        out: Path,
+        jobs: int,
+        netem: bool,
+        sweep_file: str = "",
+        command: list[str] | None = None,
+        progress_stream=None,
+    ):
+        self.spec = spec
+        self.runs = runs
+        self.out = out
+        self.jobs = jobs
+        self.jobs_requested = jobs
+        self.netem = netem
+        self.sweep_file = sweep_file
+        self.command = command or run_command()
+        self.status: dict[str, dict] = {r.run_id: {"status": "pending"} for r in runs}
+        self.backoffs: list[dict] = []
+        self.stop_signal: int | None = None
+        self.progress = Progress(len(runs), progress_stream)
+
+    # -- bookkeeping
+
+    def _write_state(self) -> None:
+        data = {
+            "format": 1,
+            "sweep_file": self.sweep_file,
+            "spec": self.spec.to_dict(),
+            "jobs_requested": self.jobs_requested,
+            "jobs": self.jobs,
+            "netem": self.netem,
+            "backoffs": self.backoffs,
+            "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "runs": [
+                {"id": r.run_id, "index": r.index, "config": r.config, **self.status[r.run_id]}
+                for r in self.runs
+            ],
+        }
+        _atomic_write_json(self.out / "sweep.json", data)
+
+    def _counts(self):
+        st = [s["status"] for s in self.status.values()]
+        return st.count("done"), st.count("running"), st.count("failed")
+
+    def _show(self, queue, event=None) -> None:
+        done, running, failed = self._counts()
+        eta = self.progress.eta(list(queue), running, self.jobs)
+        self.progress.update(done, running, failed, eta, event)
+
+    # -- signals
+
+    def _on_signal(self, signum, frame) -> None:
+        if self.stop_signal is None:
+            self.stop_signal = signum
+            log.warning("%s: stopping, waiting for runs in flight", signal.Signals(signum).name)
+        else:
+            self.stop_signal = -1  # a second signal: stop waiting politely
+
+    # -- one child
+
+    def _start(self, run: PlannedRun) -> _Child:
+        rdir = run_dir(self.out, run.run_id)
+        if rdir.exists():
+            shutil.rmtree(rdir)
+        (self.out / "logs").mkdir(exist_ok=True)
+        log_file = open(self.out / "logs" / f"{run.run_id}.log", "wb")  # noqa: SIM115
+        argv = run_argv(self.command, run.config, rdir)
+        proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            stdout=log_file,
+            stderr=subprocess.STDOUT,
+            preexec_fn=functools.partial(_child_setup, os.getpid()),
+        )
+        self.status[run.run_id] = {
+            "status": "running",
+            "pid": proc.pid,
+            "attempts": self.status[run.run_id].get("attempts", 0) + 1,
+        }
+        return _Child(run, proc, time.monotonic(), self.jobs, log_file)
+
+    def _finish(self, child: _Child, queue: deque) -> str:
+        """Record a child that exited; returns the event line for the progress display."""
+        child.log_file.close()
+        run = child.run
+        wall = time.monotonic() - child.started
+        st = self.status[run.run_id]
+        st.pop("pid", None)
+        st["exit_status"] = child.proc.returncode
+        st["wall_time_s"] = round(wall, 1)
+        if not is_done(self.out, run.run_id):
+            st["status"] = "failed"
+            st["reason"] = _last_line(self.out / "logs" / f"{run.run_id}.log") or (
+                f"exited with status {child.proc.returncode} without result.json"
+            )
+            return f"{run.run_id}: FAILED ({st['reason']})"
+        result = _read_json(run_dir(self.out, run.run_id) / "result.json") or {}
+        st["status"] = "done"
+        st["result_status"] = result.get("status")
+        miss = result.get("deadline_miss_fraction")
+        st["deadline_miss_fraction"] = miss
+        self.progress.record(run.config["robots"], wall)
+        event = f"{run.run_id}: {result.get('status')} in {wall:.0f} s"
+        if isinstance(miss, int | float) and miss > DEADLINE_MISS_LIMIT:
+            event += f", missed {miss:.1%} of step deadlines"
+            if child.jobs_at_start > 1:
+                self.jobs = max(1, min(self.jobs, child.jobs_at_start) - 1)
+                self.backoffs.append(
+                    {"run": run.run_id, "deadline_miss_fraction": miss, "jobs": self.jobs}
+                )
+                event += f"; concurrency down to {self.jobs}"
+                if st["attempts"] < 2:
+                    st["status"] = "pending"
+                    queue.appendleft(run)
+                    event += ", redoing it"
+        return event
+
+    def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
+        for child in children.values():
+            with contextlib.suppress(ProcessLookupError):
+                child.proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + GRACE_INT
+        stage = "int"
+        while children:
+            for rid in [r for r, c in children.items() if c.proc.poll() is not None]:
+                self._finish(children.pop(rid), queue)
+            if not children:
+                break
+            now = time.monotonic()
+            if stage == "int" and (now > deadline or self.stop_signal == -1):
+                for child in children.values():
+                    with contextlib.suppress(ProcessLookupError):
+                        child.proc.terminate()
+                stage, deadline = "term", now + GRACE_TERM
+            elif stage == "term" and now > deadline:
+                for child in children.values():
+                    with contextlib.suppress(ProcessLookupError, PermissionError):
+                        os.killpg(child.proc.pid, signal.SIGKILL)
+                stage = "kill"
+            time.sleep(0.1)
+        for rid, st in self.status.items():
+            if st["status"] == "failed" and not is_done(self.out, rid):
+                st["status"] = "interrupted"
+
+    # -- the loop
+
+    def run(self, todo: list[PlannedRun], done: list[PlannedRun], skipped: dict[str, str]) -> int:
+        for r in done:
+            self.status[r.run_id] = {"status": "done", "previous_sweep": True}
+            res = _read_json(run_dir(self.out, r.run_id) / "result.json") or {}
+            self.status[r.run_id]["result_status"] = res.get("status")
+        for rid, reason in skipped.items():
+            self.status[rid] = {"status": "skipped", "reason": reason}
+        self.progress.total = len(self.runs) - len(skipped)
+        queue = deque(todo)
+        children: dict[str, _Child] = {}
+        old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            self._write_state()
+            self._show(queue)
+            while (queue or children) and self.stop_signal is None:
+                while queue and len(children) < self.jobs and self.stop_signal is None:
+                    run = queue.popleft()
+                    children[run.run_id] = self._start(run)
+                    self._write_state()
+                    self._show(queue)
+                exited = [rid for rid, c in children.items() if c.proc.poll() is not None]
+                for rid in exited:
+                    event = self._finish(children.pop(rid), queue)
+                    self._write_state()
+                    self._show(queue, event)
+                if not exited:
+                    time.sleep(0.2)
+            if self.stop_signal is not None:
+                self._stop_children(children, queue)
+                self._write_state()
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+            self.progress.close()
+        if self.stop_signal is not None:
+            done, _, _ = self._counts()
+            print(
+                f"sweep interrupted: {done} of {self.progress.total} runs done; "
+                f"resume with --resume",
+                file=sys.stderr,
+            )
+            return 130
+        failed = [rid for rid, s in self.status.items() if s["status"] == "failed"]
+        if failed:
+            print(
+                f"sweep finished with {len(failed)} failed run(s) (see {self.out}/logs/): "
+                + ", ".join(failed[:5])
+                + (" ..." if len(failed) > 5 else ""),
+                file=sys.stderr,
+            )
+            return 1
+        return 0
+
+
+def _read_json(path: Path):
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _last_line(path: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1][:200] if lines else ""
+
+
+# ---------------------------------------------------------------- orphans of a killed sweep
+
+
+def _wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
+    """A SIGKILLed sweep's children get SIGTERM (PDEATHSIG); wait until they are gone before
+    redoing their runs, and SIGKILL any still running after `timeout` (only processes whose
+    command line names their run directory in `out`)."""
+    state = _read_json(out / "sweep.json") or {}
+    pids = []
+    for entry in state.get("runs", []):
+        pid = entry.get("pid")
+        if entry.get("status") == "running" and isinstance(pid, int):
+            try:
+                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ")
+            except OSError:
+                continue
+            if str(run_dir(out, entry["id"])).encode() in cmdline:
+                pids.append(pid)
+    deadline = time.monotonic() + timeout
+    while pids and time.monotonic() < deadline:
+        pids = [p for p in pids if Path(f"/proc/{p}").exists()]
+        time.sleep(0.2)
+    for pid in pids:
+        log.warning(
+            "run process %d of an earlier sweep still alive after %.0f s: SIGKILL", pid, timeout
+        )
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(pid, signal.SIGKILL)
+
+
+# ---------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "file", metavar="FILE", help="sweep file (TOML), e.g. testbed/experiments/paper.toml"
+    )
+    parser.add_argument("--out", required=True, metavar="DIR", help="sweep directory")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        metavar="J",
+        help=f"runs at once (default {default_jobs()} on this machine; "
+        "lowered automatically when runs miss step deadlines)",
+    )
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue a sweep in DIR: skip finished runs, redo partial ones",
+    )
+
+
+def main(args: argparse.Namespace) -> int:
+    spec = sweepfile.load(args.file)
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError(f"--jobs: must be >= 1, got {args.jobs}")
+    jobs = args.jobs or default_jobs()
+    out = Path(args.out)
+    runs = sweepfile.expand(spec)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "runs").mkdir(exist_ok=True)
+    lock = open(out / ".sweep.lock", "w")  # noqa: SIM115 (held for the process lifetime)
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise UsageError(f"--out {out}: another sweep is running in this directory") from None
+    existing = [p.name for p in (out / "runs").iterdir()]
+    if existing and not args.resume:
+        raise UsageError(
+            f"--out {out}: holds runs of an earlier sweep; pass --resume to continue it "
+            "or choose another directory"
+        )
+    if args.resume:
+        _wait_for_orphans(out)
+    netem = netem_available() if any(d > 0 for d in spec.delay_ms) else False
+    p = plan(runs, out, netem)
+    for r in p.done:
+        diff = config_mismatch(out, r)
+        if diff:
+            raise UsageError(
+                f"--out {out}: run {r.run_id} was made with other settings ({diff}); "
+                "use a new directory"
+            )
+    if p.skipped:
+        log.warning("skipping %d run(s): %s", len(p.skipped), next(iter(p.skipped.values())))
+    print(
+        f"sweep {args.file}: {len(runs)} runs, {len(p.done)} done, {len(p.todo)} to do"
+        + (f" ({len(p.partial)} partial, redone)" if p.partial else "")
+        + (f", {len(p.skipped)} skipped" if p.skipped else "")
+        + f", {jobs} at a time",
+        file=sys.stderr,
+    )
+    sweep = Sweep(spec, runs, out, jobs, netem, sweep_file=str(args.file))
+    return sweep.run(p.todo, p.done, p.skipped)
+
+
+def _standalone(argv: list[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    parser = argparse.ArgumentParser(prog="testbed sweep", description=__doc__.split("\n")[0])
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return main(args)
+    except TestbedError as e:
+        print(f"testbed sweep: {e}", file=sys.stderr)
+        return e.exit_status
+
+
+if __name__ == "__main__":
+    sys.exit(_standalone())

@@ -1,0 +1,281 @@
+"""Sweep files: a TOML description of a grid of runs, loaded, validated and expanded.
+
+A sweep file has two tables. `[grid]` lists the values each varied parameter takes; every
+combination is a *point*, and each point is run `runs` times. `[run]` holds what stays fixed
+for every run of the sweep::
+
+    description = "the paper's Section 5 grid"   # optional, free text
+
+    [grid]
+    robots = [1, 2, 3]            # team sizes (required)
+    comm_range = [5, 20]          # metres (required)
+    laser_range = [2.0]           # metres (required)
+    loss_pct = [0, 10, 30]        # optional, default [0]
+    delay_ms = [0, 50]            # optional, default [0]; needs sch_netem when > 0
+    runs = 1                      # runs per point, default 1
+
+    [run]
+    time_scale = 5.0              # default 1.0
+    routing = "aodv"              # aodv | babel | none, default aodv
+    max_steps = 3000              # default 3000
+    capture = true                # default false
+    map = "maps/office.png"       # optional; relative paths are relative to the sweep file
+    seed = 0                      # optional base mixed into every derived seed
+
+Validation is strict: an unknown key, a value of the wrong type or an empty grid list is a
+`UsageError` whose one-line message names the key (`grid.robots`, `run.time_scale`, ...).
+
+Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
+its parameters and run index only, so they are the same every time the file is expanded:
+that is what lets an interrupted sweep resume without redoing a finished run. Runs are
+ordered run index first, so an interrupted sweep has covered every point once before it
+covers any point twice.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import tomllib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from testbed.errors import UsageError
+
+ROUTINGS = ("aodv", "babel", "none")
+
+_TOP_KEYS = {"description", "grid", "run"}
+_GRID_LISTS = ("robots", "comm_range", "laser_range", "loss_pct", "delay_ms")
+_GRID_KEYS = set(_GRID_LISTS) | {"runs"}
+_RUN_KEYS = {"time_scale", "routing", "max_steps", "capture", "map", "seed"}
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A validated sweep file."""
+
+    robots: tuple[int, ...]
+    comm_range: tuple[float, ...]
+    laser_range: tuple[float, ...]
+    loss_pct: tuple[float, ...] = (0.0,)
+    delay_ms: tuple[float, ...] = (0.0,)
+    runs: int = 1
+    time_scale: float = 1.0
+    routing: str = "aodv"
+    max_steps: int = 3000
+    capture: bool = False
+    map: str | None = None
+    seed: int = 0
+    description: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    """One run of a sweep: its stable id and the config `testbed run` gets."""
+
+    run_id: str
+    index: int  # 1-based run index within its point
+    config: dict
+
+    @property
+    def point(self) -> tuple:
+        """The grid point this run belongs to (what its repetitions share)."""
+        c = self.config
+        return (c["robots"], c["comm_range"], c["laser_range"], c["loss_pct"], c["delay_ms"])
+
+
+def _fail(path: Path | str, key: str, message: str) -> UsageError:
+    return UsageError(f"sweep file {path}: {key}: {message}")
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v) -> bool:
+    return (isinstance(v, int | float)) and not isinstance(v, bool)
+
+
+def _check_table(path, name: str, table, allowed: set[str]) -> dict:
+    if not isinstance(table, dict):
+        raise _fail(path, name, f"expected a table, got {type(table).__name__}")
+    for key in table:
+        if key not in allowed:
+            full = f"{name}.{key}" if name else key
+            raise _fail(path, full, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+    return table
+
+
+def _number_list(path, key: str, value, *, integer: bool, low: float, low_open: bool, high=None):
+    kind = "integers" if integer else "numbers"
+    if not isinstance(value, list):
+        raise _fail(path, key, f"expected a list of {kind}, got {type(value).__name__}")
+    if not value:
+        raise _fail(path, key, "empty list: the grid needs at least one value")
+    out = []
+    for v in value:
+        ok = _is_int(v) if integer else _is_number(v)
+        if not ok:
+            raise _fail(path, key, f"expected a list of {kind}, got element {v!r}")
+        if v < low or (low_open and v == low) or (high is not None and v > high):
+            bound = f"> {low}" if low_open else f">= {low}"
+            if high is not None:
+                bound += f" and <= {high}"
+            raise _fail(path, key, f"value {v!r} out of range (must be {bound})")
+        out.append(int(v) if integer else float(v))
+    if len(set(out)) != len(out):
+        raise _fail(path, key, f"duplicate values in {value!r}")
+    return tuple(out)
+
+
+def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
+    """Validate the parsed TOML `data` and return its SweepSpec (UsageError if invalid)."""
+    _check_table(path, "", data, _TOP_KEYS)
+    if "grid" not in data:
+        raise _fail(path, "grid", "missing table [grid]")
+    grid = _check_table(path, "grid", data["grid"], _GRID_KEYS)
+    run = _check_table(path, "run", data.get("run", {}), _RUN_KEYS)
+    kw: dict = {}
+
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise _fail(path, "description", f"expected a string, got {type(description).__name__}")
+    kw["description"] = description
+
+    for key in ("robots", "comm_range", "laser_range"):
+        if key not in grid:
+            raise _fail(path, f"grid.{key}", "missing (the grid needs at least one value)")
+    kw["robots"] = _number_list(
+        path, "grid.robots", grid["robots"], integer=True, low=1, low_open=False
+    )
+    for key in ("comm_range", "laser_range"):
+        kw[key] = _number_list(path, f"grid.{key}", grid[key], integer=False, low=0, low_open=True)
+    if "loss_pct" in grid:
+        kw["loss_pct"] = _number_list(
+            path, "grid.loss_pct", grid["loss_pct"], integer=False, low=0, low_open=False, high=100
+        )
+    if "delay_ms" in grid:
+        kw["delay_ms"] = _number_list(
+            path, "grid.delay_ms", grid["delay_ms"], integer=False, low=0, low_open=False
+        )
+    if "runs" in grid:
+        runs = grid["runs"]
+        if not _is_int(runs):
+            raise _fail(path, "grid.runs", f"expected an integer, got {runs!r}")
+        if runs < 1:
+            raise _fail(path, "grid.runs", f"must be >= 1, got {runs}")
+        kw["runs"] = runs
+
+    if "time_scale" in run:
+        ts = run["time_scale"]
+        if not _is_number(ts):
+            raise _fail(path, "run.time_scale", f"expected a number, got {ts!r}")
+        if ts <= 0:
+            raise _fail(path, "run.time_scale", f"must be > 0, got {ts}")
+        kw["time_scale"] = float(ts)
+    if "routing" in run:
+        routing = run["routing"]
+        if routing not in ROUTINGS:
+            raise _fail(
+                path, "run.routing", f"expected one of {', '.join(ROUTINGS)}, got {routing!r}"
+            )
+        kw["routing"] = routing
+    if "max_steps" in run:
+        ms = run["max_steps"]
+        if not _is_int(ms):
+            raise _fail(path, "run.max_steps", f"expected an integer, got {ms!r}")
+        if ms < 1:
+            raise _fail(path, "run.max_steps", f"must be >= 1, got {ms}")
+        kw["max_steps"] = ms
+    if "capture" in run:
+        if not isinstance(run["capture"], bool):
+            raise _fail(path, "run.capture", f"expected true or false, got {run['capture']!r}")
+        kw["capture"] = run["capture"]
+    if "map" in run:
+        m = run["map"]
+        if not isinstance(m, str) or not m:
+            raise _fail(path, "run.map", f"expected a non-empty path string, got {m!r}")
+        mp = Path(m)
+        if not mp.is_absolute() and isinstance(path, Path):
+            mp = path.parent / mp
+        kw["map"] = str(mp)
+    if "seed" in run:
+        if not _is_int(run["seed"]):
+            raise _fail(path, "run.seed", f"expected an integer, got {run['seed']!r}")
+        kw["seed"] = run["seed"]
+    return SweepSpec(**kw)
+
+
+def load(path: str | Path) -> SweepSpec:
+    """Read and validate a sweep file (UsageError with one line if it is bad)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise UsageError(f"sweep file {path}: cannot read: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise UsageError(f"sweep file {path}: invalid TOML: {e}") from None
+    return parse(data, path)
+
+
+def fmt(x: float) -> str:
+    """A number as it appears in run ids: 10.0 -> '10', 1.5 -> '1.5'."""
+    return f"{x:g}"
+
+
+def run_id(
+    robots: int, comm_range: float, laser_range: float, loss_pct: float, delay_ms: float, index: int
+) -> str:
+    """Stable, readable id of one run; impairments appear only when non-zero."""
+    rid = f"n{robots:02d}-c{fmt(comm_range)}-l{fmt(laser_range)}"
+    if loss_pct:
+        rid += f"-p{fmt(loss_pct)}"
+    if delay_ms:
+        rid += f"-d{fmt(delay_ms)}"
+    return f"{rid}-k{index}"
+
+
+def derive_seed(
+    base: int,
+    robots: int,
+    comm_range: float,
+    laser_range: float,
+    loss_pct: float,
+    delay_ms: float,
+    index: int,
+) -> int:
+    """A seed that depends only on the point, the run index and the file's base seed."""
+    key = ":".join(
+        [str(base), str(robots), fmt(comm_range), fmt(laser_range), fmt(loss_pct), fmt(delay_ms)]
+        + [str(index)]
+    )
+    return int(hashlib.sha256(key.encode()).hexdigest()[:8], 16) % (2**31 - 1) + 1
+
+
+def expand(spec: SweepSpec) -> list[PlannedRun]:
+    """All runs of the sweep, run index first (see the module docstring)."""
+    out = []
+    for index in range(1, spec.runs + 1):
+        for robots, comm, laser, loss, delay in itertools.product(
+            spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct, spec.delay_ms
+        ):
+            config = {
+                "robots": robots,
+                "comm_range": comm,
+                "laser_range": laser,
+                "seed": derive_seed(spec.seed, robots, comm, laser, loss, delay, index),
+                "time_scale": spec.time_scale,
+                "routing": spec.routing,
+                "map": spec.map,
+                "loss_pct": loss,
+                "delay_ms": delay,
+                "capture": spec.capture,
+                "max_steps": spec.max_steps,
+            }
+            out.append(PlannedRun(run_id(robots, comm, laser, loss, delay, index), index, config))
+    return out
