@@ -1,0 +1,341 @@
+"""The `testbed` command: networks by hand (`net ...`), runs, sweeps, reports, clean-up.
+
+Every error the user can cause is one line on stderr and exit status 2 (testbed.errors); a
+failure while working is one line and status 1. Tracebacks are for bugs only.
+"""
+
+import argparse
+import importlib
+import importlib.util
+import logging
+import os
+import sys
+
+from pyroute2.netlink.exceptions import NetlinkError
+
+from testbed.errors import EXIT_USAGE, TestbedError, UsageError
+
+log = logging.getLogger("testbed")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a bad argument is a UsageError: one line, exit status 2."""
+
+    def error(self, message: str):
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def _float(what: str, *, positive: bool = False, nonneg: bool = False):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be a number, not {text!r}") from None
+        if value != value or value in (float("inf"), float("-inf")):
+            raise argparse.ArgumentTypeError(f"{what} must be finite, not {text!r}")
+        if positive and value <= 0:
+            raise argparse.ArgumentTypeError(f"{what} must be greater than 0, not {text}")
+        if nonneg and value < 0:
+            raise argparse.ArgumentTypeError(f"{what} must not be negative, not {text}")
+        return value
+
+    return parse
+
+
+def _robot_count(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"robot count must be a whole number, not {text!r}"
+        ) from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"a testbed needs at least one robot, not {n}")
+    return n
+
+
+def _robot_ref(text: str) -> int:
+    body = text[1:] if text[:1] in ("r", "R") else text
+    if not body.isdigit() or int(body) < 1:
+        raise argparse.ArgumentTypeError(f"robot must be written rK with K >= 1, not {text!r}")
+    return int(body)
+
+
+def _positions(text: str) -> list[tuple[float, float]]:
+    out = []
+    for item in text.replace(";", " ").split():
+        try:
+            x, y = (float(v) for v in item.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"position {item!r} is not X,Y") from None
+        out.append((x, y))
+    if not out:
+        raise argparse.ArgumentTypeError("--positions is empty")
+    return out
+
+
+def _name(text: str) -> str:
+    from topology.names import check_name
+
+    try:
+        return check_name(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+# -- net ---------------------------------------------------------------------------------------
+
+
+def _add_net(sub) -> None:
+    net = sub.add_parser("net", help="bring a network up by hand, use it, take it down")
+    nsub = net.add_subparsers(dest="net_cmd", required=True, parser_class=Parser)
+
+    up = nsub.add_parser("up", help="build a testbed network and leave it running")
+    up.add_argument("name", type=_name)
+    up.add_argument("--robots", type=_robot_count, required=True)
+    up.add_argument("--layout", choices=("chain", "grid", "random"))
+    up.add_argument("--spacing", type=_float("spacing", positive=True), default=8.0)
+    up.add_argument("--positions", type=_positions, help='"X,Y X,Y ..." in metres')
+    up.add_argument("--comm-range", type=_float("communication range", positive=True),
+                    required=True)  # fmt: skip
+    up.add_argument("--range-model", choices=("disc", "lossy"), default="disc")
+    up.add_argument("--routing", choices=("none", "babel", "aodv"), default="none")
+    up.add_argument("--loss", type=_float("loss", nonneg=True), default=0.0, metavar="PCT")
+    up.add_argument("--delay", type=_float("delay", nonneg=True), default=0.0, metavar="MS")
+    up.add_argument("--capture", metavar="DIR", help="write one pcap per robot here")
+    up.add_argument("--seed", type=int, default=None)
+    up.add_argument("--time-scale", type=_float("time scale", positive=True), default=1.0)
+
+    ex = nsub.add_parser("exec", help="run a command in a robot's namespace")
+    ex.add_argument("name", type=_name)
+    ex.add_argument("robot", type=_robot_ref)
+    ex.add_argument("command", nargs=argparse.REMAINDER)
+
+    mv = nsub.add_parser("move", help="move a robot; links follow before this returns")
+    mv.add_argument("name", type=_name)
+    mv.add_argument("robot", type=_robot_ref)
+    mv.add_argument("x", type=_float("x"))
+    mv.add_argument("y", type=_float("y"))
+
+    ln = nsub.add_parser("links", help="print the current links, one 'i j' pair per line")
+    ln.add_argument("name", type=_name)
+
+    dn = nsub.add_parser("down", help="tear a testbed network down")
+    dn.add_argument("name", type=_name)
+
+    nsub.add_parser("list", help="list the testbeds that are up")
+
+
+def _net_up(args) -> int:
+    from topology.network import Network
+    from topology.spec import Impairment, NetworkSpec, layout_positions
+
+    if args.positions is not None and args.layout is not None:
+        raise UsageError("give either --layout or --positions, not both")
+    try:
+        if args.positions is not None:
+            if len(args.positions) != args.robots:
+                raise UsageError(f"--positions has {len(args.positions)} positions "
+                                 f"for --robots {args.robots}")  # fmt: skip
+            positions = args.positions
+        else:
+            positions = layout_positions(
+                args.layout or "chain", args.robots, args.spacing, args.seed
+            )
+        spec = NetworkSpec(
+            name=args.name,
+            positions=tuple(positions),
+            comm_range=args.comm_range,
+            routing=args.routing,
+            impairment=Impairment(loss_pct=args.loss, delay_ms=args.delay),
+            range_model=args.range_model,
+            capture_dir=os.path.abspath(args.capture) if args.capture else None,
+            time_scale=args.time_scale,
+        )
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    net = Network(spec, persistent=True)
+    net.up()
+    links = net.links()
+    net.detach()
+    print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
+    print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
+          f"testbed net exec {spec.name} r1 -- ping 10.0.0.{min(2, spec.robots)}")  # fmt: skip
+    return 0
+
+
+def _attach(name: str):
+    from topology.network import Network, preflight
+
+    _require_root()
+    net = Network.attach(name)
+    preflight(net.spec)
+    return net
+
+
+def _require_root() -> None:
+    if os.geteuid() != 0:
+        raise UsageError("network namespaces need root: run this under sudo")
+
+
+def _net_exec(args) -> int:
+    from topology import names, netns, state
+
+    _require_root()
+    cmd = args.command[1:] if args.command[:1] == ["--"] else args.command
+    if not cmd:
+        raise UsageError("net exec: no command given (testbed net exec NAME rK -- CMD ...)")
+    st = state.read(args.name)
+    if st is None:
+        raise UsageError(f"no testbed named {args.name!r} is up")
+    robots = len(st.spec["positions"])
+    if args.robot > robots:
+        raise UsageError(f"testbed {args.name} has robots r1..r{robots}, not r{args.robot}")
+    ns = names.robot_ns(args.name, args.robot)
+    if not netns.exists(ns):
+        raise UsageError(f"namespace {ns} is gone; try `testbed clean`")
+    sys.stdout.flush()
+    try:
+        os.execvp("ip", netns.popen_argv(ns, cmd))
+    except OSError as exc:
+        raise UsageError(f"cannot run ip netns exec: {exc.strerror}") from None
+    return 1  # not reached
+
+
+def _net_move(args) -> int:
+    from topology import state
+
+    with state.locked(args.name):
+        pass  # wait for any change in progress before attaching
+    net = _attach(args.name)
+    try:
+        added, removed = net.move(args.robot, (args.x, args.y))
+    finally:
+        net.detach()
+    for i, j in added:
+        print(f"+ {i} {j}")
+    for i, j in removed:
+        print(f"- {i} {j}")
+    return 0
+
+
+def _net_links(args) -> int:
+    net = _attach(args.name)
+    try:
+        links = net.medium.kernel_links()
+    finally:
+        net.detach()
+    for i, j in sorted(links):
+        print(i, j)
+    return 0
+
+
+def _net_down(args) -> int:
+    from topology import names, netns, state
+    from topology.network import destroy
+
+    _require_root()
+    if state.read(args.name) is None and not netns.exists(names.medium_ns(args.name)):
+        raise UsageError(f"no testbed named {args.name!r} is up")
+    with state.locked(args.name):
+        destroy(args.name)
+    print(f"testbed {args.name} is down")
+    return 0
+
+
+def _net_list(args) -> int:
+    from topology import state
+
+    for name in state.names():
+        st = state.read(name)
+        if st is None:
+            continue
+        kind = "persistent" if st.persistent else f"owned by pid {st.owner_pid}"
+        status = "abandoned" if st.abandoned() else "up"
+        robots = len(st.spec["positions"])
+        print(f"{name}\t{robots} robots\trouting {st.spec['routing']}\t{kind}\t{status}")
+    return 0
+
+
+NET_COMMANDS = {
+    "up": _net_up,
+    "exec": _net_exec,
+    "move": _net_move,
+    "links": _net_links,
+    "down": _net_down,
+    "list": _net_list,
+}
+
+
+# -- clean -------------------------------------------------------------------------------------
+
+
+def _clean(args) -> int:
+    from topology.cleanup import clean
+
+    _require_root()
+    removed = clean(everything=args.all)
+    if removed:
+        print("removed: " + " ".join(removed))
+    else:
+        print("nothing to clean")
+    return 0
+
+
+# -- run, sweep, report: provided by their own modules -----------------------------------------
+
+DELEGATED = {
+    "run": ("testbed.run", "run one exploration experiment"),
+    "sweep": ("testbed.sweep", "run a sweep of experiments from a TOML file"),
+    "report": ("testbed.report", "figures and a report from a sweep's results"),
+}
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="testbed", description=__doc__.splitlines()[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log what is done")
+    sub = parser.add_subparsers(dest="cmd", required=True, parser_class=Parser)
+    _add_net(sub)
+    cl = sub.add_parser("clean", help="remove what dead or abandoned testbeds left behind")
+    cl.add_argument("--all", action="store_true", help="also remove testbeds that are up")
+    for cmd, (module, help_text) in DELEGATED.items():
+        if importlib.util.find_spec(module) is None:
+            continue  # not built yet
+        mod = importlib.import_module(module)
+        p = sub.add_parser(cmd, help=help_text)
+        mod.add_arguments(p)
+    return parser
+
+
+def dispatch(args) -> int:
+    if args.cmd == "net":
+        return NET_COMMANDS[args.net_cmd](args)
+    if args.cmd == "clean":
+        return _clean(args)
+    return importlib.import_module(DELEGATED[args.cmd][0]).main(args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        logging.basicConfig(
+            level=logging.INFO if args.verbose else logging.WARNING,
+            format="%(asctime)s testbed %(name)s %(levelname)s: %(message)s",
+        )
+        return dispatch(args)
+    except TestbedError as exc:
+        print(f"testbed: error: {exc}", file=sys.stderr)
+        return exc.exit_status
+    except KeyboardInterrupt:
+        print("testbed: interrupted", file=sys.stderr)
+        return 130
+    except (OSError, NetlinkError) as exc:  # a kernel or file operation that failed
+        print(f"testbed: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["main", "EXIT_USAGE"]
