@@ -1,0 +1,67 @@
+"""Integration tests: real namespaces, root only, nothing left behind.
+
+Every test gets a unique testbed name from `tb_name`. The session checks at the end that the
+host namespace's interfaces, routes and nftables ruleset are as they were at the start, and
+that no namespace of a testbed made by this session is left.
+"""
+
+import os
+import shutil
+import subprocess
+import uuid
+
+import pytest
+
+from topology import names, netns
+
+SESSION_TAG = uuid.uuid4().hex[:3]
+_made: list[str] = []
+
+
+def pytest_collection_modifyitems(config, items):
+    if os.geteuid() != 0:
+        skip = pytest.mark.skip(reason="integration tests need root (run `sudo make test`)")
+        for item in items:
+            if "integration" in str(item.fspath):
+                item.add_marker(skip)
+
+
+def _host_snapshot() -> dict[str, str]:
+    def run(argv: list[str]) -> str:
+        return subprocess.run(argv, capture_output=True, text=True).stdout
+
+    links = run(["ip", "-o", "link", "show"])
+    return {
+        # interface names and flags, not counters
+        "links": "\n".join(sorted(line.split("link/")[0] for line in links.splitlines())),
+        "routes": run(["ip", "route", "show", "table", "all"]),
+        "rules": run(["ip", "rule", "show"]),
+        "addrs": run(["ip", "-o", "addr", "show"]),
+        "nft": run(["nft", "list", "ruleset"]) if shutil.which("nft") else "",
+    }
+
+
+@pytest.fixture(scope="session", autouse=True)
+def host_untouched():
+    if os.geteuid() != 0:
+        yield
+        return
+    before = _host_snapshot()
+    yield
+    after = _host_snapshot()
+    changed = [k for k in before if before[k] != after[k]]
+    leftover = [ns for ns in netns.list_names() if (names.parse_ns(ns) or ("",))[0] in _made]
+    assert not leftover, f"namespaces left behind: {leftover}"
+    assert not changed, f"the host namespace changed: {changed}"
+
+
+@pytest.fixture
+def tb_name() -> str:
+    """A testbed name unique to this test (prefix 'it': integration tests of topology)."""
+    name = f"it{SESSION_TAG}{uuid.uuid4().hex[:5]}"
+    _made.append(name)
+    yield name
+    # Whatever the test did, nothing of this name survives it.
+    from topology.network import destroy
+
+    destroy(name)
