@@ -1,0 +1,101 @@
+"""Laser ray geometry shared by the world's laser and the robot's map update.
+
+A scan is a fan of `n_rays` rays spread evenly over 360 degrees at fixed angles in the world
+frame (ray k points at k * 360 / n_rays degrees): a noiseless 360-degree laser whose robot knows
+its pose exactly, so the heading adds nothing and the ray directions can be tabulated once.
+Each ray is sampled every half cell out to the laser's range. The world casts a ray by finding
+the first sample that falls in an occupied cell and returns its distance (+inf when no sample
+within range hits anything). The robot recomputes the same samples from the same position, so
+"free" is every sample before the hit and "occupied" is the hit sample's cell: with a noiseless
+laser the two sides agree cell for cell.
+
+Grids used with a `Laser` are *padded* by `Laser.pad` cells on every side, so a ray never
+needs a bounds check (the world pads with obstacles, the robot's map with unknown). Sample
+positions are flat indices into the padded array. Everything is vectorised over all rays and
+samples at once; nothing loops per cell.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_BIAS = 4096  # makes cell coordinates positive so truncation is floor
+
+
+class Laser:
+    """Tabulated ray geometry: `max_range` metres, `n_rays` over 360 degrees, `cell` metres."""
+
+    def __init__(self, max_range: float = 2.0, n_rays: int = 360, cell: float = 0.05):
+        if max_range <= 0 or n_rays < 1 or cell <= 0:
+            raise ValueError("laser range, ray count and cell size must be positive")
+        self.max_range = float(max_range)
+        self.n_rays = int(n_rays)
+        self.cell = float(cell)
+        self.step = self.cell / 2.0
+        self.n_samples = int(math.floor(self.max_range / self.step + 1e-9))
+        self.pad = int(math.ceil(self.max_range / self.cell)) + 2
+        angles = np.arange(self.n_rays, dtype=np.float64) * (2.0 * math.pi / self.n_rays)
+        r = np.arange(1, self.n_samples + 1, dtype=np.float64) * (self.step / self.cell)
+        self.dx = (np.cos(angles)[:, None] * r[None, :]).astype(np.float32)
+        self.dy = (np.sin(angles)[:, None] * r[None, :]).astype(np.float32)
+        self._k = np.arange(self.n_samples, dtype=np.int32)[None, :]
+
+    def angles(self) -> np.ndarray:
+        return np.arange(self.n_rays) * (2.0 * math.pi / self.n_rays)
+
+    def flat_cells(self, x: float, y: float, padded_width: int) -> np.ndarray:
+        """Flat indices, in a padded grid of row length `padded_width`, of every sample's cell.
+
+        (x, y) must lie inside the unpadded map. Shape (n_rays, n_samples), int64.
+        """
+        fx = np.float32(x / self.cell + _BIAS)
+        fy = np.float32(y / self.cell + _BIAS)
+        cols = (self.dx + fx).astype(np.int64)
+        rows = (self.dy + fy).astype(np.int64)
+        base = (self.pad - _BIAS) * padded_width + (self.pad - _BIAS)
+        rows *= padded_width
+        rows += cols
+        rows += base
+        return rows
+
+    def cast(self, occupied_padded: np.ndarray, x: float, y: float) -> np.ndarray:
+        """Noiseless ranges (float32, n_rays) on a padded boolean obstacle grid; +inf: none."""
+        flat = self.flat_cells(x, y, occupied_padded.shape[1])
+        hit = occupied_padded.reshape(-1)[flat]
+        any_hit = hit.any(axis=1)
+        first = hit.argmax(axis=1)
+        ranges = np.full(self.n_rays, np.inf, dtype=np.float32)
+        ranges[any_hit] = ((first[any_hit] + 1) * self.step).astype(np.float32)
+        return ranges
+
+    def hit_index(self, ranges: np.ndarray) -> np.ndarray:
+        """Index of the hit sample on each ray, or n_samples when the ray returned nothing."""
+        idx = np.full(ranges.shape, self.n_samples, dtype=np.int32)
+        finite = np.isfinite(ranges)
+        idx[finite] = np.rint(ranges[finite] / self.step).astype(np.int32) - 1
+        np.clip(idx, 0, self.n_samples, out=idx)
+        return idx
+
+    def scan_cells(
+        self, x: float, y: float, ranges: np.ndarray, padded_width: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Flat padded indices of the cells a scan saw free and the cells it saw occupied.
+
+        Indices may repeat; the two sets are disjoint when the ranges came from `cast` on a grid
+        of the same geometry.
+        """
+        if ranges.shape != (self.n_rays,):
+            raise ValueError(f"scan has {ranges.shape} ranges, expected {self.n_rays}")
+        flat = self.flat_cells(x, y, padded_width)
+        idx = self.hit_index(ranges)
+        free = flat[self._k < idx[:, None]]
+        rays = np.flatnonzero(idx < self.n_samples)
+        occ = flat[rays, idx[rays]]
+        return free, occ
+
+
+def pad(a: np.ndarray, n: int, value) -> np.ndarray:
+    """`a` with `n` cells of `value` added on every side."""
+    return np.pad(a, n, mode="constant", constant_values=value)

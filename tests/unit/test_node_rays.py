@@ -1,0 +1,69 @@
+"""Ray casting and the scan's free/occupied cells on small hand-made grids."""
+
+import math
+
+import numpy as np
+import pytest
+
+from node.rays import Laser, pad
+
+
+def _box(n=40, wall_col=None):
+    occ = np.zeros((n, n), dtype=bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    if wall_col is not None:
+        occ[:, wall_col] = True
+    return occ
+
+
+def test_range_to_a_wall_is_exact_to_half_a_cell():
+    laser = Laser(max_range=1.5, n_rays=4, cell=0.05)  # rays at 0, 90, 180, 270 degrees
+    occ = _box(40, wall_col=30)  # wall face at x = 1.50 m
+    r = laser.cast(pad(occ, laser.pad, True), 1.025, 1.025)
+    assert r[0] == pytest.approx(1.50 - 1.025, abs=0.025)  # east: the wall at x=1.5
+    assert r[2] == pytest.approx(1.025 - 0.05, abs=0.025)  # west: border cell 0 ends at 0.05
+    assert r[1] == pytest.approx(1.95 - 1.025, abs=0.025)  # south (+y): border row 39
+
+
+def test_no_return_beyond_range_is_inf():
+    laser = Laser(max_range=1.0, n_rays=8, cell=0.05)
+    occ = _box(100)
+    r = laser.cast(pad(occ, laser.pad, True), 2.5, 2.5)
+    assert np.isinf(r).all()
+
+
+def test_outside_the_grid_counts_as_obstacle():
+    laser = Laser(max_range=2.0, n_rays=4, cell=0.05)
+    occ = np.zeros((20, 20), dtype=bool)  # 1 x 1 m, no walls
+    r = laser.cast(pad(occ, laser.pad, True), 0.5, 0.5)
+    assert np.isfinite(r).all()
+    assert r[0] == pytest.approx(0.5, abs=0.03)
+
+
+def test_ray_count_and_angles():
+    laser = Laser(max_range=2.0, n_rays=720, cell=0.05)
+    assert laser.angles()[1] == pytest.approx(math.pi / 360)
+    assert laser.n_samples == 80
+
+
+def test_scan_cells_free_before_hit_and_hit_occupied():
+    laser = Laser(max_range=2.0, n_rays=360, cell=0.05)
+    occ = _box(60, wall_col=40)
+    occp = pad(occ, laser.pad, True)
+    x, y = 1.0, 1.5
+    r = laser.cast(occp, x, y)
+    free, hit = laser.scan_cells(x, y, r, occp.shape[1])
+    assert not occp.reshape(-1)[free].any()  # nothing seen free is an obstacle
+    assert occp.reshape(-1)[hit].all()  # everything seen occupied is one
+    assert np.intersect1d(free, hit).size == 0
+    # The robot's own cell and the wall cell straight east are seen.
+    w = occp.shape[1]
+    p = laser.pad
+    assert (int(y / 0.05) + p) * w + int(x / 0.05) + p in set(free.tolist())
+    assert (int(y / 0.05) + p) * w + 40 + p in set(hit.tolist())
+
+
+def test_scan_shape_mismatch_is_rejected():
+    laser = Laser(n_rays=10)
+    with pytest.raises(ValueError):
+        laser.scan_cells(1.0, 1.0, np.ones(11, dtype=np.float32), 100)
