@@ -1,0 +1,132 @@
+"""Loss and delay on links, measured. Loss goes through nftables where sch_netem is missing
+(this host) and through netem where it exists (`make vm-test`); delay needs netem."""
+
+import os
+import re
+import statistics
+import sys
+import time
+
+import pytest
+
+from topology import netns
+from topology.impair import netem_available
+from topology.network import Network
+from topology.spec import Impairment, NetworkSpec
+
+PROBE = [sys.executable, "-m", "tests.integration.probe"]
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PORT = 47100
+
+
+def _kernel_has_netem() -> bool:
+    probe_ns = f"itprobe{os.getpid()}"
+    netns.create(probe_ns)
+    try:
+        worker = netns.NsWorker(probe_ns)
+        try:
+            return netem_available(worker)
+        finally:
+            worker.close()
+    finally:
+        netns.remove(probe_ns)
+
+
+HAVE_NETEM = os.geteuid() == 0 and _kernel_has_netem()
+needs_netem = pytest.mark.skipif(not HAVE_NETEM, reason="sch_netem missing: run `make vm-test`")
+
+
+def _pair(name: str, imp: Impairment) -> NetworkSpec:
+    return NetworkSpec(name=name, positions=((0, 0), (5, 0)), comm_range=10.0, impairment=imp)
+
+
+def _routes(net: Network) -> None:
+    for k, other in ((1, "10.0.0.2"), (2, "10.0.0.1")):
+        net.exec(k, ["ip", "route", "add", f"{other}/32", "dev", "wlan0", "scope", "link"])
+        net.exec(k, ["ip", "neigh", "replace", other, "lladdr", _mac(net, 3 - k), "dev", "wlan0",
+                     "nud", "permanent"])  # fmt: skip
+
+
+def _mac(net: Network, k: int) -> str:
+    out = net.exec(k, ["cat", "/sys/class/net/wlan0/address"], capture_output=True, text=True)
+    return out.stdout.strip()
+
+
+def _delivered_of_1000(net: Network, tmp_path) -> int:
+    out = str(tmp_path / "rx")
+    net.spawn(2, PROBE + ["listen", str(PORT), out], role="probe", cwd=REPO)
+    while not (os.path.exists(out) and open(out).read().startswith("ready")):
+        time.sleep(0.02)
+    net.exec(1, PROBE + ["send", str(PORT), "10.0.0.2", "--count", "1000", "--gap", "0.0005",
+                         "--tag", "loss"], cwd=REPO, check=True)  # fmt: skip
+    time.sleep(0.5)
+    return sum(1 for line in open(out).read().splitlines() if " loss:" in line)
+
+
+def _check_loss(tb_name, tmp_path) -> Network:
+    # Static ARP entries: a lost ARP request must not be counted as lost data.
+    with Network(_pair(tb_name, Impairment(loss_pct=20))) as net:
+        _routes(net)
+        delivered = _delivered_of_1000(net, tmp_path)
+        lost_pct = 100 * (1000 - delivered) / 1000
+        assert 16 <= lost_pct <= 24, f"lost {lost_pct}% with 20% loss configured"
+        return net
+
+
+def test_loss_20pct_loses_20pct_of_1000_packets(tb_name, tmp_path):
+    _check_loss(tb_name, tmp_path)
+
+
+def test_no_loss_loses_nothing(tb_name, tmp_path):
+    with Network(_pair(tb_name, Impairment())) as net:
+        _routes(net)
+        assert _delivered_of_1000(net, tmp_path) == 1000
+
+
+@pytest.mark.netem
+@needs_netem
+def test_loss_through_netem(tb_name, tmp_path):
+    net = _check_loss(tb_name, tmp_path)
+    assert net.medium.impairer.netem, "with sch_netem present, loss must use netem"
+
+
+def _median_rtt_ms(net: Network, count: int = 20) -> float:
+    r = net.exec(1, ["ping", "-c", str(count), "-i", "0.05", "10.0.0.2"], capture_output=True,
+                 text=True)  # fmt: skip
+    rtts = [float(x) for x in re.findall(r"time=([\d.]+) ms", r.stdout)]
+    assert len(rtts) >= count * 0.9, r.stdout
+    return statistics.median(rtts)
+
+
+@pytest.mark.netem
+@needs_netem
+def test_50ms_delay_each_way_adds_100ms_rtt(tb_name):
+    with Network(_pair(tb_name, Impairment())) as net:
+        _routes(net)
+        base = _median_rtt_ms(net)
+    with Network(_pair(tb_name, Impairment(delay_ms=50))) as net:
+        _routes(net)
+        delayed = _median_rtt_ms(net)
+    added = delayed - base
+    assert 90 <= added <= 110, (
+        f"RTT rose by {added:.1f} ms (base {base:.2f}, with delay {delayed:.2f})"
+    )
+
+
+@pytest.mark.skipif(HAVE_NETEM, reason="this kernel has netem: delay is allowed")
+def test_delay_without_netem_is_refused_naming_the_module(tb_name):
+    with pytest.raises(Exception) as err:
+        Network(_pair(tb_name, Impairment(delay_ms=50))).up()
+    assert "sch_netem" in str(err.value)
+    assert not [ns for ns in netns.list_names() if tb_name in ns], "nothing left after refusal"
+
+
+def test_per_link_loss_changes_follow_the_range_model(tb_name):
+    spec = NetworkSpec(name=tb_name, positions=((0, 0), (4, 0), (9, 0)), comm_range=10.0,
+                       range_model="lossy")  # fmt: skip
+    with Network(spec) as net:
+        want = net.wanted()
+        assert want[(1, 2)].loss_pct == 0 and want[(1, 3)].loss_pct > 0
+        assert net.current == want
+        net.move(3, (5, 0))
+        assert net.current == net.wanted() and net.current[(1, 3)].loss_pct == 0

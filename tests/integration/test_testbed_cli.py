@@ -1,0 +1,164 @@
+"""The `testbed net ...` and `testbed clean` commands, end to end, as a user runs them."""
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from topology import names, netns, processes, state
+
+TESTBED = [sys.executable, "-m", "testbed.cli"]
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def tb(*args, **kw) -> subprocess.CompletedProcess:
+    kw.setdefault("capture_output", True)
+    kw.setdefault("text", True)
+    kw.setdefault("cwd", REPO)
+    return subprocess.run(TESTBED + list(args), **kw)
+
+
+def ping_ttl(name: str, src: int, dst: int, wait: float) -> int | None:
+    """Ping until it answers or `wait` seconds pass; the reply's TTL, or None."""
+    deadline = time.monotonic() + wait
+    while True:
+        r = tb("net", "exec", name, f"r{src}", "--", "ping", "-c1", "-W1", names.robot_addr(dst))
+        m = re.search(r"ttl=(\d+)", r.stdout)
+        if r.returncode == 0 and m:
+            return int(m[1])
+        if time.monotonic() > deadline:
+            return None
+        time.sleep(0.3)
+
+
+@pytest.mark.slow
+def test_babel_chain_four_hops_break_and_restore(tb_name):
+    up = tb("net", "up", tb_name, "--robots", "5", "--layout", "chain", "--spacing", "8",
+            "--comm-range", "10", "--routing", "babel")  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        assert tb("net", "links", tb_name).stdout.split("\n")[:4] == ["1 2", "2 3", "3 4", "4 5"]
+        ttl = ping_ttl(tb_name, 1, 5, wait=30)
+        # The reply leaves robot 5 with TTL 64 and crosses robots 4, 3, 2: 4 hops.
+        assert ttl == 64 - 3, f"reply TTL {ttl}"
+        moved = tb("net", "move", tb_name, "r3", "16", "30")
+        assert moved.returncode == 0 and moved.stdout.split("\n")[:2] == ["- 2 3", "- 3 4"]
+        lost = tb("net", "exec", tb_name, "r1", "--", "ping", "-c3", "-W1", "10.0.0.5")
+        assert lost.returncode != 0, "robot 3 left: no path from 1 to 5"
+        assert tb("net", "move", tb_name, "r3", "16", "0").returncode == 0
+        assert ping_ttl(tb_name, 1, 5, wait=30) == 61, "path restored when robot 3 came back"
+    finally:
+        down = tb("net", "down", tb_name)
+        assert down.returncode == 0, down.stderr
+    assert not [ns for ns in netns.list_names() if tb_name in ns]
+    assert state.read(tb_name) is None
+
+
+def test_exec_passes_exit_status_through(tb_name):
+    assert tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10").returncode == 0
+    try:
+        assert tb("net", "exec", tb_name, "r2", "--", "sh", "-c", "exit 7").returncode == 7
+        r = tb("net", "exec", tb_name, "r2", "--", "ip", "-br", "addr", "show", "wlan0")
+        assert r.returncode == 0 and "10.0.0.2/32" in r.stdout
+        r = tb("net", "exec", tb_name, "r3", "--", "true")
+        assert r.returncode == 2 and "r1..r2" in r.stderr
+    finally:
+        tb("net", "down", tb_name)
+
+
+def _one_line_error(r: subprocess.CompletedProcess, *words: str) -> None:
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+def test_name_in_use_is_refused_and_left_intact(tb_name):
+    assert tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10").returncode == 0
+    try:
+        _one_line_error(tb("net", "up", tb_name, "--robots", "3", "--comm-range", "10"), "in use")
+        assert tb("net", "links", tb_name).stdout == "1 2\n", "the first testbed is untouched"
+    finally:
+        tb("net", "down", tb_name)
+
+
+def test_not_root_is_a_one_line_error(tb_name):
+    if shutil.which("setpriv") is None:
+        pytest.skip("setpriv (util-linux) not installed")
+    r = subprocess.run(
+        ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", *TESTBED,
+         "net", "up", tb_name, "--robots", "2", "--comm-range", "10"],
+        capture_output=True, text=True, cwd=REPO, env={**os.environ, "HOME": "/tmp"},
+    )  # fmt: skip
+    _one_line_error(r, "root", "sudo")
+    assert not [ns for ns in netns.list_names() if tb_name in ns]
+
+
+def test_missing_tool_is_a_one_line_error(tb_name, tmp_path):
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    os.symlink(shutil.which("ip"), bindir / "ip")  # ip, but no babeld on this PATH
+    env = {**os.environ, "PATH": str(bindir)}
+    r = tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10", "--routing", "babel",
+           env=env)  # fmt: skip
+    _one_line_error(r, "babeld")
+    assert not [ns for ns in netns.list_names() if tb_name in ns]
+
+
+OWNER = textwrap.dedent(
+    """
+    import sys, time
+    from topology.network import Network
+    from topology.spec import NetworkSpec
+    spec = NetworkSpec(name=sys.argv[1], positions=((0, 0), (8, 0), (16, 0)),
+                       comm_range=10.0, routing="babel", capture_dir=sys.argv[2])
+    net = Network(spec)
+    net.up()
+    print("up", flush=True)
+    time.sleep(600)
+    """
+)
+
+
+def test_sigkilled_owner_then_clean_leaves_nothing(tb_name, tmp_path):
+    owner = subprocess.Popen(
+        [sys.executable, "-c", OWNER, tb_name, str(tmp_path / "pcaps")],
+        cwd=REPO, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert owner.stdout.readline().strip() == "up"
+        st = state.read(tb_name)
+        pids = [(p.pid, p.start) for p in st.processes]
+        assert {p.role for p in st.processes} == {"babel", "tcpdump"} and len(pids) == 6
+        # A persistent testbed of someone else's must survive our clean.
+        bystander = tb_name[:-1] + ("z" if tb_name[-1] != "z" else "y")
+        assert tb("net", "up", bystander, "--robots", "1", "--comm-range", "5").returncode == 0
+        try:
+            assert tb("clean").stdout.strip() == "nothing to clean", "owner still alive"
+            owner.send_signal(signal.SIGKILL)
+            owner.wait()
+            assert state.read(tb_name).abandoned()
+            r = tb("clean")
+            assert r.returncode == 0 and tb_name in r.stdout and bystander not in r.stdout
+            assert netns.exists(names.medium_ns(bystander))
+        finally:
+            tb("net", "down", bystander)
+    finally:
+        if owner.poll() is None:
+            owner.kill()
+            owner.wait()
+    assert not [ns for ns in netns.list_names() if tb_name in ns]
+    assert not [pid for pid, start in pids if state.is_alive(pid, start)]
+    assert state.read(tb_name) is None
+    assert not os.path.exists(state.run_dir(tb_name))
+    assert processes.pids_in_namespace(names.medium_ns(tb_name)) == []
+    # The pcaps survive the clean-up: results are never lost.
+    assert sorted(os.listdir(tmp_path / "pcaps")) == ["r1.pcap", "r2.pcap", "r3.pcap"]
