@@ -1,0 +1,50 @@
+"""The CLI turns bad arguments into one line on stderr and exit status 2 (no root needed)."""
+
+import subprocess
+import sys
+
+import pytest
+
+from testbed import cli
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["net", "up", "a1", "--robots", "0", "--comm-range", "5"], ["at least one robot"]),
+        (["net", "up", "a1", "--robots", "3", "--comm-range", "0"], ["greater than 0"]),
+        (["net", "up", "a1", "--robots", "3", "--comm-range", "-2"], ["greater than 0"]),
+        (["net", "up", "a1", "--robots", "3", "--comm-range", "x"], ["must be a number"]),
+        (["net", "up", "a1", "--robots", "3", "--comm-range", "5", "--layout", "hex"],
+         ["invalid choice", "hex"]),
+        (["net", "up", "A!", "--robots", "3", "--comm-range", "5"], ["lowercase"]),
+        (["net", "up", "a1", "--robots", "2", "--comm-range", "5", "--positions", "1,2"],
+         ["1 positions", "--robots 2"]),
+        (["net", "up", "a1", "--robots", "1", "--comm-range", "5", "--positions", "1;2"],
+         ["not X,Y"]),
+        (["net", "up", "a1", "--robots", "2", "--comm-range", "5", "--loss", "-1"],
+         ["negative"]),
+        (["net", "move", "a1", "q3", "1", "2"], ["rK"]),
+        (["net", "frobnicate"], ["invalid choice"]),
+        ([], ["required"]),
+    ],
+)  # fmt: skip
+def test_bad_arguments_are_one_line_exit_2(argv, words, capsys):
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    for w in words:
+        assert w in err[0]
+
+
+def test_same_through_the_console_entry_point():
+    r = subprocess.run([sys.executable, "-m", "testbed.cli", "net", "up", "a1", "--robots",
+                        "-3", "--comm-range", "5"], capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_help_works():
+    r = subprocess.run([sys.executable, "-m", "testbed.cli", "net", "up", "--help"],
+                       capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 0 and "--comm-range" in r.stdout
