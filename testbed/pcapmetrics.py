@@ -1,0 +1,420 @@
+"""Routing metrics of a run from its packet captures (the paper's Section 2.4).
+
+Theory of operation. Each robot K has one capture, `pcaps/rK.pcap`, of its own `wlan0`; all
+captures are stamped by the host clock. `read_pcap` turns one capture into frames with a single
+tshark invocation (`-T fields`, first occurrence of each field). A capture on a veth does not
+mark direction, so a robot's own MAC address is inferred: the most common Ethernet source of
+frames whose IP source is the robot's address. Frames from that MAC were *transmitted* by the
+robot (its own traffic and what it forwards); the rest were received.
+
+`compute` is pure (frames in, numbers out) and defines the metrics:
+
+- routing overhead: routing control packets transmitted (UDP port 654 for AODV, 6696 for
+  babel), counted once per transmission at the transmitter, so a rebroadcast RREQ counts at
+  every robot that rebroadcasts it; as a fraction of all frames transmitted, and in bytes
+  (frame bytes against all frame bytes). AODV messages are also counted by type (RREQ, RREP,
+  HELLO = RREP broadcast with IP TTL 1, RERR, RREP-ACK) and in UDP payload bytes, the unit
+  the daemon's own counters use.
+- packet delivery fraction (`pdf`): of the TCP payload the robots transmitted as sources
+  (every transmission, retransmissions included), the fraction their destinations received:
+  a segment sent twice and received once is one of two delivered. This is what link loss
+  lowers. It is counted in bytes, not frames, so it stays right when GSO/GRO merge or split
+  segments between the two captures. `segment_delivery` counts unique segments instead,
+  matched by (src, dst, ports, raw sequence number): a segment is delivered when j received
+  one covering its first byte; TCP's retransmissions keep it near 1 unless connections break.
+- end-to-end delay: first reception in j's capture minus first transmission in i's.
+- throughput: delivered TCP payload bytes over the span of the captures, in bit/s.
+
+Times are host wall-clock: with a time scale K, emulated time runs K times faster, so delays
+and throughput are those the kernel saw, not emulated ones. `run_metrics` applies this to a
+run directory, compares the AODV counts with the daemons' own counters (aodv/rK.json, where
+present) and caches the result in the run directory as routing.json.
+"""
+
+from __future__ import annotations
+
+import bisect
+import contextlib
+import json
+import logging
+import os
+import re
+import statistics
+import subprocess
+import sys
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+CONTROL_PORTS = {"aodv": 654, "babel": 6696, "none": 654}
+AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
+BROADCAST = "255.255.255.255"
+CACHE_NAME = "routing.json"
+CACHE_FORMAT = 1
+
+_FIELDS = (
+    "frame.time_epoch",
+    "frame.len",
+    "eth.src",
+    "eth.dst",
+    "ip.src",
+    "ip.dst",
+    "ip.proto",
+    "ip.ttl",
+    "udp.srcport",
+    "udp.dstport",
+    "udp.length",
+    "tcp.srcport",
+    "tcp.dstport",
+    "tcp.seq_raw",
+    "tcp.len",
+    "aodv.type",
+)
+
+
+@dataclass(frozen=True)
+class Frame:
+    time: float
+    length: int
+    eth_src: str
+    eth_dst: str
+    ip_src: str = ""
+    ip_dst: str = ""
+    ip_proto: int | None = None
+    ttl: int | None = None
+    udp_sport: int | None = None
+    udp_dport: int | None = None
+    udp_len: int | None = None
+    tcp_sport: int | None = None
+    tcp_dport: int | None = None
+    tcp_seq: int | None = None
+    tcp_len: int | None = None
+    aodv_type: int | None = None
+
+
+def _int(s: str) -> int | None:
+    return int(s) if s else None
+
+
+def parse_fields(text: str) -> list[Frame]:
+    """Frames from tshark's tab-separated `-e` output in `_FIELDS` order."""
+    frames = []
+    for line in text.splitlines():
+        if not line:
+            continue
+        f = line.split("\t")
+        f += [""] * (len(_FIELDS) - len(f))
+        try:
+            frames.append(
+                Frame(
+                    time=float(f[0]),
+                    length=int(f[1]),
+                    eth_src=f[2],
+                    eth_dst=f[3],
+                    ip_src=f[4],
+                    ip_dst=f[5],
+                    ip_proto=_int(f[6]),
+                    ttl=_int(f[7]),
+                    udp_sport=_int(f[8]),
+                    udp_dport=_int(f[9]),
+                    udp_len=_int(f[10]),
+                    tcp_sport=_int(f[11]),
+                    tcp_dport=_int(f[12]),
+                    tcp_seq=_int(f[13]),
+                    tcp_len=_int(f[14]),
+                    aodv_type=_int(f[15]),
+                )
+            )
+        except ValueError:
+            log.warning("unparsable tshark line skipped: %r", line[:120])
+    return frames
+
+
+def read_pcap(path: str | Path) -> list[Frame]:
+    """All frames of one capture (one tshark process)."""
+    argv = ["tshark", "-n", "-r", str(path), "-T", "fields", "-E", "separator=/t"]
+    argv += ["-E", "occurrence=f"]
+    for name in _FIELDS:
+        argv += ["-e", name]
+    r = subprocess.run(argv, capture_output=True, text=True)
+    if r.returncode != 0:
+        # tshark exits 2 on a capture cut short (a run killed mid-write); keep what it read.
+        log.warning("tshark on %s: status %d: %s", path, r.returncode, r.stderr.strip()[-200:])
+    return parse_fields(r.stdout)
+
+
+def own_mac(frames: list[Frame], addr: str) -> str | None:
+    """The robot's MAC: the most common Ethernet source among frames from its IP address."""
+    c = Counter(f.eth_src for f in frames if f.ip_src == addr and f.eth_src)
+    return c.most_common(1)[0][0] if c else None
+
+
+def _is_control(f: Frame, port: int) -> bool:
+    # The outer IP header must be UDP: an ICMP error quoting a UDP 654 datagram is not AODV.
+    return f.ip_proto == 17 and (f.udp_sport == port or f.udp_dport == port)
+
+
+def _aodv_kind(f: Frame) -> str:
+    kind = AODV_TYPES.get(f.aodv_type or 0, "other")
+    if kind == "RREP" and f.ip_dst == BROADCAST and f.ttl == 1:
+        return "HELLO"
+    return kind
+
+
+def _quantile(xs: list[float], q: float) -> float:
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(q * len(xs)))]
+
+
+def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int = 654) -> dict:
+    """Routing metrics of one run from each robot's frames (see the module docstring)."""
+    robots: dict[str, dict] = {}
+    # (src, dst, sport, dport, seq) -> [first time, length, transmissions]
+    sent: dict[tuple, list] = {}
+    # received segments per flow: flow -> {seq: [first time, length, receptions]}
+    received: dict[tuple, dict[int, list]] = defaultdict(dict)
+    tx_payload = rx_payload = 0  # TCP payload bytes, all transmissions / all receptions
+    sources = set(addrs.values())  # only traffic whose sender was captured too
+    t_min, t_max = float("inf"), float("-inf")
+    for k, frames in sorted(captures.items()):
+        addr = addrs[k]
+        mac = own_mac(frames, addr)
+        r = {
+            "mac": mac,
+            "frames": len(frames),
+            "tx_packets": 0,
+            "tx_bytes": 0,
+            "rx_packets": 0,
+            "control_tx_packets": 0,
+            "control_tx_bytes": 0,
+            "control_tx_payload_bytes": 0,
+            "control_rx_packets": 0,
+            "aodv_tx_by_type": Counter(),
+            "tcp_segments_sent": 0,
+        }
+        for f in frames:
+            t_min, t_max = min(t_min, f.time), max(t_max, f.time)
+            tx = mac is not None and f.eth_src == mac
+            control = _is_control(f, port)
+            if tx:
+                r["tx_packets"] += 1
+                r["tx_bytes"] += f.length
+                if control:
+                    r["control_tx_packets"] += 1
+                    r["control_tx_bytes"] += f.length
+                    r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
+                    r["aodv_tx_by_type"][_aodv_kind(f)] += 1
+                if f.ip_src == addr and f.tcp_len and f.ip_dst != addr and f.ip_proto == 6:
+                    tx_payload += f.tcp_len
+                    key = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport, f.tcp_seq)
+                    if key in sent:
+                        sent[key][2] += 1
+                    else:
+                        sent[key] = [f.time, f.tcp_len, 1]
+                        r["tcp_segments_sent"] += 1
+            else:
+                r["rx_packets"] += 1
+                if control:
+                    r["control_rx_packets"] += 1
+                if f.ip_dst == addr and f.tcp_len and f.ip_proto == 6 and f.ip_src in sources:
+                    rx_payload += f.tcp_len
+                    flow = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport)
+                    seen = received[flow].get(f.tcp_seq)
+                    if seen is None:
+                        received[flow][f.tcp_seq] = [f.time, f.tcp_len, 1]
+                    else:
+                        seen[0] = min(seen[0], f.time)
+                        seen[2] += 1
+        r["aodv_tx_by_type"] = dict(r["aodv_tx_by_type"])
+        robots[f"r{k}"] = r
+
+    index = {flow: sorted(segs) for flow, segs in received.items()}
+    delays, delivered, delivered_bytes, delivered_tx = [], 0, 0, 0
+    for (src, dst, sport, dport, seq), (t_sent, length, n_sent) in sent.items():
+        flow = (src, dst, sport, dport)
+        segs = received.get(flow)
+        if not segs:
+            continue
+        hit = segs.get(seq)
+        if hit is None:  # resegmented: a received segment that covers the first byte
+            starts = index[flow]
+            i = bisect.bisect_right(starts, seq)
+            covering = [segs[s] for s in starts[max(0, i - 8) : i] if s + segs[s][1] > seq]
+            hit = min(covering) if covering else None
+        if hit is None:
+            continue
+        delivered += 1
+        delivered_tx += min(n_sent, hit[2])
+        delivered_bytes += length
+        delays.append(hit[0] - t_sent)
+
+    tx_packets = sum(r["tx_packets"] for r in robots.values())
+    tx_bytes = sum(r["tx_bytes"] for r in robots.values())
+    ctl_packets = sum(r["control_tx_packets"] for r in robots.values())
+    ctl_bytes = sum(r["control_tx_bytes"] for r in robots.values())
+    by_type: Counter = Counter()
+    for r in robots.values():
+        by_type.update(r["aodv_tx_by_type"])
+    n_tx = sum(v[2] for v in sent.values())
+    duration = (t_max - t_min) if t_max > t_min else 0.0
+    delays_ms = [1000.0 * d for d in delays]
+    return {
+        "format": CACHE_FORMAT,
+        "control_port": port,
+        "duration_s": duration,
+        "tx_packets": tx_packets,
+        "tx_bytes": tx_bytes,
+        "control_tx_packets": ctl_packets,
+        "control_tx_bytes": ctl_bytes,
+        "control_tx_payload_bytes": sum(r["control_tx_payload_bytes"] for r in robots.values()),
+        "aodv_tx_by_type": dict(by_type),
+        "overhead_packets": ctl_packets / tx_packets if tx_packets else None,
+        "overhead_bytes": ctl_bytes / tx_bytes if tx_bytes else None,
+        "tcp_segments_sent": len(sent),
+        "tcp_segments_delivered": delivered,
+        "segment_delivery": delivered / len(sent) if sent else None,
+        "tcp_transmissions": n_tx,
+        "tcp_transmissions_delivered": delivered_tx,
+        "tcp_payload_bytes_transmitted": tx_payload,
+        "tcp_payload_bytes_received": rx_payload,
+        "pdf": rx_payload / tx_payload if tx_payload else None,
+        "delay_ms_mean": statistics.fmean(delays_ms) if delays_ms else None,
+        "delay_ms_median": statistics.median(delays_ms) if delays_ms else None,
+        "delay_ms_p95": _quantile(delays_ms, 0.95) if delays_ms else None,
+        "throughput_bps": 8.0 * delivered_bytes / duration if duration else None,
+        "delivered_payload_bytes": delivered_bytes,
+        "robots": robots,
+    }
+
+
+# ---------------------------------------------------------------- the AODV daemons' counters
+
+
+def _find_number(doc, paths: list[tuple[str, ...]]):
+    for path in paths:
+        node = doc
+        for key in path:
+            if not isinstance(node, dict) or key not in node:
+                node = None
+                break
+            node = node[key]
+        if isinstance(node, int | float) and not isinstance(node, bool):
+            return node
+        if isinstance(node, dict):  # a per-type table: sum it
+            vals = [v for v in node.values() if isinstance(v, int | float)]
+            if vals:
+                return sum(vals)
+    return None
+
+
+# Where the daemon's count of AODV messages it transmitted may live in aodv/rK.json.
+DAEMON_TX_PATHS = [
+    ("tx_packets",),
+    ("control_tx_packets",),
+    ("sent", "total"),
+    ("counters", "tx_packets"),
+    ("counters", "sent"),
+    ("stats", "tx_packets"),
+    ("tx",),
+    ("sent",),
+]
+
+
+def daemon_counts(run_dir: Path) -> dict[str, float] | None:
+    """Per robot, the AODV messages its daemon says it transmitted (None if no aodv/ files)."""
+    d = Path(run_dir) / "aodv"
+    if not d.is_dir():
+        return None
+    out = {}
+    for p in sorted(d.glob("r*.json")):
+        try:
+            doc = json.loads(p.read_text())
+        except (OSError, ValueError):
+            continue
+        n = _find_number(doc, DAEMON_TX_PATHS)
+        if n is not None:
+            out[p.stem] = n
+    return out or None
+
+
+def compare_with_daemons(metrics: dict, daemons: dict[str, float] | None) -> dict | None:
+    """Relative difference between the capture's and the daemons' AODV transmit counts."""
+    if not daemons:
+        return None
+    pcap_total = sum(metrics["robots"].get(k, {}).get("control_tx_packets", 0) for k in daemons)
+    daemon_total = sum(daemons.values())
+    rel = abs(pcap_total - daemon_total) / daemon_total if daemon_total else None
+    return {
+        "pcap_control_tx_packets": pcap_total,
+        "daemon_tx_packets": daemon_total,
+        "relative_difference": rel,
+        "per_robot": {
+            k: {"pcap": metrics["robots"].get(k, {}).get("control_tx_packets"), "daemon": v}
+            for k, v in daemons.items()
+        },
+    }
+
+
+# ---------------------------------------------------------------- a run directory
+
+
+def robot_address(k: int) -> str:
+    try:
+        from topology.names import robot_addr
+    except ImportError:  # the topology package is optional for reading results
+        hi, lo = divmod(k - 1, 254)
+        return f"10.0.{hi}.{lo + 1}"
+    return robot_addr(k)
+
+
+def _pcaps(run_dir: Path) -> dict[int, Path]:
+    out = {}
+    for p in (Path(run_dir) / "pcaps").glob("r*.pcap*"):
+        m = re.fullmatch(r"r(\d+)\.pcap(ng)?", p.name)
+        if m:
+            out[int(m[1])] = p
+    return out
+
+
+def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
+    """Routing metrics of one run directory (None if it has no captures), cached."""
+    run_dir = Path(run_dir)
+    pcaps = _pcaps(run_dir)
+    if not pcaps:
+        return None
+    cache = run_dir / CACHE_NAME
+    stamp = {p.name: [p.stat().st_size, p.stat().st_mtime_ns] for p in pcaps.values()}
+    if use_cache and cache.is_file():
+        try:
+            doc = json.loads(cache.read_text())
+            if doc.get("format") == CACHE_FORMAT and doc.get("pcaps") == stamp:
+                return doc
+        except (OSError, ValueError):
+            pass
+    routing = "aodv"
+    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+        routing = json.loads((run_dir / "result.json").read_text())["config"]["routing"]
+    captures = {k: read_pcap(p) for k, p in pcaps.items()}
+    metrics = compute(
+        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
+    )
+    metrics["pcaps"] = stamp
+    metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
+    try:
+        tmp = cache.with_name(CACHE_NAME + ".tmp")
+        tmp.write_text(json.dumps(metrics, indent=1) + "\n")
+        os.replace(tmp, cache)
+    except OSError as e:
+        log.warning("cannot cache routing metrics in %s: %s", run_dir, e)
+    return metrics
+
+
+if __name__ == "__main__":
+    logging.basicConfig(level=logging.INFO)
+    for d in sys.argv[1:]:
+        m = run_metrics(d, use_cache=False)
+        if m:
+            m = {k: v for k, v in m.items() if k != "robots"}
+        print(json.dumps({"run": d, "metrics": m}, indent=1))
