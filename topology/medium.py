@@ -9,25 +9,27 @@ arrives at the far bridges and leaves only through their robot ports: a broadcas
 reaches exactly the robots linked to i, once each, and never hops link to link.
 
 Frames leaving through `lixj` travel from i to j, so a qdisc on `lixj` shapes exactly that
-direction of that link (see topology.impair). Removing a link deletes its veth pair: the
-robots' own `wlan0` stay up and notice nothing but silence, as on a real radio.
+direction of that link (see topology.impair). Removing a link takes the near end of its
+veth pair down (see `set_links`): the robots' own `wlan0` stay up and notice nothing but
+silence, as on a real radio.
 
-All netlink work runs in one NsWorker parked in the medium namespace; robot-side
-configuration (address, sysctls) runs in a short-lived thread inside the robot's namespace.
+Requests go out in batches through topology.rtnl (a raw rtnetlink socket of the medium
+namespace, held by an NsWorker); robot-side configuration (sysctls, address) runs in one
+thread that visits each robot's namespace in turn. pyroute2's IPRoute serves the rest (tc,
+dumps), where speed does not matter.
 """
 
-import errno
 import logging
+import os
 
-from pyroute2.netlink.exceptions import NetlinkError
-
-from topology import names, netns
+from topology import names, netns, rtnl
 from topology.impair import Impairer
 from topology.spec import Impairment
 
 log = logging.getLogger(__name__)
 
 # Set before wlan0 exists so that it inherits them from conf.default (DESIGN.md).
+# accept_dad=0: the IPv6 link-local address (babeld speaks over it) is usable at once.
 ROBOT_SYSCTLS = (
     ("net.ipv4.ip_forward", 1),
     ("net.ipv4.conf.all.send_redirects", 0),
@@ -36,6 +38,7 @@ ROBOT_SYSCTLS = (
     ("net.ipv4.conf.default.accept_redirects", 0),
     ("net.ipv4.conf.all.rp_filter", 0),
     ("net.ipv4.conf.default.rp_filter", 0),
+    ("net.ipv6.conf.default.accept_dad", 0),
 )
 WLAN_SYSCTLS = (
     "net.ipv4.conf.wlan0.send_redirects",
@@ -43,29 +46,36 @@ WLAN_SYSCTLS = (
     "net.ipv4.conf.wlan0.rp_filter",
 )
 
+# Interface indices are ours to choose (per namespace): no request ever looks a name up.
+LO_INDEX = 1
+WLAN_INDEX = 10
 
-def _index(ipr, ifname: str) -> int:
-    found = ipr.link_lookup(ifname=ifname)
-    if not found:
-        raise LookupError(f"no interface {ifname}")
-    return found[0]
+
+def bridge_index(k: int) -> int:
+    return 1_000_000 + k
+
+
+def port_index(k: int) -> int:
+    return 2_000_000 + k
+
+
+def end_index(i: int, j: int) -> int:
+    return 10_000_000 + i * 1000 + j
 
 
 def _configure_robot(k: int) -> None:
-    """Runs inside robot k's namespace: sysctls first, then the robot's own wlan0 and lo."""
-    from pyroute2 import IPRoute
-
+    """Runs inside robot k's namespace: sysctls first, then address and state of wlan0, lo."""
     for key, value in ROBOT_SYSCTLS:
         netns.write_sysctl(key, value)
-    with IPRoute() as ipr:
-        lo = _index(ipr, "lo")
-        ipr.link("set", index=lo, state="up")
-        wlan = _index(ipr, names.ROBOT_IFACE)
-        for key in WLAN_SYSCTLS:  # inherited from default already; made explicit for wlan0
-            netns.write_sysctl(key, 0)
-        # A /32 and no subnet route: every route belongs to the routing daemon.
-        ipr.addr("add", index=wlan, address=names.robot_addr(k), prefixlen=32)
-        ipr.link("set", index=wlan, state="up")
+    for key in WLAN_SYSCTLS:  # inherited from conf.default already; made explicit for wlan0
+        netns.write_sysctl(key, 0)
+    batch = rtnl.Batch()
+    batch.add(rtnl.link(LO_INDEX, up=True), f"r{k}: lo up")
+    # A /32 and no subnet route: every route belongs to the routing daemon.
+    batch.add(rtnl.addr(WLAN_INDEX, names.robot_addr(k), 32), f"r{k}: address on wlan0")
+    batch.add(rtnl.link(WLAN_INDEX, up=True), f"r{k}: wlan0 up")
+    with rtnl.open_socket() as sock:
+        batch.send(sock)
 
 
 class Medium:
@@ -77,6 +87,8 @@ class Medium:
         self.worker: netns.NsWorker | None = None
         self.impairer: Impairer | None = None
         self.time_scale = time_scale
+        self.pairs: set[tuple[int, int]] = set()  # veth pairs that exist (up or down)
+        self._toggle: dict[tuple[int, int, bool], bytes] = {}
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -91,9 +103,9 @@ class Medium:
         def work(ipr) -> None:
             netns.write_sysctl("net.ipv6.conf.default.disable_ipv6", 1)
             netns.write_sysctl("net.ipv6.conf.all.disable_ipv6", 1)
-            ipr.link("set", index=_index(ipr, "lo"), state="up")
 
         self.worker.call(work)
+        self._send([(rtnl.link(LO_INDEX, up=True), "medium: lo up")])
 
     def close(self) -> None:
         if self.impairer is not None:
@@ -102,56 +114,78 @@ class Medium:
             self.worker.close()
             self.worker = None
 
+    def _send(self, requests: list[tuple[bytes, str]]) -> None:
+        batch = rtnl.Batch()
+        for req, what in requests:
+            batch.add(req, what)
+        batch.send(self.worker.nl)
+
     # -- robots -----------------------------------------------------------------------------
 
-    def add_robot(self, k: int) -> None:
-        """Bridge brK, and the veth rpK <-> wlan0 with wlan0 created in robot k's namespace."""
-        robot_ns_path = netns.path(names.robot_ns(self.testbed, k))
-
-        def work(ipr) -> None:
-            ipr.link("add", ifname=names.bridge(k), kind="bridge", br_stp_state=0)
-            br = _index(ipr, names.bridge(k))
-            ipr.link("set", index=br, state="up")
-            ipr.link(
-                "add",
-                ifname=names.robot_port(k),
-                kind="veth",
-                peer={"ifname": names.ROBOT_IFACE, "net_ns_fd": robot_ns_path},
-            )
-            port = _index(ipr, names.robot_port(k))
-            ipr.link("set", index=port, master=br, state="up")
-
-        self.worker.call(work)
-        netns.run_in(names.robot_ns(self.testbed, k), lambda: _configure_robot(k))
+    def add_robots(self, ks: list[int]) -> None:
+        """Per robot K: bridge brK, and the veth rpK <-> wlan0, wlan0 made in K's namespace;
+        then each robot's own side (sysctls, address, up), all robots in one thread."""
+        fds = {k: os.open(netns.path(names.robot_ns(self.testbed, k)), os.O_RDONLY) for k in ks}
+        try:
+            reqs = []
+            for k in ks:
+                br, port = bridge_index(k), port_index(k)
+                reqs.append((rtnl.link(br, ifname=names.bridge(k), kind="bridge", up=True,
+                                       create=True), f"create {names.bridge(k)}"))  # fmt: skip
+                reqs.append((rtnl.link(port, ifname=names.robot_port(k), kind="veth", master=br,
+                                       up=True, create=True,
+                                       veth_peer=(names.ROBOT_IFACE, WLAN_INDEX, fds[k])),
+                             f"create {names.robot_port(k)} and r{k}'s wlan0"))  # fmt: skip
+            self._send(reqs)
+        finally:
+            for fd in fds.values():
+                os.close(fd)
+        robot_ns = [names.robot_ns(self.testbed, k) for k in ks]
+        netns.run_in_each(robot_ns, lambda ns: _configure_robot(int(ns.rsplit("-r", 1)[1])))
 
     # -- links ------------------------------------------------------------------------------
 
-    def add_link(self, i: int, j: int) -> None:
-        a, b = names.link_end(i, j), names.link_end(j, i)
+    def _toggle_request(self, i: int, j: int, up: bool) -> tuple[bytes, str]:
+        key = (i, j, up)
+        if key not in self._toggle:
+            self._toggle[key] = rtnl.link(end_index(i, j), up=up)
+        return self._toggle[key], f"link {i}-{j} {'up' if up else 'down'}"
 
-        def work(ipr) -> None:
-            ipr.link("add", ifname=a, kind="veth", peer=b)
-            for end, k in ((a, i), (b, j)):
-                idx = _index(ipr, end)
-                ipr.link("set", index=idx, master=_index(ipr, names.bridge(k)))
-                ipr.brport("set", index=idx, isolated=1)
-                ipr.link("set", index=idx, state="up")
+    def create_pairs(self, pairs: list[tuple[int, int]]) -> None:
+        """Create the veth pairs of links met for the first time, disabled: both ends in
+        their bridges and isolated, the far end up, the near end still down."""
+        reqs = []
+        for i, j in pairs:
+            if (i, j) in self.pairs:
+                continue
+            a, b = end_index(i, j), end_index(j, i)
+            what = f"link {i}-{j}"
+            reqs += [
+                (rtnl.link(a, ifname=names.link_end(i, j), kind="veth", master=bridge_index(i),
+                           create=True, veth_peer=(names.link_end(j, i), b, None)),
+                 f"create {what}"),
+                (rtnl.link(b, master=bridge_index(j)), f"{what}: far end into {names.bridge(j)}"),
+                (rtnl.link(a, isolated=True), f"{what}: isolate near end"),
+                (rtnl.link(b, isolated=True), f"{what}: isolate far end"),
+                (rtnl.link(b, up=True), f"{what}: far end up"),
+            ]  # fmt: skip
+        self._send(reqs)
+        self.pairs.update(pairs)
 
-        self.worker.call(work)
+    def set_links(self, add: list[tuple[int, int]], remove: list[tuple[int, int]]) -> None:
+        """Enable the links in `add` and disable those in `remove`, in one batch. Pairs are
+        (i, j) with i < j; `add` must name pairs that exist (create_pairs).
 
-    def remove_link(self, i: int, j: int) -> None:
-        """Delete the veth pair of link i-j (deleting one end deletes both)."""
-        end = names.link_end(i, j)
-
-        def work(ipr) -> None:
-            try:
-                ipr.link("del", index=_index(ipr, end))
-            except (LookupError, NetlinkError) as exc:
-                if isinstance(exc, NetlinkError) and exc.code != errno.ENODEV:
-                    raise
-
-        self.worker.call(work)
-        self.impairer.forget(i, j)
+        A disabled link is a veth pair with its near end down: the far end loses carrier, the
+        bridges stop forwarding to both, and frames in either direction are dropped. Deleting
+        the pair instead would cost ~15 ms (the kernel waits for an RCU grace period), and
+        its qdiscs and loss rules would have to be rebuilt when the robots meet again."""
+        missing = [p for p in add if p not in self.pairs]
+        if missing:
+            raise ValueError(f"links {missing} have no veth pair yet")
+        reqs = [self._toggle_request(i, j, False) for i, j in remove]
+        reqs += [self._toggle_request(i, j, True) for i, j in add]
+        self._send(reqs)
 
     def set_link_impairment(self, i: int, j: int, imp: Impairment) -> None:
         """Apply `imp` to both directions of link i-j."""
@@ -163,15 +197,19 @@ class Medium:
         self.impairer.apply(names.link_end(i, j), imp)
 
     def kernel_links(self) -> set[tuple[int, int]]:
-        """The links as the kernel has them: pairs (i, j), i < j, with a live veth."""
+        """The links as the kernel has them: pairs (i, j), i < j, whose near end is up.
+        Also records which veth pairs exist, for a process that attaches to the testbed."""
 
-        def work(ipr) -> set[tuple[int, int]]:
-            pairs = set()
+        def work(ipr) -> tuple[set, set]:
+            pairs, up = set(), set()
             for link in ipr.get_links():
                 parsed = names.parse_link_end(link.get_attr("IFLA_IFNAME"))
-                if parsed:
-                    i, j = parsed
-                    pairs.add((min(i, j), max(i, j)))
-            return pairs
+                if parsed and parsed[0] < parsed[1]:
+                    pairs.add(parsed)
+                    if link["flags"] & rtnl.IFF_UP:
+                        up.add(parsed)
+            return pairs, up
 
-        return self.worker.call(work)
+        pairs, up = self.worker.call(work)
+        self.pairs |= pairs
+        return up

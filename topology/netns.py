@@ -24,6 +24,8 @@ from typing import Any
 
 from pyroute2 import IPRoute
 
+from topology import rtnl
+
 NETNS_DIR = "/run/netns"
 CLONE_NEWNET = 0x40000000
 MS_REC = 0x4000
@@ -140,6 +142,19 @@ def run_in(name: str, fn: Callable[[], Any]) -> Any:
     return _in_thread(entered)
 
 
+def run_in_each(names_: list[str], fn: Callable[[str], Any]) -> list[Any]:
+    """Run fn(name) inside each namespace in turn, all in one thread; return the results."""
+
+    def visit() -> list[Any]:
+        out = []
+        for name in names_:
+            _enter(name)
+            out.append(fn(name))
+        return out
+
+    return _in_thread(visit)
+
+
 def write_sysctl(key: str, value: str | int) -> None:
     """Write a sysctl in the calling thread's namespace (key like 'net.ipv4.ip_forward')."""
     with open("/proc/sys/" + key.replace(".", "/"), "w") as f:
@@ -160,7 +175,10 @@ _STOP = object()
 
 
 class NsWorker:
-    """A thread parked in one namespace, with an IPRoute of its own, running submitted calls."""
+    """A thread parked in one namespace, with an IPRoute of its own, running submitted calls.
+
+    `nl` is a raw rtnetlink socket of that namespace (topology.rtnl), usable from any thread:
+    a socket belongs to the namespace it was made in."""
 
     def __init__(self, name: str):
         self.name = name
@@ -179,6 +197,7 @@ class NsWorker:
         try:
             _enter(self.name)
             ipr = IPRoute()
+            self.nl = rtnl.open_socket()
         except BaseException as exc:
             ready.put(exc)
             return
@@ -195,6 +214,7 @@ class NsWorker:
                     reply.put((False, exc))
         finally:
             ipr.close()
+            self.nl.close()
 
     def call(self, fn: Callable[[IPRoute], Any]) -> Any:
         """Run fn(ipr) in the namespace and return its result (or raise its exception)."""

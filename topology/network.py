@@ -112,8 +112,7 @@ class Network:
                 raise UsageError(str(exc)) from None
             if not self.medium.impairer.netem and shutil.which("nft") is None:
                 raise UsageError("loss without sch_netem needs nftables: `nft` is not installed")
-        for k in self.spec.robot_ids():
-            self.medium.add_robot(k)
+        self.medium.add_robots(list(self.spec.robot_ids()))
         self._apply_positions()
         if self.spec.capture_dir:
             self._start_captures()
@@ -176,16 +175,12 @@ class Network:
     def _apply_positions(self) -> tuple[list[Pair], list[Pair]]:
         wanted = self.wanted()
         add, remove, change = ranges.diff(self.current, wanted)
-        for i, j in remove:
-            self.medium.remove_link(i, j)
-            del self.current[(i, j)]
-        for i, j in add:
-            self.medium.add_link(i, j)
-            self.current[(i, j)] = Impairment()
+        # Impairments before enabling, so no frame crosses a link without its loss and delay.
+        self.medium.create_pairs(add)
         for p in add + change:
-            if wanted[p] != self.current[p]:
-                self.medium.set_link_impairment(*p, wanted[p])
-                self.current[p] = wanted[p]
+            self.medium.set_link_impairment(*p, wanted[p])
+        self.medium.set_links(add, remove)
+        self.current = wanted
         return add, remove
 
     def move(self, k: int, xy: Position) -> tuple[list[Pair], list[Pair]]:
