@@ -1,0 +1,133 @@
+"""The display role: a mesh member that does not explore, and shows what reaches it.
+
+Theory of operation. The display sits in its own namespace like a robot (robot N+1 of the
+network, with no body: its body link only carries the world's clock). Its inbox receives map
+floods and relays them like any robot; message processing merges them into the display's map
+and records each robot's position from its floods; visualization renders the merged map with
+the robots' paths (node.render): a video frame every `video_every` steps and a PNG snapshot at
+each chosen step, plus one at the end.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import select
+import threading
+from collections import Counter
+
+import cv2
+import numpy as np
+
+from node import body, render, wire
+from node.events import EventLog
+from node.flood import Flooder
+from node.grid import FREE, OccupancyGrid
+
+log = logging.getLogger(__name__)
+
+
+class Display:
+    def __init__(
+        self,
+        me: int,
+        shape: tuple[int, int],
+        cell: float,
+        link: body.BodyClient,
+        flooder: Flooder,
+        events: EventLog,
+        out_dir: str,
+        snapshots: set[int],
+        video_every: int = 5,
+        scale: int = 2,
+    ):
+        self.me = me
+        self.shape = shape
+        self.cell = cell
+        self.link = link
+        self.flooder = flooder
+        self.events = events
+        self.out_dir = out_dir
+        self.snapshots = snapshots
+        self.video_every = max(1, video_every)
+        self.scale = scale
+        self.grid = OccupancyGrid(shape, cell)
+        self.paths: dict[int, list[tuple[float, float]]] = {}
+        self.lock = threading.Lock()
+        self.stopping = threading.Event()
+        self.received: Counter[int] = Counter()
+        self.malformed = 0
+        self.step = -1
+        os.makedirs(out_dir, exist_ok=True)
+        size = (shape[1] * scale, shape[0] * scale)
+        self.video = render.Video(os.path.join(out_dir, "run"), size)
+
+    def run(self) -> None:
+        t = threading.Thread(target=self._inbox, name="inbox", daemon=True)
+        t.start()
+        try:
+            self._visualization()
+        finally:
+            self.stopping.set()
+            t.join(timeout=2.0)
+            self._snapshot(self.step, final=True)
+            self.video.close()
+            with self.lock:
+                known = int(np.count_nonzero(self.grid.ternary() == FREE))
+            np.save(os.path.join(self.out_dir, "map.npy"), self.grid.ternary())
+            self.events.write(
+                "summary", self.step, received={f"r{k}": v for k, v in self.received.items()},
+                known_free_cells=known, video=os.path.basename(self.video.path),
+                video_frames=self.video.frames, malformed=self.malformed,
+                flood=dict(self.flooder.counts),
+            )  # fmt: skip
+
+    def _visualization(self) -> None:
+        while not self.stopping.is_set():
+            msg = self.link.recv(timeout=0.5)
+            if msg is None:
+                continue
+            if msg[0] == "end":
+                return
+            if msg[0] != "frame":
+                continue
+            step = msg[1].step
+            self.step = step
+            if step in self.snapshots:
+                self._snapshot(step)
+            if step % self.video_every == 0 and not self.link.pending():
+                self.video.add(self._frame(step))
+
+    def _frame(self, step: int) -> np.ndarray:
+        with self.lock:
+            t = self.grid.ternary()
+            paths = {k: list(v) for k, v in self.paths.items()}
+        img = render.draw_paths(render.map_image(t, self.scale), paths, self.cell, self.scale)
+        return render.caption(img, f"step {step}")
+
+    def _snapshot(self, step: int, final: bool = False) -> None:
+        if step < 0:
+            return
+        name = f"step-{step:05d}.png"
+        cv2.imwrite(os.path.join(self.out_dir, name), self._frame(step))
+        self.events.write("snapshot", step, file=name, final=final)
+
+    def _inbox(self) -> None:
+        while not self.stopping.is_set():
+            ready, _, _ = select.select([self.flooder.fileno()], [], [], 0.5)
+            if not ready:
+                continue
+            for h, payload in self.flooder.receive():
+                try:
+                    if h.kind != wire.KIND_MAP:
+                        raise ValueError(f"unexpected flood kind {h.kind}")
+                    m = wire.unpack_map(payload, self.shape)
+                except ValueError as e:
+                    self.malformed += 1
+                    log.warning("dropped a malformed flood: %s", e)
+                    continue
+                with self.lock:
+                    self.grid.merge_ternary(m.cells, m.r0, m.c0)
+                    self.paths.setdefault(h.origin, []).append((m.x, m.y))
+                self.received[h.origin] += 1
+                self.events.write("recv", self.step, kind="map", frm=h.origin, sent=h.step)

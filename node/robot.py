@@ -1,0 +1,393 @@
+"""The robot role: the paper's five concurrent parts around three shared structures.
+
+Theory of operation (the paper's Fig. 1). Shared, under one lock: the *map* (a log-odds grid
+merged from the robot's own scans and teammates' local maps; the robot's own observations are
+also kept apart, as the local map it shares), the *current plan*, and the *scans archive*.
+Five threads:
+
+- motion control (the main thread): reads a frame (step, pose, scan) from the body link,
+  puts the scan into the maps and the archive, steers along the current plan and answers the
+  frame with a motion command;
+- path planning: waits for a request, plans on a snapshot of the map (node.planner: the
+  nearest reachable frontier not within laser range of a reachable teammate's goal), makes it
+  the current plan and announces the goal to reachable teammates over nanomsg; with no
+  reachable frontier left the robot has finished and tells its body so;
+- timer: counts steps; asks for a plan when 20 steps passed since the last one, and floods
+  the robot's local map every `map_period` steps;
+- message processing: merges maps, records teammates' goals, settles goal conflicts (the
+  winner by priority asks the loser to re-plan; the loser re-plans on that request);
+- inbox: receives from the network (UDP floods, relayed on the way; nanomsg TCP) and hands
+  each new message to message processing over a nanomsg inproc socket.
+
+A teammate is *reachable* while its map floods keep arriving (within `reach_steps`): a flood
+only arrives over a path that exists. Every plan, send and receipt goes to the event log with
+the step, which is what the run's results and checks are built from.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import pynng
+
+from node import body, planner, wire
+from node.events import EventLog
+from node.flood import Flooder
+from node.goalnet import GoalNet
+from node.grid import OccupancyGrid
+from node.rays import Laser
+
+log = logging.getLogger(__name__)
+
+INPROC = "inproc://inbox"
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    robot: int
+    robots: int
+    shape: tuple[int, int] = (400, 400)
+    cell: float = 0.05
+    laser_range: float = 2.0
+    laser_rays: int = 360
+    speed: float = 0.1  # metres per step (the world's; for waypoint tolerance)
+    radius: float = 0.15
+    plan_period: int = 20
+    map_period: int = 10
+    reach_steps: int = 30
+    goal_fresh_steps: int = 40
+    time_scale: float = 1.0
+    planner_factor: int = 2
+
+
+@dataclass
+class Teammate:
+    heard: int = -(10**9)  # my step when its last map flood arrived
+    goal: tuple[float, float] | None = None
+    cost: float = 0.0
+    goal_step: int = -(10**9)
+    pos: tuple[float, float] | None = None
+
+
+@dataclass
+class Shared:
+    grid: OccupancyGrid
+    own: OccupancyGrid
+    scans: list = field(default_factory=list)
+    plan: planner.Plan | None = None
+    wp: int = 0
+    pose: tuple[float, float] = (0.0, 0.0)
+    step: int = -1
+    last_plan_step: int = -(10**9)
+    plan_pending: bool = False
+    finished: bool = False
+    teammates: dict[int, Teammate] = field(default_factory=dict)
+
+
+class Robot:
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        link: body.BodyClient,
+        flooder: Flooder,
+        goals: GoalNet,
+        events: EventLog,
+    ):
+        self.cfg = cfg
+        self.link = link
+        self.flooder = flooder
+        self.goals = goals
+        self.events = events
+        self.laser = Laser(cfg.laser_range, cfg.laser_rays, cfg.cell)
+        self.params = planner.PlannerParams(cfg.cell, cfg.planner_factor, cfg.radius)
+        self.s = Shared(
+            OccupancyGrid(cfg.shape, cfg.cell, pad=self.laser.pad),
+            OccupancyGrid(cfg.shape, cfg.cell, pad=self.laser.pad),
+            teammates={j: Teammate() for j in range(1, cfg.robots + 1) if j != cfg.robot},
+        )
+        self.lock = threading.Lock()
+        self.tick = threading.Condition()
+        self.requests: queue.Queue[str] = queue.Queue()
+        self.stopping = threading.Event()
+        self.sent: Counter[str] = Counter()
+        self.received: Counter[str] = Counter()
+        self.failed: Counter[str] = Counter()
+        self.malformed = 0
+        self.frames = 0
+        self.skipped = 0
+        self.plan_ms: list[float] = []
+        self.threads: list[threading.Thread] = []
+
+    # -- the five parts ---------------------------------------------------------------------
+
+    def run(self) -> None:
+        """Start the other four parts and run motion control until the run ends."""
+        for name, fn in (
+            ("planner", self._planning),
+            ("timer", self._timer),
+            ("processing", self._processing),
+            ("inbox", self._inbox),
+        ):
+            t = threading.Thread(target=fn, name=name, daemon=True)
+            t.start()
+            self.threads.append(t)
+        for j in self.s.teammates:
+            self.goals.connect(j)
+        try:
+            self._motion()
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        self.stopping.set()
+        with self.tick:
+            self.tick.notify_all()
+        for t in self.threads:
+            t.join(timeout=2.0)
+        self.events.write(
+            "summary",
+            self.s.step,
+            sent=dict(self.sent),
+            received=dict(self.received),
+            send_failed=dict(self.failed),
+            malformed=self.malformed + self.flooder.counts["malformed"],
+            flood=dict(self.flooder.counts),
+            frames=self.frames,
+            frames_skipped=self.skipped,
+            plan_ms_median=float(np.median(self.plan_ms)) if self.plan_ms else None,
+            finished=self.s.finished,
+        )
+
+    def _motion(self) -> None:
+        wp = self.s.grid.Lp.shape[1]
+        started = False
+        while not self.stopping.is_set():
+            msg = self.link.recv(timeout=0.5)
+            if msg is None:
+                continue
+            if msg[0] == "end":
+                log.info("the world ended the run at step %d", self.s.step)
+                return
+            if msg[0] != "frame":
+                continue
+            f: body.Frame = msg[1]
+            self.frames += 1
+            free, occ = self.laser.scan_cells(f.x, f.y, f.ranges, wp)
+            behind = self.link.pending()
+            with self.lock:
+                s = self.s
+                s.grid.update_cells(free, occ)
+                s.own.update_cells(free, occ)
+                s.pose = (f.x, f.y)
+                s.step = f.step
+                s.scans.append((f.step, f.x, f.y, f.ranges))
+                target = None if behind else self._follow()
+            if behind:
+                self.skipped += 1  # a newer frame is waiting: act on that one
+            else:
+                self.link.send(body.cmd(f.step, target))
+            with self.tick:
+                self.tick.notify_all()
+            if not started:
+                started = True
+                self.request("start")
+
+    def _follow(self) -> tuple[float, float] | None:
+        """The next waypoint of the current plan (lock held), None when there is none."""
+        s = self.s
+        if s.finished or s.plan is None:
+            return None
+        path = s.plan.path
+        tol = 1e-3 + 0.01 * self.cfg.speed
+        while s.wp < len(path) and math.dist(s.pose, path[s.wp]) <= tol:
+            s.wp += 1
+        return path[s.wp] if s.wp < len(path) else None
+
+    def request(self, cause: str) -> None:
+        with self.lock:
+            if self.s.finished or self.s.plan_pending:
+                return
+            self.s.plan_pending = True
+        self.requests.put(cause)
+
+    def _planning(self) -> None:
+        cfg = self.cfg
+        while not self.stopping.is_set():
+            try:
+                cause = self.requests.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            with self.lock:
+                s = self.s
+                t = s.grid.ternary()
+                pose, step = s.pose, s.step
+                reach = self._reachable()
+                goals = [
+                    s.teammates[j].goal
+                    for j in reach
+                    if s.teammates[j].goal is not None
+                    and step - s.teammates[j].goal_step <= cfg.goal_fresh_steps
+                ]
+            t0 = time.perf_counter()
+            p = planner.plan(t, pose, goals, cfg.laser_range, self.params)
+            ms = (time.perf_counter() - t0) * 1000
+            self.plan_ms.append(ms)
+            with self.lock:
+                s.plan, s.wp = p, 0
+                s.last_plan_step = step
+                s.plan_pending = False
+                if p.status == "done":
+                    s.finished = True
+            goal = [round(v, 3) for v in p.goal] if p.goal else None
+            self.events.write(
+                "plan", step, cause=cause, status=p.status, goal=goal, cost=round(p.cost, 3),
+                ms=round(ms, 2), avoided=len(goals),
+            )  # fmt: skip
+            log.info(
+                "plan at step %d (%s): %s goal %s cost %.2f m, %.1f ms",
+                step, cause, p.status, goal, p.cost, ms,
+            )  # fmt: skip
+            if p.status == "done":
+                self.link.send(body.done(step))
+                self.events.write("finish", step)
+                log.info("finished at step %d: no reachable frontier left", step)
+                continue
+            data = wire.goal_msg(cfg.robot, step, p.goal, p.cost)
+            for j in reach:
+                self._send(j, "goal", data, step)
+
+    def _send(self, j: int, kind: str, data: bytes, step: int) -> None:
+        if self.goals.send(j, data):
+            self.sent[kind] += 1
+            self.events.write("send", step, kind=kind, to=j)
+        else:
+            self.failed[kind] += 1
+            self.events.write("send_failed", step, kind=kind, to=j)
+
+    def _reachable(self) -> list[int]:
+        """Teammates whose map floods arrived recently (lock held)."""
+        s = self.s
+        return [j for j, tm in s.teammates.items() if s.step - tm.heard <= self.cfg.reach_steps]
+
+    def _timer(self) -> None:
+        cfg = self.cfg
+        last_map = -(10**9)
+        seen_step = -1
+        while not self.stopping.is_set():
+            with self.tick:
+                self.tick.wait(0.5)
+            with self.lock:
+                step = self.s.step
+                due = (
+                    step >= 0
+                    and not self.s.finished
+                    and not self.s.plan_pending
+                    and step - self.s.last_plan_step >= cfg.plan_period
+                )
+            if step == seen_step:
+                continue
+            seen_step = step
+            if due:
+                self.request("timer")
+            if step >= 0 and step - last_map >= cfg.map_period:
+                last_map = step
+                self._share_map(step)
+
+    def _share_map(self, step: int) -> None:
+        with self.lock:
+            t = self.s.own.ternary()
+            x, y = self.s.pose
+        payload = wire.pack_map(x, y, t)
+        seq = self.flooder.originate(wire.KIND_MAP, step, payload)
+        self.sent["map"] += 1
+        self.events.write("send", step, kind="map", seq=seq, bytes=len(payload))
+
+    def _inbox(self) -> None:
+        import select
+
+        out = pynng.Push0(send_timeout=1000)
+        out.dial(INPROC, block=False)  # connects once message processing listens
+        fds = [self.flooder.fileno(), self.goals.fileno()]
+        try:
+            while not self.stopping.is_set():
+                ready, _, _ = select.select(fds, [], [], 0.5)
+                if self.flooder.fileno() in ready:
+                    for h, payload in self.flooder.receive():
+                        out.send(b"F" + wire.pack_flood(h, payload))
+                if self.goals.fileno() in ready:
+                    for data in self.goals.receive():
+                        out.send(b"G" + data)
+        finally:
+            out.close()
+
+    def _processing(self) -> None:
+        inq = pynng.Pull0(recv_timeout=500)
+        inq.listen(INPROC)
+        try:
+            while not self.stopping.is_set():
+                try:
+                    data = inq.recv()
+                except pynng.Timeout:
+                    continue
+                try:
+                    if data[:1] == b"F":
+                        self._on_flood(data[1:])
+                    elif data[:1] == b"G":
+                        self._on_message(data[1:])
+                except ValueError as e:
+                    self.malformed += 1
+                    log.warning("dropped a malformed message: %s", e)
+        finally:
+            inq.close()
+
+    def _on_flood(self, data: bytes) -> None:
+        h, payload = wire.unpack_flood(data)
+        if h.kind != wire.KIND_MAP or not 1 <= h.origin <= self.cfg.robots + 1:
+            raise ValueError(f"unexpected flood kind {h.kind} from {h.origin}")
+        m = wire.unpack_map(payload, self.cfg.shape)
+        with self.lock:
+            s = self.s
+            learnt = s.grid.merge_ternary(m.cells, m.r0, m.c0)
+            tm = s.teammates.get(h.origin)
+            if tm is not None:
+                tm.heard = s.step
+                tm.pos = (m.x, m.y)
+            step = s.step
+        self.received["map"] += 1
+        self.events.write(
+            "recv", step, kind="map", frm=h.origin, seq=h.seq, sent=h.step, ttl=h.ttl,
+            learnt=learnt,
+        )  # fmt: skip
+
+    def _on_message(self, data: bytes) -> None:
+        cfg = self.cfg
+        m = wire.parse_msg(data, cfg.robots)
+        j = m["from"]
+        if j == cfg.robot:
+            raise ValueError("a message claiming to be from myself")
+        with self.lock:
+            s = self.s
+            step = s.step
+            tm = s.teammates[j]
+            tm.goal, tm.goal_step = m["goal"], step
+            if m["k"] == "goal":
+                tm.cost = m["cost"]
+            mine = s.plan.goal if (s.plan and not s.finished) else None
+            my_cost = s.plan.cost if s.plan else 0.0
+        self.received[m["k"]] += 1
+        self.events.write("recv", step, kind=m["k"], frm=j, sent=m["step"])
+        if m["k"] == "goal":
+            decision = planner.resolve_conflict(
+                cfg.robot, mine, my_cost, j, m["goal"], m["cost"], cfg.laser_range
+            )
+            if decision == "request":
+                self._send(j, "replan", wire.replan_msg(cfg.robot, step, mine), step)
+        elif m["k"] == "replan":
+            self.request("request")

@@ -1,0 +1,125 @@
+"""What robots say to each other on the emulated network.
+
+Floods (UDP broadcast, see node.flood) carry a fixed header and a payload:
+
+    'RMF1' u8 kind u8 ttl u16 origin u32 seq u32 step     (18 bytes, network byte order)
+
+`step` is the origin's step when it sent the flood. The only flood kind is MAP: the origin's
+own local map (cells its own laser saw) cropped to its known cells, with its position:
+
+    f32 x f32 y u16 r0 u16 c0 u16 h u16 w, then the zlib'd 2-bit ternary cells (node.grid)
+
+Goals and re-plan requests travel over nanomsg TCP (node.goalnet) as small JSON objects:
+
+    {"k": "goal",   "from": 3, "step": 120, "goal": [x, y], "cost": 4.2}
+    {"k": "replan", "from": 1, "step": 121, "goal": [x, y]}       (the sender's winning goal)
+
+Every parser raises ValueError on malformed input; callers count and drop it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from node.grid import decode_ternary, encode_ternary
+
+MAGIC = b"RMF1"
+KIND_MAP = 1
+_HDR = struct.Struct("!4sBBHII")
+_MAP = struct.Struct("!ffHHHH")
+
+
+@dataclass(frozen=True)
+class FloodHeader:
+    kind: int
+    ttl: int
+    origin: int
+    seq: int
+    step: int
+
+
+def pack_flood(h: FloodHeader, payload: bytes) -> bytes:
+    return _HDR.pack(MAGIC, h.kind, h.ttl, h.origin, h.seq, h.step) + payload
+
+
+def unpack_flood(data: bytes) -> tuple[FloodHeader, bytes]:
+    if len(data) < _HDR.size:
+        raise ValueError("flood shorter than its header")
+    magic, kind, ttl, origin, seq, step = _HDR.unpack_from(data)
+    if magic != MAGIC:
+        raise ValueError("not a robot flood (bad magic)")
+    return FloodHeader(kind, ttl, origin, seq, step), data[_HDR.size :]
+
+
+def with_ttl(data: bytes, ttl: int) -> bytes:
+    """The same flood with its TTL byte replaced (for relaying)."""
+    return data[:5] + bytes([ttl]) + data[6:]
+
+
+def pack_map(x: float, y: float, ternary: np.ndarray) -> bytes:
+    r0, c0, h, w, blob = encode_ternary(ternary)
+    return _MAP.pack(x, y, r0, c0, h, w) + blob
+
+
+@dataclass
+class MapMsg:
+    x: float
+    y: float
+    r0: int
+    c0: int
+    cells: np.ndarray
+
+
+def unpack_map(payload: bytes, shape: tuple[int, int]) -> MapMsg:
+    if len(payload) < _MAP.size:
+        raise ValueError("map payload shorter than its header")
+    x, y, r0, c0, h, w = _MAP.unpack_from(payload)
+    if r0 + h > shape[0] or c0 + w > shape[1]:
+        raise ValueError("map does not fit this robot's grid")
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError("map position is not finite")
+    cells = decode_ternary(h, w, payload[_MAP.size :])
+    return MapMsg(x, y, r0, c0, cells)
+
+
+def goal_msg(sender: int, step: int, goal: tuple[float, float], cost: float) -> bytes:
+    return json.dumps(
+        {"k": "goal", "from": sender, "step": step, "goal": list(goal), "cost": round(cost, 3)}
+    ).encode()
+
+
+def replan_msg(sender: int, step: int, goal: tuple[float, float]) -> bytes:
+    return json.dumps({"k": "replan", "from": sender, "step": step, "goal": list(goal)}).encode()
+
+
+def parse_msg(data: bytes, n_robots: int) -> dict:
+    """Validate a goal or replan message; returns the dict with goal as a tuple."""
+    try:
+        m = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"message is not JSON: {e}") from None
+    if not isinstance(m, dict) or m.get("k") not in ("goal", "replan"):
+        raise ValueError("message has no known kind")
+    sender, step, goal = m.get("from"), m.get("step"), m.get("goal")
+    if not isinstance(sender, int) or not 1 <= sender <= n_robots:
+        raise ValueError("message sender is not a robot of this team")
+    if not isinstance(step, int) or step < 0:
+        raise ValueError("message step is not a step")
+    if (
+        not isinstance(goal, list)
+        or len(goal) != 2
+        or not all(isinstance(v, int | float) and math.isfinite(v) for v in goal)
+    ):
+        raise ValueError("message goal is not a point")
+    m["goal"] = (float(goal[0]), float(goal[1]))
+    if m["k"] == "goal":
+        cost = m.get("cost")
+        if not isinstance(cost, int | float) or not math.isfinite(cost) or cost < 0:
+            raise ValueError("goal message has no valid cost")
+        m["cost"] = float(cost)
+    return m

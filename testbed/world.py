@@ -1,0 +1,109 @@
+"""The world: ground truth the robots never see directly.
+
+Theory of operation. The world holds the obstacle map, every robot's pose and the motion
+command its process last sent. One `step()` is the paper's time unit (100 ms of emulated
+time): each robot moves up to `speed` metres straight toward its commanded target and stops
+short of any obstacle (a move that would put its disc into an obstacle is refused and counted
+as a collision); then every robot's noiseless laser is cast from its new position. The cells
+those rays cross are the union of what the team has seen, from which coverage of free space
+is computed. Robots are discs that do not collide with each other (as in the paper's
+simulation). The world never touches the network: `testbed.run` feeds its positions to the
+topology controller and its scans to the robots' body links.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from node.rays import Laser, pad
+from testbed.worldmap import GroundTruth
+
+
+@dataclass
+class Body:
+    """One robot's simulated body."""
+
+    x: float
+    y: float
+    theta: float = 0.0
+    target: tuple[float, float] | None = None
+    collisions: int = 0
+    path_length: float = 0.0
+    alive: bool = True
+
+
+class World:
+    def __init__(
+        self,
+        truth: GroundTruth,
+        starts: list[tuple[float, float]],
+        laser: Laser,
+        free_space: np.ndarray,
+        speed: float = 0.1,
+        radius: float = 0.15,
+    ):
+        self.truth = truth
+        self.laser = laser
+        self.speed = float(speed)
+        self.radius = float(radius)
+        self.bodies = [Body(x, y) for x, y in starts]
+        self.step_no = 0
+        self.occ_padded = pad(truth.occupied, laser.pad, True)
+        self.seen_padded = np.zeros(self.occ_padded.shape, dtype=bool)
+        p = laser.pad
+        self.seen = self.seen_padded[p : p + truth.shape[0], p : p + truth.shape[1]]
+        self.free_space = free_space
+        self.free_total = max(1, int(free_space.sum()))
+        self.paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
+
+    @property
+    def n(self) -> int:
+        return len(self.bodies)
+
+    def positions(self) -> list[tuple[float, float]]:
+        return [(b.x, b.y) for b in self.bodies]
+
+    def command(self, k: int, target: tuple[float, float] | None) -> None:
+        """Robot k (0-based) asks to drive toward `target` (None: stop)."""
+        self.bodies[k].target = target
+
+    def move(self) -> None:
+        """Advance every live robot by one step toward its target."""
+        for i, b in enumerate(self.bodies):
+            if not b.alive or b.target is None:
+                continue
+            dx, dy = b.target[0] - b.x, b.target[1] - b.y
+            d = math.hypot(dx, dy)
+            if d < 1e-9:
+                continue
+            s = min(self.speed, d)
+            nx, ny = b.x + dx / d * s, b.y + dy / d * s
+            if not self.truth.is_free_disc(nx, ny, self.radius):
+                b.collisions += 1
+                b.target = None
+                continue
+            b.theta = math.atan2(dy, dx)
+            b.path_length += s
+            b.x, b.y = nx, ny
+            self.paths[i].append((nx, ny))
+        self.step_no += 1
+
+    def scan(self, k: int) -> np.ndarray:
+        """Cast robot k's laser (0-based) and add what it saw to the team's seen cells."""
+        b = self.bodies[k]
+        flat = self.laser.flat_cells(b.x, b.y, self.occ_padded.shape[1])
+        hit = self.occ_padded.reshape(-1)[flat]
+        any_hit = hit.any(axis=1)
+        first = np.where(any_hit, hit.argmax(axis=1), self.laser.n_samples)
+        ranges = np.full(self.laser.n_rays, np.inf, dtype=np.float32)
+        ranges[any_hit] = ((first[any_hit] + 1) * self.laser.step).astype(np.float32)
+        seen = self.seen_padded.reshape(-1)
+        seen[flat[np.arange(self.laser.n_samples)[None, :] <= first[:, None]]] = True
+        return ranges
+
+    def coverage(self) -> float:
+        """Fraction of the free space the team's lasers have seen."""
+        return float(np.count_nonzero(self.seen & self.free_space)) / self.free_total

@@ -1,0 +1,149 @@
+"""Ground-truth maps: the paper's empty terrain, or a PNG where dark pixels are obstacles.
+
+A map is a boolean obstacle grid at the world's cell size (5 cm). `free_space` is what
+coverage is measured against: the free cells connected to where the robots start (a room
+sealed off from the start can never be explored, so it does not count).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from testbed.errors import UsageError
+
+CELL = 0.05  # metres
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    occupied: np.ndarray  # bool (rows, cols); row = y / cell, col = x / cell
+    cell: float = CELL
+    source: str = "empty"
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.occupied.shape
+
+    @property
+    def size_m(self) -> tuple[float, float]:
+        """(width, height) in metres."""
+        return self.shape[1] * self.cell, self.shape[0] * self.cell
+
+    def is_free_disc(self, x: float, y: float, radius: float) -> bool:
+        """True when a disc of `radius` at (x, y) lies inside the map and touches no obstacle."""
+        h, w = self.shape
+        c = self.cell
+        r0, r1 = math.floor((y - radius) / c), math.floor((y + radius) / c)
+        c0, c1 = math.floor((x - radius) / c), math.floor((x + radius) / c)
+        if r0 < 0 or c0 < 0 or r1 >= h or c1 >= w:
+            return False
+        rows = (np.arange(r0, r1 + 1) + 0.5) * c
+        cols = (np.arange(c0, c1 + 1) + 0.5) * c
+        # A cell touches the disc when its nearest point is within the radius.
+        dy = np.maximum(np.abs(rows - y) - c / 2, 0.0)[:, None]
+        dx = np.maximum(np.abs(cols - x) - c / 2, 0.0)[None, :]
+        touch = dy * dy + dx * dx <= radius * radius
+        return not bool((self.occupied[r0 : r1 + 1, c0 : c1 + 1] & touch).any())
+
+
+def empty_terrain(width_m: float = 20.0, height_m: float = 20.0, wall_m: float = 0.1):
+    """The paper's terrain: an empty rectangle with boundary walls."""
+    h, w = round(height_m / CELL), round(width_m / CELL)
+    t = max(1, round(wall_m / CELL))
+    occ = np.zeros((h, w), dtype=bool)
+    occ[:t, :] = occ[-t:, :] = occ[:, :t] = occ[:, -t:] = True
+    return GroundTruth(occ, CELL, "empty")
+
+
+def load_png(path: str, cell_m: float, walls: bool = True) -> GroundTruth:
+    """A map from a PNG: pixels darker than mid-grey are obstacles; one pixel is `cell_m`.
+
+    The picture is resampled to the world's 5 cm cells; a one-cell wall is added around it
+    when `walls` (robots must not leave the map).
+    """
+    if not os.path.isfile(path):
+        raise UsageError(f"map file {path} does not exist")
+    if not (cell_m > 0 and math.isfinite(cell_m)):
+        raise UsageError(f"map cell size must be a positive number, not {cell_m}")
+    img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise UsageError(f"map file {path} is not an image OpenCV can read")
+    occ = img < 128
+    if abs(cell_m - CELL) > 1e-9:
+        h = max(1, round(img.shape[0] * cell_m / CELL))
+        w = max(1, round(img.shape[1] * cell_m / CELL))
+        occ = cv2.resize(occ.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
+    if occ.shape[0] > 4000 or occ.shape[1] > 4000:
+        raise UsageError(f"map {path} is too large ({occ.shape[1]} x {occ.shape[0]} cells)")
+    if walls:
+        occ = occ.copy()
+        occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    if occ.all():
+        raise UsageError(f"map {path} has no free space")
+    return GroundTruth(occ, CELL, os.path.basename(path))
+
+
+def free_space(truth: GroundTruth, starts: list[tuple[float, float]]) -> np.ndarray:
+    """Free cells 8-connected to any start position (bool)."""
+    free = (~truth.occupied).astype(np.uint8)
+    n, labels = cv2.connectedComponents(free, connectivity=8)
+    keep = set()
+    for x, y in starts:
+        r, c = int(y / truth.cell), int(x / truth.cell)
+        if 0 <= r < truth.shape[0] and 0 <= c < truth.shape[1] and free[r, c]:
+            keep.add(int(labels[r, c]))
+    return np.isin(labels, sorted(keep)) & (free > 0)
+
+
+def start_positions(
+    truth: GroundTruth,
+    n: int,
+    rng: np.random.Generator,
+    radius: float,
+    corner: tuple[float, float] = (0.0, 0.0),
+) -> list[tuple[float, float]]:
+    """`n` seeded positions clustered near `corner`, as a team dropped off together.
+
+    Each position keeps the robot's disc clear of obstacles (with a margin) and at least two
+    radii plus 10 cm from the others. The cluster's square grows until everyone fits.
+    """
+    margin = radius + 0.1
+    # The free cell nearest the corner anchors the cluster.
+    free_rows, free_cols = np.nonzero(~truth.occupied)
+    cx, cy = corner
+    d2 = ((free_cols + 0.5) * truth.cell - cx) ** 2 + ((free_rows + 0.5) * truth.cell - cy) ** 2
+    order = np.argsort(d2)
+    anchor = None
+    for i in order[:20000]:
+        x, y = (free_cols[i] + 0.5) * truth.cell, (free_rows[i] + 0.5) * truth.cell
+        x, y = x + math.copysign(margin, truth.size_m[0] / 2 - x), y
+        y = y + math.copysign(margin, truth.size_m[1] / 2 - y)
+        if truth.is_free_disc(x, y, margin):
+            anchor = (x, y)
+            break
+    if anchor is None:
+        raise UsageError("the map has no room to place a robot near its corner")
+    sx = 1.0 if anchor[0] < truth.size_m[0] / 2 else -1.0
+    sy = 1.0 if anchor[1] < truth.size_m[1] / 2 else -1.0
+    side = max(1.0, 0.6 * math.sqrt(n))
+    out: list[tuple[float, float]] = []
+    tries = 0
+    while len(out) < n:
+        tries += 1
+        if tries % 2000 == 0:
+            side *= 1.5
+        if tries > 40000:
+            raise UsageError(f"could not place {n} robots near the map's corner")
+        x = anchor[0] + sx * rng.uniform(0, side)
+        y = anchor[1] + sy * rng.uniform(0, side)
+        if not truth.is_free_disc(x, y, margin):
+            continue
+        if any(math.hypot(x - a, y - b) < 2 * radius + 0.1 for a, b in out):
+            continue
+        out.append((round(x, 3), round(y, 3)))
+    return out
