@@ -465,7 +465,7 @@ class Sweep:
                     self._write_state()
                     self._show(queue, event)
                 if not exited:
-                    time.sleep(0.2)
+                    time.sleep(0.1)
             if self.stop_signal is not None:
                 self._stop_children(children, queue)
                 self._write_state()

@@ -1,0 +1,160 @@
+"""Sweep files: validation (one-line errors naming the key), expansion, run ids and seeds."""
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from testbed import sweepfile
+from testbed.errors import UsageError
+
+REPO = Path(__file__).resolve().parents[2]
+EXPERIMENTS = REPO / "testbed" / "experiments"
+
+GOOD = """
+[grid]
+robots = [1, 2]
+comm_range = [5, 20]
+laser_range = [2.0]
+runs = 2
+
+[run]
+time_scale = 4
+capture = true
+"""
+
+
+def parse(text: str):
+    return sweepfile.parse(tomllib.loads(text), "s.toml")
+
+
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        (GOOD + "\nfoo = 1\n", "run.foo"),
+        ("bogus = 1\n" + GOOD, "bogus"),
+        (GOOD.replace("runs = 2", "runs = 2\nteams = [1]"), "grid.teams"),
+        (GOOD.replace("robots = [1, 2]", "robots = []"), "grid.robots"),
+        (GOOD.replace("comm_range = [5, 20]", "comm_range = []"), "grid.comm_range"),
+        (GOOD.replace("laser_range = [2.0]", ""), "grid.laser_range"),
+        (GOOD.replace("robots = [1, 2]", 'robots = "1-10"'), "grid.robots"),
+        (GOOD.replace("robots = [1, 2]", "robots = [1, 2.5]"), "grid.robots"),
+        (GOOD.replace("robots = [1, 2]", "robots = [true]"), "grid.robots"),
+        (GOOD.replace("robots = [1, 2]", "robots = [0, 2]"), "grid.robots"),
+        (GOOD.replace("robots = [1, 2]", "robots = [2, 2]"), "grid.robots"),
+        (GOOD.replace("comm_range = [5, 20]", 'comm_range = ["far"]'), "grid.comm_range"),
+        (GOOD.replace("comm_range = [5, 20]", "comm_range = [-5]"), "grid.comm_range"),
+        (GOOD.replace("runs = 2", "runs = 2\nloss_pct = [120]"), "grid.loss_pct"),
+        (GOOD.replace("runs = 2", "runs = 2\ndelay_ms = []"), "grid.delay_ms"),
+        (GOOD.replace("runs = 2", "runs = 0"), "grid.runs"),
+        (GOOD.replace("runs = 2", "runs = 1.5"), "grid.runs"),
+        (GOOD.replace("time_scale = 4", 'time_scale = "fast"'), "run.time_scale"),
+        (GOOD.replace("time_scale = 4", "time_scale = 0"), "run.time_scale"),
+        (GOOD.replace("capture = true", 'capture = "yes"'), "run.capture"),
+        (GOOD + 'routing = "olsr"\n', "run.routing"),
+        (GOOD + "max_steps = true\n", "run.max_steps"),
+        (GOOD + "seed = 1.5\n", "run.seed"),
+        ("description = 3\n" + GOOD, "description"),
+        ("[run]\ntime_scale = 1\n", "grid"),
+        ("grid = 3\n", "grid"),
+    ],
+)
+def test_bad_sweep_file_names_the_key(text, key):
+    with pytest.raises(UsageError) as e:
+        parse(text)
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"sweep file s.toml: {key}:"), msg
+    assert e.value.exit_status == 2
+
+
+def test_defaults_and_types():
+    spec = parse(GOOD)
+    assert spec.robots == (1, 2)
+    assert spec.comm_range == (5.0, 20.0) and all(isinstance(x, float) for x in spec.comm_range)
+    assert spec.loss_pct == (0.0,) and spec.delay_ms == (0.0,)
+    assert spec.time_scale == 4.0 and spec.capture is True and spec.routing == "aodv"
+    assert spec.max_steps == 3000 and spec.runs == 2
+
+
+def test_invalid_toml_and_missing_file(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[grid\nrobots = [1]\n")
+    with pytest.raises(UsageError, match="invalid TOML"):
+        sweepfile.load(bad)
+    with pytest.raises(UsageError, match="cannot read"):
+        sweepfile.load(tmp_path / "absent.toml")
+
+
+def test_relative_map_path_is_relative_to_the_file(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text(GOOD + 'map = "maps/office.png"\n')
+    assert sweepfile.load(f).map == str(tmp_path / "maps" / "office.png")
+
+
+@pytest.mark.parametrize(
+    "name, n_runs",
+    [("paper", 10 * 4 * 2 * 3), ("short", 6), ("impairments", 2 * 3 * 2 * 3)],
+)
+def test_profiles_load(name, n_runs):
+    spec = sweepfile.load(EXPERIMENTS / f"{name}.toml")
+    runs = sweepfile.expand(spec)
+    assert len(runs) == n_runs
+    assert len({r.run_id for r in runs}) == n_runs
+    assert spec.capture
+
+
+def test_paper_profile_is_the_papers_grid():
+    spec = sweepfile.load(EXPERIMENTS / "paper.toml")
+    assert spec.robots == tuple(range(1, 11))
+    assert spec.comm_range == (5.0, 10.0, 15.0, 20.0)
+    assert spec.laser_range == (2.0, 1.5)
+    assert spec.runs == 3
+
+
+def test_run_ids_and_seeds_are_stable_and_distinct():
+    spec = parse(GOOD.replace("runs = 2", "runs = 2\nloss_pct = [0, 10]\ndelay_ms = [0, 50]"))
+    a, b = sweepfile.expand(spec), sweepfile.expand(spec)
+    assert [r.run_id for r in a] == [r.run_id for r in b]
+    assert [r.config for r in a] == [r.config for r in b]
+    assert len({r.run_id for r in a}) == len(a)
+    assert len({r.config["seed"] for r in a}) == len(a)
+    ids = {r.run_id for r in a}
+    assert "n01-c5-l2-k1" in ids and "n02-c20-l2-p10-d50-k2" in ids
+    # The id and seed depend on the point and index only: a bigger grid keeps them.
+    bigger = parse(
+        GOOD.replace("robots = [1, 2]", "robots = [1, 2, 3]").replace("runs = 2", "runs = 3")
+    )
+    small = {r.run_id: r.config["seed"] for r in sweepfile.expand(parse(GOOD))}
+    big = {r.run_id: r.config["seed"] for r in sweepfile.expand(bigger)}
+    assert all(big[k] == v for k, v in small.items())
+    # ...and on the file's base seed.
+    other = {r.run_id: r.config["seed"] for r in sweepfile.expand(parse(GOOD + "seed = 7\n"))}
+    assert set(other) == set(small) and all(other[k] != small[k] for k in small)
+
+
+def test_expansion_covers_every_point_once_before_repeating():
+    runs = sweepfile.expand(parse(GOOD))
+    assert [r.index for r in runs] == [1, 1, 1, 1, 2, 2, 2, 2]
+    first = runs[0].config
+    assert set(first) == {
+        "robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map",
+        "loss_pct", "delay_ms", "capture", "max_steps",
+    }  # fmt: skip
+
+
+def test_cli_bad_file_one_line_exit_2(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text(GOOD.replace("robots = [1, 2]", "robots = []"))
+    r = subprocess.run(
+        [sys.executable, "-m", "testbed.sweep", str(f), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "grid.robots" in lines[0], r.stderr
+    assert not (tmp_path / "out").exists()

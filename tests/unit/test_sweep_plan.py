@@ -1,0 +1,118 @@
+"""The sweep's planner (what is done, to do, partial, skipped), command line and progress."""
+
+import io
+import json
+
+import pytest
+
+from testbed import sweep, sweepfile
+from tests.unit.test_sweep_synthetic import write_run
+
+
+def spec(**kw):
+    base = dict(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=2)
+    base.update(kw)
+    return sweepfile.SweepSpec(**base)
+
+
+def test_plan_sorts_runs_by_what_is_on_disk(tmp_path):
+    runs = sweepfile.expand(spec())
+    done, partial = runs[0], runs[1]
+    write_run(tmp_path, done)
+    pdir = tmp_path / "runs" / partial.run_id
+    pdir.mkdir(parents=True)
+    (pdir / "config.json").write_text("{}")
+    (pdir / "result.json.tmp").write_text("{")  # a run killed while writing its result
+    p = sweep.plan(runs, tmp_path, netem=False)
+    assert [r.run_id for r in p.done] == [done.run_id]
+    assert [r.run_id for r in p.todo] == [r.run_id for r in runs[1:]]
+    assert [r.run_id for r in p.partial] == [partial.run_id]
+    assert p.skipped == {}
+
+
+def test_delay_points_are_skipped_without_netem_with_a_reason(tmp_path):
+    runs = sweepfile.expand(spec(delay_ms=(0.0, 50.0), runs=1))
+    p = sweep.plan(runs, tmp_path, netem=False)
+    assert sorted(p.skipped) == ["n01-c5-l2-d50-k1", "n02-c5-l2-d50-k1"]
+    assert all("sch_netem" in why for why in p.skipped.values())
+    assert len(p.todo) == 2
+    assert not sweep.plan(runs, tmp_path, netem=True).skipped
+
+
+def test_a_finished_delay_run_stays_done_without_netem(tmp_path):
+    runs = sweepfile.expand(spec(delay_ms=(50.0,), runs=1))
+    write_run(tmp_path, runs[0])
+    p = sweep.plan(runs, tmp_path, netem=False)
+    assert [r.run_id for r in p.done] == [runs[0].run_id]
+
+
+def test_config_mismatch_is_found(tmp_path):
+    runs = sweepfile.expand(spec())
+    write_run(tmp_path, runs[0])
+    assert sweep.config_mismatch(tmp_path, runs[0]) is None
+    changed = sweepfile.expand(spec(time_scale=3.0))[0]
+    assert "time_scale" in sweep.config_mismatch(tmp_path, changed)
+
+
+def test_run_argv():
+    cfg = sweepfile.expand(spec(capture=True, time_scale=2.5))[0].config
+    argv = sweep.run_argv(["testbed", "run"], cfg, "/x/runs/a")
+    assert argv[:2] == ["testbed", "run"]
+    assert argv[-2:] == ["--out", "/x/runs/a"]
+    pairs = dict(zip(argv[2:-3:2], argv[3:-2:2], strict=False))
+    assert "--capture" in argv and "--map" not in argv
+    i = argv.index("--robots")
+    assert argv[i + 1] == "1"
+    assert argv[argv.index("--comm-range") + 1] == "5"
+    assert argv[argv.index("--time-scale") + 1] == "2.5"
+    assert argv[argv.index("--seed") + 1] == str(cfg["seed"])
+    assert pairs  # flags come in --flag value pairs
+
+
+def test_default_jobs():
+    assert sweep.default_jobs(1) == 1
+    assert sweep.default_jobs(2) == 1
+    assert sweep.default_jobs(8) == 4
+
+
+def test_progress_line_per_run_when_not_a_tty():
+    out = io.StringIO()
+    p = sweep.Progress(4, out)
+    runs = sweepfile.expand(spec())
+    assert p.eta(runs, 0, 1) is None
+    p.record(1, 10.0)
+    p.record(2, 30.0)
+    # two remaining runs (1 and 2 robots) cost 10 + 30 s, at 2 jobs: 20 s
+    assert p.eta(runs[2:], 0, 2) == pytest.approx(20.0)
+    p.update(2, 0, 0, 20.0, "n01-c5-l2-k1: complete in 10 s")
+    p.update(2, 1, 0, 20.0)  # no event: nothing printed off a TTY
+    text = out.getvalue()
+    assert text.count("\n") == 1 and "\r" not in text
+    assert "2/4 done" in text and "ETA 0m20s" in text
+
+
+def test_progress_redraws_in_place_on_a_tty():
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    out = Tty()
+    p = sweep.Progress(3, out)
+    p.update(0, 1, 0, None)
+    p.update(1, 1, 0, 5.0, "n01: complete")
+    p.close()
+    text = out.getvalue()
+    assert text.startswith("\r[") and "ETA ?" in text and "1/3 done" in text
+    assert text.endswith("\n")
+
+
+def test_sweep_json_is_written_atomically(tmp_path):
+    s = spec()
+    runs = sweepfile.expand(s)
+    (tmp_path / "runs").mkdir()
+    sw = sweep.Sweep(s, runs, tmp_path, 1, False, command=["true"], progress_stream=io.StringIO())
+    sw._write_state()
+    doc = json.loads((tmp_path / "sweep.json").read_text())
+    assert [r["id"] for r in doc["runs"]] == [r.run_id for r in runs]
+    assert all(r["status"] == "pending" for r in doc["runs"])
+    assert not (tmp_path / "sweep.json.tmp").exists()

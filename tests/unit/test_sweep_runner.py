@@ -1,0 +1,213 @@
+"""The sweep runner end to end with a stand-in for `testbed run`.
+
+The stand-in is a real program that parses the flags the sweep passes, writes config.json
+first and result.json last (atomically), as notes/run-results.md says `testbed run` does, and
+stops on SIGINT/SIGTERM without a result. With it the sweep's process handling (concurrency,
+interrupt, resume, back-off, failures) is exercised for real, without namespaces. The same
+scenarios against the real `testbed run` are in tests/integration/test_sweep_short.py.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+STANDIN = r"""
+import argparse, json, os, signal, sys, time
+p = argparse.ArgumentParser()
+for f in ("--robots", "--seed", "--max-steps"):
+    p.add_argument(f, type=int)
+for f in ("--comm-range", "--laser-range", "--time-scale", "--loss-pct", "--delay-ms"):
+    p.add_argument(f, type=float, default=0.0)
+p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
+p.add_argument("--capture", action="store_true")
+a = p.parse_args()
+signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+pids = os.environ.get("STANDIN_PIDS")
+if pids:
+    with open(os.path.join(pids, str(os.getpid())), "w") as f:
+        f.write(a.out)
+if str(a.robots) in os.environ.get("STANDIN_FAIL", "").split(","):
+    print("standin: failing on purpose", file=sys.stderr)
+    sys.exit(3)
+os.makedirs(a.out)
+cfg = {"robots": a.robots, "comm_range": a.comm_range, "laser_range": a.laser_range,
+       "seed": a.seed, "time_scale": a.time_scale, "routing": a.routing, "map": a.map,
+       "loss_pct": a.loss_pct, "delay_ms": a.delay_ms, "capture": a.capture,
+       "max_steps": a.max_steps}
+with open(os.path.join(a.out, "config.json"), "w") as f:
+    json.dump(cfg, f)
+time.sleep(float(os.environ.get("STANDIN_SLEEP", "0.05")))
+miss = float(os.environ.get("STANDIN_MISS", "0")) if str(a.robots) in os.environ.get(
+    "STANDIN_MISS_ROBOTS", "").split(",") else 0.0
+robots = {f"r{k}": {"finish_step": 100 + k, "crashed": False, "exit_status": 0,
+                    "plans": [{"step": 0, "cause": "start"}, {"step": 20, "cause": "timer"}],
+                    "messages": {"sent": {}, "received": {}}, "path_length_m": 1.0}
+          for k in range(1, a.robots + 1)}
+res = {"format": 1, "config": cfg, "status": "complete", "status_detail": "", "steps": 120,
+       "coverage_final": 0.99, "time_scale_requested": a.time_scale,
+       "time_scale_achieved": a.time_scale, "deadlines_missed": 0,
+       "deadline_miss_fraction": miss, "wall_time_s": 0.2, "robots": robots}
+tmp = os.path.join(a.out, "result.json.tmp")
+with open(tmp, "w") as f:
+    json.dump(res, f)
+os.replace(tmp, os.path.join(a.out, "result.json"))
+"""
+
+SWEEP = """
+[grid]
+robots = [1, 2, 3]
+comm_range = [5, 20]
+laser_range = [2.0]
+runs = 1
+
+[run]
+time_scale = 5
+max_steps = 500
+"""
+
+
+@pytest.fixture
+def env(tmp_path):
+    standin = tmp_path / "standin.py"
+    standin.write_text(STANDIN)
+    sweep_file = tmp_path / "s.toml"
+    sweep_file.write_text(SWEEP)
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    e = dict(os.environ)
+    e["TESTBED_SWEEP_RUN_COMMAND"] = f"{sys.executable} {standin}"
+    e["STANDIN_PIDS"] = str(pids)
+    e["PYTHONPATH"] = str(REPO)
+    return {"env": e, "file": sweep_file, "tmp": tmp_path, "pids": pids}
+
+
+def sweep_argv(env, out, *extra):
+    return [sys.executable, "-m", "testbed.sweep", str(env["file"]), "--out", str(out), *extra]
+
+
+def run_sweep(env, out, *extra, **env_over):
+    e = dict(env["env"], **env_over)
+    return subprocess.run(
+        sweep_argv(env, out, *extra), env=e, cwd=REPO, capture_output=True, text=True, timeout=120
+    )
+
+
+def results(out: Path) -> dict:
+    """run id -> result.json content, for every complete run."""
+    return {p.parent.name: json.loads(p.read_text()) for p in out.glob("runs/*/result.json")}
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie is dead for our purpose
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+def test_full_sweep_passes_the_config_through(env):
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "2")
+    assert r.returncode == 0, r.stderr
+    res = results(out)
+    assert len(res) == 6
+    state = json.loads((out / "sweep.json").read_text())
+    assert {x["status"] for x in state["runs"]} == {"done"}
+    for entry in state["runs"]:
+        # what the stand-in parsed from the command line is exactly the planned config
+        assert res[entry["id"]]["config"] == entry["config"]
+    assert "6/6 done" in r.stderr
+
+
+def test_existing_directory_needs_resume(env):
+    out = env["tmp"] / "out"
+    assert run_sweep(env, out).returncode == 0
+    r = run_sweep(env, out)
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines()[-1].count("--resume") == 1
+    before = {k: (out / "runs" / k / "result.json").stat().st_mtime_ns for k in results(out)}
+    r = run_sweep(env, out, "--resume")
+    assert r.returncode == 0 and "6 done, 0 to do" in r.stderr
+    after = {k: (out / "runs" / k / "result.json").stat().st_mtime_ns for k in results(out)}
+    assert before == after  # nothing redone
+
+
+def interrupted_then_resumed(env, sig):
+    reference = env["tmp"] / "reference"
+    assert run_sweep(env, reference, "--jobs", "2").returncode == 0
+    out = env["tmp"] / "out"
+    e = dict(env["env"], STANDIN_SLEEP="1.0")
+    p = subprocess.Popen(
+        sweep_argv(env, out, "--jobs", "2"), env=e, cwd=REPO, stderr=subprocess.PIPE, text=True
+    )
+    # wait until two runs are done and two more in flight
+    deadline = time.monotonic() + 30
+    while len(results(out)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    p.send_signal(sig)
+    p.wait(timeout=60)
+    done_at_stop = set(results(out))
+    assert 2 <= len(done_at_stop) < 6
+    # every run process the sweep started is gone (SIGINT: stopped; SIGKILL: PDEATHSIG)
+    pids = [int(x.name) for x in env["pids"].iterdir()]
+    deadline = time.monotonic() + 10
+    while any(alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(alive(pid) for pid in pids)
+    r = run_sweep(env, out, "--resume", "--jobs", "2")
+    assert r.returncode == 0, r.stderr
+    final = results(out)
+    ref = results(reference)
+    assert set(final) == set(ref)
+    assert {k: v["config"] for k, v in final.items()} == {k: v["config"] for k, v in ref.items()}
+    return p, done_at_stop, r
+
+
+def test_sigint_then_resume(env):
+    p, done_at_stop, r = interrupted_then_resumed(env, signal.SIGINT)
+    assert p.returncode == 130
+    assert "resume with --resume" in p.stderr.read()
+    assert f"{len(done_at_stop)} done" in r.stderr
+
+
+def test_sigkill_then_resume(env):
+    p, done_at_stop, r = interrupted_then_resumed(env, signal.SIGKILL)
+    assert p.returncode == -signal.SIGKILL
+    assert f"{len(done_at_stop)} done" in r.stderr
+
+
+def test_backs_off_when_runs_miss_deadlines(env):
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "2", STANDIN_MISS="0.05", STANDIN_MISS_ROBOTS="2")
+    assert r.returncode == 0, r.stderr
+    state = json.loads((out / "sweep.json").read_text())
+    assert state["jobs_requested"] == 2 and state["jobs"] == 1
+    assert state["backoffs"] and state["backoffs"][0]["deadline_miss_fraction"] == 0.05
+    assert "concurrency down to 1" in r.stderr
+    assert len(results(out)) == 6
+
+
+def test_failed_runs_are_reported_and_retried_on_resume(env):
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, STANDIN_FAIL="2")
+    assert r.returncode == 1
+    assert "2 failed run(s)" in r.stderr
+    state = json.loads((out / "sweep.json").read_text())
+    failed = [x for x in state["runs"] if x["status"] == "failed"]
+    assert {x["config"]["robots"] for x in failed} == {2}
+    assert all("failing on purpose" in x["reason"] for x in failed)
+    r = run_sweep(env, out, "--resume")
+    assert r.returncode == 0 and len(results(out)) == 6
