@@ -9,8 +9,8 @@ arrives at the far bridges and leaves only through their robot ports: a broadcas
 reaches exactly the robots linked to i, once each, and never hops link to link.
 
 Frames leaving through `lixj` travel from i to j, so a qdisc on `lixj` shapes exactly that
-direction of that link (see topology.impair). Removing a link takes the near end of its
-veth pair down (see `set_links`): the robots' own `wlan0` stay up and notice nothing but
+direction of that link (see topology.impair). Removing a link disables the bridge port of
+its near end (see `set_links`): the robots' own `wlan0` stay up and notice nothing but
 silence, as on a real radio.
 
 Requests go out in batches through topology.rtnl (a raw rtnetlink socket of the medium
@@ -21,6 +21,8 @@ dumps), where speed does not matter.
 
 import logging
 import os
+import socket
+import time
 
 from topology import names, netns, rtnl
 from topology.impair import Impairer
@@ -63,6 +65,13 @@ def end_index(i: int, j: int) -> int:
     return 10_000_000 + i * 1000 + j
 
 
+_ENSLAVE = rtnl.LinkTemplate(master=0)
+_ISOLATE = rtnl.LinkTemplate(isolated=True)
+_UP = rtnl.LinkTemplate(up=True)
+_PORT_ON = rtnl.LinkTemplate(rtnl.port_state, state=rtnl.BR_STATE_FORWARDING)
+_PORT_OFF = rtnl.LinkTemplate(rtnl.port_state, state=rtnl.BR_STATE_DISABLED)
+
+
 def _configure_robot(k: int) -> None:
     """Runs inside robot k's namespace: sysctls first, then address and state of wlan0, lo."""
     for key, value in ROBOT_SYSCTLS:
@@ -70,10 +79,10 @@ def _configure_robot(k: int) -> None:
     for key in WLAN_SYSCTLS:  # inherited from conf.default already; made explicit for wlan0
         netns.write_sysctl(key, 0)
     batch = rtnl.Batch()
-    batch.add(rtnl.link(LO_INDEX, up=True), f"r{k}: lo up")
+    batch.add(_UP(LO_INDEX), f"r{k}: lo up")
     # A /32 and no subnet route: every route belongs to the routing daemon.
     batch.add(rtnl.addr(WLAN_INDEX, names.robot_addr(k), 32), f"r{k}: address on wlan0")
-    batch.add(rtnl.link(WLAN_INDEX, up=True), f"r{k}: wlan0 up")
+    batch.add(_UP(WLAN_INDEX), f"r{k}: wlan0 up")
     with rtnl.open_socket() as sock:
         batch.send(sock)
 
@@ -87,8 +96,8 @@ class Medium:
         self.worker: netns.NsWorker | None = None
         self.impairer: Impairer | None = None
         self.time_scale = time_scale
-        self.pairs: set[tuple[int, int]] = set()  # veth pairs that exist (up or down)
-        self._toggle: dict[tuple[int, int, bool], bytes] = {}
+        self.pairs: set[tuple[int, int]] = set()  # veth pairs that exist (on or off)
+        self._pending: set[int] = set()  # new link ends the bridges may not forward through yet
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -123,8 +132,8 @@ class Medium:
     # -- robots -----------------------------------------------------------------------------
 
     def add_robots(self, ks: list[int]) -> None:
-        """Per robot K: bridge brK, and the veth rpK <-> wlan0, wlan0 made in K's namespace;
-        then each robot's own side (sysctls, address, up), all robots in one thread."""
+        """Per robot K: bridge brK, and the veth rpK <-> wlan0, wlan0 made in K's namespace.
+        The robots' own side is configure_robots()."""
         fds = {k: os.open(netns.path(names.robot_ns(self.testbed, k)), os.O_RDONLY) for k in ks}
         try:
             reqs = []
@@ -140,49 +149,80 @@ class Medium:
         finally:
             for fd in fds.values():
                 os.close(fd)
+
+    def configure_robots(self, ks: list[int]) -> None:
+        """Each robot's own side (sysctls, address, up), all robots in one thread."""
         robot_ns = [names.robot_ns(self.testbed, k) for k in ks]
         netns.run_in_each(robot_ns, lambda ns: _configure_robot(int(ns.rsplit("-r", 1)[1])))
 
     # -- links ------------------------------------------------------------------------------
 
-    def _toggle_request(self, i: int, j: int, up: bool) -> tuple[bytes, str]:
-        key = (i, j, up)
-        if key not in self._toggle:
-            self._toggle[key] = rtnl.link(end_index(i, j), up=up)
-        return self._toggle[key], f"link {i}-{j} {'up' if up else 'down'}"
+    @staticmethod
+    def _toggle_request(i: int, j: int, on: bool) -> tuple[bytes, str]:
+        return (_PORT_ON if on else _PORT_OFF)(
+            end_index(i, j)
+        ), f"link {i}-{j} {'on' if on else 'off'}"
 
     def create_pairs(self, pairs: list[tuple[int, int]]) -> None:
-        """Create the veth pairs of links met for the first time, disabled: both ends in
-        their bridges and isolated, the far end up, the near end still down."""
+        """Create the veth pairs of links met for the first time: both ends up, in their
+        bridges and isolated. set_links() waits until the bridges forward through them."""
+        new = [p for p in pairs if p not in self.pairs]
         reqs = []
-        for i, j in pairs:
-            if (i, j) in self.pairs:
-                continue
+        for i, j in new:
             a, b = end_index(i, j), end_index(j, i)
             what = f"link {i}-{j}"
             reqs += [
                 (rtnl.link(a, ifname=names.link_end(i, j), kind="veth", master=bridge_index(i),
                            create=True, veth_peer=(names.link_end(j, i), b, None)),
                  f"create {what}"),
-                (rtnl.link(b, master=bridge_index(j)), f"{what}: far end into {names.bridge(j)}"),
-                (rtnl.link(a, isolated=True), f"{what}: isolate near end"),
-                (rtnl.link(b, isolated=True), f"{what}: isolate far end"),
-                (rtnl.link(b, up=True), f"{what}: far end up"),
+                (_ENSLAVE(b, bridge_index(j)), f"{what}: far end into {names.bridge(j)}"),
+                (_ISOLATE(a), f"{what}: isolate near end"),
+                (_ISOLATE(b), f"{what}: isolate far end"),
+                (_UP(b), f"{what}: far end up"),
+                (_UP(a), f"{what}: near end up"),
             ]  # fmt: skip
         self._send(reqs)
-        self.pairs.update(pairs)
+        self.pairs.update(new)
+        self._pending |= {end_index(i, j) for i, j in new} | {end_index(j, i) for i, j in new}
+
+    def _wait_forwarding(self, indices: set[int], timeout: float = 5.0) -> None:
+        """The kernel brings a new veth's carrier up asynchronously (linkwatch), and only then
+        does the bridge forward through it: wait for that, so a link is usable on return."""
+
+        def forwarding(ipr) -> set[int]:
+            ready = set()
+            for port in ipr.get_links(family=socket.AF_BRIDGE):
+                if port["index"] in indices:
+                    info = port.get_attr("IFLA_PROTINFO")
+                    if info is not None and info.get_attr("IFLA_BRPORT_STATE") == 3:
+                        ready.add(port["index"])
+            return ready
+
+        deadline = time.monotonic() + timeout
+        while True:
+            pending = indices - self.worker.call(forwarding)
+            if not pending:
+                return
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"{len(pending)} new link ends did not start forwarding")
+            time.sleep(0.005)
 
     def set_links(self, add: list[tuple[int, int]], remove: list[tuple[int, int]]) -> None:
-        """Enable the links in `add` and disable those in `remove`, in one batch. Pairs are
+        """Switch the links in `add` on and those in `remove` off, in one batch. Pairs are
         (i, j) with i < j; `add` must name pairs that exist (create_pairs).
 
-        A disabled link is a veth pair with its near end down: the far end loses carrier, the
-        bridges stop forwarding to both, and frames in either direction are dropped. Deleting
-        the pair instead would cost ~15 ms (the kernel waits for an RCU grace period), and
-        its qdiscs and loss rules would have to be rebuilt when the robots meet again."""
+        A link is switched off by setting the bridge-port state of its near end to disabled:
+        the bridge neither forwards frames out through it nor accepts frames coming in, so
+        both directions stop, synchronously, in one request. Deleting the veth pair instead
+        costs ~15 ms (the kernel waits for an RCU grace period), and taking an end down is
+        asynchronous (carrier changes go through linkwatch); both would also drop the link's
+        qdiscs and loss rules, to be rebuilt when the robots meet again."""
         missing = [p for p in add if p not in self.pairs]
         if missing:
             raise ValueError(f"links {missing} have no veth pair yet")
+        if self._pending:
+            self._wait_forwarding(self._pending)
+            self._pending.clear()
         reqs = [self._toggle_request(i, j, False) for i, j in remove]
         reqs += [self._toggle_request(i, j, True) for i, j in add]
         self._send(reqs)
@@ -197,16 +237,17 @@ class Medium:
         self.impairer.apply(names.link_end(i, j), imp)
 
     def kernel_links(self) -> set[tuple[int, int]]:
-        """The links as the kernel has them: pairs (i, j), i < j, whose near end is up.
+        """The links as the kernel has them: pairs (i, j), i < j, whose near end forwards.
         Also records which veth pairs exist, for a process that attaches to the testbed."""
 
         def work(ipr) -> tuple[set, set]:
             pairs, up = set(), set()
-            for link in ipr.get_links():
-                parsed = names.parse_link_end(link.get_attr("IFLA_IFNAME"))
+            for port in ipr.get_links(family=socket.AF_BRIDGE):
+                parsed = names.parse_link_end(port.get_attr("IFLA_IFNAME"))
                 if parsed and parsed[0] < parsed[1]:
                     pairs.add(parsed)
-                    if link["flags"] & rtnl.IFF_UP:
+                    info = port.get_attr("IFLA_PROTINFO")
+                    if info is not None and info.get_attr("IFLA_BRPORT_STATE") == 3:
                         up.add(parsed)
             return pairs, up
 

@@ -112,7 +112,12 @@ class Network:
                 raise UsageError(str(exc)) from None
             if not self.medium.impairer.netem and shutil.which("nft") is None:
                 raise UsageError("loss without sch_netem needs nftables: `nft` is not installed")
-        self.medium.add_robots(list(self.spec.robot_ids()))
+        robots = list(self.spec.robot_ids())
+        self.medium.add_robots(robots)
+        # The kernel brings new links' carriers up in the background: configure the robots
+        # meanwhile; _apply_positions waits for the links before it switches them on.
+        self.medium.create_pairs(sorted(self.wanted()))
+        self.medium.configure_robots(robots)
         self._apply_positions()
         if self.spec.capture_dir:
             self._start_captures()

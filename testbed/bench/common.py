@@ -1,0 +1,33 @@
+"""Shared by the benchmarks: where results go, and medians over noisy repeats."""
+
+import json
+import os
+import platform
+import statistics
+import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BENCH_DIR = os.path.join(REPO, "results", "bench")
+
+
+def median(values: list[float]) -> float:
+    return statistics.median(values)
+
+
+def write(name: str, data: dict) -> str:
+    """Write results/bench/NAME.json with the machine's description; return the path."""
+    os.makedirs(BENCH_DIR, exist_ok=True)
+    data = {
+        "benchmark": name,
+        "when": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "machine": {
+            "cpus": os.cpu_count(),
+            "kernel": platform.release(),
+            "load_average_1min_at_end": os.getloadavg()[0],
+        },
+        **data,
+    }
+    path = os.path.join(BENCH_DIR, f"{name}.json")
+    with open(path, "w") as f:
+        json.dump(data, f, indent=2)
+    return path
