@@ -1,0 +1,151 @@
+"""Routing metrics on hand-made frames (the real-capture test is in tests/integration)."""
+
+import json
+
+import pytest
+
+from testbed import pcapmetrics as pm
+from testbed.pcapmetrics import Frame
+
+M1, M2, M3 = "02:00:00:00:00:01", "02:00:00:00:00:02", "02:00:00:00:00:03"
+A1, A2, A3 = "10.0.0.1", "10.0.0.2", "10.0.0.3"
+BCAST_MAC = "ff:ff:ff:ff:ff:ff"
+ADDRS = {1: A1, 2: A2, 3: A3}
+
+
+def udp(t, src_mac, dst_mac, src, dst, aodv_type, ttl=64, payload=24, port=654):
+    return Frame(t, 42 + payload, src_mac, dst_mac, src, dst, 17, ttl, port, port, payload + 8,
+                 aodv_type=aodv_type)  # fmt: skip
+
+
+def tcp(t, src_mac, dst_mac, src, dst, seq, length, sport=40000, dport=5555):
+    return Frame(t, 66 + length, src_mac, dst_mac, src, dst, 6, 64, tcp_sport=sport,
+                 tcp_dport=dport, tcp_seq=seq, tcp_len=length)  # fmt: skip
+
+
+def chain_captures():
+    """1 - 3 - 2: robot 1 sends 3 segments to robot 2 through robot 3; the third is lost on
+    the second hop; AODV control traffic on the way."""
+    c1 = [
+        udp(0.0, M1, BCAST_MAC, A1, "255.255.255.255", 1),  # RREQ
+        udp(0.1, M3, M1, A2, A1, 2),  # RREP forwarded by 3
+        tcp(1.0, M1, M3, A1, A2, 1000, 100),
+        tcp(1.1, M1, M3, A1, A2, 1100, 100),
+        tcp(1.2, M1, M3, A1, A2, 1200, 100),
+        tcp(1.05, M3, M1, A2, A1, 5000, 0),  # an ACK: no payload, not a message
+        udp(2.0, M1, BCAST_MAC, A1, "255.255.255.255", 2, ttl=1, payload=20),  # HELLO
+    ]
+    c3 = [
+        udp(0.0, M1, BCAST_MAC, A1, "255.255.255.255", 1),
+        udp(0.01, M3, BCAST_MAC, A1, "255.255.255.255", 1),  # rebroadcast RREQ
+        udp(0.09, M2, M3, A2, A1, 2),
+        udp(0.1, M3, M1, A2, A1, 2),  # forwarded RREP
+        udp(0.5, M3, BCAST_MAC, A3, "255.255.255.255", 2, ttl=1, payload=20),  # own HELLO
+        tcp(1.0, M1, M3, A1, A2, 1000, 100),
+        tcp(1.001, M3, M2, A1, A2, 1000, 100),
+        tcp(1.1, M1, M3, A1, A2, 1100, 100),
+        tcp(1.101, M3, M2, A1, A2, 1100, 100),
+        tcp(1.2, M1, M3, A1, A2, 1200, 100),
+        tcp(1.201, M3, M2, A1, A2, 1200, 100),
+    ]
+    c2 = [
+        udp(0.01, M3, BCAST_MAC, A1, "255.255.255.255", 1),
+        udp(0.09, M2, M3, A2, A1, 2),  # RREP
+        tcp(1.003, M3, M2, A1, A2, 1000, 100),
+        tcp(1.104, M3, M2, A1, A2, 1100, 100),
+        tcp(1.05, M2, M3, A2, A1, 5000, 0),
+    ]
+    return {1: c1, 2: c2, 3: c3}
+
+
+def test_overhead_counts_each_transmission_at_its_transmitter():
+    m = pm.compute(chain_captures(), ADDRS)
+    r1, r2, r3 = (m["robots"][f"r{k}"] for k in (1, 2, 3))
+    assert (r1["mac"], r2["mac"], r3["mac"]) == (M1, M2, M3)
+    assert r1["control_tx_packets"] == 2  # RREQ, HELLO
+    assert r3["control_tx_packets"] == 3  # rebroadcast RREQ, forwarded RREP, HELLO
+    assert r2["control_tx_packets"] == 1
+    assert m["aodv_tx_by_type"] == {"RREQ": 2, "RREP": 2, "HELLO": 2}
+    assert r1["tx_packets"] == 5 and r3["tx_packets"] == 6 and r2["tx_packets"] == 2
+    assert m["overhead_packets"] == pytest.approx(6 / 13)
+    assert r1["control_tx_payload_bytes"] == 24 + 20
+    assert r1["control_rx_packets"] == 1
+
+
+def test_delivery_delay_and_throughput():
+    m = pm.compute(chain_captures(), ADDRS)
+    assert m["tcp_segments_sent"] == 3
+    assert m["tcp_segments_delivered"] == 2
+    assert m["segment_delivery"] == pytest.approx(2 / 3)
+    assert m["pdf"] == pytest.approx(200 / 300)  # forwarding by robot 3 is not a source
+    assert m["delay_ms_mean"] == pytest.approx((3 + 4) / 2)
+    assert m["delay_ms_median"] == pytest.approx(3.5)
+    assert m["delivered_payload_bytes"] == 200
+    assert m["throughput_bps"] == pytest.approx(8 * 200 / 2.0)  # captures span 0.0 .. 2.0
+
+
+def test_retransmissions_and_resegmentation():
+    caps = {
+        1: [
+            udp(0.0, M1, BCAST_MAC, A1, "255.255.255.255", 1),
+            tcp(1.0, M1, M2, A1, A2, 0, 100),  # lost
+            tcp(1.5, M1, M2, A1, A2, 0, 100),  # retransmission, arrives
+            tcp(1.6, M1, M2, A1, A2, 100, 100),
+            tcp(1.7, M1, M2, A1, A2, 200, 100),
+        ],
+        2: [
+            udp(0.0, M2, BCAST_MAC, A2, "255.255.255.255", 1),
+            tcp(1.501, M1, M2, A1, A2, 0, 100),
+            tcp(1.702, M1, M2, A1, A2, 100, 200),  # GRO merged the last two segments
+        ],
+    }
+    m = pm.compute(caps, {1: A1, 2: A2})
+    assert m["tcp_segments_sent"] == 3 and m["tcp_transmissions"] == 4
+    assert m["segment_delivery"] == 1.0
+    assert m["pdf"] == pytest.approx(300 / 400)
+    assert m["tcp_transmissions_delivered"] == 3
+    # delays: 1.0 -> 1.501 (first transmission to first reception), 1.6 -> 1.702, 1.7 -> 1.702
+    assert m["delay_ms_mean"] == pytest.approx((501 + 102 + 2) / 3)
+
+
+def test_icmp_quoting_port_654_is_not_aodv():
+    icmp = Frame(1.0, 90, M1, M2, A1, A2, 1, 64, 654, 654, 32)  # inner UDP header fields
+    caps = {1: [udp(0.0, M1, BCAST_MAC, A1, "255.255.255.255", 1), icmp], 2: []}
+    m = pm.compute(caps, {1: A1, 2: A2})
+    assert m["control_tx_packets"] == 1 and m["tx_packets"] == 2
+
+
+def test_babel_port():
+    caps = {1: [udp(0.0, M1, BCAST_MAC, A1, "ff02::1:6", None, port=6696)]}
+    caps[1].append(udp(0.1, M1, BCAST_MAC, A1, "255.255.255.255", 1))
+    assert pm.compute(caps, {1: A1}, port=6696)["control_tx_packets"] == 1
+
+
+def test_parse_fields():
+    line = "\t".join(
+        ["12.5", "62", M1, BCAST_MAC, A1, "255.255.255.255", "17", "1", "654", "654", "28",
+         "", "", "", "", "2"]
+    )  # fmt: skip
+    (f,) = pm.parse_fields(line + "\n\nnot\ta\tframe\n")
+    assert f == udp(12.5, M1, BCAST_MAC, A1, "255.255.255.255", 2, ttl=1, payload=20)
+    short = "1.0\t60\t" + M1 + "\t" + M2  # an ARP frame: no IP fields at all
+    (g,) = pm.parse_fields(short)
+    assert g.ip_src == "" and g.udp_sport is None
+
+
+def test_daemon_comparison(tmp_path):
+    (tmp_path / "aodv").mkdir()
+    (tmp_path / "aodv" / "r1.json").write_text(json.dumps({"sent": {"RREQ": 1, "HELLO": 1}}))
+    (tmp_path / "aodv" / "r3.json").write_text(json.dumps({"tx_packets": 3}))
+    (tmp_path / "aodv" / "r2.json").write_text("{broken")
+    daemons = pm.daemon_counts(tmp_path)
+    assert daemons == {"r1": 2, "r3": 3}
+    cmp = pm.compare_with_daemons(pm.compute(chain_captures(), ADDRS), daemons)
+    assert cmp["pcap_control_tx_packets"] == 5 and cmp["daemon_tx_packets"] == 5
+    assert cmp["relative_difference"] == 0.0
+    assert pm.daemon_counts(tmp_path / "nothing") is None
+    assert pm.compare_with_daemons({}, None) is None
+
+
+def test_run_without_captures(tmp_path):
+    assert pm.run_metrics(tmp_path) is None

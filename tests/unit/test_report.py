@@ -1,0 +1,136 @@
+"""Report verdicts on synthetic data whose answer is known, and the report end to end."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from testbed import report, sweepfile
+from testbed.report import FAILS, HOLDS, NO_DATA, PARTLY
+from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def rows(fn, robots=(1, 2, 3, 5, 8, 10), comms=(5.0, 20.0), lasers=(2.0, 1.5)):
+    return [
+        {"laser_range": la, "comm_range": c, "robots": n, "mean": fn(n, c, la)}
+        for la in lasers
+        for c in comms
+        for n in robots
+    ]
+
+
+def paper(n, c, la):
+    return (1200 / n + 40 * n) * (1 + 4 / c) * (2 / la)
+
+
+def test_all_section_5_1_claims_hold_on_the_papers_shape():
+    fig2 = rows(paper)
+    for f in (
+        report.verdict_team_beats_one,
+        report.verdict_fall_then_rise,
+        report.verdict_smaller_range,
+        report.verdict_shorter_laser,
+    ):
+        v = f(fig2)
+        assert v.verdict == HOLDS, (v.claim, v.evidence)
+        assert v.evidence
+
+
+def test_claims_fail_when_the_data_says_otherwise():
+    # more robots only get in each other's way; range and laser do not matter
+    fig2 = rows(lambda n, c, la: 100.0 * n)
+    assert report.verdict_team_beats_one(fig2).verdict == FAILS
+    assert report.verdict_fall_then_rise(fig2).verdict == FAILS
+    assert report.verdict_smaller_range(fig2).verdict == FAILS
+    assert report.verdict_shorter_laser(fig2).verdict == FAILS
+
+
+def test_partly_when_only_some_groups_agree():
+    # the claim holds at range 5 but not at range 20
+    def fn(n, c, la):
+        return paper(n, c, la) if c == 5.0 else 100.0 * n
+
+    assert report.verdict_team_beats_one(rows(fn)).verdict == PARTLY
+    # shorter laser needs more steps everywhere, but the ratio changes with team size
+    v = report.verdict_shorter_laser(rows(lambda n, c, la: 100 + (n if la == 1.5 else 0) * 50))
+    assert v.verdict == PARTLY
+    assert any("varies" in e for e in v.evidence)
+
+
+def test_not_enough_data():
+    one_point = rows(paper, robots=(3,), comms=(5.0,), lasers=(2.0,))
+    for f in (
+        report.verdict_team_beats_one,
+        report.verdict_fall_then_rise,
+        report.verdict_smaller_range,
+        report.verdict_shorter_laser,
+    ):
+        assert f(one_point).verdict == NO_DATA
+    assert report.verdict_single_robot_timer([]).verdict == NO_DATA
+    assert report.verdict_requests_grow([{"robots": 3, "request": 4}]).verdict == NO_DATA
+    # two team sizes are not enough to see a fall and a rise
+    assert report.verdict_fall_then_rise(rows(paper, robots=(1, 5))).verdict == NO_DATA
+
+
+def test_section_5_2_verdicts():
+    alone = [{"robots": 1, "timer": 40, "request": 0, "start": 1}]
+    assert report.verdict_single_robot_timer(alone).verdict == HOLDS
+    mixed = [{"robots": 1, "timer": 10, "request": 10, "start": 1}]
+    v = report.verdict_single_robot_timer(mixed)
+    assert v.verdict == FAILS and "50%" in v.evidence[0]
+    growing = [{"robots": n, "request": 3 * n + k} for n in (1, 2, 5, 10) for k in (0, 1)]
+    assert report.verdict_requests_grow(growing).verdict == HOLDS
+    shrinking = [{"robots": n, "request": 30 - 3 * n} for n in (1, 2, 5, 10)]
+    assert report.verdict_requests_grow(shrinking).verdict == FAILS
+    noisy = [{"robots": n, "request": r} for n, r in ((1, 0), (2, 5), (3, 2), (4, 6))]
+    assert report.verdict_requests_grow(noisy).verdict == PARTLY
+
+
+def test_spearman():
+    assert report.spearman([1, 2, 3], [10, 20, 30]) == pytest.approx(1.0)
+    assert report.spearman([1, 2, 3], [3, 2, 1]) == pytest.approx(-1.0)
+    assert report.spearman([1, 2, 3, 4], [1, 1, 2, 2]) == pytest.approx(0.894, abs=1e-3)
+    assert report.spearman([1, 2], [5, 5]) is None
+
+
+def test_report_end_to_end(tmp_path):
+    spec = sweepfile.SweepSpec(
+        robots=(1, 2, 5, 10), comm_range=(5.0, 20.0), laser_range=(2.0, 1.5), runs=1
+    )
+    make_sweep(tmp_path, spec)
+    path, vs = report.write_report(tmp_path, metrics_of=lambda run: None)
+    assert [v.verdict for v in vs] == [HOLDS] * 6
+    text = path.read_text()
+    assert path == tmp_path / "report.md"
+    assert "![fig2a](figures/fig2a.png)" in text and "![fig4](figures/fig4.png)" in text
+    assert "| 5.1 | Team work beats one robot" in text
+    assert "No run has packet captures" in text
+    saved = json.loads((tmp_path / "figures" / "verdicts.json").read_text())
+    assert [v["verdict"] for v in saved] == [HOLDS] * 6
+
+
+def test_report_counts_excluded_runs(tmp_path):
+    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    runs = sweepfile.expand(spec)
+    write_run(tmp_path, runs[0])
+    doc = result_doc(runs[1].config, [None, None], 40, {1: timer_plans(40)}, "robot_crashed")
+    write_run(tmp_path, runs[1], doc)
+    path, vs = report.write_report(tmp_path, metrics_of=lambda run: None)
+    text = path.read_text()
+    assert "Finished runs: 2 (complete: 1, robot_crashed: 1)" in text
+    assert vs[0].verdict == NO_DATA  # the only team run crashed
+
+
+def test_cli_not_a_sweep_directory(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "testbed.report", str(tmp_path / "nothing")],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1 and "DIR" in r.stderr
