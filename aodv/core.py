@@ -1,0 +1,779 @@
+"""Sans-IO AODV protocol core (RFC 3561).
+
+Theory of operation
+-------------------
+`AodvCore` is the whole protocol of one node and nothing else: it never opens a socket and
+never reads a clock. The daemon (or a test) feeds it events, each with `now` (seconds of any
+monotonic clock), and executes the actions it returns, in order:
+
+    events                                   actions
+    on_control(now, src, ttl, msg)           Unicast(msg, dst, ttl), Broadcast(msg, ttl)
+    on_no_route(now, src, dst, packet)       InstallRoute(dest, next_hop, hops)
+    on_route_used(now, addr)                 DeleteRoute(dest)
+    on_link_lost(now, neighbor)              ReleasePackets(dest, packets)
+    on_timer(now)                            DropPackets(dest, packets)  (ICMP unreachable)
+                                             DiscoveryDone(dest, ok, latency, round_latency)
+
+After every call `next_deadline()` says when `on_timer` must run next. Route actions are
+a diff of the valid routing-table entries against what was already installed, and come
+first in every returned list, so a Release always follows the Install it needs.
+
+Where the RFC leaves a choice, the decision is written next to the rule as "Decision:".
+Local repair (RFC 6.12) is not implemented, so the N flag is never set, and a received
+RERR with N set changes nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass
+
+from aodv import seqnum
+from aodv.neighbors import Neighbors
+from aodv.packet import Message, Rerr, Rrep, RrepAck, Rreq, is_hello
+from aodv.params import Params
+from aodv.request_queue import RequestQueue
+from aodv.routes import Route, RoutingTable
+from aodv.rreq_cache import RreqCache
+
+log = logging.getLogger(__name__)
+
+# Decision (RREP IP TTL): a RREP travels hop by hop and is unicast to the next hop, which
+# re-originates it, so any IP TTL >= 1 arrives. We send 64 so that a RREP can never be
+# taken for a HELLO (IP TTL 1, RFC 6.9) by a receiver that looks at the IP TTL.
+UNICAST_TTL = 64
+# RFC 6.11: a RERR to several precursors goes to "the local broadcast address
+# (Destination IP == 0xFFFFFFFF, TTL == 1)". HELLOs (RFC 6.9) also carry IP TTL 1.
+# Decision (limited vs subnet broadcast): robots have /32 addresses and no subnet, so
+# every broadcast is the limited broadcast 255.255.255.255 on wlan0.
+LOCAL_TTL = 1
+
+
+# -- actions ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Unicast:
+    msg: Message
+    dst: str
+    ttl: int = UNICAST_TTL
+
+
+@dataclass(frozen=True)
+class Broadcast:
+    msg: Message
+    ttl: int
+
+
+@dataclass(frozen=True)
+class InstallRoute:
+    dest: str
+    next_hop: str
+    hops: int
+
+
+@dataclass(frozen=True)
+class DeleteRoute:
+    dest: str
+
+
+@dataclass(frozen=True)
+class ReleasePackets:
+    dest: str
+    packets: tuple[bytes, ...]
+
+
+@dataclass(frozen=True)
+class DropPackets:
+    dest: str
+    packets: tuple[bytes, ...]
+
+
+@dataclass(frozen=True)
+class DiscoveryDone:
+    dest: str
+    ok: bool
+    latency: float  # first RREQ to route (or to giving up)
+    round_latency: float  # the last RREQ sent to route
+
+
+Action = Unicast | Broadcast | InstallRoute | DeleteRoute | ReleasePackets | DropPackets
+Action = Action | DiscoveryDone
+
+
+@dataclass
+class _Discovery:
+    dest: str
+    ttl: int
+    started: float
+    deadline: float = 0.0
+    round_started: float = 0.0
+    retries: int = 0
+    rate_limited: bool = False
+
+
+class _RateLimit:
+    """At most `limit` events per sliding `window` (RFC RREQ_RATELIMIT, RERR_RATELIMIT)."""
+
+    def __init__(self, limit: int, window: float) -> None:
+        self.limit, self.window = limit, window
+        self._times: deque[float] = deque()
+
+    def _trim(self, now: float) -> None:
+        while self._times and self._times[0] <= now - self.window:
+            self._times.popleft()
+
+    def allow(self, now: float) -> bool:
+        self._trim(now)
+        if len(self._times) >= self.limit:
+            return False
+        self._times.append(now)
+        return True
+
+    def next_free(self, now: float) -> float:
+        self._trim(now)
+        return self._times[0] + self.window if len(self._times) >= self.limit else now
+
+
+class AodvCore:
+    def __init__(self, addr: str, params: Params, now: float, rebooted: bool = False) -> None:
+        self.addr = addr
+        self.p = params
+        self.seq = 0
+        self.rreq_id = 0
+        self.table = RoutingTable()
+        self.rreq_cache = RreqCache()
+        self.neighbors = Neighbors()
+        self.queue = RequestQueue(params.queue_len)
+        self.discoveries: dict[str, _Discovery] = {}
+        self.pending_acks: dict[str, float] = {}
+        self.bidirectional: dict[str, float] = {}
+        self._rreq_limit = _RateLimit(params.rreq_ratelimit, params.rate_window)
+        self._rerr_limit = _RateLimit(params.rerr_ratelimit, params.rate_window)
+        self._installed: dict[str, tuple[str, int]] = {}
+        self.next_hello = now + params.hello_interval
+        self.dropped_rerr = 0
+        # RFC 6.13: "...after rebooting, a node MUST wait for DELETE_PERIOD before
+        # transmitting any route discovery messages." Decision: the daemon says whether
+        # this start is a reboot (it found routes of a previous instance in the kernel);
+        # a first start in a fresh network has no stale sequence numbers to protect.
+        self.reboot_until = now + params.delete_period if rebooted else None
+
+    # == public events ====================================================================
+    def on_control(self, now: float, src: str, ttl: int, msg: Message) -> list[Action]:
+        """A control message from `src` (IP source), received with IP TTL `ttl`."""
+        out: list[Action] = []
+        if src == self.addr:
+            return out
+        # RFC 6.10: any packet from a neighbour shows the link is alive.
+        self.neighbors.heard(src, now)
+        if isinstance(msg, Rreq):
+            self._rreq(now, src, ttl, msg, out)
+        elif isinstance(msg, Rrep):
+            if is_hello(msg, src):
+                self._hello(now, src, msg)
+            else:
+                self._rrep(now, src, msg, out)
+        elif isinstance(msg, Rerr):
+            self._rerr(now, src, msg, out)
+        elif isinstance(msg, RrepAck):
+            self._rrep_ack(now, src)
+        return self._finish(now, out)
+
+    def on_no_route(self, now: float, src: str, dst: str, packet: bytes) -> list[Action]:
+        """A data packet from `src` to `dst` found no kernel route."""
+        out: list[Action] = []
+        if src == self.addr:
+            self._originate(now, dst, packet, out)
+        else:
+            self._forward_without_route(now, dst, out)
+        return self._finish(now, out)
+
+    def on_route_used(self, now: float, addr: str) -> list[Action]:
+        """Data to or from `addr` crossed this node recently.
+
+        RFC 6.2: "Each time a route is used to forward a data packet, its Active Route
+        Lifetime field of the source, destination and the next hop on the path to the
+        destination is updated to be no less than the current time plus
+        ACTIVE_ROUTE_TIMEOUT." The daemon reports sources and destinations alike.
+        """
+        r = self.table.valid(addr)
+        if r is not None:
+            self._refresh(r, now + self.p.active_route_timeout)
+            nh = self.table.valid(r.next_hop)
+            if nh is not None:
+                self._refresh(nh, now + self.p.active_route_timeout)
+        return self._finish(now, [])
+
+    def on_link_lost(self, now: float, neighbor: str) -> list[Action]:
+        """The link to `neighbor` broke (detected outside the core, e.g. by the driver)."""
+        out: list[Action] = []
+        self.neighbors.forget(neighbor)
+        self._link_break(now, neighbor, out)
+        return self._finish(now, out)
+
+    def on_timer(self, now: float) -> list[Action]:
+        out: list[Action] = []
+        if self.reboot_until is not None and now >= self.reboot_until:
+            self.reboot_until = None
+        # RFC 6.10 / 6.11 (i): silent monitored neighbours are lost links.
+        for n in self.neighbors.lost(now, self.p.delete_period):
+            self._link_break(now, n, out)
+        self._expire_routes(now, out)
+        self.rreq_cache.purge(now)
+        self._expire_acks(now)
+        for d in list(self.discoveries.values()):
+            if d.deadline <= now:
+                self._discovery_timeout(now, d, out)
+        if now >= self.next_hello:
+            self._maybe_hello(now, out)
+        return self._finish(now, out)
+
+    def next_deadline(self) -> float:
+        cands = [self.next_hello]
+        for t in (self.table.next_deadline(), self.neighbors.next_deadline(), self.reboot_until):
+            if t is not None:
+                cands.append(t)
+        cands.extend(d.deadline for d in self.discoveries.values())
+        cands.extend(self.pending_acks.values())
+        return min(cands)
+
+    # == RFC 6.5 RREQ =====================================================================
+    def _rreq(self, now: float, src: str, ttl: int, m: Rreq, out: list[Action]) -> None:
+        # RFC 6.8: "...a node ignores all RREQs received from any node in its blacklist
+        # set."
+        if self.neighbors.blacklisted(src, now):
+            return
+        # RFC 6.5: "When a node receives a RREQ, it first creates or updates a route to
+        # the previous hop without a valid sequence number."
+        self._touch_prev_hop(now, src)
+        if m.orig == self.addr:
+            return
+        # RFC 6.5: "...checks to determine whether it has received a RREQ with the same
+        # Originator IP Address and RREQ ID within at least the last PATH_DISCOVERY_TIME.
+        # If such a RREQ has been received, the node silently discards the newly received
+        # RREQ."
+        if self.rreq_cache.seen(m.orig, m.rreq_id, now):
+            return
+        self.rreq_cache.add(m.orig, m.rreq_id, now + self.p.path_discovery_time)
+        # RFC 6.5: "...first increments the hop count value in the RREQ by one..."
+        hops = m.hop_count + 1
+        rev = self._update_reverse_route(now, src, m, hops)
+        if self.reboot_until is not None:
+            # RFC 6.13: it "SHOULD create route entries as appropriate ... but MUST NOT
+            # forward any control packets" (and sends no RREP) while it waits.
+            return
+        if m.dest == self.addr:
+            self._reply_as_destination(now, m, rev, out)
+            return
+        # RFC 6.6 (ii): "it has an active route to the destination, the destination
+        # sequence number in the node's existing route table entry for the destination is
+        # valid and greater than or equal to the Destination Sequence Number of the RREQ
+        # ... and the 'destination only' ('D') flag is NOT set."
+        # Decision: with the U flag the RREQ's number means nothing, any valid one will do.
+        fwd = self.table.valid(m.dest)
+        if (
+            fwd is not None
+            and fwd.valid_seq
+            and not m.dest_only
+            and (m.unknown_seq or seqnum.at_least(fwd.seq, m.dest_seq))
+            and fwd.next_hop != src
+        ):
+            self._reply_as_intermediate(now, m, rev, fwd, out)
+            return
+        # RFC 6.5: forward only if the IP TTL allows; "the Destination Sequence number for
+        # the requested destination is set to the maximum of the corresponding value
+        # received in the RREQ message, and the destination sequence value currently
+        # maintained by the node ... the forwarding node MUST NOT modify its maintained
+        # value".
+        if ttl <= 1:
+            return
+        known = self.table.get(m.dest)
+        dest_seq, unknown = m.dest_seq, m.unknown_seq
+        if known is not None and known.valid_seq:
+            dest_seq = known.seq if unknown else seqnum.newest(m.dest_seq, known.seq)
+            unknown = False
+        fwd_msg = Rreq(
+            rreq_id=m.rreq_id,
+            dest=m.dest,
+            dest_seq=dest_seq,
+            orig=m.orig,
+            orig_seq=m.orig_seq,
+            hop_count=hops,
+            join=m.join,
+            repair=m.repair,
+            gratuitous=m.gratuitous,
+            dest_only=m.dest_only,
+            unknown_seq=unknown,
+        )
+        self._broadcast(now, fwd_msg, ttl - 1, out)
+
+    def _update_reverse_route(self, now: float, src: str, m: Rreq, hops: int) -> Route:
+        # RFC 6.5: "...the Originator Sequence Number from the RREQ is compared to the
+        # corresponding destination sequence number in the route table entry and copied
+        # if greater than the existing value there; the valid sequence number field is set
+        # to true; the next hop in the routing table becomes the node from which the RREQ
+        # was received ...; the hop count is copied from the Hop Count in the RREQ".
+        # "MinimalLifetime = (current time + 2*NET_TRAVERSAL_TIME -
+        # 2*HopCount*NODE_TRAVERSAL_TIME)" and the lifetime is the maximum of the
+        # existing one and MinimalLifetime.
+        # Decision: the next hop only changes when the RREQ is fresher, equally fresh and
+        # shorter, or the entry was unusable (RFC 6.2's update rule), so a late copy
+        # of a RREQ over a longer path cannot replace a good reverse route.
+        minimal = now + 2 * self.p.net_traversal_time - 2 * hops * self.p.node_traversal_time
+        r = self.table.get(m.orig)
+        if r is None:
+            return self.table.add(Route(m.orig, src, hops, m.orig_seq, True, minimal))
+        better = (
+            not r.valid
+            or not r.valid_seq
+            or seqnum.newer(m.orig_seq, r.seq)
+            or (m.orig_seq == r.seq and hops < r.hops)
+        )
+        if not r.valid_seq or seqnum.newer(m.orig_seq, r.seq):
+            r.seq = m.orig_seq
+        r.valid_seq = True
+        if better:
+            r.next_hop, r.hops = src, hops
+        r.lifetime = max(r.lifetime, minimal) if r.valid else minimal
+        r.valid = True
+        r.hello_only = False
+        return r
+
+    # == RFC 6.6 generating a RREP ========================================================
+    def _reply_as_destination(self, now: float, m: Rreq, rev: Route, out: list) -> None:
+        # RFC 6.1: "Immediately before a destination node originates a RREP in response
+        # to a RREQ, it MUST update its own sequence number to the maximum of its current
+        # sequence number and the destination sequence number in the RREQ packet."
+        # Decision: 6.6.1 says instead "increment ... if the sequence number in the RREQ
+        # packet is equal to that incremented value"; the 6.1 maximum covers that case
+        # and never answers with a number older than the one asked for. With the U flag
+        # set the RREQ's number is meaningless and is ignored.
+        if not m.unknown_seq:
+            self.seq = seqnum.newest(self.seq, m.dest_seq)
+        # RFC 6.6.1: "...enters the value zero in the Hop Count field of the RREP. The
+        # destination node copies the value MY_ROUTE_TIMEOUT into the Lifetime field".
+        rrep = Rrep(
+            dest=self.addr,
+            dest_seq=self.seq,
+            orig=m.orig,
+            lifetime_ms=self.p.ms(self.p.my_route_timeout),
+            hop_count=0,
+        )
+        self._send_rrep(now, rrep, rev.next_hop, out)
+
+    def _reply_as_intermediate(
+        self, now: float, m: Rreq, rev: Route, fwd: Route, out: list
+    ) -> None:
+        # RFC 6.6.2: "...copies its known sequence number for the destination into the
+        # Destination Sequence Number field ... places its distance in hops from the
+        # destination ... in the Hop Count field, and updates the Lifetime field of the
+        # RREP by subtracting the current time from the expiration time in its route table
+        # entry." "...placing the last hop node ... into the precursor list for the
+        # forward route entry ... [and] the next hop towards the destination in the
+        # precursor list for the reverse route entry."
+        fwd.precursors.add(rev.next_hop)
+        rev.precursors.add(fwd.next_hop)
+        rrep = Rrep(
+            dest=m.dest,
+            dest_seq=fwd.seq,
+            orig=m.orig,
+            lifetime_ms=self.p.ms(fwd.lifetime - now),
+            hop_count=fwd.hops,
+        )
+        self._send_rrep(now, rrep, rev.next_hop, out)
+        # RFC 6.6.3: "If the RREQ has the 'G' flag set, and the intermediate node returns
+        # a RREP to the originating node, it MUST also unicast a gratuitous RREP to the
+        # destination node." (Destination = RREQ originator, its sequence number from the
+        # RREQ, Originator = RREQ destination, hop count and lifetime of the reverse route.)
+        if m.gratuitous:
+            grat = Rrep(
+                dest=m.orig,
+                dest_seq=m.orig_seq,
+                orig=m.dest,
+                lifetime_ms=self.p.ms(rev.lifetime - now),
+                hop_count=rev.hops,
+            )
+            self._send_rrep(now, grat, fwd.next_hop, out)
+
+    def _send_rrep(self, now: float, rrep: Rrep, next_hop: str, out: list) -> None:
+        # RFC 6.7/6.8: "If a node forwards a RREP over a link that is likely to have errors
+        # or be unidirectional, the node SHOULD set the 'A' flag". Decision: a link is
+        # "likely unidirectional" until the neighbour has shown it hears us (it sent us a
+        # RREP-ACK or a RREP, i.e. picked us as its next hop) within DELETE_PERIOD.
+        proof = self.bidirectional.get(next_hop)
+        if proof is None or proof < now - self.p.delete_period:
+            rrep = Rrep(**{**rrep.__dict__, "ack_required": True})
+            self.pending_acks[next_hop] = now + self.p.next_hop_wait
+        out.append(Unicast(rrep, next_hop))
+
+    # == RFC 6.7 receiving a RREP =========================================================
+    def _rrep(self, now: float, src: str, m: Rrep, out: list[Action]) -> None:
+        # RFC 6.8: "...the node receiving the RREP with the 'A' bit set... sends a
+        # RREP-ACK" back to the sender.
+        if m.ack_required:
+            out.append(Unicast(RrepAck(), src))
+        self.bidirectional[src] = now
+        # RFC 6.7: "...searches ... for a route to the previous hop. If needed, a route is
+        # created for the previous hop, but without a valid sequence number".
+        self._touch_prev_hop(now, src)
+        if m.dest == self.addr:
+            return
+        # RFC 6.7: "...increments the hop count value in the RREP by one".
+        hops = m.hop_count + 1
+        r = self.table.get(m.dest)
+        # RFC 6.7: the existing entry is updated only if "(i) the sequence number in the
+        # routing table is marked as invalid ..., (ii) the Destination Sequence Number in
+        # the RREP is greater than the node's copy ..., (iii) the sequence numbers are
+        # the same, but the route is marked as inactive, or (iv) the sequence numbers are
+        # the same, and the New Hop Count is smaller than the hop count in route table".
+        if r is None:
+            r = self.table.add(Route(m.dest, src, hops, m.dest_seq, True, 0.0))
+        elif not (
+            not r.valid_seq
+            or seqnum.newer(m.dest_seq, r.seq)
+            or (m.dest_seq == r.seq and not r.valid)
+            or (m.dest_seq == r.seq and hops < r.hops)
+        ):
+            return
+        # RFC 6.7: "the route is marked as active, the destination sequence number is
+        # marked as valid, the next hop ... is assigned to be the node from which the RREP
+        # is received, ... the hop count is set to the value of the New Hop Count, the
+        # expiry time is set to the current time plus the value of the Lifetime in the
+        # RREP message, and the destination sequence number is the Destination Sequence
+        # Number in the RREP message."
+        r.valid, r.valid_seq, r.next_hop, r.hops = True, True, src, hops
+        r.lifetime = now + self.p.from_ms(m.lifetime_ms)
+        r.seq = m.dest_seq
+        r.hello_only = False
+        if m.orig == self.addr or self.reboot_until is not None:
+            return
+        # RFC 6.7: "If the current node is not the node indicated by the Originator IP
+        # Address in the RREP message AND a forward route has been created or updated...,
+        # the node consults its route table entry for the originating node to determine
+        # the next hop for the RREP packet, and then forwards the RREP towards the
+        # originator".
+        rev = self.table.valid(m.orig)
+        if rev is None:
+            log.debug("%s: RREP for %s has no route back to %s", self.addr, m.dest, m.orig)
+            return
+        # RFC 6.7: "When any node transmits a RREP, the precursor list for the
+        # corresponding destination node is updated by adding to it the next hop node to
+        # which the RREP is forwarded. Also, at each node the (reverse) route used to
+        # forward a RREP has its lifetime changed to be the maximum of (existing-lifetime,
+        # (current time + ACTIVE_ROUTE_TIMEOUT)). Finally, the precursor list for the next
+        # hop towards the destination is updated to contain the next hop towards the
+        # source." Decision: as ns-3 does, the symmetric entries are filled too (the
+        # reverse route and the next hop towards the source get the next hop towards the
+        # destination), so a break on either side reaches both ends by RERR.
+        r.precursors.add(rev.next_hop)
+        rev.precursors.add(r.next_hop)
+        self._refresh(rev, now + self.p.active_route_timeout)
+        nh_dst = self.table.valid(r.next_hop)
+        if nh_dst is not None:
+            nh_dst.precursors.add(rev.next_hop)
+        nh_src = self.table.valid(rev.next_hop)
+        if nh_src is not None:
+            nh_src.precursors.add(r.next_hop)
+        fwd = Rrep(
+            dest=m.dest,
+            dest_seq=m.dest_seq,
+            orig=m.orig,
+            lifetime_ms=m.lifetime_ms,
+            hop_count=hops,
+            prefix_size=m.prefix_size,
+        )
+        self._send_rrep(now, fwd, rev.next_hop, out)
+
+    def _rrep_ack(self, now: float, src: str) -> None:
+        self.pending_acks.pop(src, None)
+        self.bidirectional[src] = now
+
+    def _expire_acks(self, now: float) -> None:
+        # RFC 6.8: "...if the RREP-ACK is not received within NEXT_HOP_WAIT, the node
+        # adds the next hop to a blacklist for BLACKLIST_TIMEOUT."
+        for nbr, deadline in list(self.pending_acks.items()):
+            if deadline <= now:
+                del self.pending_acks[nbr]
+                log.info("%s: no RREP-ACK from %s, blacklisted", self.addr, nbr)
+                self.neighbors.blacklist(nbr, now + self.p.blacklist_timeout)
+
+    # == RFC 6.9 HELLO ====================================================================
+    def _hello(self, now: float, src: str, m: Rrep) -> None:
+        # RFC 6.9: "Whenever a node receives a Hello message from a neighbor, the node
+        # SHOULD make sure that it has an active route to the neighbor, and create one if
+        # necessary. If a route already exists, then the Lifetime for the route should be
+        # increased, if necessary, to be at least ALLOWED_HELLO_LOSS * HELLO_INTERVAL. The
+        # route to the neighbor, if it exists, MUST subsequently contain the latest
+        # Destination Sequence Number from the Hello message."
+        # The neighbour's own HELLO_INTERVAL comes from its Hello Interval extension.
+        interval = (
+            self.p.from_ms(m.hello_interval_ms)
+            if m.hello_interval_ms is not None
+            else self.p.hello_interval
+        )
+        timeout = self.p.allowed_hello_loss * interval
+        self.neighbors.hello(src, now, timeout)
+        r = self.table.get(src)
+        if r is None or not r.valid:
+            self.table.add(Route(src, src, 1, m.dest_seq, True, now + timeout, hello_only=True))
+            return
+        r.next_hop, r.hops = src, 1
+        r.seq, r.valid_seq = m.dest_seq, True
+        r.lifetime = max(r.lifetime, now + timeout)
+
+    def _maybe_hello(self, now: float, out: list[Action]) -> None:
+        # RFC 6.9: "...a node SHOULD only use hello messages if it is part of an active
+        # route." "Every HELLO_INTERVAL milliseconds, the node checks whether it has sent
+        # a broadcast (e.g., a RREQ ...) within the last HELLO_INTERVAL. If it has not, it
+        # MAY broadcast a RREP with TTL = 1, called a Hello message". Decision: the next
+        # check is HELLO_INTERVAL after the last broadcast, so a neighbour never waits
+        # more than HELLO_INTERVAL between two broadcasts from us.
+        active = any(r.valid and not r.hello_only for r in self.table)
+        if active and self.reboot_until is None:
+            hello = Rrep(
+                dest=self.addr,
+                dest_seq=self.seq,
+                orig=self.addr,
+                lifetime_ms=self.p.ms(self.p.neighbor_timeout),
+                hop_count=0,
+                hello_interval_ms=int(self.p.hello_interval_ms),
+            )
+            self._broadcast(now, hello, LOCAL_TTL, out)
+        else:
+            self.next_hello = now + self.p.hello_interval
+
+    # == RFC 6.3 / 6.4 route discovery ====================================================
+    def _originate(self, now: float, dst: str, packet: bytes, out: list[Action]) -> None:
+        if self.table.valid(dst) is not None:
+            # The kernel route appeared while the packet was on its way to us.
+            out.append(ReleasePackets(dst, (packet,)))
+            return
+        overflow = self.queue.push(dst, packet)
+        if overflow is not None:
+            out.append(DropPackets(dst, (overflow,)))
+        if dst in self.discoveries:
+            return
+        # RFC 6.4: "...the originating node SHOULD use the expanding ring search technique
+        # ... initially uses TTL = TTL_START"; "...the TTL ... is initially set to the Hop
+        # Count plus TTL_INCREMENT" when an (invalid) entry knows the old distance.
+        old = self.table.get(dst)
+        ttl = self.p.ttl_start if old is None else old.hops + self.p.ttl_increment
+        if ttl > self.p.ttl_threshold:
+            ttl = self.p.net_diameter
+        d = self.discoveries[dst] = _Discovery(dst, ttl, now)
+        self._send_rreq(now, d, out)
+
+    def _send_rreq(self, now: float, d: _Discovery, out: list[Action]) -> None:
+        # RFC 6.3: "A node SHOULD NOT originate more than RREQ_RATELIMIT RREQ messages per
+        # second." Decision: a RREQ over the limit is delayed, not dropped.
+        if not self._rreq_limit.allow(now):
+            d.rate_limited = True
+            d.deadline = self._rreq_limit.next_free(now)
+            return
+        d.rate_limited = False
+        # RFC 6.1: "Immediately before a node originates a route discovery, it MUST
+        # increment its own sequence number." RFC 6.3: "...the RREQ ID field is
+        # incremented by one from the last RREQ ID used by the current node."
+        self.seq = seqnum.increment(self.seq)
+        self.rreq_id = seqnum.increment(self.rreq_id)
+        # RFC 6.3: "The Destination Sequence Number field in the RREQ message is the last
+        # known destination sequence number for this destination ...  If no sequence
+        # number is known, the unknown sequence number flag MUST be set."
+        old = self.table.get(d.dest)
+        known = old is not None and old.valid_seq
+        rreq = Rreq(
+            rreq_id=self.rreq_id,
+            dest=d.dest,
+            dest_seq=old.seq if known else 0,
+            orig=self.addr,
+            orig_seq=self.seq,
+            hop_count=0,
+            gratuitous=self.p.gratuitous_rrep,
+            dest_only=self.p.dest_only,
+            unknown_seq=not known,
+        )
+        # RFC 6.3: "Before broadcasting the RREQ, the originating node buffers the RREQ ID
+        # and the Originator IP address (its own address) of the RREQ for
+        # PATH_DISCOVERY_TIME."
+        self.rreq_cache.add(self.addr, self.rreq_id, now + self.p.path_discovery_time)
+        self._broadcast(now, rreq, d.ttl, out)
+        d.round_started = now
+        # RFC 6.4: "The timeout for receiving a RREP is RING_TRAVERSAL_TIME" during the
+        # ring search; "Once TTL = NET_DIAMETER, the timeout for waiting for the RREP is
+        # set to NET_TRAVERSAL_TIME". RFC 6.3: binary exponential backoff, "...the wait
+        # time for the RREP ... is 2^k * NET_TRAVERSAL_TIME" for retry k.
+        if d.ttl >= self.p.net_diameter:
+            d.deadline = now + (2**d.retries) * self.p.net_traversal_time
+        else:
+            d.deadline = now + self.p.ring_traversal_time(d.ttl)
+
+    def _discovery_timeout(self, now: float, d: _Discovery, out: list[Action]) -> None:
+        if d.rate_limited:
+            self._send_rreq(now, d, out)
+            return
+        if d.ttl < self.p.net_diameter:
+            # RFC 6.4: "...the TTL_VALUE is incremented by TTL_INCREMENT ... until TTL set
+            # in the RREQ reaches TTL_THRESHOLD, beyond which a TTL = NET_DIAMETER is used
+            # for each attempt."
+            d.ttl += self.p.ttl_increment
+            if d.ttl > self.p.ttl_threshold:
+                d.ttl = self.p.net_diameter
+            self._send_rreq(now, d, out)
+            return
+        # RFC 6.3: "...the node MAY try again to discover a route by broadcasting another
+        # RREQ, up to a maximum of RREQ_RETRIES times at the maximum TTL value."
+        if d.retries < self.p.rreq_retries:
+            d.retries += 1
+            self._send_rreq(now, d, out)
+            return
+        # RFC 6.3: "...all data packets destined for the corresponding destination SHOULD
+        # be dropped from the buffer and a Destination Unreachable message SHOULD be
+        # delivered to the application."
+        del self.discoveries[d.dest]
+        out.append(DropPackets(d.dest, tuple(self.queue.pop_all(d.dest))))
+        out.append(DiscoveryDone(d.dest, False, now - d.started, now - d.round_started))
+
+    def _complete_discoveries(self, now: float, out: list[Action]) -> None:
+        for dest, d in list(self.discoveries.items()):
+            if self.table.valid(dest) is not None:
+                del self.discoveries[dest]
+                out.append(ReleasePackets(dest, tuple(self.queue.pop_all(dest))))
+                out.append(DiscoveryDone(dest, True, now - d.started, now - d.round_started))
+
+    # == RFC 6.11 RERR ====================================================================
+    def _link_break(self, now: float, nbr: str, out: list[Action]) -> None:
+        # RFC 6.11 (i): "...the node first makes a list of unreachable destinations
+        # consisting of the unreachable neighbor and any additional destinations ... in
+        # the local routing table that use the unreachable neighbor as the next hop."
+        # "1. The destination sequence number of this routing entry, if it exists and is
+        # valid, is incremented for cases (i) and (ii)".
+        broken = self.table.via(nbr)
+        for r in broken:
+            if r.valid_seq:
+                r.seq = seqnum.increment(r.seq)
+            self._invalidate(r, now)
+        if broken:
+            log.info("%s: link to %s lost, %d routes invalid", self.addr, nbr, len(broken))
+        self._send_rerr(now, [r for r in broken if r.precursors], out, fallback=False)
+
+    def _forward_without_route(self, now: float, dst: str, out: list[Action]) -> None:
+        # RFC 6.11 (ii): "...if it gets a data packet destined to a node for which it does
+        # not have an active route and is not repairing". RFC 6.13: a rebooted node
+        # "SHOULD broadcast a RERR ... and MUST reset the waiting timer to expire after
+        # current time plus DELETE_PERIOD."
+        if self.reboot_until is not None:
+            self.reboot_until = now + self.p.delete_period
+        r = self.table.get(dst)
+        if r is None:
+            r = self.table.add(Route(dst, dst, 0, 0, False, now + self.p.delete_period, False))
+        elif r.valid:
+            if r.valid_seq:
+                r.seq = seqnum.increment(r.seq)
+            self._invalidate(r, now)
+        # Decision: with no precursor known for the destination (the packet's previous hop
+        # is hidden from us), the RERR is broadcast with TTL 1; neighbours without a route
+        # through us to `dst` ignore it (RFC 6.11 case iii only acts on such routes).
+        self._send_rerr(now, [r], out, fallback=True)
+
+    def _rerr(self, now: float, src: str, m: Rerr, out: list[Action]) -> None:
+        # RFC 6.11 (iii) / 6.12: a RERR with the N flag announces a local repair; the
+        # upstream node "MUST NOT delete the route".
+        if m.no_delete:
+            return
+        # RFC 6.11: "...the list should consist of those destinations in the RERR for
+        # which there exists a corresponding entry in the local routing table that has
+        # the transmitter of the received RERR as the next hop." The sequence number is
+        # "copied from the incoming RERR in case (iii)".
+        affected = []
+        for dest, seq in m.unreachable:
+            r = self.table.valid(dest)
+            if r is not None and r.next_hop == src:
+                r.seq, r.valid_seq = seq, True
+                self._invalidate(r, now)
+                affected.append(r)
+        if self.reboot_until is not None:
+            return
+        # RFC 6.11: "The RERR should contain those destinations that are part of the
+        # created list of unreachable destinations and have a non-empty precursor list."
+        self._send_rerr(now, [r for r in affected if r.precursors], out, fallback=False)
+
+    def _send_rerr(self, now: float, routes: list[Route], out: list, fallback: bool) -> None:
+        if not routes:
+            return
+        # RFC 6.11: "A node should not generate more than RERR_RATELIMIT RERR messages
+        # per second." Decision: RERRs over the limit are dropped (and counted).
+        if not self._rerr_limit.allow(now):
+            self.dropped_rerr += 1
+            return
+        # RFC 6.11: "The neighboring node(s) that should receive the RERR are all those
+        # that belong to a precursor list of at least one of the unreachable
+        # destination(s)... In case there is only one unique neighbor that needs to
+        # receive the RERR, the RERR SHOULD be unicast toward that neighbor. Otherwise
+        # the RERR is typically sent to the local broadcast address (Destination IP ==
+        # 0xFFFFFFFF, TTL == 1)".
+        targets = set().union(*(r.precursors for r in routes))
+        for i in range(0, len(routes), 255):
+            rerr = Rerr(unreachable=tuple((r.dest, r.seq) for r in routes[i : i + 255]))
+            if len(targets) == 1:
+                out.append(Unicast(rerr, next(iter(targets)), LOCAL_TTL))
+            elif targets or fallback:
+                self._broadcast(now, rerr, LOCAL_TTL, out)
+
+    # == helpers ==========================================================================
+    def _touch_prev_hop(self, now: float, src: str) -> None:
+        """A route to a neighbour we just heard, without a valid sequence number."""
+        r = self.table.get(src)
+        until = now + self.p.active_route_timeout
+        if r is None:
+            self.table.add(Route(src, src, 1, 0, False, until))
+        elif not r.valid or r.next_hop != src:
+            r.valid, r.next_hop, r.hops, r.lifetime = True, src, 1, until
+            r.hello_only = False
+        else:
+            r.lifetime = max(r.lifetime, until)
+
+    def _refresh(self, r: Route, until: float) -> None:
+        r.lifetime = max(r.lifetime, until)
+        r.hello_only = False
+
+    def _invalidate(self, r: Route, now: float) -> None:
+        # RFC 6.11: "2. The entry is invalidated by marking the route entry as invalid
+        # 3. The Lifetime field is updated to current time plus DELETE_PERIOD."
+        r.valid = False
+        r.lifetime = now + self.p.delete_period
+
+    def _expire_routes(self, now: float, out: list[Action]) -> None:
+        # RFC 6.11 / section 2: an active route whose lifetime passed becomes invalid;
+        # an invalid one is deleted after DELETE_PERIOD.
+        for r in self.table:
+            if r.lifetime <= now:
+                if r.valid:
+                    self._invalidate(r, now)
+                else:
+                    self.table.remove(r.dest)
+
+    def _broadcast(self, now: float, msg: Message, ttl: int, out: list[Action]) -> None:
+        out.append(Broadcast(msg, ttl))
+        self.next_hello = now + self.p.hello_interval
+
+    def _finish(self, now: float, out: list[Action]) -> list[Action]:
+        self._complete_discoveries(now, out)
+        return self._sync_routes() + out
+
+    def _sync_routes(self) -> list[Action]:
+        """Install/delete actions that bring the kernel in line with the valid entries."""
+        acts: list[Action] = []
+        valid = {r.dest: r.kernel_key() for r in self.table if r.valid}
+        for dest in [d for d in self._installed if d not in valid]:
+            del self._installed[dest]
+            acts.append(DeleteRoute(dest))
+        for dest, key in valid.items():
+            if self._installed.get(dest) != key:
+                self._installed[dest] = key
+                acts.append(InstallRoute(dest, key[0], key[1]))
+        return acts
+
+    # == inspection =======================================================================
+    def routes(self) -> dict[str, tuple[str, int]]:
+        """Valid routes: destination -> (next hop, hops)."""
+        return {r.dest: r.kernel_key() for r in self.table if r.valid}

@@ -1,0 +1,76 @@
+"""Neighbour sensing (RFC 3561 sections 6.9, 6.10) and the RREQ blacklist (section 6.8).
+
+A neighbour is monitored once a HELLO came from it: RFC 6.10 "If, within the past
+DELETE_PERIOD, it has received a Hello message from a neighbor, and then for that neighbor
+does not receive any packets (Hello messages or otherwise) for more than ALLOWED_HELLO_LOSS *
+HELLO_INTERVAL milliseconds, the node SHOULD assume that the link to this neighbor is
+currently lost."
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class Neighbor:
+    addr: str
+    last_hello: float | None = None
+    last_heard: float = 0.0
+    # Allowed silence, from the neighbour's Hello Interval extension when it sent one.
+    timeout: float = 0.0
+
+
+class Neighbors:
+    def __init__(self) -> None:
+        self._n: dict[str, Neighbor] = {}
+        self._blacklist: dict[str, float] = {}
+
+    def heard(self, addr: str, now: float) -> Neighbor:
+        n = self._n.get(addr)
+        if n is None:
+            n = self._n[addr] = Neighbor(addr)
+        n.last_heard = now
+        return n
+
+    def hello(self, addr: str, now: float, timeout: float) -> None:
+        n = self.heard(addr, now)
+        n.last_hello = now
+        n.timeout = timeout
+
+    def get(self, addr: str) -> Neighbor | None:
+        return self._n.get(addr)
+
+    def forget(self, addr: str) -> None:
+        self._n.pop(addr, None)
+
+    def lost(self, now: float, delete_period: float) -> list[str]:
+        """Monitored neighbours silent for longer than their timeout; they are forgotten."""
+        out = []
+        for n in list(self._n.values()):
+            monitored = n.last_hello is not None and n.last_hello >= now - delete_period
+            if monitored and now >= n.last_heard + n.timeout:
+                out.append(n.addr)
+                del self._n[n.addr]
+            elif not monitored and now > n.last_heard + delete_period:
+                del self._n[n.addr]
+        return out
+
+    def next_deadline(self) -> float | None:
+        return min(
+            (n.last_heard + n.timeout for n in self._n.values() if n.last_hello is not None),
+            default=None,
+        )
+
+    # -- RFC 6.8 blacklist -------------------------------------------------------------
+    def blacklist(self, addr: str, until: float) -> None:
+        self._blacklist[addr] = until
+
+    def blacklisted(self, addr: str, now: float) -> bool:
+        until = self._blacklist.get(addr)
+        if until is None:
+            return False
+        if until <= now:
+            del self._blacklist[addr]
+            return False
+        return True

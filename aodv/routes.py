@@ -1,0 +1,62 @@
+"""The AODV routing table (RFC 3561 section 2 and 6.2): one entry per destination.
+
+An entry is VALID (usable, installed in the kernel by the daemon) or INVALID (kept for
+DELETE_PERIOD so its sequence number survives, RFC 6.11). `lifetime` is the absolute time
+at which a valid entry becomes invalid, or at which an invalid entry is deleted.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+
+@dataclass
+class Route:
+    dest: str
+    next_hop: str
+    hops: int
+    seq: int
+    valid_seq: bool
+    lifetime: float
+    valid: bool = True
+    precursors: set[str] = field(default_factory=set)
+    # Created only by HELLOs and never used: does not make this node "part of an active
+    # route" (RFC 6.9), so it does not start HELLOs on its own.
+    hello_only: bool = False
+
+    def kernel_key(self) -> tuple[str, int]:
+        """What the kernel route depends on: a change means reinstall."""
+        return (self.next_hop, self.hops)
+
+
+class RoutingTable:
+    def __init__(self) -> None:
+        self._routes: dict[str, Route] = {}
+
+    def get(self, dest: str) -> Route | None:
+        return self._routes.get(dest)
+
+    def valid(self, dest: str) -> Route | None:
+        r = self._routes.get(dest)
+        return r if r is not None and r.valid else None
+
+    def add(self, route: Route) -> Route:
+        self._routes[route.dest] = route
+        return route
+
+    def remove(self, dest: str) -> None:
+        self._routes.pop(dest, None)
+
+    def __iter__(self) -> Iterator[Route]:
+        return iter(list(self._routes.values()))
+
+    def __len__(self) -> int:
+        return len(self._routes)
+
+    def via(self, next_hop: str) -> list[Route]:
+        """Valid routes whose next hop is `next_hop`."""
+        return [r for r in self._routes.values() if r.valid and r.next_hop == next_hop]
+
+    def next_deadline(self) -> float | None:
+        return min((r.lifetime for r in self._routes.values()), default=None)
