@@ -71,6 +71,7 @@ _FIELDS = (
     "tcp.seq_raw",
     "tcp.len",
     "aodv.type",
+    "ipv6.nxt",
 )
 
 
@@ -115,7 +116,7 @@ def parse_fields(text: str) -> list[Frame]:
                     eth_dst=f[3],
                     ip_src=f[4],
                     ip_dst=f[5],
-                    ip_proto=_int(f[6]),
+                    ip_proto=_int(f[6]) or _int(f[16]),  # IPv4 protocol or IPv6 next header
                     ttl=_int(f[7]),
                     udp_sport=_int(f[8]),
                     udp_dport=_int(f[9]),
@@ -205,7 +206,8 @@ def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int =
                     r["control_tx_packets"] += 1
                     r["control_tx_bytes"] += f.length
                     r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
-                    r["aodv_tx_by_type"][_aodv_kind(f)] += 1
+                    if port == CONTROL_PORTS["aodv"]:
+                        r["aodv_tx_by_type"][_aodv_kind(f)] += 1
                 if f.ip_src == addr and f.tcp_len and f.ip_dst != addr and f.ip_proto == 6:
                     tx_payload += f.tcp_len
                     key = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport, f.tcp_seq)

@@ -62,8 +62,8 @@ _FLAGS = {
     "time_scale": "--time-scale",
     "routing": "--routing",
     "max_steps": "--max-steps",
-    "loss_pct": "--loss-pct",
-    "delay_ms": "--delay-ms",
+    "loss_pct": "--loss",
+    "delay_ms": "--delay",
     "map": "--map",
     "capture": "--capture",
 }
@@ -186,7 +186,7 @@ def run_argv(prefix: list[str], config: dict, out_dir: Path) -> list[str]:
             argv.append(flag)
         else:
             argv += [flag, sweepfile.fmt(value) if isinstance(value, float) else str(value)]
-    return argv + ["--out", str(out_dir)]
+    return argv + ["--quiet", "--out", str(out_dir)]
 
 
 # ---------------------------------------------------------------- progress

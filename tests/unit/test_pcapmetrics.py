@@ -124,7 +124,7 @@ def test_babel_port():
 def test_parse_fields():
     line = "\t".join(
         ["12.5", "62", M1, BCAST_MAC, A1, "255.255.255.255", "17", "1", "654", "654", "28",
-         "", "", "", "", "2"]
+         "", "", "", "", "2", ""]
     )  # fmt: skip
     (f,) = pm.parse_fields(line + "\n\nnot\ta\tframe\n")
     assert f == udp(12.5, M1, BCAST_MAC, A1, "255.255.255.255", 2, ttl=1, payload=20)
@@ -149,3 +149,14 @@ def test_daemon_comparison(tmp_path):
 
 def test_run_without_captures(tmp_path):
     assert pm.run_metrics(tmp_path) is None
+
+
+def test_ipv6_udp_is_recognised():
+    """babel speaks UDP 6696 over IPv6 link-local: the protocol comes from ipv6.nxt."""
+    fields = ["1.0", "100", M1, "33:33:00:01:00:06", "", "", "", "", "6696", "6696", "40"]
+    fields += ["", "", "", "", "", "17"]
+    (f,) = pm.parse_fields("\t".join(fields))
+    assert f.ip_proto == 17
+    caps = {1: [f, udp(0.0, M1, BCAST_MAC, A1, "255.255.255.255", None, port=5000)]}
+    m = pm.compute(caps, {1: A1}, port=6696)
+    assert m["control_tx_packets"] == 1 and m["tx_packets"] == 2

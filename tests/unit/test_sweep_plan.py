@@ -58,15 +58,14 @@ def test_run_argv():
     cfg = sweepfile.expand(spec(capture=True, time_scale=2.5))[0].config
     argv = sweep.run_argv(["testbed", "run"], cfg, "/x/runs/a")
     assert argv[:2] == ["testbed", "run"]
-    assert argv[-2:] == ["--out", "/x/runs/a"]
-    pairs = dict(zip(argv[2:-3:2], argv[3:-2:2], strict=False))
+    assert argv[-3:] == ["--quiet", "--out", "/x/runs/a"]
     assert "--capture" in argv and "--map" not in argv
     i = argv.index("--robots")
     assert argv[i + 1] == "1"
     assert argv[argv.index("--comm-range") + 1] == "5"
     assert argv[argv.index("--time-scale") + 1] == "2.5"
     assert argv[argv.index("--seed") + 1] == str(cfg["seed"])
-    assert pairs  # flags come in --flag value pairs
+    assert argv[argv.index("--loss") + 1] == "0"
 
 
 def test_default_jobs():

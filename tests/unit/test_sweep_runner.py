@@ -24,10 +24,10 @@ import argparse, json, os, signal, sys, time
 p = argparse.ArgumentParser()
 for f in ("--robots", "--seed", "--max-steps"):
     p.add_argument(f, type=int)
-for f in ("--comm-range", "--laser-range", "--time-scale", "--loss-pct", "--delay-ms"):
+for f in ("--comm-range", "--laser-range", "--time-scale", "--loss", "--delay"):
     p.add_argument(f, type=float, default=0.0)
 p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
-p.add_argument("--capture", action="store_true")
+p.add_argument("--capture", action="store_true"); p.add_argument("--quiet", action="store_true")
 a = p.parse_args()
 signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 pids = os.environ.get("STANDIN_PIDS")
@@ -40,7 +40,7 @@ if str(a.robots) in os.environ.get("STANDIN_FAIL", "").split(","):
 os.makedirs(a.out)
 cfg = {"robots": a.robots, "comm_range": a.comm_range, "laser_range": a.laser_range,
        "seed": a.seed, "time_scale": a.time_scale, "routing": a.routing, "map": a.map,
-       "loss_pct": a.loss_pct, "delay_ms": a.delay_ms, "capture": a.capture,
+       "loss_pct": a.loss, "delay_ms": a.delay, "capture": a.capture,
        "max_steps": a.max_steps}
 with open(os.path.join(a.out, "config.json"), "w") as f:
     json.dump(cfg, f)
