@@ -1,0 +1,360 @@
+"""The AODV daemon of one robot: sockets, kernel routes, the TUN device and the clock.
+
+Theory of operation
+-------------------
+One thread, one `selectors` loop over three file descriptors: the UDP socket on port 654
+(control messages), the TUN device (data packets that found no kernel route) and a signal
+wake-up socket. Everything protocol-related is delegated to `AodvCore`; this module only
+turns IO into core events (with `time.monotonic()` as `now`) and core actions into IO:
+
+    UDP 654 datagram  -> decode -> core.on_control(src, ttl)   Unicast/Broadcast -> sendto
+    TUN packet        -> core.on_no_route(src, dst)            Install/DeleteRoute -> netlink
+    nft "used" set    -> core.on_route_used(addr)               ReleasePackets -> raw socket
+    deadline reached  -> core.on_timer()                        DropPackets -> ICMP via TUN
+
+Control socket: bound to 0.0.0.0:654 and to the interface (SO_BINDTODEVICE), with
+SO_BROADCAST; the IP TTL is set before each send and read on receipt (IP_RECVTTL = 12,
+missing from Python 3.11's socket module). Broadcasts go to 255.255.255.255; unicasts use
+MSG_DONTROUTE, as a control message always goes to a neighbour on the link. The socket
+hears our own broadcasts: they are dropped by source address.
+
+Routes of the daemon carry protocol number RTPROT_AODV; they are flushed at start and at
+exit. Finding such routes at start means a previous instance died: the core then applies
+the RFC 6.13 reboot rule.
+
+Peer input is never trusted: a datagram that does not decode, or names addresses outside
+the ad hoc network, is counted in stats["dropped"] and logged (rate-limited), never raised.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import selectors
+import signal
+import socket
+import struct
+import time
+
+from aodv import packet as wire
+from aodv.core import (
+    AodvCore,
+    Broadcast,
+    DeleteRoute,
+    DiscoveryDone,
+    DropPackets,
+    InstallRoute,
+    ReleasePackets,
+    Unicast,
+)
+from aodv.kernel import KernelRoutes, Tun, UseMonitor
+from aodv.params import Params
+from aodv.stats import Stats
+
+log = logging.getLogger(__name__)
+
+IP_RECVTTL = 12  # linux/in.h; not in Python 3.11's socket module
+IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
+BROADCAST = "255.255.255.255"
+STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
+
+
+def _checksum(data: bytes) -> int:
+    if len(data) % 2:
+        data += b"\0"
+    s = sum(struct.unpack(f"!{len(data) // 2}H", data))
+    s = (s >> 16) + (s & 0xFFFF)
+    s += s >> 16
+    return ~s & 0xFFFF
+
+
+def icmp_host_unreachable(own: str, original: bytes) -> bytes:
+    """An ICMP destination unreachable (type 3, code 1) about `original`, to its sender."""
+    ihl = (original[0] & 0x0F) * 4
+    quoted = original[: ihl + 8]
+    icmp = struct.pack("!BBHI", 3, 1, 0, 0) + quoted
+    icmp = icmp[:2] + struct.pack("!H", _checksum(icmp)) + icmp[4:]
+    total = 20 + len(icmp)
+    hdr = struct.pack(
+        "!BBHHHBBH4s4s",
+        0x45,
+        0,
+        total,
+        0,
+        0,
+        64,
+        socket.IPPROTO_ICMP,
+        0,
+        socket.inet_aton(own),
+        original[12:16],
+    )
+    hdr = hdr[:10] + struct.pack("!H", _checksum(hdr)) + hdr[12:]
+    return hdr + icmp
+
+
+class Daemon:
+    def __init__(
+        self,
+        robot: str,
+        iface: str,
+        params: Params,
+        stats_path: str | None,
+        net: str = "10.0.0.0/16",
+    ) -> None:
+        self.robot = robot
+        self.iface = iface
+        self.p = params
+        self.stats_path = stats_path
+        self.net = ipaddress.IPv4Network(net)
+        self._stop = False
+        self._dump = False
+        self._malformed_logged = 0
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def run(self) -> int:
+        self.routes = KernelRoutes(self.iface)
+        self.addr = self.routes.address()
+        self.stats = Stats(self.robot, self.addr)
+        stale = self.routes.ours()
+        rebooted = bool(stale)
+        if rebooted:
+            log.warning("found %d routes of a previous run: reboot rule applies", len(stale))
+        self.routes.flush()
+        self.tun = Tun()
+        self.monitor = None
+        self.sock = None
+        try:
+            self.routes.catch_all(self.tun.ifindex, str(self.net), self.addr)
+            self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
+            self._open_sockets()
+            self.core = AodvCore(self.addr, self.p, time.monotonic(), rebooted=rebooted)
+            log.info("AODV up on %s (%s), time scale %g", self.iface, self.addr, self.p.time_scale)
+            self._loop()
+        finally:
+            self._teardown()
+        return 0
+
+    def _poll_period(self) -> float:
+        return self.p.active_route_timeout / 3
+
+    def _open_sockets(self) -> None:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, self.iface.encode())
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+        s.setsockopt(socket.IPPROTO_IP, IP_RECVTTL, 1)
+        s.bind(("0.0.0.0", wire.AODV_PORT))
+        s.setblocking(False)
+        self.sock = s
+        self._ttl = None
+        self.raw = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        signal.set_wakeup_fd(self._wake_w.fileno(), warn_on_full_buffer=False)
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._on_stop)
+        signal.signal(signal.SIGUSR1, self._on_dump)
+
+    def _on_stop(self, *_a) -> None:
+        self._stop = True
+
+    def _on_dump(self, *_a) -> None:
+        self._dump = True
+
+    def _teardown(self) -> None:
+        for step in (
+            lambda: self.routes.flush(),
+            lambda: self.monitor and self.monitor.remove(),
+            lambda: self.tun.close(),
+            lambda: self.sock and self.sock.close(),
+            lambda: self._write_stats(),
+            lambda: self.routes.close(),
+        ):
+            try:
+                step()
+            except Exception as e:  # teardown goes on whatever failed
+                log.warning("teardown: %s", e)
+        log.info("AODV down")
+
+    def _write_stats(self) -> None:
+        if self.stats_path:
+            self.stats.routes = {
+                d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
+            }
+            self.stats.write(self.stats_path)
+
+    # -- the loop ------------------------------------------------------------------------
+    def _loop(self) -> None:
+        sel = selectors.DefaultSelector()
+        sel.register(self.sock, selectors.EVENT_READ, self._on_udp)
+        sel.register(self.tun.fd, selectors.EVENT_READ, self._on_tun)
+        sel.register(self._wake_r, selectors.EVENT_READ, self._on_wake)
+        next_poll = time.monotonic() + self._poll_period()
+        next_stats = time.monotonic()
+        while not self._stop:
+            now = time.monotonic()
+            deadline = min(self.core.next_deadline(), next_poll, next_stats)
+            for key, _ in sel.select(max(0.0, deadline - now)):
+                key.data()
+            now = time.monotonic()
+            if now >= self.core.next_deadline():
+                self._execute(self.core.on_timer(now), now)
+            if now >= next_poll:
+                next_poll = now + self._poll_period()
+                self._poll_use(now)
+            if self._dump or now >= next_stats:
+                self._dump = False
+                next_stats = now + STATS_PERIOD
+                self._write_stats()
+
+    def _on_wake(self) -> None:
+        try:
+            while self._wake_r.recv(64):
+                pass
+        except BlockingIOError:
+            pass
+
+    def _poll_use(self, now: float) -> None:
+        if not self.core.routes():
+            return
+        try:
+            used = self.monitor.poll()
+        except Exception as e:
+            log.warning("route-use poll failed: %s", e)
+            return
+        for addr in used:
+            self.stats.route_uses += 1
+            self._execute(self.core.on_route_used(now, addr), now)
+
+    def _on_udp(self) -> None:
+        for _ in range(64):
+            try:
+                data, anc, _flags, (src, _port) = self.sock.recvmsg(4096, socket.CMSG_SPACE(4))
+            except BlockingIOError:
+                return
+            if src == self.addr:
+                continue  # our own broadcast
+            ttl = 0
+            for level, ctype, cdata in anc:
+                if level == socket.IPPROTO_IP and ctype == IP_TTL_CMSG and len(cdata) >= 4:
+                    ttl = struct.unpack("i", cdata[:4])[0]
+            self.stats.bytes_received += len(data)
+            try:
+                msg = wire.decode(data)
+                self._check_addresses(src, msg)
+            except wire.MalformedPacket as e:
+                self._drop("malformed", src, e)
+                continue
+            kind = "HELLO" if wire.is_hello(msg, src) else msg.type_name
+            self.stats.received[kind] += 1
+            now = time.monotonic()
+            try:
+                self._execute(self.core.on_control(now, src, ttl, msg), now)
+            except Exception:  # a bug must not kill the daemon; count it loudly
+                self.stats.dropped["error"] += 1
+                log.exception("error handling %s from %s", kind, src)
+
+    def _check_addresses(self, src: str, msg: wire.Message) -> None:
+        if isinstance(msg, wire.Rreq):
+            addrs = [src, msg.dest, msg.orig]
+        elif isinstance(msg, wire.Rrep):
+            addrs = [src, msg.dest, msg.orig]
+        elif isinstance(msg, wire.Rerr):
+            addrs = [src, *(a for a, _ in msg.unreachable)]
+        else:
+            addrs = [src]
+        for a in addrs:
+            ip = ipaddress.IPv4Address(a)
+            if (
+                ip not in self.net
+                or ip == self.net.network_address
+                or ip == self.net.broadcast_address
+            ):
+                raise wire.MalformedPacket(f"address {a} outside {self.net}")
+
+    def _drop(self, reason: str, src: str, err: Exception) -> None:
+        self.stats.dropped[reason] += 1
+        self._malformed_logged += 1
+        n = self._malformed_logged
+        if n <= 10 or n % 10000 == 0:
+            log.warning("dropped %s datagram from %s (%d so far): %s", reason, src, n, err)
+
+    def _on_tun(self) -> None:
+        for _ in range(256):
+            pkt = self.tun.read()
+            if pkt is None:
+                return
+            if len(pkt) < 20 or pkt[0] >> 4 != 4:
+                self.stats.dropped["tun_not_ipv4"] += 1
+                continue
+            src = socket.inet_ntoa(pkt[12:16])
+            dst = socket.inet_ntoa(pkt[16:20])
+            if ipaddress.IPv4Address(dst) not in self.net:
+                self.stats.dropped["tun_foreign"] += 1
+                continue
+            if src == self.addr:
+                self.stats.packets_buffered += 1
+            now = time.monotonic()
+            self._execute(self.core.on_no_route(now, src, dst, pkt), now)
+
+    # -- actions -------------------------------------------------------------------------
+    def _execute(self, actions: list, now: float) -> None:
+        for a in actions:
+            if isinstance(a, Unicast):
+                self._send(a.msg, a.dst, a.ttl, socket.MSG_DONTROUTE)
+            elif isinstance(a, Broadcast):
+                self._send(a.msg, BROADCAST, a.ttl, 0)
+            elif isinstance(a, InstallRoute):
+                self.routes.install(a.dest, a.next_hop)
+                self.stats.route_installs += 1
+                log.info("route %s via %s (%d hops)", a.dest, a.next_hop, a.hops)
+            elif isinstance(a, DeleteRoute):
+                self.routes.delete(a.dest)
+                self.stats.route_deletes += 1
+                log.info("route %s deleted", a.dest)
+            elif isinstance(a, ReleasePackets):
+                for pkt in a.packets:
+                    try:
+                        self.raw.sendto(pkt, (a.dest, 0))
+                        self.stats.packets_released += 1
+                    except OSError as e:
+                        self.stats.dropped["release_failed"] += 1
+                        log.warning("re-send to %s failed: %s", a.dest, e)
+            elif isinstance(a, DropPackets):
+                for pkt in a.packets:
+                    if pkt[12:16] == socket.inet_aton(self.addr):
+                        self.tun.write(icmp_host_unreachable(self.addr, pkt))
+                        self.stats.icmp_unreachable += 1
+            elif isinstance(a, DiscoveryDone):
+                extra = time.monotonic() - now  # route installation time, same batch
+                self.stats.discoveries.append(
+                    {
+                        "dest": a.dest,
+                        "ok": a.ok,
+                        "latency_s": round(a.latency + extra, 6),
+                        "round_latency_s": round(a.round_latency + extra, 6),
+                        "t": round(time.time(), 3),
+                    }
+                )
+                log.info(
+                    "discovery of %s %s after %.1f ms",
+                    a.dest,
+                    "succeeded" if a.ok else "failed",
+                    1000 * (a.latency + extra),
+                )
+
+    def _send(self, msg: wire.Message, dst: str, ttl: int, flags: int) -> None:
+        data = wire.encode(msg)
+        if ttl != self._ttl:
+            self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_TTL, ttl)
+            self._ttl = ttl
+        try:
+            self.sock.sendto(data, flags, (dst, wire.AODV_PORT))
+        except OSError as e:
+            self.stats.dropped["send_failed"] += 1
+            log.warning("send %s to %s failed: %s", msg.type_name, dst, e)
+            return
+        kind = "HELLO" if wire.is_hello(msg, self.addr) else msg.type_name
+        self.stats.sent[kind] += 1
+        self.stats.bytes_sent += len(data)

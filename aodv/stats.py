@@ -1,0 +1,58 @@
+"""Counters of one AODV daemon, written as JSON (atomically: a temporary file renamed)."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections import Counter
+
+
+class Stats:
+    def __init__(self, robot: str, addr: str) -> None:
+        self.robot = robot
+        self.addr = addr
+        self.started = time.time()
+        self.sent: Counter[str] = Counter()
+        self.received: Counter[str] = Counter()
+        self.bytes_sent = 0
+        self.bytes_received = 0
+        self.dropped: Counter[str] = Counter()
+        self.route_installs = 0
+        self.route_deletes = 0
+        self.packets_buffered = 0
+        self.packets_released = 0
+        self.icmp_unreachable = 0
+        self.route_uses = 0
+        self.discoveries: list[dict] = []
+        self.routes: dict[str, dict] = {}
+
+    def as_dict(self) -> dict:
+        ok = [d for d in self.discoveries if d["ok"]]
+        return {
+            "robot": self.robot,
+            "addr": self.addr,
+            "pid": os.getpid(),
+            "uptime_s": round(time.time() - self.started, 3),
+            "messages_sent": dict(self.sent),
+            "messages_received": dict(self.received),
+            "bytes_sent": self.bytes_sent,
+            "bytes_received": self.bytes_received,
+            "dropped": dict(self.dropped),
+            "routes": self.routes,
+            "route_installs": self.route_installs,
+            "route_deletes": self.route_deletes,
+            "packets_buffered": self.packets_buffered,
+            "packets_released": self.packets_released,
+            "icmp_unreachable_sent": self.icmp_unreachable,
+            "route_use_refreshes": self.route_uses,
+            "discoveries_ok": len(ok),
+            "discoveries_failed": len(self.discoveries) - len(ok),
+            "discoveries": self.discoveries[-1000:],
+        }
+
+    def write(self, path: str) -> None:
+        tmp = f"{path}.tmp"
+        with open(tmp, "w") as f:
+            json.dump(self.as_dict(), f, indent=1, sort_keys=True)
+        os.replace(tmp, path)
