@@ -256,9 +256,7 @@ class Daemon:
                 log.exception("error handling %s from %s", kind, src)
 
     def _check_addresses(self, src: str, msg: wire.Message) -> None:
-        if isinstance(msg, wire.Rreq):
-            addrs = [src, msg.dest, msg.orig]
-        elif isinstance(msg, wire.Rrep):
+        if isinstance(msg, (wire.Rreq, wire.Rrep)):
             addrs = [src, msg.dest, msg.orig]
         elif isinstance(msg, wire.Rerr):
             addrs = [src, *(a for a, _ in msg.unreachable)]
