@@ -142,6 +142,7 @@ class Daemon:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, self.iface.encode())
         s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         s.setsockopt(socket.IPPROTO_IP, IP_RECVTTL, 1)
         s.bind(("0.0.0.0", wire.AODV_PORT))
         s.setblocking(False)

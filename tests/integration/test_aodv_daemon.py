@@ -1,0 +1,304 @@
+"""The AODV daemon in real namespaces (topology.Network with routing="aodv").
+
+Each test builds its own testbed named "ta" + random hex and removes it in a finally.
+Time scales above 1 shorten the waits: a time scale K runs every protocol timer K times
+faster (HELLO, lifetimes, ring search), so the same protocol events happen sooner.
+"""
+
+import contextlib
+import json
+import os
+import re
+import signal
+import subprocess
+import tempfile
+import textwrap
+import time
+import uuid
+
+from aodv import packet as wire
+from topology.network import Network, destroy
+from topology.spec import NetworkSpec
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PY = os.path.join(REPO, ".venv", "bin", "python")
+CHAIN5 = tuple((8.0 * i, 0.0) for i in range(5))
+
+
+@contextlib.contextmanager
+def aodv_net(positions, time_scale=1.0, capture_dir=None):
+    name = "ta" + uuid.uuid4().hex[:6]
+    spec = NetworkSpec(
+        name=name,
+        positions=tuple(positions),
+        comm_range=10.0,
+        routing="aodv",
+        time_scale=time_scale,
+        capture_dir=capture_dir,
+    )
+    try:
+        with Network(spec) as net:
+            wait_ready(net, len(positions))
+            yield net
+    finally:
+        destroy(name)
+
+
+def daemon(net, k):
+    for proc in net.children.values():
+        if "aodv" in proc.args and f"r{k}" in proc.args:
+            return proc
+    raise AssertionError(f"no AODV daemon for robot {k}")
+
+
+def wait_ready(net, n, timeout=30.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if all(os.path.exists(stats_path(net, k)) for k in range(1, n + 1)):
+            return
+        for k in range(1, n + 1):
+            assert daemon(net, k).poll() is None, open(f"{net.state_dir}/r{k}.aodv.log").read()
+        time.sleep(0.05)
+    raise AssertionError("AODV daemons did not start")
+
+
+def stats_path(net, k):
+    return f"{net.state_dir}/r{k}.aodv.json"
+
+
+def stats(net, k):
+    """Fresh statistics: SIGUSR1 makes the daemon rewrite its file."""
+    path = stats_path(net, k)
+    before = os.stat(path).st_mtime_ns
+    daemon(net, k).send_signal(signal.SIGUSR1)
+    deadline = time.monotonic() + 3
+    while os.stat(path).st_mtime_ns == before and time.monotonic() < deadline:
+        time.sleep(0.01)
+    with open(path) as f:
+        return json.load(f)
+
+
+def routes(net, k):
+    out = net.exec(k, ["ip", "-4", "route", "show", "proto", "101"], capture_output=True, text=True)
+    return {line.split()[0]: line for line in out.stdout.splitlines() if "/" not in line.split()[0]}
+
+
+def ping(net, k, dst, *args, timeout=30):
+    return net.exec(
+        k, ["ping", "-n", *args, dst], capture_output=True, text=True, timeout=timeout
+    ).stdout
+
+
+def test_chain_ping_4_hops_pcap_and_nng():
+    with tempfile.TemporaryDirectory(prefix="ta-aodv-") as cap, aodv_net(CHAIN5, 1.0, cap) as net:
+        assert "10.0.0.5" not in routes(net, 1)
+        out = ping(net, 1, "10.0.0.5", "-c", "2", "-W", "5")
+        assert " 0% packet loss" in out, out
+        ttls = {int(t) for t in re.findall(r"ttl=(\d+)", out)}
+        assert ttls == {64 - 3}, out  # 4 hops: three routers decrement the TTL
+        assert "via 10.0.0.2" in routes(net, 1)["10.0.0.5"]
+        s1 = stats(net, 1)
+        assert s1["discoveries_ok"] == 1 and s1["messages_sent"]["RREQ"] >= 1
+
+        # A nanomsg-protocol message (pynng Pair0 over TCP) crosses the same 4 hops.
+        server = net.spawn(
+            5,
+            [PY, "-c", textwrap.dedent("""
+                import pynng
+                with pynng.Pair0(listen="tcp://10.0.0.5:5555", recv_timeout=20000) as s:
+                    s.send(b"pong:" + s.recv())
+            """)],
+            role="test",
+            cwd=REPO,
+        )  # fmt: skip
+        time.sleep(0.5)
+        client = net.exec(
+            1,
+            [PY, "-c", textwrap.dedent("""
+                import pynng
+                with pynng.Pair0(dial="tcp://10.0.0.5:5555", recv_timeout=10000) as s:
+                    s.send(b"ping")
+                    print(s.recv().decode())
+            """)],
+            capture_output=True, text=True, timeout=30, cwd=REPO,
+        )  # fmt: skip
+        assert client.stdout.strip() == "pong:ping", client.stderr
+        server.wait(timeout=10)
+        time.sleep(0.3)  # let tcpdump flush
+
+        # tshark decodes what crossed wlan0 as AODV with the expected fields.
+        fields = ["aodv.type", "aodv.flags", "aodv.hopcount", "aodv.dest_ip", "aodv.orig_ip",
+                  "aodv.dest_seqno", "aodv.orig_seqno", "ip.ttl", "ip.dst"]  # fmt: skip
+        rows = []
+        for k in (1, 5):
+            out = subprocess.run(
+                ["tshark", "-r", f"{cap}/r{k}.pcap", "-Y", "aodv", "-T", "fields",
+                 *sum((["-e", f] for f in fields), [])],
+                capture_output=True, text=True, check=True,
+            ).stdout  # fmt: skip
+            rows += [dict(zip(fields, line.split("\t"), strict=False)) for line in out.splitlines()]
+        rreqs = [r for r in rows if r["aodv.type"] == "1" and r["aodv.orig_ip"] == "10.0.0.1"]
+        assert rreqs and all(r["ip.dst"] == "255.255.255.255" for r in rreqs)
+        first = rreqs[0]
+        assert first["ip.ttl"] == "1" and first["aodv.hopcount"] == "0"
+        # tshark shows the 16 bits after Type: G (0x2000) and U (0x0800) set.
+        assert int(first["aodv.flags"], 0) & 0x2800 == 0x2800
+        assert first["aodv.orig_seqno"] == "1" and first["aodv.dest_seqno"] == "0"
+        # The RREQ that reaches 5 (seen in r5.pcap, sent by 4) has hop count 3.
+        assert any(r["aodv.type"] == "1" and r["aodv.hopcount"] == "3" for r in rows)
+        # The RREP that reaches 1 has hop count 3 and comes from the destination 5.
+        rreps = [
+            r for r in rows
+            if r["aodv.type"] == "2"
+            and r["aodv.dest_ip"] == "10.0.0.5"
+            and r["ip.dst"] == "10.0.0.1"
+        ]  # fmt: skip
+        assert rreps and rreps[0]["aodv.hopcount"] == "3"
+        # HELLOs: RREPs to the broadcast address with IP TTL 1.
+        hellos = [r for r in rows if r["aodv.type"] == "2" and r["ip.dst"] == "255.255.255.255"]
+        assert hellos and all(h["ip.ttl"] == "1" and h["aodv.hopcount"] == "0" for h in hellos)
+
+
+def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
+    # 1 - 2 - 3 - 4 in a line; 5 sits above 2 and 3 and offers a detour 2 - 5 - 3.
+    positions = [(0, 0), (8, 0), (16, 0), (24, 0), (12, 6)]
+    with aodv_net(positions, time_scale=5.0) as net:
+        out = ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
+        assert "ttl=62" in out, out  # 3 hops
+        pinger = net.spawn(
+            1, ["ping", "-n", "-i", "0.05", "-c", "200", "-W", "1", "10.0.0.4"],
+            role="test", stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(2.0)
+        net.move(3, (19.0, 3.0))  # 2 - 3 now 11.4 m apart; 3 - 4 and 5 - 3 stay linked
+        assert (2, 3) not in net.links() and (3, 5) in net.links() and (3, 4) in net.links()
+        text, _ = pinger.communicate(timeout=30)
+        replies = [(int(s), int(t)) for s, t in re.findall(r"icmp_seq=(\d+) ttl=(\d+)", text)]
+        assert {t for _, t in replies} == {62, 61}, text  # 3 hops before, 4 hops after
+        last_short = max(s for s, t in replies if t == 62)
+        first_long = min(s for s, t in replies if t == 61)
+        assert first_long > last_short
+        assert len([s for s, t in replies if t == 61]) > 40
+        # Node 2 lost its next hop 3 and told its precursor 1 with a RERR.
+        s2, s1 = stats(net, 2), stats(net, 1)
+        assert s2["messages_sent"].get("RERR", 0) >= 1
+        assert s1["messages_received"].get("RERR", 0) >= 1
+
+
+def test_unknown_destination_icmp_unreachable_others_unaffected():
+    with aodv_net(CHAIN5[:3], time_scale=10.0) as net:
+        good = net.spawn(
+            1, ["ping", "-n", "-i", "0.1", "-c", "40", "-W", "2", "10.0.0.3"],
+            role="test", stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        t0 = time.monotonic()
+        out = ping(net, 1, "10.0.0.99", "-c", "1", "-W", "10")
+        elapsed = time.monotonic() - t0
+        assert "Destination Host Unreachable" in out, out
+        # Ring search TTL 1, 3, 5, 7, then NET_DIAMETER with RREQ_RETRIES = 2 and binary
+        # exponential backoff: 21.5 s at time scale 1, so 2.15 s here.
+        assert 1.8 < elapsed < 6.0, elapsed
+        s1 = stats(net, 1)
+        failed = [d for d in s1["discoveries"] if not d["ok"]]
+        assert failed and failed[0]["dest"] == "10.0.0.99"
+        assert s1["icmp_unreachable_sent"] >= 1
+        text, _ = good.communicate(timeout=30)
+        assert " 0% packet loss" in text, text
+
+
+def test_idle_route_expires_active_route_stays():
+    with aodv_net(CHAIN5[:4], time_scale=5.0) as net:
+        assert "0% packet loss" in ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
+        pinger = net.spawn(
+            1, ["ping", "-n", "-i", "0.05", "-c", "60", "10.0.0.3"],
+            role="test", stdout=subprocess.DEVNULL,
+        )  # fmt: skip
+        time.sleep(0.5)
+        assert {"10.0.0.3", "10.0.0.4"} <= set(routes(net, 1))
+        # MY_ROUTE_TIMEOUT is 6 s, 1.2 s at time scale 5; wait well past it.
+        time.sleep(2.0)
+        r1 = routes(net, 1)
+        assert "10.0.0.4" not in r1, r1  # idle: gone from the kernel
+        assert "10.0.0.3" in r1, r1  # used: refreshed through the nftables set
+        pinger.wait(timeout=10)
+
+
+FUZZER = textwrap.dedent("""
+    import random, socket, sys, time
+    sys.path.insert(0, sys.argv[1])
+    from aodv import packet as wire
+    import ipaddress
+    NET = ipaddress.IPv4Network("10.0.0.0/16")
+    rng = random.Random(654)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, b"wlan0")
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+    def acceptable(raw):
+        try:
+            m = wire.decode(raw)
+        except wire.MalformedPacket:
+            return False
+        addrs = [getattr(m, a) for a in ("dest", "orig") if hasattr(m, a)]
+        addrs += [a for a, _ in getattr(m, "unreachable", ())]
+        return all(ipaddress.IPv4Address(a) in NET for a in addrs)
+    sent = skipped = 0
+    valid = [bytes.fromhex(h) for h in sys.argv[2:]]
+    while sent < 100000:
+        kind = rng.random()
+        if kind < 0.5:
+            raw = rng.randbytes(rng.randrange(0, 64))
+        elif kind < 0.8:
+            base = rng.choice(valid)
+            raw = base[: rng.randrange(len(base))]  # truncated
+        else:
+            raw = bytearray(rng.choice(valid))
+            raw[0] = rng.choice([0, 5, 6, 17, 255])  # unknown type
+            raw = bytes(raw)
+        if acceptable(raw):
+            skipped += 1
+            continue
+        s.sendto(raw, ("255.255.255.255", 654))
+        sent += 1
+        if sent % 500 == 0:
+            time.sleep(0.01)
+    print(sent, skipped)
+""")
+
+
+def test_fuzzed_datagrams_are_counted_and_change_nothing():
+    with aodv_net(CHAIN5[:3]) as net:
+        assert "0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        before = routes(net, 2)
+        udp_before = net.exec(2, ["cat", "/proc/net/snmp"], capture_output=True, text=True).stdout
+        valid = [
+            wire.encode(wire.Rreq(1, "10.0.0.2", 0, "10.0.0.1", 1)).hex(),
+            wire.encode(wire.Rrep("10.0.0.2", 1, "10.0.0.1", 6000)).hex(),
+            wire.encode(wire.Rerr((("10.0.0.2", 1), ("10.0.0.3", 1)))).hex(),
+        ]
+        out = net.exec(
+            1, [PY, "-c", FUZZER, REPO, *valid], capture_output=True, text=True, timeout=120
+        )
+        sent, skipped = map(int, out.stdout.split())
+        assert sent == 100000, out.stderr
+        assert skipped < 100
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            s2 = stats(net, 2)
+            if s2["dropped"].get("malformed", 0) >= sent:
+                break
+            time.sleep(0.5)
+        udp_after = net.exec(2, ["cat", "/proc/net/snmp"], capture_output=True, text=True).stdout
+        rcvbuf_lost = _udp_counter(udp_after, "RcvbufErrors") - _udp_counter(
+            udp_before, "RcvbufErrors"
+        )
+        assert daemon(net, 2).poll() is None
+        assert s2["dropped"]["malformed"] == sent - rcvbuf_lost
+        assert s2["dropped"].get("error", 0) == 0
+        assert routes(net, 2) == before
+        assert "0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+
+
+def _udp_counter(snmp: str, name: str) -> int:
+    lines = [line.split() for line in snmp.splitlines() if line.startswith("Udp:")]
+    header, values = lines[0], lines[1]
+    return int(values[header.index(name)])

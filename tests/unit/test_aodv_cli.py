@@ -1,0 +1,40 @@
+"""`python -m aodv` command line: help, and bad input as one line with exit status 2."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def run(*argv):
+    return subprocess.run(
+        [sys.executable, "-m", "aodv", *argv], capture_output=True, text=True, cwd=REPO
+    )
+
+
+def test_help():
+    proc = run("--help")
+    assert proc.returncode == 0
+    for flag in ("--robot", "--iface", "--time-scale", "--stats", "--log-level"):
+        assert flag in proc.stdout
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [],
+        ["--robot"],
+        ["--robot", "r1", "--time-scale", "0"],
+        ["--robot", "r1", "--time-scale", "fast"],
+        ["--robot", "r1", "--log-level", "loud"],
+        ["--robot", "r1", "--net", "10.0.0.300/16"],
+    ],
+)
+def test_bad_cli_is_one_line_and_status_2(argv):
+    proc = run(*argv)
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
