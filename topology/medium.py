@@ -65,11 +65,43 @@ def end_index(i: int, j: int) -> int:
     return 10_000_000 + i * 1000 + j
 
 
-_ENSLAVE = rtnl.LinkTemplate(master=0)
-_ISOLATE = rtnl.LinkTemplate(isolated=True)
-_UP = rtnl.LinkTemplate(up=True)
-_PORT_ON = rtnl.LinkTemplate(rtnl.port_state, state=rtnl.BR_STATE_FORWARDING)
-_PORT_OFF = rtnl.LinkTemplate(rtnl.port_state, state=rtnl.BR_STATE_DISABLED)
+_ENSLAVE = rtnl.Template(rtnl.link, ints=("index", "master"))
+_ISOLATE = rtnl.Template(rtnl.link, isolated=True)
+_UP = rtnl.Template(rtnl.link, up=True)
+_PORT_ON = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_FORWARDING)
+_PORT_OFF = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_DISABLED)
+_VETH: dict[tuple[int, int], rtnl.Template] = {}
+_BRIDGE: dict[int, rtnl.Template] = {}
+_ROBOT_VETH: dict[int, rtnl.Template] = {}
+
+
+def _bridge(k: int) -> bytes:
+    name = names.bridge(k)
+    if len(name) not in _BRIDGE:
+        _BRIDGE[len(name)] = rtnl.Template(rtnl.bridge, strs={"ifname": len(name)})
+    return _BRIDGE[len(name)](index=bridge_index(k), ifname=name)
+
+
+def _robot_veth(k: int, nsfd: int) -> bytes:
+    """rpK in bridge K, up, with its peer wlan0 created in robot K's namespace."""
+    name = names.robot_port(k)
+    if len(name) not in _ROBOT_VETH:
+        _ROBOT_VETH[len(name)] = rtnl.Template(
+            rtnl.veth, ints=("index", "master", "peer_nsfd"), strs={"ifname": len(name)},
+            peer_name=names.ROBOT_IFACE, peer_index=WLAN_INDEX, up=True,
+        )  # fmt: skip
+    return _ROBOT_VETH[len(name)](index=port_index(k), ifname=name, master=bridge_index(k),
+                                  peer_nsfd=nsfd)  # fmt: skip
+
+
+def _veth(index: int, ifname: str, master: int, peer_name: str, peer_index: int) -> bytes:
+    """A veth-creation request, from a template per pair of name lengths."""
+    key = (len(ifname), len(peer_name))
+    if key not in _VETH:
+        _VETH[key] = rtnl.Template(rtnl.veth, ints=("index", "master", "peer_index"),
+                                   strs={"ifname": key[0], "peer_name": key[1]})  # fmt: skip
+    return _VETH[key](index=index, ifname=ifname, master=master, peer_name=peer_name,
+                      peer_index=peer_index)  # fmt: skip
 
 
 def _configure_robot(k: int) -> None:
@@ -79,10 +111,10 @@ def _configure_robot(k: int) -> None:
     for key in WLAN_SYSCTLS:  # inherited from conf.default already; made explicit for wlan0
         netns.write_sysctl(key, 0)
     batch = rtnl.Batch()
-    batch.add(_UP(LO_INDEX), f"r{k}: lo up")
+    batch.add(_UP(index=LO_INDEX), f"r{k}: lo up")
     # A /32 and no subnet route: every route belongs to the routing daemon.
     batch.add(rtnl.addr(WLAN_INDEX, names.robot_addr(k), 32), f"r{k}: address on wlan0")
-    batch.add(_UP(WLAN_INDEX), f"r{k}: wlan0 up")
+    batch.add(_UP(index=WLAN_INDEX), f"r{k}: wlan0 up")
     with rtnl.open_socket() as sock:
         batch.send(sock)
 
@@ -138,17 +170,16 @@ class Medium:
         try:
             reqs = []
             for k in ks:
-                br, port = bridge_index(k), port_index(k)
-                reqs.append((rtnl.link(br, ifname=names.bridge(k), kind="bridge", up=True,
-                                       create=True), f"create {names.bridge(k)}"))  # fmt: skip
-                reqs.append((rtnl.link(port, ifname=names.robot_port(k), kind="veth", master=br,
-                                       up=True, create=True,
-                                       veth_peer=(names.ROBOT_IFACE, WLAN_INDEX, fds[k])),
-                             f"create {names.robot_port(k)} and r{k}'s wlan0"))  # fmt: skip
+                reqs.append((_bridge(k), f"create {names.bridge(k)}"))
+                reqs.append(
+                    (_robot_veth(k, fds[k]), f"create {names.robot_port(k)} and r{k}'s wlan0")
+                )
             self._send(reqs)
         finally:
             for fd in fds.values():
                 os.close(fd)
+        # Carrier comes when the robot's wlan0 goes up (configure_robots); set_links waits.
+        self._pending |= {port_index(k) for k in ks}
 
     def configure_robots(self, ks: list[int]) -> None:
         """Each robot's own side (sysctls, address, up), all robots in one thread."""
@@ -159,9 +190,8 @@ class Medium:
 
     @staticmethod
     def _toggle_request(i: int, j: int, on: bool) -> tuple[bytes, str]:
-        return (_PORT_ON if on else _PORT_OFF)(
-            end_index(i, j)
-        ), f"link {i}-{j} {'on' if on else 'off'}"
+        request = (_PORT_ON if on else _PORT_OFF)(index=end_index(i, j))
+        return request, f"link {i}-{j} {'on' if on else 'off'}"
 
     def create_pairs(self, pairs: list[tuple[int, int]]) -> None:
         """Create the veth pairs of links met for the first time: both ends up, in their
@@ -172,14 +202,14 @@ class Medium:
             a, b = end_index(i, j), end_index(j, i)
             what = f"link {i}-{j}"
             reqs += [
-                (rtnl.link(a, ifname=names.link_end(i, j), kind="veth", master=bridge_index(i),
-                           create=True, veth_peer=(names.link_end(j, i), b, None)),
+                (_veth(a, names.link_end(i, j), bridge_index(i), names.link_end(j, i), b),
                  f"create {what}"),
-                (_ENSLAVE(b, bridge_index(j)), f"{what}: far end into {names.bridge(j)}"),
-                (_ISOLATE(a), f"{what}: isolate near end"),
-                (_ISOLATE(b), f"{what}: isolate far end"),
-                (_UP(b), f"{what}: far end up"),
-                (_UP(a), f"{what}: near end up"),
+                (_ENSLAVE(index=b, master=bridge_index(j)),
+                 f"{what}: far end into {names.bridge(j)}"),
+                (_ISOLATE(index=a), f"{what}: isolate near end"),
+                (_ISOLATE(index=b), f"{what}: isolate far end"),
+                (_UP(index=b), f"{what}: far end up"),
+                (_UP(index=a), f"{what}: near end up"),
             ]  # fmt: skip
         self._send(reqs)
         self.pairs.update(new)
@@ -205,7 +235,7 @@ class Medium:
                 return
             if time.monotonic() > deadline:
                 raise TimeoutError(f"{len(pending)} new link ends did not start forwarding")
-            time.sleep(0.005)
+            time.sleep(0.01)  # a dump is not free: leave the CPU to the kernel meanwhile
 
     def set_links(self, add: list[tuple[int, int]], remove: list[tuple[int, int]]) -> None:
         """Switch the links in `add` on and those in `remove` off, in one batch. Pairs are

@@ -101,32 +101,58 @@ def port_state(index: int, state: int) -> bytes:
     return bytes(buf)
 
 
-_INDEX_OFFSET = 20  # nlmsghdr (16) + ifi_family, pad (2) + ifi_type (2): then ifi_index
-_SENTINEL = 0x7EADBEEF
-
-
-class LinkTemplate:
-    """An RTM_NEWLINK change request encoded once, re-addressed by patching bytes.
+class Template:
+    """A request encoded once by pyroute2, then re-filled by patching bytes.
 
     pyroute2 takes ~0.5 ms to encode one message; a bring-up sends a thousand that differ
-    only in the interface index (and the master's). The template is encoded with sentinel
-    values and the positions of those values are remembered."""
+    only in interface indices and names. The template is encoded with a sentinel in each
+    variable u32 field and a placeholder of the right length in each variable string, and
+    remembers where they landed. `build` is called with the variable fields as keywords,
+    plus `fixed`."""
 
-    def __init__(self, build=None, **kwargs) -> None:
-        with_master = "master" in kwargs
-        if with_master:
-            kwargs["master"] = _SENTINEL
-        self.data = (build or link)(_SENTINEL, **kwargs)
-        assert struct.unpack_from("=I", self.data, _INDEX_OFFSET)[0] == _SENTINEL
-        self.master_at = self.data.find(struct.pack("=I", _SENTINEL), _INDEX_OFFSET + 4)
-        assert self.master_at > 0 or not with_master
+    def __init__(self, build, ints=("index",), strs: dict[str, int] | None = None, **fixed):
+        strs = strs or {}
+        values: dict = {name: 0x7EAD0000 + n for n, name in enumerate(ints)}
+        values |= {
+            name: chr(ord("Q") + n) * length for n, (name, length) in enumerate(strs.items())
+        }
+        self.data = build(**values, **fixed)
+        self.ints = {name: self._find(struct.pack("=I", values[name])) for name in ints}
+        self.strs = {name: self._find(values[name].encode()) for name in strs}
+        self.lengths = dict(strs)
 
-    def __call__(self, index: int, master: int | None = None) -> bytes:
+    def _find(self, needle: bytes) -> int:
+        at = self.data.find(needle)
+        if at < 0 or self.data.find(needle, at + 1) >= 0:
+            raise ValueError("template field not found exactly once")
+        return at
+
+    def __call__(self, **values) -> bytes:
         buf = bytearray(self.data)
-        struct.pack_into("=I", buf, _INDEX_OFFSET, index)
-        if master is not None:
-            struct.pack_into("=I", buf, self.master_at, master)
+        for name, value in values.items():
+            if name in self.ints:
+                struct.pack_into("=I", buf, self.ints[name], value)
+            else:
+                raw = value.encode()
+                if len(raw) != self.lengths[name]:
+                    raise ValueError(f"{name} {value!r} does not fit this template")
+                buf[self.strs[name] : self.strs[name] + len(raw)] = raw
         return bytes(buf)
+
+
+def veth(
+    index: int, ifname: str, master: int, peer_name: str, peer_index: int,
+    peer_nsfd: int | None = None, up: bool | None = None,
+) -> bytes:  # fmt: skip
+    """RTM_NEWLINK creating veth `ifname` (a port of bridge `master`) and its peer, the
+    peer in the namespace of `peer_nsfd` if given."""
+    return link(index, ifname=ifname, kind="veth", master=master, create=True, up=up,
+                veth_peer=(peer_name, peer_index, peer_nsfd))  # fmt: skip
+
+
+def bridge(index: int, ifname: str) -> bytes:
+    """RTM_NEWLINK creating bridge `ifname`, up."""
+    return link(index, ifname=ifname, kind="bridge", up=True, create=True)
 
 
 def addr(index: int, address: str, prefixlen: int) -> bytes:
