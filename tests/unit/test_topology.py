@@ -128,3 +128,34 @@ def test_process_identity_includes_start_time():
     start = state.proc_start_time(me)
     assert start is not None and state.is_alive(me, start)
     assert not state.is_alive(me, start + 1), "same pid, other start time: not ours"
+
+
+def test_rtnl_templates_encode_exactly_what_pyroute2_would():
+    from topology import rtnl
+
+    enslave = rtnl.Template(rtnl.link, ints=("index", "master"))
+    assert enslave(index=10_001_002, master=1_000_001) == rtnl.link(10_001_002, master=1_000_001)
+    up = rtnl.Template(rtnl.link, up=True)
+    assert up(index=7) == rtnl.link(7, up=True)
+    off = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_DISABLED)
+    assert off(index=42) == rtnl.port_state(42, rtnl.BR_STATE_DISABLED)
+    veth = rtnl.Template(rtnl.veth, ints=("index", "master", "peer_index"),
+                         strs={"ifname": 6, "peer_name": 6})  # fmt: skip
+    direct = rtnl.veth(10_012_034, "l12x34", 1_000_012, "l34x12", 10_034_012)
+    assert veth(index=10_012_034, ifname="l12x34", master=1_000_012, peer_name="l34x12",
+                peer_index=10_034_012) == direct  # fmt: skip
+    with pytest.raises(ValueError):
+        veth(ifname="l1x2")  # another length needs another template
+
+
+def test_port_state_request_marks_protinfo_nested():
+    import struct
+
+    from topology import rtnl
+
+    msg = rtnl.port_state(5, rtnl.BR_STATE_FORWARDING)
+    length, mtype = struct.unpack_from("=LH", msg)
+    assert length == len(msg) and mtype == 19  # RTM_SETLINK
+    assert msg[16] == 7  # AF_BRIDGE
+    (nla_type,) = struct.unpack_from("=H", msg, 34)
+    assert nla_type == 12 | rtnl.NLA_F_NESTED  # IFLA_PROTINFO, nested
