@@ -41,6 +41,8 @@ class Laser:
         self.dx = (np.cos(angles)[:, None] * r[None, :]).astype(np.float32)
         self.dy = (np.sin(angles)[:, None] * r[None, :]).astype(np.float32)
         self._k = np.arange(self.n_samples, dtype=np.int32)[None, :]
+        if (2 * self.pad + 4096) ** 2 > 2**31:
+            raise ValueError("laser range too long for int32 cell indices")
 
     def angles(self) -> np.ndarray:
         return np.arange(self.n_rays) * (2.0 * math.pi / self.n_rays)
@@ -48,12 +50,13 @@ class Laser:
     def flat_cells(self, x: float, y: float, padded_width: int) -> np.ndarray:
         """Flat indices, in a padded grid of row length `padded_width`, of every sample's cell.
 
-        (x, y) must lie inside the unpadded map. Shape (n_rays, n_samples), int64.
+        (x, y) must lie inside the unpadded map. Shape (n_rays, n_samples), int32 (int32
+        arithmetic is several times faster here than int64).
         """
         fx = np.float32(x / self.cell + _BIAS)
         fy = np.float32(y / self.cell + _BIAS)
-        cols = (self.dx + fx).astype(np.int64)
-        rows = (self.dy + fy).astype(np.int64)
+        cols = (self.dx + fx).astype(np.int32)
+        rows = (self.dy + fy).astype(np.int32)
         base = (self.pad - _BIAS) * padded_width + (self.pad - _BIAS)
         rows *= padded_width
         rows += cols
@@ -63,7 +66,7 @@ class Laser:
     def cast(self, occupied_padded: np.ndarray, x: float, y: float) -> np.ndarray:
         """Noiseless ranges (float32, n_rays) on a padded boolean obstacle grid; +inf: none."""
         flat = self.flat_cells(x, y, occupied_padded.shape[1])
-        hit = occupied_padded.reshape(-1)[flat]
+        hit = np.take(occupied_padded.reshape(-1), flat)
         any_hit = hit.any(axis=1)
         first = hit.argmax(axis=1)
         ranges = np.full(self.n_rays, np.inf, dtype=np.float32)

@@ -41,7 +41,7 @@ from node import body, planner, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
-from node.grid import OccupancyGrid
+from node.grid import FREE, OCC, OccupancyGrid
 from node.rays import Laser
 
 log = logging.getLogger(__name__)
@@ -79,7 +79,7 @@ class Teammate:
 @dataclass
 class Shared:
     grid: OccupancyGrid
-    own: OccupancyGrid
+    own: np.ndarray  # the local map: ternary, padded like grid.Lp (noiseless: last word wins)
     scans: list = field(default_factory=list)
     plan: planner.Plan | None = None
     wp: int = 0
@@ -109,7 +109,10 @@ class Robot:
         self.params = planner.PlannerParams(cfg.cell, cfg.planner_factor, cfg.radius)
         self.s = Shared(
             OccupancyGrid(cfg.shape, cfg.cell, pad=self.laser.pad),
-            OccupancyGrid(cfg.shape, cfg.cell, pad=self.laser.pad),
+            np.zeros(
+                (cfg.shape[0] + 2 * self.laser.pad, cfg.shape[1] + 2 * self.laser.pad),
+                dtype=np.uint8,
+            ),
             teammates={j: Teammate() for j in range(1, cfg.robots + 1) if j != cfg.robot},
         )
         self.lock = threading.Lock()
@@ -184,7 +187,9 @@ class Robot:
             with self.lock:
                 s = self.s
                 s.grid.update_cells(free, occ)
-                s.own.update_cells(free, occ)
+                own = s.own.reshape(-1)
+                own[free] = FREE
+                own[occ] = OCC
                 s.pose = (f.x, f.y)
                 s.step = f.step
                 s.scans.append((f.step, f.x, f.y, f.ranges))
@@ -301,8 +306,9 @@ class Robot:
                 self._share_map(step)
 
     def _share_map(self, step: int) -> None:
+        p = self.laser.pad
         with self.lock:
-            t = self.s.own.ternary()
+            t = self.s.own[p : p + self.cfg.shape[0], p : p + self.cfg.shape[1]].copy()
             x, y = self.s.pose
         payload = wire.pack_map(x, y, t)
         seq = self.flooder.originate(wire.KIND_MAP, step, payload)

@@ -58,6 +58,10 @@ class World:
         self.free_space = free_space
         self.free_total = max(1, int(free_space.sum()))
         self.paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
+        self._rays = np.arange(laser.n_rays)
+        self._k = np.arange(laser.n_samples, dtype=np.int32)[None, :]
+        # Cells where a robot's centre may be: obstacles grown by the robot's radius.
+        self.blocked = truth.inflated(radius)
 
     @property
     def n(self) -> int:
@@ -81,7 +85,11 @@ class World:
                 continue
             s = min(self.speed, d)
             nx, ny = b.x + dx / d * s, b.y + dy / d * s
-            if not self.truth.is_free_disc(nx, ny, self.radius):
+            r, c = int(ny / self.truth.cell), int(nx / self.truth.cell)
+            if (
+                not (0 <= r < self.blocked.shape[0] and 0 <= c < self.blocked.shape[1])
+                or (self.blocked[r, c])
+            ):
                 b.collisions += 1
                 b.target = None
                 continue
@@ -95,13 +103,13 @@ class World:
         """Cast robot k's laser (0-based) and add what it saw to the team's seen cells."""
         b = self.bodies[k]
         flat = self.laser.flat_cells(b.x, b.y, self.occ_padded.shape[1])
-        hit = self.occ_padded.reshape(-1)[flat]
-        any_hit = hit.any(axis=1)
-        first = np.where(any_hit, hit.argmax(axis=1), self.laser.n_samples)
+        hit = np.take(self.occ_padded.reshape(-1), flat)
+        first = hit.argmax(axis=1)
+        any_hit = hit[self._rays, first]
+        first[~any_hit] = self.laser.n_samples
         ranges = np.full(self.laser.n_rays, np.inf, dtype=np.float32)
         ranges[any_hit] = ((first[any_hit] + 1) * self.laser.step).astype(np.float32)
-        seen = self.seen_padded.reshape(-1)
-        seen[flat[np.arange(self.laser.n_samples)[None, :] <= first[:, None]]] = True
+        self.seen_padded.reshape(-1)[flat[self._k <= first[:, None]]] = True
         return ranges
 
     def coverage(self) -> float:
