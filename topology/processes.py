@@ -42,20 +42,14 @@ def stop(
         return is_alive(r.pid, r.start)
 
     live = [r for r in records if alive(r)]
-    for r in live:
-        _signal(r.pid, signal.SIGTERM)
-    deadline = time.monotonic() + grace
-    while live and time.monotonic() < deadline:
-        live = [r for r in live if alive(r)]
-        if live:
-            time.sleep(0.02)
-    for r in live:
-        _signal(r.pid, signal.SIGKILL)
-    deadline = time.monotonic() + grace
-    while live and time.monotonic() < deadline:
-        live = [r for r in live if alive(r)]
-        if live:
-            time.sleep(0.01)
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for r in live:
+            _signal(r.pid, sig)
+        deadline = time.monotonic() + grace
+        while live and time.monotonic() < deadline:
+            live = [r for r in live if alive(r)]
+            if live:
+                time.sleep(0.01)
 
 
 def _signal(pid: int, sig: int) -> None:
