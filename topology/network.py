@@ -278,5 +278,20 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
         )
     for ns in namespaces:
         netns.remove(ns)
+    _keep_logs(name, st)
     shutil.rmtree(state.run_dir(name), ignore_errors=True)
     state.remove(name)
+
+
+def _keep_logs(name: str, st: state.TestbedState | None) -> None:
+    """Nothing is lost: when the testbed captured packets, the daemons' logs and statistics
+    (written to its run dir as they stop) go next to the pcaps, in CAPTURE_DIR/daemons/."""
+    capture_dir = st.spec.get("capture_dir") if st else None
+    src = state.run_dir(name)
+    if not capture_dir or not os.path.isdir(src):
+        return
+    dst = os.path.join(capture_dir, "daemons")
+    os.makedirs(dst, exist_ok=True)
+    for entry in os.listdir(src):
+        if entry.endswith((".log", ".json")):
+            shutil.copy2(os.path.join(src, entry), os.path.join(dst, entry))

@@ -160,5 +160,7 @@ def test_sigkilled_owner_then_clean_leaves_nothing(tb_name, tmp_path):
     assert state.read(tb_name) is None
     assert not os.path.exists(state.run_dir(tb_name))
     assert processes.pids_in_namespace(names.medium_ns(tb_name)) == []
-    # The pcaps survive the clean-up: results are never lost.
-    assert sorted(os.listdir(tmp_path / "pcaps")) == ["r1.pcap", "r2.pcap", "r3.pcap"]
+    # The pcaps and the daemons' logs survive the clean-up: results are never lost.
+    assert sorted(os.listdir(tmp_path / "pcaps")) == ["daemons", "r1.pcap", "r2.pcap", "r3.pcap"]
+    kept = os.listdir(tmp_path / "pcaps" / "daemons")
+    assert {f"r{k}.babel.log" for k in (1, 2, 3)} <= set(kept)
