@@ -37,6 +37,7 @@ $(STAMP): pyproject.toml constraints.txt
 
 test: setup
 	$(NEED_ROOT)
+	@$(VENV)/bin/testbed clean   # leftovers of an earlier run that was killed, and only those
 	$(PY) -m pytest -q tests/unit tests/integration
 
 unit: venv
