@@ -264,7 +264,7 @@ class Robot:
                 self.events.write("finish", step)
                 log.info("finished at step %d: no reachable frontier left", step)
                 continue
-            data = wire.goal_msg(cfg.robot, step, p.goal, p.cost)
+            data = wire.goal_msg(cfg.robot, step, p.goal, p.cost, p.status == "fallback")
             for j in reach:
                 self._send(j, "goal", data, step)
 
@@ -390,10 +390,16 @@ class Robot:
         self.received[m["k"]] += 1
         self.events.write("recv", step, kind=m["k"], frm=j, sent=m["step"])
         if m["k"] == "goal":
+            if m["fallback"]:
+                return  # its robot had nowhere better to go: asking again would not help
             decision = planner.resolve_conflict(
                 cfg.robot, mine, my_cost, j, m["goal"], m["cost"], cfg.laser_range
             )
             if decision == "request":
                 self._send(j, "replan", wire.replan_msg(cfg.robot, step, mine), step)
         elif m["k"] == "replan":
-            self.request("request")
+            # A request about a goal I no longer have (I re-planned since) is stale.
+            if mine is not None and planner.goals_conflict(mine, m["goal"], cfg.laser_range):
+                self.request("request")
+            else:
+                self.events.write("stale_request", step, frm=j)

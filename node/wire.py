@@ -11,8 +11,11 @@ own local map (cells its own laser saw) cropped to its known cells, with its pos
 
 Goals and re-plan requests travel over nanomsg TCP (node.goalnet) as small JSON objects:
 
-    {"k": "goal",   "from": 3, "step": 120, "goal": [x, y], "cost": 4.2}
+    {"k": "goal",   "from": 3, "step": 120, "goal": [x, y], "cost": 4.2[, "fallback": true]}
     {"k": "replan", "from": 1, "step": 121, "goal": [x, y]}       (the sender's winning goal)
+
+"fallback" marks a goal taken although it is near a teammate's (every reachable frontier was):
+asking its robot to re-plan would not help, so nobody does.
 
 Every parser raises ValueError on malformed input; callers count and drop it.
 """
@@ -87,10 +90,13 @@ def unpack_map(payload: bytes, shape: tuple[int, int]) -> MapMsg:
     return MapMsg(x, y, r0, c0, cells)
 
 
-def goal_msg(sender: int, step: int, goal: tuple[float, float], cost: float) -> bytes:
-    return json.dumps(
-        {"k": "goal", "from": sender, "step": step, "goal": list(goal), "cost": round(cost, 3)}
-    ).encode()
+def goal_msg(
+    sender: int, step: int, goal: tuple[float, float], cost: float, fallback: bool = False
+) -> bytes:
+    m = {"k": "goal", "from": sender, "step": step, "goal": list(goal), "cost": round(cost, 3)}
+    if fallback:
+        m["fallback"] = True
+    return json.dumps(m).encode()
 
 
 def replan_msg(sender: int, step: int, goal: tuple[float, float]) -> bytes:
@@ -122,4 +128,5 @@ def parse_msg(data: bytes, n_robots: int) -> dict:
         if not isinstance(cost, int | float) or not math.isfinite(cost) or cost < 0:
             raise ValueError("goal message has no valid cost")
         m["cost"] = float(cost)
+        m["fallback"] = bool(m.get("fallback", False))
     return m

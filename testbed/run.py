@@ -253,6 +253,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
     _write_json(os.path.join(out, "config.json"), config)
 
     robots = {k: RobotRecord(k) for k in range(1, n + 1)}
+    timing: dict[str, float] = {}
     status, detail = "error", "the run did not start"
     steps_done = 0
     missed_world = 0
@@ -316,7 +317,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
                 )
             status, detail, steps_done, missed_world, wall = _step_loop(
                 cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
-                progress,
+                progress, timing,
             )  # fmt: skip
             _end(server, robots, display_k, display_proc, steps_done)
             _collect_routing(net, cfg, out)
@@ -331,24 +332,26 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         if server is not None:
             server.close()
     result = _results(cfg, config, out, world, robots, status, detail, steps_done,
-                      missed_world, wall, time.monotonic() - t_start)  # fmt: skip
+                      missed_world, wall, time.monotonic() - t_start, timing)  # fmt: skip
     return result
 
 
 def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
-               progress):  # fmt: skip
+               progress, timing):  # fmt: skip
     n = cfg.robots
     period = STEP_S / cfg.time_scale
     kills = dict()
     for k, s in cfg.kill:
         kills.setdefault(s, []).append(k)
     missed_world = 0
+    timing.update(net_s=0.0, net_max_s=0.0, world_s=0.0)
     tty = progress and sys.stderr.isatty()
     last_print = 0.0
     step = 0
     scans = [world.scan(i) for i in range(n)]
     cov_w.writerow([0, f"{world.coverage():.5f}"])
     t0 = time.monotonic()
+    cpu0 = time.process_time()
 
     def send_frames(step: int) -> None:
         for k in range(1, n + 1):
@@ -381,8 +384,12 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
             if not r.crashed and r.last_cmd < step:
                 r.missed += 1
         step += 1
+        tw = time.monotonic()
         world.move()
+        tn = time.monotonic()
         added, removed = net.set_positions(world.positions() + [display_pos])
+        timing["net_s"] += time.monotonic() - tn
+        timing["net_max_s"] = max(timing["net_max_s"], time.monotonic() - tn)
         for i, j in sorted(removed):
             links_w.writerow([step, "remove", i, j])
         for i, j in sorted(added):
@@ -401,6 +408,7 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
         cov = world.coverage()
         cov_w.writerow([step, f"{cov:.5f}"])
         send_frames(step)
+        timing["world_s"] += time.monotonic() - tw
         if time.monotonic() > t0 + (step + 1) * period:
             missed_world += 1  # the world's own work ran past this step's deadline
         live = [r for r in robots.values() if not r.crashed]
@@ -425,6 +433,7 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
         if step >= cfg.max_steps:
             break
     wall = time.monotonic() - t0
+    timing["world_cpu_s"] = time.process_time() - cpu0
     if tty:
         sys.stderr.write("\n")
     crashed = [r for r in robots.values() if r.crashed]
@@ -500,7 +509,7 @@ def read_events(path: str) -> list[dict]:
 
 
 def _results(cfg, config, out, world, robots, status, detail, steps, missed_world, wall,
-             total_wall) -> dict:  # fmt: skip
+             total_wall, timing) -> dict:  # fmt: skip
     n = cfg.robots
     robot_out = {}
     for k, r in robots.items():
@@ -562,6 +571,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         "wall_time_s": round(total_wall, 2),
         "step_loop_wall_s": round(wall, 2),
         "display": {"robot": n + 1, "coverage_final": disp},
+        "world_timing_s": {k: round(v, 3) for k, v in timing.items()},
         "robots": robot_out,
     }  # fmt: skip
     result["config"]["extra"] = {k: v for k, v in config.items() if k not in result["config"]}
