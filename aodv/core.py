@@ -336,7 +336,6 @@ class AodvCore:
             r.next_hop, r.hops = src, hops
         r.lifetime = max(r.lifetime, minimal) if r.valid else minimal
         r.valid = True
-        r.hello_only = False
         return r
 
     # == RFC 6.6 generating a RREP ========================================================
@@ -359,6 +358,7 @@ class AodvCore:
             lifetime_ms=self.p.ms(self.p.my_route_timeout),
             hop_count=0,
         )
+        rev.active_until = max(rev.active_until, rev.lifetime)
         self._send_rrep(now, rrep, rev.next_hop, out)
 
     def _reply_as_intermediate(
@@ -373,6 +373,8 @@ class AodvCore:
         # precursor list for the reverse route entry."
         fwd.precursors.add(rev.next_hop)
         rev.precursors.add(fwd.next_hop)
+        fwd.active_until = max(fwd.active_until, fwd.lifetime)
+        rev.active_until = max(rev.active_until, rev.lifetime)
         rrep = Rrep(
             dest=m.dest,
             dest_seq=fwd.seq,
@@ -444,7 +446,7 @@ class AodvCore:
         r.valid, r.valid_seq, r.next_hop, r.hops = True, True, src, hops
         r.lifetime = now + self.p.from_ms(m.lifetime_ms)
         r.seq = m.dest_seq
-        r.hello_only = False
+        r.active_until = r.lifetime
         if m.orig == self.addr or self.reboot_until is not None:
             return
         # RFC 6.7: "If the current node is not the node indicated by the Originator IP
@@ -515,7 +517,7 @@ class AodvCore:
         self.neighbors.hello(src, now, timeout)
         r = self.table.get(src)
         if r is None or not r.valid:
-            self.table.add(Route(src, src, 1, m.dest_seq, True, now + timeout, hello_only=True))
+            self.table.add(Route(src, src, 1, m.dest_seq, True, now + timeout))
             return
         r.next_hop, r.hops = src, 1
         r.seq, r.valid_seq = m.dest_seq, True
@@ -528,7 +530,7 @@ class AodvCore:
         # MAY broadcast a RREP with TTL = 1, called a Hello message". Decision: the next
         # check is HELLO_INTERVAL after the last broadcast, so a neighbour never waits
         # more than HELLO_INTERVAL between two broadcasts from us.
-        active = any(r.valid and not r.hello_only for r in self.table)
+        active = any(r.valid and r.active_until > now for r in self.table)
         if active and self.reboot_until is None:
             hello = Rrep(
                 dest=self.addr,
@@ -728,13 +730,12 @@ class AodvCore:
             self.table.add(Route(src, src, 1, 0, False, until))
         elif not r.valid or r.next_hop != src:
             r.valid, r.next_hop, r.hops, r.lifetime = True, src, 1, until
-            r.hello_only = False
         else:
             r.lifetime = max(r.lifetime, until)
 
     def _refresh(self, r: Route, until: float) -> None:
         r.lifetime = max(r.lifetime, until)
-        r.hello_only = False
+        r.active_until = max(r.active_until, until)
 
     def _invalidate(self, r: Route, now: float) -> None:
         # RFC 6.11: "2. The entry is invalidated by marking the route entry as invalid

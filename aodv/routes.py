@@ -21,9 +21,9 @@ class Route:
     lifetime: float
     valid: bool = True
     precursors: set[str] = field(default_factory=set)
-    # Created only by HELLOs and never used: does not make this node "part of an active
-    # route" (RFC 6.9), so it does not start HELLOs on its own.
-    hello_only: bool = False
+    # Until when this entry is part of an active route (RFC 6.9: only such nodes send
+    # HELLOs): set by route replies and by data using it, not by HELLOs or RREQs.
+    active_until: float = 0.0
 
     def kernel_key(self) -> tuple[str, int]:
         """What the kernel route depends on: a change means reinstall."""

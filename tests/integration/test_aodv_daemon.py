@@ -259,7 +259,7 @@ FUZZER = textwrap.dedent("""
             continue
         s.sendto(raw, ("255.255.255.255", 654))
         sent += 1
-        if sent % 500 == 0:
+        if sent % 200 == 0:
             time.sleep(0.01)
     print(sent, skipped)
 """)
@@ -268,6 +268,9 @@ FUZZER = textwrap.dedent("""
 def test_fuzzed_datagrams_are_counted_and_change_nothing():
     with aodv_net(CHAIN5[:3]) as net:
         assert "0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        # Keep 2's one route in use so that its table is stable while it is fuzzed.
+        keep = net.spawn(2, ["ping", "-n", "-i", "0.2", "10.0.0.3"], role="test",
+                         stdout=subprocess.DEVNULL)  # fmt: skip
         before = routes(net, 2)
         udp_before = net.exec(2, ["cat", "/proc/net/snmp"], capture_output=True, text=True).stdout
         valid = [
@@ -281,21 +284,26 @@ def test_fuzzed_datagrams_are_counted_and_change_nothing():
         sent, skipped = map(int, out.stdout.split())
         assert sent == 100000, out.stderr
         assert skipped < 100
+        # What the kernel itself dropped (socket buffer full) never reached the daemon.
         deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
+        while True:
+            udp_after = net.exec(2, ["cat", "/proc/net/snmp"], capture_output=True, text=True)
+            lost = _udp_counter(udp_after.stdout, "RcvbufErrors") - _udp_counter(
+                udp_before, "RcvbufErrors"
+            )
             s2 = stats(net, 2)
-            if s2["dropped"].get("malformed", 0) >= sent:
+            if s2["dropped"].get("malformed", 0) >= sent - lost or time.monotonic() > deadline:
                 break
-            time.sleep(0.5)
-        udp_after = net.exec(2, ["cat", "/proc/net/snmp"], capture_output=True, text=True).stdout
-        rcvbuf_lost = _udp_counter(udp_after, "RcvbufErrors") - _udp_counter(
-            udp_before, "RcvbufErrors"
-        )
+            time.sleep(0.3)
         assert daemon(net, 2).poll() is None
-        assert s2["dropped"]["malformed"] == sent - rcvbuf_lost
+        # The kernel's RcvbufErrors may count a datagram the daemon still got: allow that.
+        assert sent - lost <= s2["dropped"]["malformed"] <= sent
+        assert lost < sent // 10
         assert s2["dropped"].get("error", 0) == 0
         assert routes(net, 2) == before
         assert "0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        keep.terminate()
+        keep.wait(timeout=5)
 
 
 def _udp_counter(snmp: str, name: str) -> int:

@@ -245,6 +245,19 @@ def test_hellos_only_on_active_routes_and_create_neighbor_routes():
     assert max(b - a for a, b in zip(t2, t2[1:], strict=False)) <= 1.0 + 1e-9
 
 
+def test_bystander_sends_no_hello_and_hellos_stop_when_routes_idle():
+    m = chain(3)
+    m.add_node(N6)
+    m.link(N1, N6)  # hears 1's RREQ, is on no route
+    m.send_data(N1, N3)
+    m.run_until(20.0)
+    hellos = m.sent("HELLO")
+    assert hellos and N6 not in {s.src for s in hellos}
+    # MY_ROUTE_TIMEOUT 6 s, then neighbour routes held by HELLOs run out: silence.
+    assert max(s.time for s in hellos) < 10.0
+    assert not any(m.nodes[a].kernel for a in (N1, N2, N3, N6))
+
+
 def test_link_loss_after_allowed_hello_loss_sends_rerr_to_precursors():
     m = chain()
     flow(m, N1, N5, 0.0, 20.0)
