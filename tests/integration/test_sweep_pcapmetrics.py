@@ -128,6 +128,20 @@ def start_capture(ns, path):
     return p
 
 
+def wait_until_written(path, quiet=0.5, timeout=10.0):
+    """tcpdump drops what it has not read yet when it is stopped: on a loaded machine it can
+    lag, so wait until the file has not grown for `quiet` seconds."""
+    deadline = time.monotonic() + timeout
+    size, since = -1, time.monotonic()
+    while time.monotonic() < deadline:
+        now_size = path.stat().st_size
+        if now_size != size:
+            size, since = now_size, time.monotonic()
+        elif time.monotonic() - since >= quiet:
+            return
+        time.sleep(0.05)
+
+
 DROP_RULE = """
 table bridge ts {
     chain tsfw {
@@ -162,6 +176,8 @@ def test_metrics_from_real_pcaps(bridged_pair):
         time.sleep(0.3)
         after = {k: tx_packets(nss[k]) for k in (1, 2)}
     finally:
+        for k in caps:
+            wait_until_written(run / "pcaps" / f"r{k}.pcap")
         for p in caps.values():
             p.send_signal(signal.SIGINT)
             p.wait(timeout=10)
