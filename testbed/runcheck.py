@@ -1,0 +1,108 @@
+"""Checks of a finished run's directory against its own link timeline.
+
+`causality_violations` replays links.csv and asks, for every message a robot logged as
+received (map floods, goals, re-plan requests), whether a time-respecting multi-hop path from
+its sender existed between the step it was sent and the step it was received: starting from
+the sender at the send step, the set of robots the message could have reached grows, step by
+step, by the connected components of that step's links. A message that arrived anyway came
+around the emulated network (or through a bug), which is what the check is for.
+
+Steps in the logs are the robots' own steps (the last frame each had processed), which can lag
+the world's by a step or two; `slack` widens the window by that much on each side.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from collections import defaultdict
+
+
+def link_timeline(out: str) -> dict[int, list[tuple[str, int, int]]]:
+    changes: dict[int, list[tuple[str, int, int]]] = defaultdict(list)
+    with open(os.path.join(out, "links.csv")) as f:
+        for row in csv.DictReader(f):
+            changes[int(row["step"])].append((row["event"], int(row["i"]), int(row["j"])))
+    return changes
+
+
+def links_by_step(out: str, last_step: int) -> list[set[tuple[int, int]]]:
+    """The link set in force during each step 0..last_step."""
+    changes = link_timeline(out)
+    current: set[tuple[int, int]] = set()
+    out_sets = []
+    for step in range(last_step + 1):
+        for ev, i, j in changes.get(step, []):
+            if ev == "add":
+                current.add((i, j))
+            else:
+                current.discard((i, j))
+        out_sets.append(set(current))
+    return out_sets
+
+
+def _grow(reached: set[int], links: set[tuple[int, int]]) -> set[int]:
+    adj: dict[int, list[int]] = defaultdict(list)
+    for i, j in links:
+        adj[i].append(j)
+        adj[j].append(i)
+    stack = list(reached)
+    seen = set(reached)
+    while stack:
+        v = stack.pop()
+        for w in adj[v]:
+            if w not in seen:
+                seen.add(w)
+                stack.append(w)
+    return seen
+
+
+def received(out: str, robots: int) -> list[dict]:
+    """Every 'recv' event of every robot, with "to" added."""
+    evs = []
+    for k in range(1, robots + 1):
+        path = os.path.join(out, "robots", f"r{k}.events.jsonl")
+        if not os.path.exists(path):
+            continue
+        with open(path) as f:
+            for line in f:
+                try:
+                    e = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                if e.get("e") == "recv":
+                    e["to"] = k
+                    evs.append(e)
+    return evs
+
+
+def causality_violations(out: str, slack: int = 2) -> tuple[int, list[dict]]:
+    """(messages checked, messages that had no time-respecting path from their sender)."""
+    with open(os.path.join(out, "result.json")) as f:
+        result = json.load(f)
+    robots = result["config"]["robots"]
+    steps = result["steps"]
+    sets = links_by_step(out, steps + slack + 1)
+    evs = received(out, robots)
+    bad = []
+    for e in evs:
+        start = max(0, e["sent"] - slack)
+        end = min(len(sets) - 1, max(e["step"], start) + slack)
+        reached = {e["frm"]}
+        for t in range(start, end + 1):
+            reached = _grow(reached, sets[t])
+            if e["to"] in reached:
+                break
+        if e["to"] not in reached:
+            bad.append(e)
+    return len(evs), bad
+
+
+def heard_from(out: str, robots: int, kind: str = "map") -> dict[int, set[int]]:
+    """For each robot, the robots it received at least one `kind` message from."""
+    got: dict[int, set[int]] = {k: set() for k in range(1, robots + 1)}
+    for e in received(out, robots):
+        if e["kind"] == kind:
+            got[e["to"]].add(e["frm"])
+    return got

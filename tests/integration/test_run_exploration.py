@@ -1,0 +1,102 @@
+"""Whole runs: robots explore the empty 20 x 20 m terrain over the emulated network.
+
+Each run is real: one namespace and one process per robot, babel routing, the world's step
+clock at a raised time scale. Checked: the run stops by itself with >= 99% of the free space
+covered, writes the run-results contract, and no robot ever received a map or a goal from a
+robot it had no (time-respecting, multi-hop) path to; with 20 m every robot hears every other.
+"""
+
+import json
+import os
+import uuid
+
+import pytest
+
+from testbed import runcheck
+from testbed.run import RunConfig, run
+from topology.network import destroy
+
+
+@pytest.fixture
+def tn_name():
+    name = "tn" + uuid.uuid4().hex[:6]
+    yield name
+    destroy(name)
+
+
+CONTRACT_FILES = ["result.json", "config.json", "links.csv", "coverage.csv", "paths.png"]
+
+
+def check_contract(out: str, result: dict, robots: int) -> None:
+    for f in CONTRACT_FILES:
+        assert os.path.exists(os.path.join(out, f)), f
+    for k in range(1, robots + 1):
+        assert os.path.exists(os.path.join(out, "robots", f"r{k}.json"))
+        assert os.path.exists(os.path.join(out, "robots", f"r{k}.log"))
+    assert any(f.startswith("run.") for f in os.listdir(os.path.join(out, "display")))
+    assert any(f.startswith("step-") for f in os.listdir(os.path.join(out, "display")))
+    with open(os.path.join(out, "result.json")) as f:
+        assert json.load(f) == result
+    with open(os.path.join(out, "config.json")) as f:
+        cfg = json.load(f)
+    assert {k: cfg[k] for k in result["config"] if k != "extra"} == {
+        k: v for k, v in result["config"].items() if k != "extra"
+    }
+    assert result["format"] == 1
+    for r in result["robots"].values():
+        assert r["plans"][0]["cause"] == "start"
+        assert {p["cause"] for p in r["plans"]} <= {"start", "timer", "request"}
+        assert r["messages"]["sent"].get("map", 0) > 0
+
+
+def explore(tmp_path, name, robots, comm_range, time_scale=10.0, **kw) -> tuple[str, dict]:
+    out = str(tmp_path / "run")
+    cfg = RunConfig(
+        robots=robots, comm_range=comm_range, laser_range=2.0, seed=robots * 7 + 1,
+        time_scale=time_scale, routing="babel", max_steps=6000, **kw,
+    )  # fmt: skip
+    return out, run(cfg, out, name, progress=False)
+
+
+def check_exploration(out: str, result: dict, robots: int, comm_range: float) -> None:
+    assert result["status"] == "complete", result["status_detail"]
+    assert result["coverage_final"] >= 0.99
+    assert all(r["finish_step"] is not None for r in result["robots"].values())
+    check_contract(out, result, robots)
+    checked, bad = runcheck.causality_violations(out)
+    assert not bad, f"{len(bad)} of {checked} messages had no path from their sender: {bad[:3]}"
+    if robots > 1:
+        assert checked > 0
+    if comm_range >= 20:
+        heard = runcheck.heard_from(out, robots)
+        for k in range(1, robots + 1):
+            assert heard[k] == set(range(1, robots + 1)) - {k}, f"r{k} heard only {heard[k]}"
+
+
+@pytest.mark.parametrize("robots", [1, 3])
+@pytest.mark.parametrize("comm_range", [20.0, 5.0])
+def test_team_explores_the_empty_terrain(tmp_path, tn_name, robots, comm_range):
+    out, result = explore(tmp_path, tn_name, robots, comm_range)
+    check_exploration(out, result, robots, comm_range)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("comm_range", [20.0, 5.0])
+def test_ten_robots_explore_the_empty_terrain(tmp_path, tn_name, comm_range):
+    out, result = explore(tmp_path, tn_name, 10, comm_range, time_scale=5.0)
+    check_exploration(out, result, 10, comm_range)
+
+
+def test_killed_robot_does_not_stop_the_others(tmp_path, tn_name):
+    out, result = explore(tmp_path, tn_name, 3, 20.0, kill=((2, 60),))
+    assert result["status"] == "robot_crashed"
+    assert "r2" in result["status_detail"]
+    r2 = result["robots"]["r2"]
+    assert r2["crashed"] and r2["exit_status"] == -9 and r2["finish_step"] is None
+    for k in ("r1", "r3"):
+        assert not result["robots"][k]["crashed"]
+        assert result["robots"][k]["finish_step"] is not None
+        assert result["robots"][k]["exit_status"] == 0
+    assert result["coverage_final"] >= 0.99
+    with open(os.path.join(out, "robots", "r2.json")) as f:
+        assert json.load(f)["crash_step"] >= 60
