@@ -10,8 +10,7 @@ STAMP := $(VENV)/.installed
 # Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
 APT_PACKAGES := iproute2 nftables tcpdump tshark babeld nanomsg-utils iputils-ping \
 	iperf3 procps python3-venv
-# Only for `make vm-test` (netem under Debian's stock kernel).
-VM_APT_PACKAGES := qemu-system-x86 linux-image-amd64 busybox-static
+# `make vm-test` (netem under Debian's stock kernel) installs its own: tests/vm/run-netem-tests.
 
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
