@@ -292,6 +292,7 @@ class Robot:
                 step = self.s.step
                 due = (
                     step >= 0
+                    and self.s.last_plan_step >= 0  # the first plan is motion control's "start"
                     and not self.s.finished
                     and not self.s.plan_pending
                     and step - self.s.last_plan_step >= cfg.plan_period
