@@ -10,8 +10,10 @@ the reason recorded).
 
 Each run is a child process, `testbed run ... --out DIR/runs/R`, with its output in
 `DIR/logs/R.log`. Children run in their own session (a Ctrl-C in the terminal reaches only
-the sweep, which forwards it) and with PR_SET_PDEATHSIG=SIGTERM, so a SIGKILLed sweep takes its
+the sweep, which forwards it) and with PR_SET_PDEATHSIG=SIGINT, so a SIGKILLed sweep takes its
 runs down with it instead of leaving them writing into directories a resumed sweep redoes.
+SIGINT, not SIGTERM: `testbed run` tears its testbed down on KeyboardInterrupt, while
+SIGTERM's default action would kill it before it removes its namespaces.
 On SIGINT or SIGTERM the sweep starts nothing new, forwards SIGINT to each running child,
 waits, escalates to SIGTERM and then SIGKILL of the child's process group, and exits 130.
 A run that finishes during that grace period still counts.
@@ -267,7 +269,7 @@ def _child_setup(parent_pid: int) -> None:  # runs in the child between fork and
     os.setsid()
     with contextlib.suppress(Exception):
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGINT, 0, 0, 0)
     if os.getppid() != parent_pid:  # the sweep died before prctl took effect
         os._exit(1)
 
@@ -512,7 +514,7 @@ def _last_line(path: Path) -> str:
 
 
 def _wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
-    """A SIGKILLed sweep's children get SIGTERM (PDEATHSIG); wait until they are gone before
+    """A SIGKILLed sweep's children get SIGINT (PDEATHSIG); wait until they are gone before
     redoing their runs, and SIGKILL any still running after `timeout` (only processes whose
     command line names their run directory in `out`)."""
     state = _read_json(out / "sweep.json") or {}

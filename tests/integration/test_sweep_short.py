@@ -1,0 +1,171 @@
+"""Sweeps of real runs (`testbed run` in namespaces): the short profile end to end, and a
+sweep interrupted by SIGINT or SIGKILL and resumed.
+
+Both are slow (minutes). The interrupted sweep is checked against its plan, which is exactly
+what an uninterrupted sweep of the same file produces (tests/unit/test_sweep_runner.py checks
+that equivalence against an actual uninterrupted sweep, with a stand-in for `testbed run`).
+"""
+
+import importlib.util
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from testbed import sweepfile
+
+REPO = Path(__file__).resolve().parents[2]
+SHORT = REPO / "testbed" / "experiments" / "short.toml"
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(os.geteuid() != 0, reason="needs root (network namespaces)"),
+]
+
+
+def run_testbed(*args, timeout=3600, **kw):
+    argv = [sys.executable, "-c", "import sys; from testbed.cli import main; sys.exit(main())"]
+    return subprocess.run(
+        [*argv, *map(str, args)], cwd=REPO, capture_output=True, text=True, timeout=timeout, **kw
+    )
+
+
+def results(out: Path) -> dict:
+    return {p.parent.name: json.loads(p.read_text()) for p in out.glob("runs/*/result.json")}
+
+
+def test_short_profile_end_to_end(tmp_path):
+    if importlib.util.find_spec("aodv.__main__") is None:
+        pytest.skip("the AODV daemon (python -m aodv) is not built yet")
+    out = tmp_path / "short"
+    r = run_testbed("sweep", SHORT, "--out", out)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = run_testbed("report", out, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    figs = out / "figures"
+    for name in ("fig2a", "fig4", "routing"):
+        assert (figs / f"{name}.png").is_file() and (figs / f"{name}.pdf").is_file()
+    assert (out / "report.md").is_file()
+    assert len(list((figs / "paths").glob("*.png"))) == 6
+
+    # The numbers behind Fig. 2 against the runs' own result.json.
+    res = results(out)
+    assert len(res) == 6
+    for row in json.loads((figs / "fig2.json").read_text()):
+        per_run = []
+        for rid in row["runs"]:
+            doc = res[rid]
+            fs = [
+                r["finish_step"] if r["finish_step"] is not None else doc["steps"]
+                for r in doc["robots"].values()
+            ]
+            per_run.append(statistics.fmean(fs))
+            c = doc["config"]
+            assert (c["robots"], c["comm_range"], c["laser_range"]) == (
+                row["robots"],
+                row["comm_range"],
+                row["laser_range"],
+            )
+        assert row["mean"] == pytest.approx(statistics.fmean(per_run))
+
+    # Routing metrics exist for every run, and agree with the daemons' own counters.
+    routing = json.loads((figs / "routing_runs.json").read_text())
+    assert len(routing) == 6
+    for row in routing:
+        assert row["control_tx_packets"] > 0 and 0 < row["overhead_packets"] < 1
+        if row["daemon_relative_difference"] is not None:
+            assert row["daemon_relative_difference"] <= 0.01, row
+
+
+INTERRUPT_SWEEP = """
+[grid]
+robots = [1, 2]
+comm_range = [5, 20]
+laser_range = [2.0]
+runs = 1
+
+[run]
+time_scale = 5
+routing = "babel"
+max_steps = 150
+capture = false
+"""
+
+
+def namespaces() -> set[str]:
+    out = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    return {line.split()[0] for line in out.splitlines() if line.strip()}
+
+
+def processes_mentioning(text: str) -> list[int]:
+    pids = []
+    for p in Path("/proc").iterdir():
+        if not p.name.isdigit() or int(p.name) == os.getpid():
+            continue
+        try:
+            if text.encode() in (p / "cmdline").read_bytes():
+                pids.append(int(p.name))
+        except OSError:
+            continue
+    return pids
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
+    f = tmp_path / "s.toml"
+    f.write_text(INTERRUPT_SWEEP)
+    plan = {r.run_id: r.config for r in sweepfile.expand(sweepfile.load(f))}
+    out = tmp_path / "out"
+    argv = [sys.executable, "-c", "import sys; from testbed.cli import main; sys.exit(main())"]
+    p = subprocess.Popen(
+        [*argv, "sweep", str(f), "--out", str(out), "--jobs", "1"],
+        cwd=REPO,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        # interrupt while the second run is in flight
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline:
+            in_flight = [d for d in out.glob("runs/*") if not (d / "result.json").exists()]
+            if results(out) and in_flight and (in_flight[0] / "config.json").exists():
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("the sweep never got to its second run")
+        victim = in_flight[0]
+        name = json.loads((victim / "config.json").read_text())["name"]
+        time.sleep(1.0)
+        p.send_signal(sig)
+        p.wait(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    done_before = {k: (out / "runs" / k / "result.json").stat().st_mtime_ns for k in results(out)}
+    assert 1 <= len(done_before) < len(plan)
+    # The interrupted run cleaned up after itself: no namespace, no process left.
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (
+        any(ns.startswith(f"tb-{name}-") for ns in namespaces())
+        or processes_mentioning(str(victim))
+    ):
+        time.sleep(0.5)
+    assert not any(ns.startswith(f"tb-{name}-") for ns in namespaces())
+    assert not processes_mentioning(str(victim))
+
+    r = run_testbed("sweep", f, "--out", out, "--resume", "--jobs", "1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    final = results(out)
+    assert set(final) == set(plan)
+    for rid, doc in final.items():
+        assert {k: doc["config"][k] for k in plan[rid]} == plan[rid]
+    # finished runs were not redone
+    for rid, mtime in done_before.items():
+        assert (out / "runs" / rid / "result.json").stat().st_mtime_ns == mtime
