@@ -191,6 +191,7 @@ class Daemon:
         sel.register(self.sock, selectors.EVENT_READ, self._on_udp)
         sel.register(self.tun.fd, selectors.EVENT_READ, self._on_tun)
         sel.register(self._wake_r, selectors.EVENT_READ, self._on_wake)
+        sel.register(self.routes.nl, selectors.EVENT_READ, self._on_netlink)
         next_poll = time.monotonic() + self._poll_period()
         next_stats = time.monotonic()
         while not self._stop:
@@ -215,6 +216,11 @@ class Daemon:
                 pass
         except BlockingIOError:
             pass
+
+    def _on_netlink(self) -> None:
+        for failure in self.routes.read_acks():
+            self.stats.dropped["kernel_route_error"] += 1
+            log.warning("kernel refused %s", failure)
 
     def _poll_use(self, now: float) -> None:
         if not self.core.routes():
@@ -299,12 +305,18 @@ class Daemon:
 
     # -- actions -------------------------------------------------------------------------
     def _execute(self, actions: list, now: float) -> None:
+        # Control messages first: they go to neighbours on the link and need no kernel
+        # route, so route installation stays off the discovery's critical path. The rest
+        # keeps the core's order (a Release follows the Install it needs).
         for a in actions:
             if isinstance(a, Unicast):
                 self._send(a.msg, a.dst, a.ttl, socket.MSG_DONTROUTE)
             elif isinstance(a, Broadcast):
                 self._send(a.msg, BROADCAST, a.ttl, 0)
-            elif isinstance(a, InstallRoute):
+        for a in actions:
+            if isinstance(a, (Unicast, Broadcast)):
+                continue
+            if isinstance(a, InstallRoute):
                 self.routes.install(a.dest, a.next_hop)
                 self.stats.route_installs += 1
                 log.info("route %s via %s (%d hops)", a.dest, a.next_hop, a.hops)

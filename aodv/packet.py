@@ -29,7 +29,7 @@ Hop Count 0, sent to 255.255.255.255 with IP TTL 1; `is_hello()` recognises it.
 
 from __future__ import annotations
 
-import ipaddress
+import socket
 import struct
 from dataclasses import dataclass
 
@@ -65,12 +65,14 @@ class MalformedPacket(ValueError):
     """A datagram on port 654 that is not a well-formed RFC 3561 message."""
 
 
-def _addr(raw: bytes) -> str:
-    return str(ipaddress.IPv4Address(raw))
+_addr = socket.inet_ntoa
 
 
 def _raw(addr: str) -> bytes:
-    return ipaddress.IPv4Address(addr).packed
+    try:
+        return socket.inet_pton(socket.AF_INET, addr)
+    except OSError:
+        raise ValueError(f"not an IPv4 address: {addr!r}") from None
 
 
 def _check_u32(name: str, value: int) -> None:

@@ -152,7 +152,7 @@ def test_malformed_raises_specific_error(raw):
 
 def test_random_bytes_never_raise_anything_else():
     rng = random.Random(3561)
-    for _ in range(20000):
+    for _ in range(5000):
         raw = bytes(rng.randrange(256) for _ in range(rng.randrange(40)))
         with contextlib.suppress(MalformedPacket):
             decode(raw)
