@@ -294,38 +294,10 @@ def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int =
 # ---------------------------------------------------------------- the AODV daemons' counters
 
 
-def _find_number(doc, paths: list[tuple[str, ...]]):
-    for path in paths:
-        node = doc
-        for key in path:
-            if not isinstance(node, dict) or key not in node:
-                node = None
-                break
-            node = node[key]
-        if isinstance(node, int | float) and not isinstance(node, bool):
-            return node
-        if isinstance(node, dict):  # a per-type table: sum it
-            vals = [v for v in node.values() if isinstance(v, int | float)]
-            if vals:
-                return sum(vals)
-    return None
-
-
-# Where the daemon's count of AODV messages it transmitted may live in aodv/rK.json.
-DAEMON_TX_PATHS = [
-    ("tx_packets",),
-    ("control_tx_packets",),
-    ("sent", "total"),
-    ("counters", "tx_packets"),
-    ("counters", "sent"),
-    ("stats", "tx_packets"),
-    ("tx",),
-    ("sent",),
-]
-
-
-def daemon_counts(run_dir: Path) -> dict[str, float] | None:
-    """Per robot, the AODV messages its daemon says it transmitted (None if no aodv/ files)."""
+def daemon_counts(run_dir: Path) -> dict[str, dict] | None:
+    """Per robot, what its AODV daemon says it transmitted (aodv/rK.json, written by
+    aodv/stats.py): {"packets": n, "bytes": UDP payload bytes, "by_type": {...}}.
+    None if the run has no such files."""
     d = Path(run_dir) / "aodv"
     if not d.is_dir():
         return None
@@ -333,28 +305,49 @@ def daemon_counts(run_dir: Path) -> dict[str, float] | None:
     for p in sorted(d.glob("r*.json")):
         try:
             doc = json.loads(p.read_text())
-        except (OSError, ValueError):
-            continue
-        n = _find_number(doc, DAEMON_TX_PATHS)
-        if n is not None:
-            out[p.stem] = n
+            by_type = {str(k): int(v) for k, v in doc["messages_sent"].items()}
+            out[p.stem] = {
+                "packets": sum(by_type.values()),
+                "bytes": int(doc.get("bytes_sent", 0)),
+                "by_type": by_type,
+            }
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+            log.warning("%s: unreadable AODV counters (%s)", p, e)
     return out or None
 
 
-def compare_with_daemons(metrics: dict, daemons: dict[str, float] | None) -> dict | None:
-    """Relative difference between the capture's and the daemons' AODV transmit counts."""
-    if not daemons:
+def _rel(a: float, b: float) -> float | None:
+    return abs(a - b) / b if b else (0.0 if a == b else None)
+
+
+def compare_with_daemons(metrics: dict, daemons: dict[str, dict] | None) -> dict | None:
+    """The captures' AODV transmit counts against the daemons' own (robots with both)."""
+    if not daemons or not metrics.get("robots"):
         return None
-    pcap_total = sum(metrics["robots"].get(k, {}).get("control_tx_packets", 0) for k in daemons)
-    daemon_total = sum(daemons.values())
-    rel = abs(pcap_total - daemon_total) / daemon_total if daemon_total else None
+    robots = metrics["robots"]
+    both = [k for k in daemons if k in robots]
+    pcap_pkts = sum(robots[k]["control_tx_packets"] for k in both)
+    pcap_bytes = sum(robots[k]["control_tx_payload_bytes"] for k in both)
+    d_pkts = sum(daemons[k]["packets"] for k in both)
+    d_bytes = sum(daemons[k]["bytes"] for k in both)
+    by_type: dict[str, dict] = {}
+    for k in both:
+        for kind, n in daemons[k]["by_type"].items():
+            by_type.setdefault(kind, {"pcap": 0, "daemon": 0})["daemon"] += n
+        for kind, n in robots[k].get("aodv_tx_by_type", {}).items():
+            by_type.setdefault(kind, {"pcap": 0, "daemon": 0})["pcap"] += n
     return {
-        "pcap_control_tx_packets": pcap_total,
-        "daemon_tx_packets": daemon_total,
-        "relative_difference": rel,
+        "robots": both,
+        "pcap_control_tx_packets": pcap_pkts,
+        "daemon_tx_packets": d_pkts,
+        "relative_difference": _rel(pcap_pkts, d_pkts),
+        "pcap_control_tx_payload_bytes": pcap_bytes,
+        "daemon_tx_bytes": d_bytes,
+        "relative_difference_bytes": _rel(pcap_bytes, d_bytes),
+        "by_type": by_type,
         "per_robot": {
-            k: {"pcap": metrics["robots"].get(k, {}).get("control_tx_packets"), "daemon": v}
-            for k, v in daemons.items()
+            k: {"pcap": robots[k]["control_tx_packets"], "daemon": daemons[k]["packets"]}
+            for k in both
         },
     }
 

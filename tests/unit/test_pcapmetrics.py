@@ -133,16 +133,33 @@ def test_parse_fields():
     assert g.ip_src == "" and g.udp_sport is None
 
 
+def daemon_doc(sent: dict, bytes_sent: int) -> str:
+    """What aodv/stats.py writes (the fields the comparison reads, plus some it ignores)."""
+    return json.dumps(
+        {"robot": "r1", "messages_sent": sent, "messages_received": {}, "bytes_sent": bytes_sent,
+         "bytes_received": 0, "dropped": {}, "discoveries_ok": 1}
+    )  # fmt: skip
+
+
 def test_daemon_comparison(tmp_path):
     (tmp_path / "aodv").mkdir()
-    (tmp_path / "aodv" / "r1.json").write_text(json.dumps({"sent": {"RREQ": 1, "HELLO": 1}}))
-    (tmp_path / "aodv" / "r3.json").write_text(json.dumps({"tx_packets": 3}))
+    (tmp_path / "aodv" / "r1.json").write_text(daemon_doc({"RREQ": 1, "HELLO": 1}, 44))
+    (tmp_path / "aodv" / "r3.json").write_text(daemon_doc({"RREQ": 1, "RREP": 1, "HELLO": 1}, 68))
     (tmp_path / "aodv" / "r2.json").write_text("{broken")
     daemons = pm.daemon_counts(tmp_path)
-    assert daemons == {"r1": 2, "r3": 3}
+    assert daemons["r1"] == {"packets": 2, "bytes": 44, "by_type": {"RREQ": 1, "HELLO": 1}}
+    assert set(daemons) == {"r1", "r3"}
     cmp = pm.compare_with_daemons(pm.compute(chain_captures(), ADDRS), daemons)
+    assert cmp["robots"] == ["r1", "r3"]
     assert cmp["pcap_control_tx_packets"] == 5 and cmp["daemon_tx_packets"] == 5
     assert cmp["relative_difference"] == 0.0
+    assert cmp["pcap_control_tx_payload_bytes"] == 24 + 20 + 24 + 24 + 20
+    assert cmp["relative_difference_bytes"] == pytest.approx(abs(112 - 112) / 112)
+    assert cmp["by_type"]["HELLO"] == {"pcap": 2, "daemon": 2}
+    # one message the capture missed shows as a difference
+    (tmp_path / "aodv" / "r1.json").write_text(daemon_doc({"RREQ": 2, "HELLO": 1}, 68))
+    cmp = pm.compare_with_daemons(pm.compute(chain_captures(), ADDRS), pm.daemon_counts(tmp_path))
+    assert cmp["relative_difference"] == pytest.approx(1 / 6)
     assert pm.daemon_counts(tmp_path / "nothing") is None
     assert pm.compare_with_daemons({}, None) is None
 
