@@ -78,7 +78,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--bind", help="address for the goal socket (default: the robot's)")
     p.add_argument("--out-dir", help="display: where snapshots and the video go")
     p.add_argument("--snapshots", type=steps, default=set(), help="display: steps, e.g. 100,500")
-    p.add_argument("--video-every", type=positive(int), default=5)
+    p.add_argument("--video-every", type=positive(int), default=10)
     return p
 
 

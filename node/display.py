@@ -38,7 +38,7 @@ class Display:
         events: EventLog,
         out_dir: str,
         snapshots: set[int],
-        video_every: int = 5,
+        video_every: int = 10,
         scale: int = 2,
     ):
         self.me = me
@@ -59,7 +59,7 @@ class Display:
         self.malformed = 0
         self.step = -1
         os.makedirs(out_dir, exist_ok=True)
-        size = (shape[1] * scale, shape[0] * scale)
+        size = (shape[1], shape[0])  # video frames at one pixel per cell, snapshots at `scale`
         self.video = render.Video(os.path.join(out_dir, "run"), size)
 
     def run(self) -> None:
@@ -96,13 +96,14 @@ class Display:
             if step in self.snapshots:
                 self._snapshot(step)
             if step % self.video_every == 0 and not self.link.pending():
-                self.video.add(self._frame(step))
+                self.video.add(self._frame(step, 1))
 
-    def _frame(self, step: int) -> np.ndarray:
+    def _frame(self, step: int, scale: int | None = None) -> np.ndarray:
+        scale = scale or self.scale
         with self.lock:
             t = self.grid.ternary()
             paths = {k: list(v) for k, v in self.paths.items()}
-        img = render.draw_paths(render.map_image(t, self.scale), paths, self.cell, self.scale)
+        img = render.draw_paths(render.map_image(t, scale), paths, self.cell, scale)
         return render.caption(img, f"step {step}")
 
     def _snapshot(self, step: int, final: bool = False) -> None:

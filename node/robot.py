@@ -29,6 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import queue
+import resource
 import threading
 import time
 from collections import Counter
@@ -61,6 +62,7 @@ class RobotConfig:
     radius: float = 0.15
     plan_period: int = 20
     map_period: int = 10
+    full_period: int = 100
     reach_steps: int = 30
     goal_fresh_steps: int = 40
     time_scale: float = 1.0
@@ -86,9 +88,16 @@ class Shared:
     pose: tuple[float, float] = (0.0, 0.0)
     step: int = -1
     last_plan_step: int = -(10**9)
+    dirty: tuple[int, int, int, int] | None = None  # local-map window changed since the last flood
     plan_pending: bool = False
     finished: bool = False
     teammates: dict[int, Teammate] = field(default_factory=dict)
+
+
+def _grow_box(a, b):
+    if a is None:
+        return b
+    return min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])
 
 
 class Robot:
@@ -125,7 +134,9 @@ class Robot:
         self.malformed = 0
         self.frames = 0
         self.skipped = 0
+        self.last_full = -(10**9)
         self.plan_ms: list[float] = []
+        self.busy: Counter[str] = Counter()  # thread CPU seconds per part
         self.threads: list[threading.Thread] = []
 
     # -- the five parts ---------------------------------------------------------------------
@@ -165,12 +176,16 @@ class Robot:
             frames=self.frames,
             frames_skipped=self.skipped,
             plan_ms_median=float(np.median(self.plan_ms)) if self.plan_ms else None,
+            cpu_s=round(time.process_time(), 3),
+            max_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            busy_s={k: round(v, 3) for k, v in self.busy.items()},
             finished=self.s.finished,
         )
 
     def _motion(self) -> None:
         wp = self.s.grid.Lp.shape[1]
         started = False
+        last_xy = None
         while not self.stopping.is_set():
             msg = self.link.recv(timeout=0.5)
             if msg is None:
@@ -182,14 +197,21 @@ class Robot:
                 continue
             f: body.Frame = msg[1]
             self.frames += 1
-            free, occ = self.laser.scan_cells(f.x, f.y, f.ranges, wp)
+            t_frame = time.thread_time()
+            # A robot standing still sees nothing new (the world is static): skip the update.
+            moved = (f.x, f.y) != last_xy
+            last_xy = (f.x, f.y)
+            if moved:
+                free, occ = self.laser.scan_cells(f.x, f.y, f.ranges, wp)
             behind = self.link.pending()
             with self.lock:
                 s = self.s
-                s.grid.update_cells(free, occ)
-                own = s.own.reshape(-1)
-                own[free] = FREE
-                own[occ] = OCC
+                if moved:
+                    s.grid.update_cells(free, occ)
+                    own = s.own.reshape(-1)
+                    own[free] = FREE
+                    own[occ] = OCC
+                    s.dirty = _grow_box(s.dirty, self._footprint(f.x, f.y))
                 s.pose = (f.x, f.y)
                 s.step = f.step
                 s.scans.append((f.step, f.x, f.y, f.ranges))
@@ -198,11 +220,21 @@ class Robot:
                 self.skipped += 1  # a newer frame is waiting: act on that one
             else:
                 self.link.send(body.cmd(f.step, target))
+            self.busy["motion"] += time.thread_time() - t_frame
             with self.tick:
                 self.tick.notify_all()
             if not started:
                 started = True
                 self.request("start")
+
+    def _footprint(self, x: float, y: float) -> tuple[int, int, int, int]:
+        """The map window (r0, c0, r1, c1) a scan from (x, y) can touch."""
+        c, rng = self.cfg.cell, self.cfg.laser_range
+        h, w = self.cfg.shape
+        return (
+            max(0, int((y - rng) / c) - 1), max(0, int((x - rng) / c) - 1),
+            min(h, int((y + rng) / c) + 2), min(w, int((x + rng) / c) + 2),
+        )  # fmt: skip
 
     def _follow(self) -> tuple[float, float] | None:
         """The next waypoint of the current plan (lock held), None when there is none."""
@@ -243,6 +275,7 @@ class Robot:
             t0 = time.perf_counter()
             p = planner.plan(t, pose, goals, cfg.laser_range, self.params)
             ms = (time.perf_counter() - t0) * 1000
+            self.busy["plan"] += ms / 1000
             self.plan_ms.append(ms)
             with self.lock:
                 s.plan, s.wp = p, 0
@@ -307,14 +340,28 @@ class Robot:
                 self._share_map(step)
 
     def _share_map(self, step: int) -> None:
+        t_cpu = time.thread_time()
         p = self.laser.pad
+        h, w = self.cfg.shape
+        full = step - self.last_full >= self.cfg.full_period
         with self.lock:
-            t = self.s.own[p : p + self.cfg.shape[0], p : p + self.cfg.shape[1]].copy()
-            x, y = self.s.pose
-        payload = wire.pack_map(x, y, t)
+            s = self.s
+            if full:
+                r0, c0, r1, c1 = 0, 0, h, w
+            elif s.dirty is None:
+                r0 = c0 = r1 = c1 = 0
+            else:
+                r0, c0, r1, c1 = s.dirty
+            s.dirty = None
+            t = s.own[p + r0 : p + r1, p + c0 : p + c1].copy()
+            x, y = s.pose
+        if full:
+            self.last_full = step
+        payload = wire.pack_map(x, y, t, r0, c0)
         seq = self.flooder.originate(wire.KIND_MAP, step, payload)
         self.sent["map"] += 1
-        self.events.write("send", step, kind="map", seq=seq, bytes=len(payload))
+        self.events.write("send", step, kind="map", seq=seq, bytes=len(payload), full=full)
+        self.busy["share"] += time.thread_time() - t_cpu
 
     def _inbox(self) -> None:
         import select
@@ -355,6 +402,7 @@ class Robot:
             inq.close()
 
     def _on_flood(self, data: bytes) -> None:
+        t_cpu = time.thread_time()
         h, payload = wire.unpack_flood(data)
         if h.kind != wire.KIND_MAP or not 1 <= h.origin <= self.cfg.robots + 1:
             raise ValueError(f"unexpected flood kind {h.kind} from {h.origin}")
@@ -372,6 +420,7 @@ class Robot:
             "recv", step, kind="map", frm=h.origin, seq=h.seq, sent=h.step, ttl=h.ttl,
             learnt=learnt,
         )  # fmt: skip
+        self.busy["merge"] += time.thread_time() - t_cpu
 
     def _on_message(self, data: bytes) -> None:
         cfg = self.cfg

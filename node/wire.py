@@ -4,8 +4,11 @@ Floods (UDP broadcast, see node.flood) carry a fixed header and a payload:
 
     'RMF1' u8 kind u8 ttl u16 origin u32 seq u32 step     (18 bytes, network byte order)
 
-`step` is the origin's step when it sent the flood. The only flood kind is MAP: the origin's
-own local map (cells its own laser saw) cropped to its known cells, with its position:
+`step` is the origin's step when it sent the flood. The only flood kind is MAP: part of the
+origin's own local map (cells its own laser saw), cropped to its known cells, with its
+position. Most map floods carry only the window its laser swept since its last flood (a
+delta); every `full_period` steps one carries the whole local map, so that a robot that missed
+deltas while out of reach catches up:
 
     f32 x f32 y u16 r0 u16 c0 u16 h u16 w, then the zlib'd 2-bit ternary cells (node.grid)
 
@@ -64,9 +67,10 @@ def with_ttl(data: bytes, ttl: int) -> bytes:
     return data[:5] + bytes([ttl]) + data[6:]
 
 
-def pack_map(x: float, y: float, ternary: np.ndarray) -> bytes:
+def pack_map(x: float, y: float, ternary: np.ndarray, r_off: int = 0, c_off: int = 0) -> bytes:
+    """A map payload for `ternary`, a window of the map whose top-left cell is (r_off, c_off)."""
     r0, c0, h, w, blob = encode_ternary(ternary)
-    return _MAP.pack(x, y, r0, c0, h, w) + blob
+    return _MAP.pack(x, y, r0 + r_off if h else 0, c0 + c_off if w else 0, h, w) + blob
 
 
 @dataclass

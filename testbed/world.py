@@ -59,6 +59,7 @@ class World:
         self.free_total = max(1, int(free_space.sum()))
         self.paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
         self._rays = np.arange(laser.n_rays)
+        self._last_scan: list = [None] * len(self.bodies)
         self._k = np.arange(laser.n_samples, dtype=np.int32)[None, :]
         # Cells where a robot's centre may be: obstacles grown by the robot's radius.
         self.blocked = truth.inflated(radius)
@@ -102,6 +103,9 @@ class World:
     def scan(self, k: int) -> np.ndarray:
         """Cast robot k's laser (0-based) and add what it saw to the team's seen cells."""
         b = self.bodies[k]
+        cached = self._last_scan[k]
+        if cached is not None and cached[0] == (b.x, b.y):
+            return cached[1]  # it did not move: same scan, nothing new seen
         flat = self.laser.flat_cells(b.x, b.y, self.occ_padded.shape[1])
         hit = np.take(self.occ_padded.reshape(-1), flat)
         first = hit.argmax(axis=1)
@@ -110,6 +114,7 @@ class World:
         ranges = np.full(self.laser.n_rays, np.inf, dtype=np.float32)
         ranges[any_hit] = ((first[any_hit] + 1) * self.laser.step).astype(np.float32)
         self.seen_padded.reshape(-1)[flat[self._k <= first[:, None]]] = True
+        self._last_scan[k] = ((b.x, b.y), ranges)
         return ranges
 
     def coverage(self) -> float:
