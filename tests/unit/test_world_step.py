@@ -1,0 +1,53 @@
+"""The world's step: motion toward the commanded target, walls, lasers and coverage."""
+
+import numpy as np
+import pytest
+
+from node.rays import Laser
+from testbed.world import World
+from testbed.worldmap import GroundTruth, empty_terrain, free_space
+
+
+def make(starts, occ=None, speed=0.1):
+    t = empty_terrain(4, 4) if occ is None else GroundTruth(occ)
+    return World(t, starts, Laser(1.5, 180), free_space(t, starts), speed, 0.15)
+
+
+def test_robot_moves_toward_target_by_its_speed_and_stops_there():
+    w = make([(1.0, 1.0)])
+    w.command(0, (1.25, 1.0))
+    w.move()
+    assert w.bodies[0].x == pytest.approx(1.1)
+    w.move()
+    w.move()
+    w.move()
+    assert (w.bodies[0].x, w.bodies[0].y) == pytest.approx((1.25, 1.0))
+    assert w.bodies[0].path_length == pytest.approx(0.25)
+    w.command(0, None)
+    w.move()
+    assert w.bodies[0].x == pytest.approx(1.25)
+
+
+def test_walls_stop_the_robot():
+    w = make([(1.0, 1.0)])
+    w.command(0, (-5.0, 1.0))  # through the boundary wall
+    for _ in range(20):
+        w.move()
+    b = w.bodies[0]
+    assert b.collisions == 1 and b.target is None
+    assert b.x - 0.15 >= 0.1 - 0.05  # its disc stays off the 10 cm wall (within half a cell)
+
+
+def test_scan_and_coverage():
+    w = make([(2.0, 2.0)])
+    assert w.coverage() == 0.0
+    r = w.scan(0)
+    assert r.shape == (180,) and np.isinf(r).all()  # 1.5 m laser in a 4 m room: no walls
+    c1 = w.coverage()
+    assert 0.3 < c1 < 0.6  # a 1.5 m disc of a 3.8 x 3.8 m room
+    w.command(0, (2.0, 3.5))
+    for _ in range(5):
+        w.move()
+        w.scan(0)
+    assert w.coverage() > c1
+    assert np.isfinite(w.scan(0)).any()  # now the north wall is in range
