@@ -117,6 +117,15 @@ def _add_net(sub) -> None:
     mv.add_argument("x", type=_float("x"))
     mv.add_argument("y", type=_float("y"))
 
+    im = nsub.add_parser("impair", help="impair one link (both directions), or clear it")
+    im.add_argument("name", type=_name)
+    im.add_argument("robot_a", type=_robot_ref)
+    im.add_argument("robot_b", type=_robot_ref)
+    im.add_argument("--loss", type=_float("loss", nonneg=True), default=0.0, metavar="PCT")
+    im.add_argument("--delay", type=_float("delay", nonneg=True), default=0.0, metavar="MS")
+    im.add_argument("--jitter", type=_float("jitter", nonneg=True), default=0.0, metavar="MS")
+    im.add_argument("--rate", type=_float("rate", nonneg=True), default=0.0, metavar="KBIT")
+
     ln = nsub.add_parser("links", help="print the current links, one 'i j' pair per line")
     ln.add_argument("name", type=_name)
 
@@ -219,6 +228,22 @@ def _net_move(args) -> int:
     return 0
 
 
+def _net_impair(args) -> int:
+    from topology.spec import Impairment
+
+    try:
+        imp = Impairment(loss_pct=args.loss, delay_ms=args.delay, jitter_ms=args.jitter,
+                         rate_kbit=args.rate)  # fmt: skip
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    net = _attach(args.name)
+    try:
+        net.impair(args.robot_a, args.robot_b, imp)
+    finally:
+        net.detach()
+    return 0
+
+
 def _net_links(args) -> int:
     net = _attach(args.name)
     try:
@@ -261,6 +286,7 @@ NET_COMMANDS = {
     "up": _net_up,
     "exec": _net_exec,
     "move": _net_move,
+    "impair": _net_impair,
     "links": _net_links,
     "down": _net_down,
     "list": _net_list,

@@ -19,6 +19,7 @@ import subprocess
 
 from pyroute2.netlink.exceptions import NetlinkError
 
+from testbed.errors import TestbedError
 from topology import netns
 from topology.spec import Impairment
 
@@ -61,10 +62,12 @@ def nft_loss_rules(ifname: str, loss_pct: float) -> str:
     """nft commands that make `ifname` drop loss_pct% of the frames it forwards."""
     chain = nft_chain(ifname)
     threshold = round(loss_pct * 100)  # in 1/10000
+    # numgen yields 0..9999, and nft refuses a comparison with a constant out of that range.
+    match = "" if threshold >= 10000 else f"numgen random mod 10000 < {threshold} "
     return (
         f"add chain bridge {NFT_TABLE} {chain}\n"
         f"flush chain bridge {NFT_TABLE} {chain}\n"
-        f"add rule bridge {NFT_TABLE} {chain} numgen random mod 10000 < {threshold} counter drop\n"
+        f"add rule bridge {NFT_TABLE} {chain} {match}counter drop\n"
         f'add element bridge {NFT_TABLE} {NFT_MAP} {{ "{ifname}" : jump {chain} }}\n'
     )
 
@@ -205,4 +208,5 @@ class Impairer:
             text=True,
         )
         if proc.returncode != 0:
-            raise RuntimeError(f"nft in {self.ns} failed: {proc.stderr.strip()}")
+            first = (proc.stderr.strip().splitlines() or ["?"])[0]
+            raise TestbedError(f"nft in {self.ns} failed: {first}")

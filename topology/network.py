@@ -24,6 +24,7 @@ import os
 import shutil
 import subprocess
 import time
+from dataclasses import asdict
 
 from testbed.errors import TestbedError, UsageError
 from topology import capture, names, netns, processes, ranges, routing, state
@@ -45,6 +46,7 @@ class Network:
         self.positions: list[Position] = list(spec.positions)
         self.medium = Medium(spec.name, spec.time_scale)
         self.current: dict[Pair, Impairment] = {}
+        self.link_impairments: dict[Pair, Impairment] = {}  # set by hand, per link
         self.state: state.TestbedState | None = None
         self.children: dict[int, subprocess.Popen] = {}
         self._owner = False
@@ -175,7 +177,29 @@ class Network:
     def wanted(self) -> dict[Pair, Impairment]:
         links = ranges.wanted_links(self.positions, self.spec.comm_range, self.spec.range_model)
         base = self.spec.impairment
-        return {p: base.combined(imp) for p, imp in links.items()}
+        none = Impairment()
+        return {
+            p: base.combined(imp).combined(self.link_impairments.get(p, none))
+            for p, imp in links.items()
+        }
+
+    def impair(self, i: int, j: int, imp: Impairment) -> None:
+        """Impair link i-j (both directions) on top of the testbed-wide impairment and the
+        range model's, now and whenever the two robots are linked; Impairment() clears it."""
+        for k in (i, j):
+            self._check_robot(k)
+        if i == j:
+            raise UsageError("a link joins two different robots")
+        pair = (min(i, j), max(i, j))
+        try:
+            self.medium.impairer.check(imp)
+        except MissingKernelFeature as exc:
+            raise UsageError(str(exc)) from None
+        if imp.is_none:
+            self.link_impairments.pop(pair, None)
+        else:
+            self.link_impairments[pair] = imp
+        self._moved()
 
     def _apply_positions(self) -> tuple[list[Pair], list[Pair]]:
         wanted = self.wanted()
@@ -214,6 +238,10 @@ class Network:
         with state.locked(self.name):
             st = state.read(self.name) or self.state
             st.positions = [list(p) for p in self.positions]
+            st.link_impairments = {
+                f"{i}-{j}": asdict(imp) for (i, j), imp in self.link_impairments.items()
+            }
+            st.applied = {ifname: asdict(imp) for ifname, imp in self.medium.impairer.have.items()}
             st.persistent = self.state.persistent
             self.state = st
             state.write(self.name, st)
@@ -229,7 +257,12 @@ class Network:
         net = cls(state.spec_from_dict(st.spec), persistent=st.persistent)
         net.state = st
         net.positions = [tuple(p) for p in st.positions]
+        net.link_impairments = {
+            tuple(int(k) for k in key.split("-")): Impairment(**fields)
+            for key, fields in st.link_impairments.items()
+        }
         net.medium.open()
+        net.medium.impairer.have = {k: Impairment(**v) for k, v in st.applied.items()}
         kernel = net.medium.kernel_links()
         wanted = net.wanted()
         net.current = {p: wanted.get(p, Impairment()) for p in kernel}

@@ -82,6 +82,11 @@ class TestbedState:
     owner_start: int | None
     persistent: bool = False
     processes: list[ProcessRecord] = field(default_factory=list)
+    # Per-link impairments set by hand: "i-j" -> Impairment fields, on top of the spec's.
+    link_impairments: dict[str, dict[str, float]] = field(default_factory=dict)
+    # What the medium has applied to each link end (ifname -> Impairment fields), so that a
+    # process attaching later knows what to undo.
+    applied: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @classmethod
     def new(cls, spec: NetworkSpec) -> "TestbedState":

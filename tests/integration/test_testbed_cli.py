@@ -164,3 +164,32 @@ def test_sigkilled_owner_then_clean_leaves_nothing(tb_name, tmp_path):
     assert sorted(os.listdir(tmp_path / "pcaps")) == ["daemons", "r1.pcap", "r2.pcap", "r3.pcap"]
     kept = os.listdir(tmp_path / "pcaps" / "daemons")
     assert {f"r{k}.babel.log" for k in (1, 2, 3)} <= set(kept)
+
+
+def test_impair_one_link_by_hand_and_clear_it(tb_name):
+    assert tb("net", "up", tb_name, "--robots", "3", "--layout", "chain", "--spacing", "5",
+              "--comm-range", "6").returncode == 0  # fmt: skip
+    try:
+        for k, others in ((1, (2,)), (2, (1, 3)), (3, (2,))):
+            for o in others:
+                tb("net", "exec", tb_name, f"r{k}", "--", "ip", "route", "add",
+                   f"10.0.0.{o}/32", "dev", "wlan0", "scope", "link")  # fmt: skip
+
+        def ping(src, dst) -> int:
+            return tb("net", "exec", tb_name, f"r{src}", "--", "ping", "-c2", "-W1",
+                      f"10.0.0.{dst}").returncode  # fmt: skip
+
+        assert ping(1, 2) == 0 and ping(2, 3) == 0
+        assert tb("net", "impair", tb_name, "r1", "r2", "--loss", "100").returncode == 0
+        assert ping(1, 2) != 0, "link 1-2 drops everything"
+        assert ping(2, 3) == 0, "link 2-3 is untouched"
+        # The setting belongs to the link: it holds after the robots part and meet again.
+        assert tb("net", "move", tb_name, "r1", "-50", "0").returncode == 0
+        assert tb("net", "move", tb_name, "r1", "0", "0").returncode == 0
+        assert ping(1, 2) != 0
+        assert tb("net", "impair", tb_name, "r1", "r2").returncode == 0  # no option: clear
+        assert ping(1, 2) == 0
+        r = tb("net", "impair", tb_name, "r1", "r1", "--loss", "5")
+        assert r.returncode == 2 and "two different robots" in r.stderr
+    finally:
+        tb("net", "down", tb_name)

@@ -99,6 +99,8 @@ def test_nft_rules_name_the_link_end_and_threshold():
     rules = nft_loss_rules("l1x2", 20)
     assert "numgen random mod 10000 < 2000" in rules and '"l1x2" : jump loss-l1x2' in rules
     assert "delete chain bridge testbed loss-l1x2" in nft_unloss_rules("l1x2")
+    total = nft_loss_rules("l1x2", 100)
+    assert "numgen" not in total and "counter drop" in total
 
 
 def test_state_round_trip_and_ownership(tmp_path, monkeypatch):
