@@ -487,8 +487,12 @@ class AodvCore:
         self._send_rrep(now, fwd, rev.next_hop, out)
 
     def _rrep_ack(self, now: float, src: str) -> None:
+        # Decision: a RREP-ACK that arrives after NEXT_HOP_WAIT (a busy neighbour, not a
+        # unidirectional link) still proves the link works both ways: it lifts the
+        # blacklisting its absence caused.
         self.pending_acks.pop(src, None)
         self.bidirectional[src] = now
+        self.neighbors.unblacklist(src)
 
     def _expire_acks(self, now: float) -> None:
         # RFC 6.8: "...if the RREP-ACK is not received within NEXT_HOP_WAIT, the node

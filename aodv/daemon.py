@@ -305,18 +305,15 @@ class Daemon:
 
     # -- actions -------------------------------------------------------------------------
     def _execute(self, actions: list, now: float) -> None:
-        # Control messages first: they go to neighbours on the link and need no kernel
-        # route, so route installation stays off the discovery's critical path. The rest
-        # keeps the core's order (a Release follows the Install it needs).
+        # In the core's order: route changes first, so that a RREP never leaves before the
+        # route it announces is in the kernel (else data could overtake the install and
+        # draw a RERR). Installs are asynchronous rtnetlink writes, microseconds each.
         for a in actions:
             if isinstance(a, Unicast):
                 self._send(a.msg, a.dst, a.ttl, socket.MSG_DONTROUTE)
             elif isinstance(a, Broadcast):
                 self._send(a.msg, BROADCAST, a.ttl, 0)
-        for a in actions:
-            if isinstance(a, (Unicast, Broadcast)):
-                continue
-            if isinstance(a, InstallRoute):
+            elif isinstance(a, InstallRoute):
                 self.routes.install(a.dest, a.next_hop)
                 self.stats.route_installs += 1
                 log.info("route %s via %s (%d hops)", a.dest, a.next_hop, a.hops)

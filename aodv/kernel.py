@@ -126,15 +126,16 @@ class KernelRoutes:
         return [r.get("dst") for r in self.ipr.get_routes(family=2, proto=RTPROT_AODV)]
 
     def flush(self) -> int:
-        n = 0
-        for r in self.ipr.get_routes(family=2, proto=RTPROT_AODV):
-            try:
-                self.ipr.route("del", dst=f"{r.get('dst')}/{r['dst_len']}", proto=RTPROT_AODV)
-                n += 1
-            except NetlinkError as e:
-                if e.code not in (errno.ESRCH, errno.ENOENT):
-                    raise KernelError(f"flush route {r.get('dst')}: {e}") from e
-        return n
+        """Delete every route with our protocol number; return how many there were."""
+        found = [
+            (r.get("dst"), r["dst_len"]) for r in self.ipr.get_routes(family=2, proto=RTPROT_AODV)
+        ]
+        for dst, plen in found:
+            self.delete(dst, plen)
+        failures = self.read_acks()
+        if failures:
+            raise KernelError("; ".join(failures))
+        return len(found)
 
     def install(self, dest: str, next_hop: str) -> None:
         """`ip route replace DEST/32 [via NEXT onlink] dev IFACE proto RTPROT_AODV`."""
@@ -152,10 +153,10 @@ class KernelRoutes:
         flags = _NLM_F_REQUEST | _NLM_F_ACK | _NLM_F_REPLACE | _NLM_F_CREATE
         self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {dest} via {next_hop}")
 
-    def delete(self, dest: str) -> None:
-        """`ip route del DEST/32 proto RTPROT_AODV`; a route already gone is no error."""
+    def delete(self, dest: str, plen: int = 32) -> None:
+        """`ip route del DEST/PLEN proto RTPROT_AODV`; a route already gone is no error."""
         rtmsg = _RTMSG.pack(
-            socket.AF_INET, 32, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, _RT_SCOPE_NOWHERE, 0, 0
+            socket.AF_INET, plen, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, _RT_SCOPE_NOWHERE, 0, 0
         )
         attrs = self._attr(_RTA_DST, socket.inet_aton(dest))
         self._request(

@@ -66,6 +66,9 @@ class Neighbors:
     def blacklist(self, addr: str, until: float) -> None:
         self._blacklist[addr] = until
 
+    def unblacklist(self, addr: str) -> None:
+        self._blacklist.pop(addr, None)
+
     def blacklisted(self, addr: str, now: float) -> bool:
         until = self._blacklist.get(addr)
         if until is None:

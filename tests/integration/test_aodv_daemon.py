@@ -310,3 +310,23 @@ def _udp_counter(snmp: str, name: str) -> int:
     lines = [line.split() for line in snmp.splitlines() if line.startswith("Udp:")]
     header, values = lines[0], lines[1]
     return int(values[header.index(name)])
+
+
+def test_sigterm_writes_stats_and_leaves_no_kernel_state():
+    with aodv_net(CHAIN5[:2]) as net:
+        assert "0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
+        proc = daemon(net, 1)
+        assert routes(net, 1)
+        proc.terminate()
+        assert proc.wait(timeout=10) == 0
+        with open(stats_path(net, 1)) as f:
+            final = json.load(f)
+        assert final["robot"] == "r1" and final["discoveries_ok"] == 1
+        assert final["messages_sent"]["RREQ"] >= 1 and final["bytes_sent"] > 0
+        assert routes(net, 1) == {}
+        links = net.exec(1, ["ip", "-o", "link"], capture_output=True, text=True).stdout
+        assert "aodv0" not in links
+        nft = net.exec(1, ["nft", "list", "tables"], capture_output=True, text=True).stdout
+        assert "aodv" not in nft
+        log = open(f"{net.state_dir}/r1.aodv.log").read()
+        assert all(" r1 " in line for line in log.splitlines() if line.strip())

@@ -3,7 +3,7 @@
 import pytest
 
 from aodv.core import AodvCore, Broadcast, DeleteRoute, InstallRoute, Unicast
-from aodv.packet import Rerr, Rrep, Rreq
+from aodv.packet import Rerr, Rrep, RrepAck, Rreq
 from aodv.params import Params
 from aodv.sim import Medium, data_packet
 
@@ -227,6 +227,23 @@ def test_unidirectional_link_is_blacklisted_by_missing_rrep_ack():
     m.send_data(N1, "10.0.0.77")
     m.run_until(1.1)
     assert len(m.sent("RREQ", src=N2)) == before
+
+
+def test_late_rrep_ack_lifts_the_blacklist():
+    core = AodvCore(N2, Params(), 0.0)
+    core.on_control(0.0, N1, 5, Rreq(1, N3, 0, N1, 1, unknown_seq=True))
+    core.on_control(0.01, N3, 64, Rrep(N3, 1, N1, 6000))
+    assert N1 in core.pending_acks
+    core.on_timer(0.2)  # NEXT_HOP_WAIT (50 ms) passed without RREP-ACK
+    assert core.neighbors.blacklisted(N1, 0.2)
+    assert not [
+        a for a in core.on_control(0.3, N1, 5, Rreq(2, N4, 0, N1, 2)) if isinstance(a, Broadcast)
+    ]
+    core.on_control(0.4, N1, 64, RrepAck())
+    assert not core.neighbors.blacklisted(N1, 0.4)
+    assert [
+        a for a in core.on_control(0.5, N1, 5, Rreq(3, N4, 0, N1, 3)) if isinstance(a, Broadcast)
+    ]
 
 
 # -- RFC 6.9 / 6.10 HELLO -----------------------------------------------------------------
