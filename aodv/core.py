@@ -270,6 +270,8 @@ class AodvCore:
         # valid and greater than or equal to the Destination Sequence Number of the RREQ
         # ... and the 'destination only' ('D') flag is NOT set."
         # Decision: with the U flag the RREQ's number means nothing, any valid one will do.
+        # Decision: never answer with a route whose next hop is the node that asked (it
+        # would point the requester back through itself); forward the RREQ instead.
         fwd = self.table.valid(m.dest)
         if (
             fwd is not None

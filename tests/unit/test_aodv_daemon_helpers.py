@@ -1,0 +1,46 @@
+"""Pure helpers of the daemon: the ICMP error it injects, the address filter for peers."""
+
+import socket
+import struct
+
+import pytest
+
+from aodv import packet as wire
+from aodv.daemon import Daemon, _checksum, icmp_host_unreachable
+from aodv.params import Params
+
+
+def udp_packet(src, dst):
+    payload = b"hello world"
+    udp = struct.pack("!HHHH", 40000, 5555, 8 + len(payload), 0) + payload
+    hdr = struct.pack(
+        "!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), 1, 0, 64, 17, 0,
+        socket.inet_aton(src), socket.inet_aton(dst),
+    )  # fmt: skip
+    return hdr + udp
+
+
+def test_icmp_host_unreachable_quotes_header_and_8_bytes():
+    orig = udp_packet("10.0.0.1", "10.0.0.99")
+    pkt = icmp_host_unreachable("10.0.0.1", orig)
+    assert _checksum(pkt[:20]) == 0  # IP header checksum valid
+    assert pkt[9] == socket.IPPROTO_ICMP
+    assert pkt[12:16] == socket.inet_aton("10.0.0.1") and pkt[16:20] == orig[12:16]
+    icmp = pkt[20:]
+    assert icmp[0] == 3 and icmp[1] == 1  # destination unreachable, host unreachable
+    assert _checksum(icmp) == 0
+    assert icmp[8:] == orig[:28]
+    assert struct.unpack("!H", pkt[2:4])[0] == len(pkt)
+
+
+def test_peer_addresses_outside_the_network_are_malformed():
+    d = Daemon("r1", "wlan0", Params(), None, "10.0.0.0/16")
+    d._check_addresses("10.0.0.2", wire.Rreq(1, "10.0.0.5", 0, "10.0.0.1", 1))
+    for src, msg in [
+        ("10.0.0.2", wire.Rreq(1, "8.8.8.8", 0, "10.0.0.1", 1)),
+        ("10.0.0.2", wire.Rrep("10.0.0.5", 0, "224.0.0.1", 0)),
+        ("10.0.0.2", wire.Rerr((("10.0.255.255", 1),))),
+        ("192.168.1.1", wire.RrepAck()),
+    ]:
+        with pytest.raises(wire.MalformedPacket):
+            d._check_addresses(src, msg)
