@@ -330,3 +330,16 @@ def test_sigterm_writes_stats_and_leaves_no_kernel_state():
         assert "aodv" not in nft
         log = open(f"{net.state_dir}/r1.aodv.log").read()
         assert all(" r1 " in line for line in log.splitlines() if line.strip())
+
+
+def test_forwarded_packet_without_route_draws_rerr_and_rediscovery():
+    with aodv_net(CHAIN5[:3]) as net:
+        assert "0% packet loss" in ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
+        # Robot 2 loses its kernel route to 3 behind its daemon's back.
+        net.exec(2, ["ip", "route", "del", "10.0.0.3/32"], check=True)
+        out = ping(net, 1, "10.0.0.3", "-c", "3", "-i", "0.3", "-W", "3")
+        s2, s1 = stats(net, 2), stats(net, 1)
+        assert s2["messages_sent"].get("RERR", 0) >= 1
+        assert s1["messages_received"].get("RERR", 0) >= 1
+        assert s1["discoveries_ok"] >= 2  # the RERR made 1 discover the route again
+        assert "ttl=63" in out, out
