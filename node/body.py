@@ -6,7 +6,8 @@ namespace reaches it without crossing the emulated network. Messages (one datagr
 network byte order):
 
     robot -> world  HELLO  'H' u16 robot u8 role (0 robot, 1 display)
-    world -> robot  FRAME  'F' u32 step f32 x f32 y f32 theta u16 n, then n float32 ranges
+    world -> robot  FRAME  'F' u32 step f32 x f32 y f32 theta f64 sent u16 n, then n float32
+                           ranges (sent: the world's time.monotonic(), for latency stats)
     world -> robot  END    'E'                        (the run is over: finish and exit)
     robot -> world  CMD    'C' u32 step u8 go f32 x f32 y   (drive toward (x, y), or stop)
     robot -> world  DONE   'D' u32 step               (no reachable frontier left)
@@ -26,7 +27,7 @@ import numpy as np
 
 ROLE_ROBOT, ROLE_DISPLAY = 0, 1
 _HELLO = struct.Struct("!cHB")
-_FRAME = struct.Struct("!cIfffH")
+_FRAME = struct.Struct("!cIfffdH")
 _CMD = struct.Struct("!cIBff")
 _DONE = struct.Struct("!cI")
 MAX_DATAGRAM = 65536
@@ -39,16 +40,19 @@ class Frame:
     y: float
     theta: float
     ranges: np.ndarray
+    sent: float = 0.0
 
 
 def hello(robot: int, role: int) -> bytes:
     return _HELLO.pack(b"H", robot, role)
 
 
-def frame(step: int, x: float, y: float, theta: float, ranges: np.ndarray | None) -> bytes:
+def frame(
+    step: int, x: float, y: float, theta: float, ranges: np.ndarray | None, sent: float = 0.0
+) -> bytes:
     r = b"" if ranges is None else np.asarray(ranges, dtype=">f4").tobytes()
     n = 0 if ranges is None else len(ranges)
-    return _FRAME.pack(b"F", step, x, y, theta, n) + r
+    return _FRAME.pack(b"F", step, x, y, theta, sent, n) + r
 
 
 END = b"E"
@@ -75,12 +79,12 @@ def parse(data: bytes):
             _, robot, role = _HELLO.unpack(data)
             return ("hello", robot, role)
         if t == b"F":
-            _, step, x, y, theta, n = _FRAME.unpack_from(data)
+            _, step, x, y, theta, sent, n = _FRAME.unpack_from(data)
             body = data[_FRAME.size :]
             if len(body) != 4 * n:
                 raise ValueError("frame length does not match its ray count")
             ranges = np.frombuffer(body, dtype=">f4").astype(np.float32)
-            return ("frame", Frame(step, x, y, theta, ranges))
+            return ("frame", Frame(step, x, y, theta, ranges, sent))
         if t == b"E":
             return ("end",)
         if t == b"C":

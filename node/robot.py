@@ -137,6 +137,8 @@ class Robot:
         self.last_full = -(10**9)
         self.plan_ms: list[float] = []
         self.busy: Counter[str] = Counter()  # thread CPU seconds per part
+        # Wall seconds: world send -> frame received; frame received -> command sent.
+        self.latency: dict[str, list[float]] = {"delivery": [], "answer": []}
         self.threads: list[threading.Thread] = []
 
     # -- the five parts ---------------------------------------------------------------------
@@ -179,6 +181,14 @@ class Robot:
             cpu_s=round(time.process_time(), 3),
             max_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             busy_s={k: round(v, 3) for k, v in self.busy.items()},
+            latency_ms={
+                k: {
+                    q: round(float(np.percentile(v, p)) * 1000, 2)
+                    for q, p in (("p50", 50), ("p90", 90), ("p99", 99), ("max", 100))
+                }
+                for k, v in self.latency.items()
+                if v
+            },
             finished=self.s.finished,
         )
 
@@ -198,6 +208,7 @@ class Robot:
             f: body.Frame = msg[1]
             self.frames += 1
             t_frame = time.thread_time()
+            t_in = time.monotonic()
             # A robot standing still sees nothing new (the world is static): skip the update.
             moved = (f.x, f.y) != last_xy
             last_xy = (f.x, f.y)
@@ -221,6 +232,10 @@ class Robot:
             else:
                 self.link.send(body.cmd(f.step, target))
             self.busy["motion"] += time.thread_time() - t_frame
+            t_out = time.monotonic()
+            if f.sent > 0:
+                self.latency["delivery"].append(t_in - f.sent)
+            self.latency["answer"].append(t_out - t_in)
             with self.tick:
                 self.tick.notify_all()
             if not started:

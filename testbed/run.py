@@ -354,12 +354,13 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
     cpu0 = time.process_time()
 
     def send_frames(step: int) -> None:
+        now = time.monotonic()
         for k in range(1, n + 1):
             r = robots[k]
             if r.crashed:
                 continue
             b = world.bodies[k - 1]
-            server.send(k, body.frame(step, b.x, b.y, b.theta, scans[k - 1]))
+            server.send(k, body.frame(step, b.x, b.y, b.theta, scans[k - 1], now))
         server.send(display_k, body.frame(step, display_pos[0], display_pos[1], 0.0, None), True)
 
     send_frames(0)
@@ -546,6 +547,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
             plan_ms_median=summary.get("plan_ms_median"),
             cpu_s=summary.get("cpu_s"), max_rss_mb=summary.get("max_rss_mb"),
             busy_s=summary.get("busy_s"), frames=summary.get("frames"),
+            latency_ms=summary.get("latency_ms"),
         )  # fmt: skip
         _write_json(os.path.join(out, "robots", f"r{k}.json"), detail_rec)
     missed = missed_world + sum(r.missed for r in robots.values())
