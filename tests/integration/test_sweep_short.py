@@ -78,7 +78,9 @@ def test_short_profile_end_to_end(tmp_path):
     routing = json.loads((figs / "routing_runs.json").read_text())
     assert len(routing) == 6
     for row in routing:
-        assert row["control_tx_packets"] > 0 and 0 < row["overhead_packets"] < 1
+        assert 0 <= row["overhead_packets"] < 1
+        if row["robots"] > 1:  # a lone robot has nobody to route to: no AODV traffic at all
+            assert row["control_tx_packets"] > 0 and row["pdf"] > 0
         if row["daemon_relative_difference"] is not None:
             assert row["daemon_relative_difference"] <= 0.01, row
 
