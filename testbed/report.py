@@ -50,6 +50,24 @@ RHO_MIN = 0.8
 DAEMON_AGREEMENT = 0.01
 
 
+RULES = (
+    "team work beats one robot: in a group with a one-robot point, every larger team needs "
+    "fewer steps than one robot;",
+    "fall then rise: in a group with three or more team sizes, the fewest steps are at a team "
+    "size strictly between the smallest and the largest;",
+    "smaller range: for each team of two or more, the smallest range needs more steps than the "
+    "largest;",
+    "shorter laser: the shorter laser needs more steps at every (range, team), and the ratio of "
+    f"the two lasers' steps varies across team sizes by at most {RATIO_CV_MAX:.0%} (CV);",
+    f"timer: at least {TIMER_SHARE_MIN:.0%} of a lone robot's plan generations after its first "
+    "are on the timer;",
+    "on request: the mean number of on-request plan generations per run rises with team size "
+    f"(Spearman rank correlation at least {RHO_MIN});",
+    "a claim holds when it holds in every group with the data, partly when in some, and does "
+    "not hold when in none.",
+)
+
+
 @dataclass
 class Verdict:
     section: str
@@ -113,9 +131,12 @@ def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
         lo, hi = min(pts), max(pts)
         ok = lo < best < hi
         results.append(ok)
+        note = ""
+        if best == hi:
+            note = f" (no rise up to {hi} robots: the sweep may stop short of the turning point)"
         v.evidence.append(
             f"{_group_name(laser, comm)}: fewest steps {pts[best]:.0f} with {best} robots; "
-            f"{pts[lo]:.0f} with {lo}, {pts[hi]:.0f} with {hi} -> {'yes' if ok else 'no'}"
+            f"{pts[lo]:.0f} with {lo}, {pts[hi]:.0f} with {hi} -> {'yes' if ok else 'no'}{note}"
         )
     v.verdict = _overall(results)
     return v
@@ -379,6 +400,12 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
         out += [f"### {v.section}: {v.claim} — {v.verdict}", ""]
         out += [f"- {e}" for e in v.evidence] or ["- (no runs with the points this claim needs)"]
         out.append("")
+    out += [
+        "How the verdicts are decided (steps: mean over runs of each run's exploration "
+        "steps; a group: one laser and communication range):",
+        "",
+    ]
+    out += [f"- {rule}" for rule in RULES] + [""]
     out += ["## Figures", ""]
     for name, caption in (
         ("fig2a", "Fig. 2(a): exploration steps against team size, first laser range"),
