@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import queue
 import resource
 import threading
@@ -94,6 +95,32 @@ class Shared:
     teammates: dict[int, Teammate] = field(default_factory=dict)
 
 
+def _fatal_on_error(fn, name: str):
+    """A part that dies takes the robot with it (exit status 3): a robot without its planner
+    or inbox would idle until the step cap, while a dead process is recorded as a crash."""
+
+    def guarded():
+        prof_dir = os.environ.get("NODE_PROFILE_DIR")  # development aid: cProfile per part
+        prof = None
+        if prof_dir:
+            import cProfile
+
+            prof = cProfile.Profile()
+            prof.enable()
+        try:
+            fn()
+        except Exception:
+            log.exception("the %s part failed; the robot stops", name)
+            logging.shutdown()
+            os._exit(3)
+        finally:
+            if prof is not None:
+                prof.disable()
+                prof.dump_stats(os.path.join(prof_dir, f"{os.getpid()}.{name}.prof"))
+
+    return guarded
+
+
 def _grow_box(a, b):
     if a is None:
         return b
@@ -151,13 +178,13 @@ class Robot:
             ("processing", self._processing),
             ("inbox", self._inbox),
         ):
-            t = threading.Thread(target=fn, name=name, daemon=True)
+            t = threading.Thread(target=_fatal_on_error(fn, name), name=name, daemon=True)
             t.start()
             self.threads.append(t)
         for j in self.s.teammates:
             self.goals.connect(j)
         try:
-            self._motion()
+            _fatal_on_error(self._motion, "motion")()
         finally:
             self.stop()
 
@@ -197,7 +224,12 @@ class Robot:
         started = False
         last_xy = None
         while not self.stopping.is_set():
-            msg = self.link.recv(timeout=0.5)
+            try:
+                msg = self.link.recv(timeout=0.5)
+            except ValueError as e:
+                self.malformed += 1
+                log.warning("dropped a malformed body message: %s", e)
+                continue
             if msg is None:
                 continue
             if msg[0] == "end":
