@@ -1,6 +1,6 @@
 """Frontier detection and path planning: pure functions of a ternary map and a pose.
 
-Theory of operation (after m-explore's frontier_search, but on a grid with numpy/OpenCV):
+Theory of operation (after m-explore's frontier_search, but on a grid with numpy):
 
 1. *Planning grid.* The 5 cm ternary map is pooled into planning cells of `factor` x `factor`
    map cells (10 cm by default): a planning cell is occupied if any of its map cells is, free if
@@ -26,12 +26,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from node.grid import FREE, OCC, UNKNOWN
 
-_CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=np.uint8)
 _SQUARE = np.ones((3, 3), dtype=np.uint8)
 _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1))
 
@@ -87,26 +86,38 @@ def disc(radius: int) -> np.ndarray:
     return ((yy * yy + xx * xx) <= r * r).astype(np.uint8)
 
 
+def dilate(mask: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Binary dilation of a bool array by a small odd-sized kernel; outside counts as False.
+
+    One OR of shifted views per kernel cell (numpy only: robots need not load OpenCV).
+    """
+    kh, kw = kernel.shape
+    ry, rx = kh // 2, kw // 2
+    h, w = mask.shape
+    padded = np.zeros((h + 2 * ry, w + 2 * rx), dtype=bool)
+    padded[ry : ry + h, rx : rx + w] = mask
+    out = np.zeros((h, w), dtype=bool)
+    for dy, dx in zip(*np.nonzero(kernel), strict=True):
+        out |= padded[dy : dy + h, dx : dx + w]
+    return out
+
+
 def traversable(p: np.ndarray, inflate: int) -> np.ndarray:
     """Free planning cells not within `inflate` cells of an occupied one (bool)."""
-    occ = (p == OCC).astype(np.uint8)
+    occ = p == OCC
     if inflate > 0:
-        occ = cv2.dilate(occ, disc(inflate))
-    return (p == FREE) & (occ == 0)
+        occ = dilate(occ, disc(inflate))
+    return (p == FREE) & ~occ
 
 
 def frontiers(t: np.ndarray) -> np.ndarray:
     """Classic frontier cells of a ternary map: free cells with a 4-neighbour unknown (bool)."""
-    unknown = (t == UNKNOWN).astype(np.uint8)
-    near = cv2.dilate(unknown, _CROSS, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    return (t == FREE) & (near > 0)
+    return (t == FREE) & dilate(t == UNKNOWN, _CROSS)
 
 
 def frontier_goals(p: np.ndarray, trav: np.ndarray) -> np.ndarray:
     """Cells a robot can stand at next to the unknown: traversable with an unknown 8-neighbour."""
-    unknown = (p == UNKNOWN).astype(np.uint8)
-    near = cv2.dilate(unknown, _SQUARE, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    return trav & (near > 0)
+    return trav & dilate(p == UNKNOWN, _SQUARE)
 
 
 def exclusion_mask(
