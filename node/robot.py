@@ -159,6 +159,7 @@ class Robot:
         self.received: Counter[str] = Counter()
         self.failed: Counter[str] = Counter()
         self.malformed = 0
+        self.inbox_dropped = 0
         self.frames = 0
         self.skipped = 0
         self.last_full = -(10**9)
@@ -204,6 +205,7 @@ class Robot:
             flood=dict(self.flooder.counts),
             frames=self.frames,
             frames_skipped=self.skipped,
+            inbox_dropped=self.inbox_dropped,
             plan_ms_median=float(np.median(self.plan_ms)) if self.plan_ms else None,
             cpu_s=round(time.process_time(), 3),
             max_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
@@ -419,12 +421,18 @@ class Robot:
         try:
             while not self.stopping.is_set():
                 ready, _, _ = select.select(fds, [], [], 0.5)
+                batch = []
                 if self.flooder.fileno() in ready:
-                    for h, payload in self.flooder.receive():
-                        out.send(b"F" + wire.pack_flood(h, payload))
+                    batch += [b"F" + wire.pack_flood(h, p) for h, p in self.flooder.receive()]
                 if self.goals.fileno() in ready:
-                    for data in self.goals.receive():
-                        out.send(b"G" + data)
+                    batch += [b"G" + data for data in self.goals.receive()]
+                for data in batch:
+                    try:
+                        out.send(data)
+                    except (pynng.Timeout, pynng.Closed):
+                        if self.stopping.is_set():
+                            return  # message processing has shut down
+                        self.inbox_dropped += 1  # processing is stuck: drop, never block
         finally:
             out.close()
 
