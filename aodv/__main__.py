@@ -12,6 +12,18 @@ EXIT_USAGE = 2
 EXIT_FAILURE = 1
 
 
+class RobotFormatter(logging.Formatter):
+    """Puts the robot's name on every line, traceback lines included."""
+
+    def __init__(self, robot: str) -> None:
+        super().__init__("%(asctime)s %(name)s %(levelname)s %(message)s")
+        self.robot = robot
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        return "\n".join(f"{self.robot} {line}" for line in text.splitlines())
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit status 2
         print(f"aodv: error: {message}", file=sys.stderr)
@@ -66,11 +78,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    logging.basicConfig(
-        level=args.log_level.upper(),
-        format=f"%(asctime)s {args.robot} %(name)s %(levelname)s %(message)s",
-        stream=sys.stderr,
-    )
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(RobotFormatter(args.robot))
+    logging.basicConfig(level=args.log_level.upper(), handlers=[handler])
     if os.geteuid() != 0:
         print("aodv: error: needs root (CAP_NET_ADMIN) in the robot's namespace", file=sys.stderr)
         return EXIT_USAGE

@@ -182,7 +182,12 @@ class AodvCore:
     def on_no_route(self, now: float, src: str, dst: str, packet: bytes) -> list[Action]:
         """A data packet from `src` to `dst` found no kernel route."""
         out: list[Action] = []
-        if src == self.addr:
+        if self.table.valid(dst) is not None:
+            # We hold a valid route the kernel has lost (removed behind our back): install
+            # it again and send the packet on, whoever sent it.
+            self._installed.pop(dst, None)
+            out.append(ReleasePackets(dst, (packet,)))
+        elif src == self.addr:
             self._originate(now, dst, packet, out)
         else:
             self._forward_without_route(now, dst, out)
@@ -552,10 +557,6 @@ class AodvCore:
 
     # == RFC 6.3 / 6.4 route discovery ====================================================
     def _originate(self, now: float, dst: str, packet: bytes, out: list[Action]) -> None:
-        if self.table.valid(dst) is not None:
-            # The kernel route appeared while the packet was on its way to us.
-            out.append(ReleasePackets(dst, (packet,)))
-            return
         overflow = self.queue.push(dst, packet)
         if overflow is not None:
             out.append(DropPackets(dst, (overflow,)))
@@ -674,10 +675,6 @@ class AodvCore:
         r = self.table.get(dst)
         if r is None:
             r = self.table.add(Route(dst, dst, 0, 0, False, now + self.p.delete_period, False))
-        elif r.valid:
-            if r.valid_seq:
-                r.seq = seqnum.increment(r.seq)
-            self._invalidate(r, now)
         # Decision: with no precursor known for the destination (the packet's previous hop
         # is hidden from us), the RERR is broadcast with TTL 1; neighbours without a route
         # through us to `dst` ignore it (RFC 6.11 case iii only acts on such routes).

@@ -45,8 +45,9 @@ def aodv_net(positions, time_scale=1.0, capture_dir=None):
 
 
 def daemon(net, k):
-    for proc in net.children.values():
-        if "aodv" in proc.args and f"r{k}" in proc.args:
+    """The live AODV daemon of robot k (the newest, if it was restarted)."""
+    for proc in reversed(list(net.children.values())):
+        if "aodv" in proc.args and f"r{k}" in proc.args and proc.poll() is None:
             return proc
     raise AssertionError(f"no AODV daemon for robot {k}")
 
@@ -208,7 +209,7 @@ def test_unknown_destination_icmp_unreachable_others_unaffected():
 
 def test_idle_route_expires_active_route_stays():
     with aodv_net(CHAIN5[:4], time_scale=5.0) as net:
-        assert "0% packet loss" in ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
+        assert " 0% packet loss" in ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
         pinger = net.spawn(
             1, ["ping", "-n", "-i", "0.05", "-c", "60", "10.0.0.3"],
             role="test", stdout=subprocess.DEVNULL,
@@ -267,7 +268,7 @@ FUZZER = textwrap.dedent("""
 
 def test_fuzzed_datagrams_are_counted_and_change_nothing():
     with aodv_net(CHAIN5[:3]) as net:
-        assert "0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
         # Keep 2's one route in use so that its table is stable while it is fuzzed.
         keep = net.spawn(2, ["ping", "-n", "-i", "0.2", "10.0.0.3"], role="test",
                          stdout=subprocess.DEVNULL)  # fmt: skip
@@ -301,7 +302,7 @@ def test_fuzzed_datagrams_are_counted_and_change_nothing():
         assert lost < sent // 10
         assert s2["dropped"].get("error", 0) == 0
         assert routes(net, 2) == before
-        assert "0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
         keep.terminate()
         keep.wait(timeout=5)
 
@@ -314,7 +315,7 @@ def _udp_counter(snmp: str, name: str) -> int:
 
 def test_sigterm_writes_stats_and_leaves_no_kernel_state():
     with aodv_net(CHAIN5[:2]) as net:
-        assert "0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
+        assert " 0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
         proc = daemon(net, 1)
         assert routes(net, 1)
         proc.terminate()
@@ -329,17 +330,70 @@ def test_sigterm_writes_stats_and_leaves_no_kernel_state():
         nft = net.exec(1, ["nft", "list", "tables"], capture_output=True, text=True).stdout
         assert "aodv" not in nft
         log = open(f"{net.state_dir}/r1.aodv.log").read()
-        assert all(" r1 " in line for line in log.splitlines() if line.strip())
+        assert all(line.startswith("r1 ") for line in log.splitlines() if line.strip())
 
 
 def test_forwarded_packet_without_route_draws_rerr_and_rediscovery():
     with aodv_net(CHAIN5[:3]) as net:
-        assert "0% packet loss" in ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
-        # Robot 2 loses its kernel route to 3 behind its daemon's back.
-        net.exec(2, ["ip", "route", "del", "10.0.0.3/32"], check=True)
+        assert " 0% packet loss" in ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
+        # Robot 2's daemon restarts cleanly: its routes are gone, 1 and 3 still use it.
+        old = daemon(net, 2)
+        old.terminate()
+        assert old.wait(timeout=10) == 0
+        os.remove(stats_path(net, 2))
+        net.spawn(
+            2, [PY, "-m", "aodv", "--robot", "r2", "--stats", stats_path(net, 2)],
+            role="aodv", cwd=REPO, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        while not os.path.exists(stats_path(net, 2)):
+            time.sleep(0.05)
         out = ping(net, 1, "10.0.0.3", "-c", "3", "-i", "0.3", "-W", "3")
         s2, s1 = stats(net, 2), stats(net, 1)
+        # RFC 6.11 (ii): 2 gets data for 3 with no route and says so with a RERR.
         assert s2["messages_sent"].get("RERR", 0) >= 1
         assert s1["messages_received"].get("RERR", 0) >= 1
         assert s1["discoveries_ok"] >= 2  # the RERR made 1 discover the route again
         assert "ttl=63" in out, out
+
+
+def test_restart_after_crash_applies_the_reboot_rule():
+    # Time scale 10: DELETE_PERIOD is 1.5 s.
+    with aodv_net(CHAIN5[:2], time_scale=10.0) as net:
+        assert " 0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
+        old = daemon(net, 2)
+        old.kill()  # no teardown: its routes stay in the kernel
+        old.wait(timeout=5)
+        assert routes(net, 2)
+        os.remove(stats_path(net, 2))
+        new = net.spawn(
+            2, [PY, "-m", "aodv", "--robot", "r2", "--time-scale", "10",
+                "--stats", stats_path(net, 2)],
+            role="aodv", cwd=REPO, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 20
+        line, reboot_logged = "", False
+        while "AODV up" not in line and time.monotonic() < deadline:
+            line = new.stderr.readline()
+            if "reboot rule" in line:
+                reboot_logged = True
+        assert reboot_logged
+        t_up = time.monotonic()
+        deadline = t_up + 10
+        while "10.0.0.2" in routes(net, 1) and time.monotonic() < deadline:
+            time.sleep(0.05)  # 1's old route to 2 times out (HELLO loss, lifetime)
+        t_ping = time.monotonic()
+        assert t_ping < t_up + 1.3, "too slow to test the wait"
+        out = ping(net, 1, "10.0.0.2", "-c", "8", "-i", "0.4", "-W", "5")
+        replies = [
+            (int(q), float(t) / 1000)
+            for q, t in re.findall(r"icmp_seq=(\d+) ttl=\d+ time=([\d.]+) ms", out)
+        ]
+        assert replies, out
+        # 1's RREQs reach 2 from the start; 2 answers only once DELETE_PERIOD (1.5 s) is
+        # over, so no reply can come earlier (0.1 s of slack for reading the clocks).
+        for seq, rtt in replies:
+            assert t_ping + 0.4 * (seq - 1) + rtt >= t_up + 1.5 - 0.1, (t_ping - t_up, out)
+        s2 = stats(net, 2)
+        assert s2["messages_received"].get("RREQ", 0) >= 2
+        new.terminate()
+        new.wait(timeout=10)

@@ -38,3 +38,17 @@ def test_bad_cli_is_one_line_and_status_2(argv):
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_every_log_line_names_the_robot_even_tracebacks():
+    import logging
+
+    from aodv.__main__ import RobotFormatter
+
+    try:
+        raise RuntimeError("boom")
+    except RuntimeError:
+        rec = logging.LogRecord("aodv.x", logging.ERROR, __file__, 1, "failed %s", ("x",), None)
+        rec.exc_info = sys.exc_info()
+    lines = RobotFormatter("r7").format(rec).splitlines()
+    assert len(lines) > 3 and all(line.startswith("r7 ") for line in lines)

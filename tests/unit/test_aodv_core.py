@@ -2,13 +2,21 @@
 
 import pytest
 
-from aodv.core import AodvCore, Broadcast, DeleteRoute, InstallRoute, Unicast
+from aodv.core import (
+    AodvCore,
+    Broadcast,
+    DeleteRoute,
+    InstallRoute,
+    ReleasePackets,
+    Unicast,
+)
 from aodv.packet import Rerr, Rrep, RrepAck, Rreq
 from aodv.params import Params
 from aodv.sim import Medium, data_packet
 
 A = [f"10.0.0.{i}" for i in range(1, 11)]
 N1, N2, N3, N4, N5, N6 = A[:6]
+N9 = A[8]
 
 
 def chain(n=5, **kw):
@@ -313,6 +321,17 @@ def test_rerr_on_forwarded_data_without_route():
     # 2 has 3 as next hop to 5: invalidates and passes it to its precursor 1.
     assert [s for s in m.sent("RERR") if s.src == N2 and s.dst == N1]
     assert N5 not in m.nodes[N1].kernel
+
+
+def test_kernel_route_lost_behind_our_back_is_reinstalled():
+    core = AodvCore(N1, Params(), 0.0)
+    acts = core.on_control(0.0, N2, 64, Rrep(N5, 3, N1, 6000, hop_count=3))
+    assert InstallRoute(N5, N2, 4) in acts
+    acts = core.on_no_route(0.1, N1, N5, b"pkt")
+    assert acts[0] == InstallRoute(N5, N2, 4)
+    assert acts[1:] == [ReleasePackets(N5, (b"pkt",))]
+    acts = core.on_no_route(0.2, N9, N5, b"fwd")  # forwarded: same repair, no RERR
+    assert acts == [InstallRoute(N5, N2, 4), ReleasePackets(N5, (b"fwd",))]
 
 
 def test_rerr_from_someone_not_our_next_hop_is_ignored_and_n_flag():
