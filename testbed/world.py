@@ -113,7 +113,9 @@ class World:
         first[~any_hit] = self.laser.n_samples
         ranges = np.full(self.laser.n_rays, np.inf, dtype=np.float32)
         ranges[any_hit] = ((first[any_hit] + 1) * self.laser.step).astype(np.float32)
-        self.seen_padded.reshape(-1)[flat[self._k <= first[:, None]]] = True
+        self.seen_padded.reshape(-1)[flat[self.laser.mark & (self._k <= first[:, None])]] = True
+        hits = np.flatnonzero(any_hit)
+        self.seen_padded.reshape(-1)[flat[hits, first[hits]]] = True
         self._last_scan[k] = ((b.x, b.y), ranges)
         return ranges
 

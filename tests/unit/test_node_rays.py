@@ -67,3 +67,13 @@ def test_scan_shape_mismatch_is_rejected():
     laser = Laser(n_rays=10)
     with pytest.raises(ValueError):
         laser.scan_cells(1.0, 1.0, np.ones(11, dtype=np.float32), 100)
+
+
+def test_thinned_samples_mark_the_same_cells_as_all_samples():
+    laser = Laser(max_range=2.0, n_rays=360, cell=0.05)
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        x, y = rng.uniform(2.0, 3.0, 2)
+        flat = laser.flat_cells(x, y, 200)
+        assert set(np.unique(flat[laser.mark]).tolist()) == set(np.unique(flat).tolist())
+    assert laser.mark.sum() < 0.7 * laser.mark.size
