@@ -19,6 +19,27 @@ a diff of the valid routing-table entries against what was already installed, an
 first in every returned list, so a Release always follows the Install it needs.
 
 Where the RFC leaves a choice, the decision is written next to the rule as "Decision:".
+The main ones, for a reader in a hurry:
+
+- MY_ROUTE_TIMEOUT = 2 * ACTIVE_ROUTE_TIMEOUT = 6 s (section 10 table; ns-3 uses 11.2 s),
+  DELETE_PERIOD = 5 * max(ACTIVE_ROUTE_TIMEOUT, HELLO_INTERVAL): see params.py.
+- HELLO extension type 1 (RFC 9.1, IANA); Wireshark's 2 accepted on receipt: packet.py.
+- RREP IP TTL 64 (unicast to the next hop, which re-originates it); HELLO and multi-
+  precursor RERR use IP TTL 1 to 255.255.255.255, the limited broadcast (robots have /32
+  addresses, there is no subnet broadcast).
+- Destination sequence number in a RREP: max(own, RREQ's) as RFC 6.1 says (6.6.1's
+  "increment if equal" is a special case of it).
+- G flag set on every RREQ (our traffic is bidirectional), D flag off unless configured.
+- A flag (RREP-ACK request) on a RREP to a neighbour not yet shown to hear us; a late
+  RREP-ACK lifts the blacklisting.
+- RERR for a forwarded packet with no route and no known precursor: broadcast, TTL 1.
+- HELLOs only from nodes on an active route (set up by a reply or used by data), and at
+  most HELLO_INTERVAL after the node's last broadcast.
+- Reboot rule (6.13): applied when the daemon finds routes of a dead predecessor in the
+  kernel; during the wait the node learns routes but sends no RREP and forwards no
+  control message; it may still originate RREQs.
+- RREQs over RREQ_RATELIMIT are delayed; RERRs over RERR_RATELIMIT are dropped.
+
 Local repair (RFC 6.12) is not implemented, so the N flag is never set, and a received
 RERR with N set changes nothing.
 """
