@@ -9,6 +9,7 @@ import importlib
 import importlib.util
 import logging
 import os
+import signal
 import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
@@ -341,7 +342,12 @@ def dispatch(args) -> int:
     return importlib.import_module(DELEGATED[args.cmd][0]).main(args)
 
 
+def _stop_on_sigterm(signum, frame) -> None:
+    raise KeyboardInterrupt  # unwinds like Ctrl-C: every testbed is torn down on the way out
+
+
 def main(argv: list[str] | None = None) -> int:
+    signal.signal(signal.SIGTERM, _stop_on_sigterm)
     try:
         args = build_parser().parse_args(argv)
         logging.basicConfig(

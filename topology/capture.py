@@ -3,9 +3,12 @@
 Capturing on wlan0 records exactly what the robot's radio sent and received, which is what
 the routing metrics are computed from. tcpdump is started before the routing daemons so the
 first HELLO is in the file, and we wait for its "listening on" line so nothing is missed.
-`-U` writes each packet as it comes, so a killed run still leaves readable pcaps; `-Z root`
-keeps Debian's tcpdump from dropping privileges and failing to write into a root-owned
-directory.
+`--immediate-mode` hands each packet to tcpdump as it arrives (libpcap otherwise delivers
+blocks on a 1 s timeout, and stopping tcpdump loses the block in progress: the last HELLOs
+went missing), `-U` writes each packet as it comes, so a killed run still leaves readable
+pcaps, and `-Z root` keeps Debian's tcpdump from dropping privileges and failing to write
+into a root-owned directory. At teardown tcpdump is stopped after everything else, so the
+routing daemons' last words are in the file.
 """
 
 import os
@@ -22,7 +25,8 @@ def pcap_path(capture_dir: str, k: int) -> str:
 
 def tcpdump_argv(capture_dir: str, k: int) -> list[str]:
     return [
-        "tcpdump", "-i", names.ROBOT_IFACE, "-n", "-s", "0", "-U", "-Z", "root",
+        "tcpdump", "-i", names.ROBOT_IFACE, "-n", "-s", "0", "-U", "--immediate-mode",
+        "-Z", "root",
         "-w", pcap_path(capture_dir, k),
     ]  # fmt: skip
 

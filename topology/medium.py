@@ -163,18 +163,19 @@ class Medium:
 
     # -- robots -----------------------------------------------------------------------------
 
-    def add_robots(self, ks: list[int]) -> None:
-        """Per robot K: bridge brK, and the veth rpK <-> wlan0, wlan0 made in K's namespace.
-        The robots' own side is configure_robots()."""
+    def add_bridges(self, ks: list[int]) -> None:
+        """Bridge brK per robot K."""
+        self._send([(_bridge(k), f"create {names.bridge(k)}") for k in ks])
+
+    def add_robot_ports(self, ks: list[int]) -> None:
+        """Per robot K: the veth rpK <-> wlan0, rpK in bridge K and wlan0 made in K's
+        namespace. The robots' own side is configure_robots()."""
         fds = {k: os.open(netns.path(names.robot_ns(self.testbed, k)), os.O_RDONLY) for k in ks}
         try:
-            reqs = []
-            for k in ks:
-                reqs.append((_bridge(k), f"create {names.bridge(k)}"))
-                reqs.append(
-                    (_robot_veth(k, fds[k]), f"create {names.robot_port(k)} and r{k}'s wlan0")
-                )
-            self._send(reqs)
+            self._send([
+                (_robot_veth(k, fds[k]), f"create {names.robot_port(k)} and r{k}'s wlan0")
+                for k in ks
+            ])  # fmt: skip
         finally:
             for fd in fds.values():
                 os.close(fd)

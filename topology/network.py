@@ -35,6 +35,7 @@ from topology.spec import Impairment, NetworkSpec, Position
 log = logging.getLogger(__name__)
 
 Pair = tuple[int, int]
+CAPTURE_DRAIN_S = 0.2  # lets tcpdump read what is still queued for it before it stops
 
 
 class Network:
@@ -98,13 +99,8 @@ class Network:
     def _build(self) -> None:
         t0 = time.perf_counter()
         os.makedirs(self.state_dir, exist_ok=True)
-        for ns in [names.medium_ns(self.name)] + [
-            names.robot_ns(self.name, k) for k in self.spec.robot_ids()
-        ]:
-            try:
-                netns.create(ns)
-            except FileExistsError:
-                raise UsageError(f"namespace {ns} already exists (try `testbed clean`)") from None
+        robots = list(self.spec.robot_ids())
+        self._create_namespace(names.medium_ns(self.name))
         self.medium.open()
         self.medium.setup()
         if not self.spec.impairment.is_none:
@@ -114,11 +110,14 @@ class Network:
                 raise UsageError(str(exc)) from None
             if not self.medium.impairer.netem and shutil.which("nft") is None:
                 raise UsageError("loss without sch_netem needs nftables: `nft` is not installed")
-        robots = list(self.spec.robot_ids())
-        self.medium.add_robots(robots)
-        # The kernel brings new links' carriers up in the background: configure the robots
-        # meanwhile; _apply_positions waits for the links before it switches them on.
+        # The kernel brings new veths' carriers up in the background (linkwatch), which at 50
+        # robots takes longer than all the rest: links first, then the robots' namespaces and
+        # interfaces meanwhile; _apply_positions waits for the links before switching them on.
+        self.medium.add_bridges(robots)
         self.medium.create_pairs(sorted(self.wanted()))
+        for k in robots:
+            self._create_namespace(names.robot_ns(self.name, k))
+        self.medium.add_robot_ports(robots)
         self.medium.configure_robots(robots)
         self._apply_positions()
         if self.spec.capture_dir:
@@ -128,6 +127,13 @@ class Network:
             "%s: %d robots, %d links up in %.0f ms",
             self.name, self.spec.robots, len(self.current), 1000 * (time.perf_counter() - t0),
         )  # fmt: skip
+
+    @staticmethod
+    def _create_namespace(ns: str) -> None:
+        try:
+            netns.create(ns)
+        except FileExistsError:
+            raise UsageError(f"namespace {ns} already exists (try `testbed clean`)") from None
 
     def _start_captures(self) -> None:
         cdir = self.spec.capture_dir
@@ -300,7 +306,12 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
     st = state.read(name)
     namespaces = our_namespaces(name)
     if st is not None:
-        processes.stop(st.processes, children)
+        # Captures last: what the daemons send as they stop belongs in the pcaps.
+        last = [p for p in st.processes if p.role == "tcpdump"]
+        processes.stop([p for p in st.processes if p.role != "tcpdump"], children)
+        if last:
+            time.sleep(CAPTURE_DRAIN_S)
+            processes.stop(last, children)
     stray = [
         pid for ns in namespaces for pid in processes.pids_in_namespace(ns) if pid != os.getpid()
     ]
