@@ -34,7 +34,7 @@ from testbed.world import World
 from testbed.worldmap import empty_terrain, free_space, start_positions
 
 RUN_STEPS = 300
-SCALES = (2.0, 3.0, 5.0, 8.0)
+SCALES = (1.0, 2.0, 3.0, 5.0, 8.0)
 MAX_SIM_STEPS = 6000
 
 
