@@ -52,6 +52,7 @@ from testbed.worldmap import empty_terrain, free_space, load_png, start_position
 log = logging.getLogger(__name__)
 
 STEP_S = 0.1  # emulated seconds per step
+DEFAULT_SNAPSHOTS = (100, 250, 500, 1000, 2000)  # display PNGs (plus one at the end)
 ROUTINGS = ("babel", "aodv", "none")
 PROJECT_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -148,7 +149,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--laser-rays", type=_number(int, 4, name="laser rays"), default=360)
     a("--speed", type=_number(float, 0, True, "speed"), default=1.0, help="m/s")
     a("--display-pos", type=_point, help="X,Y of the display (default: map centre)")
-    a("--snapshots", type=_steps, default=(), help="display snapshot steps, e.g. 200,600")
+    a("--snapshots", type=_steps, default=(),
+      help="display snapshot steps, e.g. 200,600 (default 100,250,500,1000,2000; always one "
+           "at the end)")  # fmt: skip
     a("--kill", type=_kill, action="append", default=[], help="ROBOT:STEP, SIGKILL (testing)")
     a("--name", help="testbed name (default: random 'run' + 4 hex digits)")
     a("--quiet", action="store_true", help="no progress line")
@@ -293,7 +296,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
                         k, argv, role="robot", stdout=logf, stderr=subprocess.STDOUT, env=env
                     )
             with open(os.path.join(out, "display", "display.log"), "w") as logf:
-                snaps = ",".join(str(s) for s in cfg.snapshots) or "0"
+                snaps = ",".join(str(s) for s in cfg.snapshots or DEFAULT_SNAPSHOTS)
                 argv = common + [
                     "--robot", f"r{display_k}", "--role", "display",
                     "--out-dir", os.path.join(os.path.abspath(out), "display"),
