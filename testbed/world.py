@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from node.rays import Laser, pad
@@ -60,6 +61,16 @@ class World:
         self.paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
         self._rays = np.arange(laser.n_rays)
         self._last_scan: list = [None] * len(self.bodies)
+        self._no_returns = np.full(laser.n_rays, np.inf, dtype=np.float32)
+        self._no_returns.flags.writeable = False
+        # Cells from which no obstacle (nor the map's edge) is within laser range (+1 cell).
+        reach = laser.pad + 1
+        blocked = pad(truth.occupied, reach, True).astype(np.uint8)
+        n = 2 * reach + 1
+        yy, xx = np.mgrid[:n, :n] - reach
+        disc = ((yy * yy + xx * xx) <= reach * reach).astype(np.uint8)
+        near = cv2.dilate(blocked, disc)[reach:-reach, reach:-reach]
+        self.open_space = near == 0
         self._k = np.arange(laser.n_samples, dtype=np.int32)[None, :]
         # Cells where a robot's centre may be: obstacles grown by the robot's radius.
         self.blocked = truth.inflated(radius)
@@ -107,15 +118,25 @@ class World:
         if cached is not None and cached[0] == (b.x, b.y):
             return cached[1]  # it did not move: same scan, nothing new seen
         flat = self.laser.flat_cells(b.x, b.y, self.occ_padded.shape[1])
-        hit = np.take(self.occ_padded.reshape(-1), flat)
-        first = hit.argmax(axis=1)
-        any_hit = hit[self._rays, first]
-        first[~any_hit] = self.laser.n_samples
-        ranges = np.full(self.laser.n_rays, np.inf, dtype=np.float32)
-        ranges[any_hit] = ((first[any_hit] + 1) * self.laser.step).astype(np.float32)
-        self.seen_padded.reshape(-1)[flat[self.laser.mark & (self._k <= first[:, None])]] = True
-        hits = np.flatnonzero(any_hit)
-        self.seen_padded.reshape(-1)[flat[hits, first[hits]]] = True
+        seen = self.seen_padded.reshape(-1)
+        r, c = int(b.y / self.truth.cell), int(b.x / self.truth.cell)
+        if not self.open_space[r, c]:
+            hit = np.take(self.occ_padded.reshape(-1), flat)
+            first = hit.argmax(axis=1)
+            any_hit = hit[self._rays, first]
+        else:  # no obstacle within laser range: every ray runs out (and the cast is skipped)
+            first = np.zeros(self.laser.n_rays, dtype=np.int64)
+            any_hit = np.zeros(self.laser.n_rays, dtype=bool)
+        if not any_hit.any():
+            seen[flat[self.laser.mark]] = True
+            ranges = self._no_returns
+        else:
+            first[~any_hit] = self.laser.n_samples
+            ranges = np.full(self.laser.n_rays, np.inf, dtype=np.float32)
+            ranges[any_hit] = ((first[any_hit] + 1) * self.laser.step).astype(np.float32)
+            seen[flat[self.laser.mark & (self._k <= first[:, None])]] = True
+            hits = np.flatnonzero(any_hit)
+            seen[flat[hits, first[hits]]] = True
         self._last_scan[k] = ((b.x, b.y), ranges)
         return ranges
 

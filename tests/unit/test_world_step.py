@@ -51,3 +51,22 @@ def test_scan_and_coverage():
         w.scan(0)
     assert w.coverage() > c1
     assert np.isfinite(w.scan(0)).any()  # now the north wall is in range
+
+
+def test_world_scan_equals_the_plain_cast_everywhere():
+    from node.rays import pad
+
+    t = empty_terrain(8, 8)
+    occ = t.occupied.copy()
+    occ[60:100, 100:104] = True  # an inner wall
+    w = make([(1.0, 1.0)], occ=occ)
+    laser = w.laser
+    occp = pad(occ, laser.pad, True)
+    rng = np.random.default_rng(2)
+    for _ in range(40):
+        x, y = rng.uniform(0.5, 7.5, 2)
+        if occ[int(y / 0.05), int(x / 0.05)]:
+            continue
+        w.bodies[0].x, w.bodies[0].y = x, y
+        assert np.array_equal(w.scan(0), laser.cast(occp, x, y))
+    assert w.open_space.any() and not w.open_space.all()
