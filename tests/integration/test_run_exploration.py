@@ -100,3 +100,21 @@ def test_killed_robot_does_not_stop_the_others(tmp_path, tn_name):
     assert result["coverage_final"] >= 0.99
     with open(os.path.join(out, "robots", "r2.json")) as f:
         assert json.load(f)["crash_step"] >= 60
+
+
+def test_png_map_with_walls_and_a_door(tmp_path, tn_name):
+    import cv2
+    import numpy as np
+
+    img = np.full((100, 150), 255, dtype=np.uint8)  # 0.1 m pixels: 15 x 10 m
+    img[:, 70:72] = 0
+    img[40:55, 70:72] = 255  # a 1.5 m door
+    img[60:62, 0:50] = 0
+    img[20:25, 100:130] = 0
+    png = tmp_path / "office.png"
+    cv2.imwrite(str(png), img)
+    out, result = explore(tmp_path, tn_name, 2, 8.0, map=str(png), map_cell=0.1)
+    assert result["status"] == "complete", result["status_detail"]
+    assert result["coverage_final"] >= 0.99
+    with open(os.path.join(out, "config.json")) as f:
+        assert json.load(f)["map_size"] == [200, 300]
