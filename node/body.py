@@ -104,7 +104,12 @@ class BodyClient:
     def __init__(self, path: str, robot: int, role: int = ROLE_ROBOT):
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self.sock.connect(path)
-        self.sock.sendall(hello(robot, role))
+        self.robot, self.role = robot, role
+
+    def ready(self) -> None:
+        """Say HELLO: the world starts its clock once every robot has, so a robot says it
+        only when it can answer frames at once (everything built, every part running)."""
+        self.sock.sendall(hello(self.robot, self.role))
 
     def recv(self, timeout: float | None = None):
         """Next message from the world, or None on timeout; ("end",) when the world hangs up."""

@@ -65,6 +65,7 @@ class Display:
     def run(self) -> None:
         t = threading.Thread(target=self._inbox, name="inbox", daemon=True)
         t.start()
+        self.link.ready()
         try:
             self._visualization()
         finally:

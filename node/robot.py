@@ -186,6 +186,7 @@ class Robot:
             self.threads.append(t)
         for j in self.s.teammates:
             self.goals.connect(j)
+        self.link.ready()
         try:
             _fatal_on_error(self._motion, "motion")()
         finally:

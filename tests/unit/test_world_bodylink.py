@@ -11,6 +11,10 @@ def test_body_link_round_trip(tmp_path):
     try:
         robot = body.BodyClient(server.path, 3)
         display = body.BodyClient(server.path, 4, body.ROLE_DISPLAY)
+        server.wait_for({3}, {4}, timeout=0.2)
+        assert not server.robots  # connected, but not ready yet
+        robot.ready()
+        display.ready()
         server.wait_for({3}, {4}, timeout=5.0)
         assert set(server.robots) == {3} and set(server.displays) == {4}
         r = np.linspace(0.1, 2.0, 8).astype(np.float32)
