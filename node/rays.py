@@ -102,9 +102,10 @@ class Laser:
             raise ValueError(f"scan has {ranges.shape} ranges, expected {self.n_rays}")
         flat = self.flat_cells(x, y, padded_width)
         idx = self.hit_index(ranges)
-        free = flat[self.mark & (self._k < idx[:, None])]
+        # Fancy indexing converts indices to intp on every use: convert once here.
+        free = flat[self.mark & (self._k < idx[:, None])].astype(np.intp)
         rays = np.flatnonzero(idx < self.n_samples)
-        occ = flat[rays, idx[rays]]
+        occ = flat[rays, idx[rays]].astype(np.intp)
         return free, occ
 
 
