@@ -95,6 +95,9 @@ class Shared:
     teammates: dict[int, Teammate] = field(default_factory=dict)
 
 
+THREAD_CPU: dict[str, float] = {}  # CPU seconds of each part's thread, when it ended
+
+
 def _fatal_on_error(fn, name: str):
     """A part that dies takes the robot with it (exit status 3): a robot without its planner
     or inbox would idle until the step cap, while a dead process is recorded as a crash."""
@@ -109,6 +112,7 @@ def _fatal_on_error(fn, name: str):
             prof.enable()
         try:
             fn()
+            THREAD_CPU[name] = time.thread_time()
         except Exception:
             log.exception("the %s part failed; the robot stops", name)
             logging.shutdown()
@@ -198,6 +202,9 @@ class Robot:
             self.tick.notify_all()
         for t in self.threads:
             t.join(timeout=2.0)
+        parts = sum(THREAD_CPU.values())
+        thread_cpu = {k: round(v, 3) for k, v in THREAD_CPU.items()}
+        thread_cpu["other"] = round(time.process_time() - parts, 3)  # nng's threads, start-up
         self.events.write(
             "summary",
             self.s.step,
@@ -213,6 +220,7 @@ class Robot:
             cpu_s=round(time.process_time(), 3),
             max_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             busy_s={k: round(v, 3) for k, v in self.busy.items()},
+            thread_cpu_s=thread_cpu,
             latency_ms={
                 k: {
                     q: round(float(np.percentile(v, p)) * 1000, 2)

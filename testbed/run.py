@@ -556,7 +556,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
             plan_ms_median=summary.get("plan_ms_median"),
             cpu_s=summary.get("cpu_s"), max_rss_mb=summary.get("max_rss_mb"),
             busy_s=summary.get("busy_s"), frames=summary.get("frames"),
-            latency_ms=summary.get("latency_ms"),
+            latency_ms=summary.get("latency_ms"), thread_cpu_s=summary.get("thread_cpu_s"),
         )  # fmt: skip
         _write_json(os.path.join(out, "robots", f"r{k}.json"), detail_rec)
     missed = missed_world + sum(r.missed for r in robots.values())
