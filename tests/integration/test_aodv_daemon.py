@@ -167,7 +167,7 @@ def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
         out = ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
         assert "ttl=62" in out, out  # 3 hops
         pinger = net.spawn(
-            1, ["ping", "-n", "-i", "0.05", "-c", "200", "-W", "1", "10.0.0.4"],
+            1, ["ping", "-n", "-i", "0.05", "-c", "120", "-W", "1", "10.0.0.4"],
             role="test", stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
         time.sleep(2.0)
@@ -179,7 +179,7 @@ def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
         last_short = max(s for s, t in replies if t == 62)
         first_long = min(s for s, t in replies if t == 61)
         assert first_long > last_short
-        assert len([s for s, t in replies if t == 61]) > 40
+        assert len([s for s, t in replies if t == 61]) > 30
         # Node 2 lost its next hop 3 and told its precursor 1 with a RERR.
         s2, s1 = stats(net, 2), stats(net, 1)
         assert s2["messages_sent"].get("RERR", 0) >= 1
