@@ -1,12 +1,13 @@
 """Kernel objects the AODV daemon owns inside its robot's namespace.
 
 - `KernelRoutes`: /32 routes of our own routing protocol number. Neighbours are
-  `dev wlan0 scope link`, others `via NEXT dev wlan0 onlink`. Installs and deletes are
-  rtnetlink messages packed here and written to a raw NETLINK_ROUTE socket without waiting
-  for the acknowledgement (pyroute2's IPRoute costs ~1.5 ms a request, more than a whole
-  discovery hop); the kernel applies a route request within the send() call, so a packet
-  sent right after sees the route. Acknowledgements are read by the daemon's loop
-  (`read_acks`), and errors logged there. Start-up and flushing use pyroute2.
+  `dev wlan0 scope link`, others `via NEXT dev wlan0 onlink`. Requests are rtnetlink
+  messages packed here and written to a raw NETLINK_ROUTE socket. At run time installs and
+  deletes do not wait for their acknowledgement: the kernel applies a route request within
+  the send() call, so a packet sent right after sees the route, and the daemon's loop reads
+  the acknowledgements (`read_acks`) and logs errors. Start-up and teardown requests wait
+  for theirs. (pyroute2's IPRoute costs ~1.5 ms a request, more than a discovery hop, and
+  its import 18 MB and half a second per daemon: the daemon does not use it.)
 - `Tun`: the TUN device that catches packets with no route (a 10.0.0.0/16 route points at
   it, less specific than every /32), IPv6 disabled on it.
 - `UseMonitor`: an nftables table whose dynamic set collects the addresses of data packets
@@ -20,15 +21,14 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import ipaddress
 import json
 import logging
 import os
+import select
 import socket
 import struct
 import subprocess
-
-from pyroute2 import IPRoute
-from pyroute2.netlink.exceptions import NetlinkError
 
 log = logging.getLogger(__name__)
 
@@ -42,12 +42,15 @@ NFT_TABLE = "aodv"
 _NLMSGHDR = struct.Struct("=LHHLL")
 _RTMSG = struct.Struct("=BBBBBBBBI")
 _RTA = struct.Struct("=HH")
-_RTM_NEWROUTE, _RTM_DELROUTE = 24, 25
-_NLMSG_ERROR = 2
-_NLM_F_REQUEST, _NLM_F_ACK, _NLM_F_REPLACE, _NLM_F_CREATE = 0x1, 0x4, 0x100, 0x400
-_RTA_DST, _RTA_OIF, _RTA_GATEWAY = 1, 4, 5
+_RTM_NEWROUTE, _RTM_DELROUTE, _RTM_GETROUTE = 24, 25, 26
+_NLMSG_ERROR, _NLMSG_DONE = 2, 3
+_NLM_F_REQUEST, _NLM_F_ACK, _NLM_F_DUMP = 0x1, 0x4, 0x300
+_NLM_F_REPLACE, _NLM_F_CREATE = 0x100, 0x400
+_RTA_DST, _RTA_OIF, _RTA_GATEWAY, _RTA_PRIORITY, _RTA_PREFSRC = 1, 4, 5, 6, 7
 _RT_TABLE_MAIN, _RTN_UNICAST, _RT_SCOPE_UNIVERSE, _RT_SCOPE_NOWHERE = 254, 1, 0, 255
 
+_SIOCGIFFLAGS, _SIOCSIFFLAGS, _SIOCGIFADDR = 0x8913, 0x8914, 0x8915
+_IFF_UP = 0x1
 _TUNSETIFF = 0x400454CA
 _IFF_TUN = 0x0001
 _IFF_NO_PI = 0x1000
@@ -65,13 +68,39 @@ def write_sysctl(path: str, value: str) -> None:
         raise KernelError(f"sysctl {path}={value}: {e}") from e
 
 
+def ifindex(name: str) -> int:
+    try:
+        return socket.if_nametoindex(name)
+    except OSError:
+        raise KernelError(f"no interface {name}") from None
+
+
+def ipv4_address(name: str) -> str:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            res = fcntl.ioctl(s.fileno(), _SIOCGIFADDR, struct.pack("16s16x", name.encode()))
+        except OSError:
+            raise KernelError(f"{name} has no IPv4 address") from None
+    return socket.inet_ntoa(res[20:24])
+
+
+def set_up(name: str) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        req = struct.pack("16sH14x", name.encode(), 0)
+        flags = struct.unpack_from("H", fcntl.ioctl(s.fileno(), _SIOCGIFFLAGS, req), 16)[0]
+        fcntl.ioctl(
+            s.fileno(), _SIOCSIFFLAGS, struct.pack("16sH14x", name.encode(), flags | _IFF_UP)
+        )
+
+
+def _attr(kind: int, data: bytes) -> bytes:
+    """One rtattr; all of ours carry 4 bytes, so no padding is needed."""
+    return _RTA.pack(_RTA.size + len(data), kind) + data
+
+
 class KernelRoutes:
     def __init__(self, ifname: str) -> None:
-        self.ipr = IPRoute()
-        found = self.ipr.link_lookup(ifname=ifname)
-        if not found:
-            raise KernelError(f"no interface {ifname}")
-        self.ifindex = found[0]
+        self.ifindex = ifindex(ifname)
         self.ifname = ifname
         self.nl = socket.socket(socket.AF_NETLINK, socket.SOCK_RAW, socket.NETLINK_ROUTE)
         self.nl.bind((0, 0))
@@ -80,7 +109,8 @@ class KernelRoutes:
         self._pending: dict[int, str] = {}
         self.errors = 0
 
-    def _request(self, rtm_type: int, flags: int, rtmsg: bytes, attrs: bytes, what: str) -> None:
+    # -- raw rtnetlink ---------------------------------------------------------------------
+    def _request(self, rtm_type: int, flags: int, rtmsg: bytes, attrs: bytes, what: str) -> int:
         self._seq += 1
         body = rtmsg + attrs
         hdr = _NLMSGHDR.pack(_NLMSGHDR.size + len(body), rtm_type, flags, self._seq, 0)
@@ -89,92 +119,143 @@ class KernelRoutes:
             self.nl.send(hdr + body)
         except OSError as e:
             raise KernelError(f"{what}: {e}") from e
+        return self._seq
 
-    @staticmethod
-    def _attr(kind: int, data: bytes) -> bytes:
-        return _RTA.pack(_RTA.size + len(data), kind) + data  # all ours are 4-byte aligned
+    def _messages(self, timeout: float | None = 0.0):
+        """(type, seq, payload) of every netlink message readable now (or within timeout)."""
+        if timeout and not select.select([self.nl], [], [], timeout)[0]:
+            return
+        while True:
+            try:
+                data = self.nl.recv(1 << 16)
+            except BlockingIOError:
+                return
+            off = 0
+            while off + _NLMSGHDR.size <= len(data):
+                length, mtype, _flags, seq, _pid = _NLMSGHDR.unpack_from(data, off)
+                if length < _NLMSGHDR.size:
+                    break
+                yield mtype, seq, data[off + _NLMSGHDR.size : off + length]
+                off += (length + 3) & ~3
+
+    def _ack(self, seq: int, payload: bytes) -> str | None:
+        """The failure an NLMSG_ERROR carries, or None for an acknowledgement."""
+        code = -struct.unpack_from("=i", payload)[0]
+        what = self._pending.pop(seq, "?")
+        if code and code not in (errno.ESRCH, errno.ENOENT):
+            self.errors += 1
+            return f"{what}: {os.strerror(code)}"
+        return None
 
     def read_acks(self) -> list[str]:
         """Read pending acknowledgements; return one message per failed request."""
         failures = []
-        while True:
-            try:
-                data = self.nl.recv(65536)
-            except BlockingIOError:
-                return failures
-            off = 0
-            while off + _NLMSGHDR.size <= len(data):
-                length, mtype, _flags, seq, _pid = _NLMSGHDR.unpack_from(data, off)
-                if mtype == _NLMSG_ERROR and length >= _NLMSGHDR.size + 4:
-                    code = -struct.unpack_from("=i", data, off + _NLMSGHDR.size)[0]
-                    what = self._pending.pop(seq, "?")
-                    if code and code not in (errno.ESRCH, errno.ENOENT):
-                        self.errors += 1
-                        failures.append(f"{what}: {os.strerror(code)}")
-                if length == 0:
-                    break
-                off += (length + 3) & ~3
+        for mtype, seq, payload in self._messages():
+            if mtype == _NLMSG_ERROR and len(payload) >= 4:
+                failure = self._ack(seq, payload)
+                if failure:
+                    failures.append(failure)
+        return failures
 
+    def _wait(self, seq: int) -> None:
+        """Block (up to 5 s) for the acknowledgement of request `seq`; raise its error."""
+        for _ in range(100):
+            for mtype, mseq, payload in self._messages(timeout=0.05):
+                if mtype == _NLMSG_ERROR and len(payload) >= 4:
+                    failure = self._ack(mseq, payload)
+                    if mseq == seq:
+                        if failure:
+                            raise KernelError(failure)
+                        return
+                    if failure:
+                        log.warning("kernel refused %s", failure)
+        raise KernelError(f"no answer from the kernel to {self._pending.pop(seq, '?')}")
+
+    # -- routes ----------------------------------------------------------------------------
     def address(self) -> str:
-        addrs = self.ipr.get_addr(index=self.ifindex, family=2)
-        if not addrs:
-            raise KernelError(f"{self.ifname} has no IPv4 address")
-        return addrs[0].get("address")
+        return ipv4_address(self.ifname)
 
-    def ours(self) -> list[str]:
-        """Destinations of routes with our protocol number (a previous run's, at start)."""
-        return [r.get("dst") for r in self.ipr.get_routes(family=2, proto=RTPROT_AODV)]
+    def ours(self) -> list[tuple[str, int]]:
+        """(destination, prefix length) of routes with our protocol number, any table."""
+        self.read_acks()
+        rtmsg = _RTMSG.pack(socket.AF_INET, 0, 0, 0, 0, 0, 0, 0, 0)
+        seq = self._request(_RTM_GETROUTE, _NLM_F_REQUEST | _NLM_F_DUMP, rtmsg, b"", "dump")
+        self._pending.pop(seq, None)
+        found = []
+        for _ in range(100):
+            for mtype, mseq, payload in self._messages(timeout=0.05):
+                if mseq != seq:
+                    continue
+                if mtype in (_NLMSG_DONE, _NLMSG_ERROR):
+                    return found
+                if mtype != _RTM_NEWROUTE or len(payload) < _RTMSG.size:
+                    continue
+                _fam, plen, _s, _t, _table, proto, *_ = _RTMSG.unpack_from(payload)
+                if proto != RTPROT_AODV:
+                    continue
+                off, dst = _RTMSG.size, "0.0.0.0"
+                while off + _RTA.size <= len(payload):
+                    alen, atype = _RTA.unpack_from(payload, off)
+                    if alen < _RTA.size:
+                        break
+                    if atype == _RTA_DST and alen == 8:
+                        dst = socket.inet_ntoa(payload[off + 4 : off + 8])
+                    off += (alen + 3) & ~3
+                found.append((dst, plen))
+        raise KernelError("route dump did not finish")
 
     def flush(self) -> int:
         """Delete every route with our protocol number; return how many there were."""
-        found = [
-            (r.get("dst"), r["dst_len"]) for r in self.ipr.get_routes(family=2, proto=RTPROT_AODV)
-        ]
+        found = self.ours()
         for dst, plen in found:
-            self.delete(dst, plen)
-        failures = self.read_acks()
-        if failures:
-            raise KernelError("; ".join(failures))
+            self._wait(self.delete(dst, plen))
         return len(found)
 
-    def install(self, dest: str, next_hop: str) -> None:
+    def install(self, dest: str, next_hop: str) -> int:
         """`ip route replace DEST/32 [via NEXT onlink] dev IFACE proto RTPROT_AODV`."""
-        attrs = self._attr(_RTA_DST, socket.inet_aton(dest)) + self._attr(
+        attrs = _attr(_RTA_DST, socket.inet_aton(dest)) + _attr(
             _RTA_OIF, struct.pack("=I", self.ifindex)
         )
         if next_hop == dest:
             scope, rflags = RT_SCOPE_LINK, 0
         else:
             scope, rflags = _RT_SCOPE_UNIVERSE, RTNH_F_ONLINK
-            attrs += self._attr(_RTA_GATEWAY, socket.inet_aton(next_hop))
+            attrs += _attr(_RTA_GATEWAY, socket.inet_aton(next_hop))
         rtmsg = _RTMSG.pack(
             socket.AF_INET, 32, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, scope, _RTN_UNICAST, rflags
         )
         flags = _NLM_F_REQUEST | _NLM_F_ACK | _NLM_F_REPLACE | _NLM_F_CREATE
-        self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {dest} via {next_hop}")
+        return self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {dest} via {next_hop}")
 
-    def delete(self, dest: str, plen: int = 32) -> None:
+    def delete(self, dest: str, plen: int = 32) -> int:
         """`ip route del DEST/PLEN proto RTPROT_AODV`; a route already gone is no error."""
         rtmsg = _RTMSG.pack(
             socket.AF_INET, plen, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, _RT_SCOPE_NOWHERE, 0, 0
         )
-        attrs = self._attr(_RTA_DST, socket.inet_aton(dest))
-        self._request(
+        attrs = _attr(_RTA_DST, socket.inet_aton(dest))
+        return self._request(
             _RTM_DELROUTE, _NLM_F_REQUEST | _NLM_F_ACK, rtmsg, attrs, f"delete route {dest}"
         )
 
-    def catch_all(self, ifindex: int, net: str, src: str) -> None:
-        """The route that sends packets without a /32 route to the TUN device."""
-        try:
-            self.ipr.route(
-                "replace", dst=net, oif=ifindex, prefsrc=src, proto=RTPROT_AODV, priority=1000
-            )
-        except NetlinkError as e:
-            raise KernelError(f"route {net} dev {TUN_NAME}: {e}") from e
+    def catch_all(self, oif: int, net: str, src: str) -> None:
+        """`ip route replace NET dev TUN src SRC metric 1000 proto RTPROT_AODV`: packets
+        without a /32 route go to the TUN device."""
+        n = ipaddress.IPv4Network(net)
+        attrs = (
+            _attr(_RTA_DST, n.network_address.packed)
+            + _attr(_RTA_OIF, struct.pack("=I", oif))
+            + _attr(_RTA_PREFSRC, socket.inet_aton(src))
+            + _attr(_RTA_PRIORITY, struct.pack("=I", 1000))
+        )
+        rtmsg = _RTMSG.pack(
+            socket.AF_INET, n.prefixlen, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, RT_SCOPE_LINK,
+            _RTN_UNICAST, 0,
+        )  # fmt: skip
+        flags = _NLM_F_REQUEST | _NLM_F_ACK | _NLM_F_REPLACE | _NLM_F_CREATE
+        self._wait(self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {net} dev TUN"))
 
     def close(self) -> None:
         self.nl.close()
-        self.ipr.close()
 
 
 class Tun:
@@ -194,9 +275,8 @@ class Tun:
         # ICMP errors we inject come from our own address: accept them on the TUN.
         write_sysctl(f"net.ipv4.conf.{name}.accept_local", "1")
         write_sysctl(f"net.ipv4.conf.{name}.rp_filter", "0")
-        with IPRoute() as ipr:
-            self.ifindex = ipr.link_lookup(ifname=name)[0]
-            ipr.link("set", index=self.ifindex, state="up")
+        self.ifindex = ifindex(name)
+        set_up(name)
 
     def read(self) -> bytes | None:
         try:
