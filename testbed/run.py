@@ -148,6 +148,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--max-steps", type=_number(int, 1, name="max steps"), default=3000)
     a("--laser-rays", type=_number(int, 4, name="laser rays"), default=360)
     a("--speed", type=_number(float, 0, True, "speed"), default=1.0, help="m/s")
+    a("--map-period", type=_number(int, 1, name="map period"), default=10,
+      help="steps between a robot's map floods (default 10)")  # fmt: skip
     a("--display-pos", type=_point, help="X,Y of the display (default: map centre)")
     a("--snapshots", type=_steps, default=(),
       help="display snapshot steps, e.g. 200,600 (default 100,250,500,1000,2000; always one "
@@ -171,6 +173,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
         max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
         speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
+        map_period=args.map_period,
         kill=tuple(args.kill),
     )  # fmt: skip
 
