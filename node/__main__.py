@@ -72,6 +72,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--plan-period", type=positive(int), default=20)
     p.add_argument("--map-period", type=positive(int), default=10)
     p.add_argument("--time-scale", type=positive(float), default=1.0)
+    p.add_argument("--timer-phase", type=int, default=0, help="steps added to the first timer")
     p.add_argument("--iface", default="wlan0", help="'' to not bind floods to a device")
     p.add_argument("--flood-port", type=positive(int), default=5100)
     p.add_argument("--goal-port", type=positive(int), default=5101)
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             robot=me, robots=args.robots, shape=args.map_size, cell=args.cell,
             laser_range=args.laser_range, laser_rays=args.laser_rays, speed=args.speed,
             radius=args.radius, plan_period=args.plan_period, map_period=args.map_period,
-            time_scale=args.time_scale,
+            time_scale=args.time_scale, phase=max(0, args.timer_phase),
         )  # fmt: skip
         goals = GoalNet(
             me, args.bind or robot_addr(me), args.goal_port, robot_addr,

@@ -68,6 +68,7 @@ class RobotConfig:
     goal_fresh_steps: int = 40
     time_scale: float = 1.0
     planner_factor: int = 2
+    phase: int = 0  # steps added to the first timer period (and map floods' offset)
 
 
 @dataclass
@@ -378,24 +379,33 @@ class Robot:
         cfg = self.cfg
         last_map = -(10**9)
         seen_step = -1
+        timer_fired = False
         while not self.stopping.is_set():
             with self.tick:
                 self.tick.wait(0.5)
             with self.lock:
                 step = self.s.step
+                # The first timer period is longer by the robot's phase: robots booted in
+                # the same step would otherwise plan (and flood) in lock-step forever.
+                period = cfg.plan_period + (cfg.phase if not timer_fired else 0)
                 due = (
                     step >= 0
                     and self.s.last_plan_step >= 0  # the first plan is motion control's "start"
                     and not self.s.finished
                     and not self.s.plan_pending
-                    and step - self.s.last_plan_step >= cfg.plan_period
+                    and step - self.s.last_plan_step >= period
                 )
             if step == seen_step:
                 continue
             seen_step = step
             if due:
+                timer_fired = True
                 self.request("timer")
-            if step >= 0 and step - last_map >= cfg.map_period:
+            if (
+                step >= 0
+                and step - last_map >= cfg.map_period
+                and step >= cfg.phase % cfg.map_period
+            ):
                 last_map = step
                 self._share_map(step)
 

@@ -202,6 +202,7 @@ class RobotRecord:
     crash_step: int | None = None
     exit_status: int | None = None
     missed: int = 0
+    missed_steps: list = field(default_factory=list)
     killed_at: int | None = None
     extra: dict = field(default_factory=dict)
 
@@ -225,6 +226,8 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         raise
     rng = np.random.default_rng(cfg.seed)
     starts = start_positions(truth, cfg.robots, rng, cfg.radius)
+    # Each robot's timer starts at its own phase (seeded), as robots booted one by one would.
+    phases = [int(v) for v in rng.integers(0, cfg.plan_period, size=cfg.robots)]
     space = free_space(truth, starts)
     laser = Laser(cfg.laser_range, cfg.laser_rays, truth.cell)
     world = World(truth, starts, laser, space, cfg.speed, cfg.radius)
@@ -255,7 +258,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         if f.endswith(".events.jsonl"):
             os.unlink(os.path.join(out, "robots", f))
     config = cfg.to_dict()
-    config.update(map_size=list(truth.shape), starts=[list(p) for p in starts],
+    config.update(map_size=list(truth.shape), starts=[list(p) for p in starts], timer_phases=phases,
                   display=display_k, display_pos=list(display_pos), name=name)  # fmt: skip
     _write_json(os.path.join(out, "config.json"), config)
 
@@ -292,7 +295,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
             for k in range(1, n + 1):
                 with open(os.path.join(out, "robots", f"r{k}.log"), "w") as logf:
                     argv = common + [
-                        "--robot", f"r{k}",
+                        "--robot", f"r{k}", "--timer-phase", str(phases[k - 1]),
                         "--events", os.path.join(outa, "robots", f"r{k}.events.jsonl"),
                     ]  # fmt: skip
                     robots[k].proc = net.spawn(
@@ -392,6 +395,8 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
         for r in robots.values():
             if not r.crashed and r.last_cmd < step:
                 r.missed += 1
+                if len(r.missed_steps) < 1000:
+                    r.missed_steps.append(step)
         step += 1
         tw = time.monotonic()
         world.move()
@@ -549,6 +554,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         detail_rec = dict(rec)
         detail_rec.update(
             crash_step=r.crash_step, killed_at=r.killed_at, deadlines_missed=r.missed,
+            deadlines_missed_steps=r.missed_steps,
             collisions=b.collisions, final_pose=[round(b.x, 3), round(b.y, 3)],
             plan_details=[
                 {k2: e.get(k2) for k2 in ("step", "cause", "status", "goal", "cost", "ms")}
