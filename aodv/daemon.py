@@ -47,7 +47,7 @@ from aodv.core import (
     ReleasePackets,
     Unicast,
 )
-from aodv.kernel import KernelRoutes, Tun, UseMonitor
+from aodv.kernel import KernelError, KernelRoutes, SetReader, Tun, UseMonitor
 from aodv.params import Params
 from aodv.stats import Stats
 
@@ -109,6 +109,7 @@ class Daemon:
         self._stop = False
         self._dump = False
         self._malformed_logged = 0
+        self._poll_started = 0.0
 
     # -- lifecycle -----------------------------------------------------------------------
     def run(self) -> int:
@@ -122,10 +123,12 @@ class Daemon:
         self.routes.flush()
         self.tun = Tun()
         self.monitor = None
+        self.reader = None
         self.sock = None
         try:
             self.routes.catch_all(self.tun.ifindex, str(self.net), self.addr)
             self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
+            self.reader = SetReader()
             self._open_sockets()
             self.core = AodvCore(self.addr, self.p, time.monotonic(), rebooted=rebooted)
             log.info("AODV up on %s (%s), time scale %g", self.iface, self.addr, self.p.time_scale)
@@ -165,6 +168,7 @@ class Daemon:
 
     def _teardown(self) -> None:
         for step in (
+            lambda: self.reader and self.reader.close(),
             lambda: self.routes.flush(),
             lambda: self.monitor and self.monitor.remove(),
             lambda: self.tun.close(),
@@ -187,11 +191,12 @@ class Daemon:
 
     # -- the loop ------------------------------------------------------------------------
     def _loop(self) -> None:
-        sel = selectors.DefaultSelector()
+        sel = self._sel = selectors.DefaultSelector()
         sel.register(self.sock, selectors.EVENT_READ, self._on_udp)
         sel.register(self.tun.fd, selectors.EVENT_READ, self._on_tun)
         sel.register(self._wake_r, selectors.EVENT_READ, self._on_wake)
         sel.register(self.routes.nl, selectors.EVENT_READ, self._on_netlink)
+        sel.register(self.reader.sock, selectors.EVENT_READ, self._on_poll_answer)
         next_poll = time.monotonic() + self._poll_period()
         next_stats = time.monotonic()
         while not self._stop:
@@ -223,16 +228,32 @@ class Daemon:
             log.warning("kernel refused %s", failure)
 
     def _poll_use(self, now: float) -> None:
-        if not self.core.routes():
+        """Ask for the nftables set of used addresses, unless a request is under way.
+
+        The answer is read by the loop (`_on_poll_answer`) over NETLINK_NETFILTER, so
+        the loop never blocks on it (forking `nft` stalled discoveries by milliseconds)."""
+        if self.reader.busy or not self.core.routes():
             return
         try:
-            used = self.monitor.poll()
-        except Exception as e:
+            self.reader.request()
+        except OSError as e:
             log.warning("route-use poll failed: %s", e)
             return
+        self._poll_started = now
+
+    def _on_poll_answer(self) -> None:
+        try:
+            used = self.reader.receive()
+        except (KernelError, OSError) as e:
+            self.reader.busy = False
+            log.warning("route-use poll: %s", e)
+            return
+        if used is None:
+            return
+        now = time.monotonic()
         for addr in used:
             self.stats.route_uses += 1
-            self._execute(self.core.on_route_used(now, addr), now)
+            self._execute(self.core.on_route_used(self._poll_started, addr), now)
 
     def _on_udp(self) -> None:
         for _ in range(64):
