@@ -7,8 +7,8 @@
 - 10-robot runs (empty terrain, comm range 20 m, babel) capped at RUN_STEPS steps (the
   start, when all ten explore at once, is the busiest part) at increasing time scales: the
   fraction of step deadlines missed (world and robots, see testbed/run.py) at each, and the
-  highest scale missing under 1 % (best of two attempts per scale). Per robot: CPU (fraction of a core, ms per step) and
-  peak resident memory.
+  highest scale missing under 1 % (best of two attempts per scale). Per robot: CPU (fraction
+  of a core, ms per step) and peak resident memory.
 Targets: plan <= 20 ms median; a 10-robot run at time scale >= 5 missing < 1 % of deadlines;
 <= 150 MB per robot process. The machine is shared: its load average is recorded.
 """
