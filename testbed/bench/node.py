@@ -152,6 +152,12 @@ def run() -> dict:
             break  # higher scales only miss more
         best = k
     ref = next((r for r in runs if r["time_scale"] == 5.0), runs[-1])
+    # What the CPU alone allows: 10 K steps per second of wall time, each costing the robots'
+    # and the world's CPU per step, on all of this machine's cores (an upper bound: start-up
+    # CPU is included, other work on the machine and scheduling delays are not).
+    cores = os.cpu_count() or 1
+    per_step = 10 * ref["robot_cpu_ms_per_step_mean"] + ref["world_cpu_ms_per_step"]
+    cpu_bound = round(cores * 100.0 / per_step, 2) if per_step > 0 else None
     rss = max(r["robot_max_rss_mb"] or 0 for r in runs)
     plan_median = sim["plan_ms"]["median"]
     data = {
@@ -161,6 +167,8 @@ def run() -> dict:
         },
         "ten_robot_runs": runs,
         "max_time_scale_under_1pct_missed": best,
+        "cpu_bound_time_scale_estimate": cpu_bound,
+        "cores": cores,
         "per_robot": {
             "at_time_scale": ref["time_scale"],
             "cpu_core_fraction": ref["robot_cpu_core_fraction_mean"],
