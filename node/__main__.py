@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
 
         d = Display(
             me, args.map_size, args.cell, link, flooder, events, args.out_dir,
-            args.snapshots, args.video_every,
+            args.snapshots, args.video_every, map_period=args.map_period,
         )  # fmt: skip
         stop["robot"] = d
         log.info("display up")

@@ -3,9 +3,10 @@
 Theory of operation. The display sits in its own namespace like a robot (robot N+1 of the
 network, with no body: its body link only carries the world's clock). Its inbox receives map
 floods and relays them like any robot; message processing merges them into the display's map
-and records each robot's position from its floods; visualization renders the merged map with
-the robots' paths (node.render): a video frame every `video_every` steps and a PNG snapshot at
-each chosen step, plus one at the end.
+and records each robot's position from its floods; every `map_period` steps it floods a small
+beacon so that robots notice when it comes back into reach (and send it their whole maps).
+Visualization renders the merged map with the robots' paths (node.render): a video frame
+every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class Display:
         snapshots: set[int],
         video_every: int = 10,
         scale: int = 2,
+        map_period: int = 10,
     ):
         self.me = me
         self.shape = shape
@@ -50,6 +52,7 @@ class Display:
         self.out_dir = out_dir
         self.snapshots = snapshots
         self.video_every = max(1, video_every)
+        self.map_period = max(1, map_period)
         self.scale = scale
         self.grid = OccupancyGrid(shape, cell)
         self.paths: dict[int, list[tuple[float, float]]] = {}
@@ -94,6 +97,10 @@ class Display:
                 continue
             step = msg[1].step
             self.step = step
+            if step % self.map_period == 0:
+                f = msg[1]
+                seq = self.flooder.originate(wire.KIND_BEACON, step, wire.pack_beacon(f.x, f.y))
+                self.events.write("send", step, kind="beacon", seq=seq)
             if step in self.snapshots:
                 self._snapshot(step)
             if step % self.video_every == 0 and not self.link.pending():
@@ -120,6 +127,8 @@ class Display:
             if not ready:
                 continue
             for h, payload in self.flooder.receive():
+                if h.kind == wire.KIND_BEACON:
+                    continue  # another display's
                 try:
                     if h.kind != wire.KIND_MAP:
                         raise ValueError(f"unexpected flood kind {h.kind}")

@@ -63,7 +63,7 @@ class RobotConfig:
     radius: float = 0.15
     plan_period: int = 20
     map_period: int = 10
-    full_period: int = 100
+    full_period: int = 500  # whole local map at least this often (and on reunions)
     reach_steps: int = 30
     goal_fresh_steps: int = 40
     time_scale: float = 1.0
@@ -170,6 +170,8 @@ class Robot:
         self.frames = 0
         self.skipped = 0
         self.last_full = -(10**9)
+        self.full_wanted = False  # set when someone comes back into reach
+        self.last_heard: dict[int, int] = {}  # origin -> my step when its last flood came
         self.plan_ms: list[float] = []
         self.busy: Counter[str] = Counter()  # thread CPU seconds per part
         # Wall seconds: world send -> frame received; frame received -> command sent.
@@ -413,7 +415,8 @@ class Robot:
         t_cpu = time.thread_time()
         p = self.laser.pad
         h, w = self.cfg.shape
-        full = step - self.last_full >= self.cfg.full_period
+        full = self.full_wanted or step - self.last_full >= self.cfg.full_period
+        self.full_wanted = False
         with self.lock:
             s = self.s
             if full:
@@ -486,8 +489,22 @@ class Robot:
     def _on_flood(self, data: bytes) -> None:
         t_cpu = time.thread_time()
         h, payload = wire.unpack_flood(data)
-        if h.kind != wire.KIND_MAP or not 1 <= h.origin <= self.cfg.robots + 1:
+        if h.kind not in (wire.KIND_MAP, wire.KIND_BEACON) or not (
+            1 <= h.origin <= self.cfg.robots + 1
+        ):
             raise ValueError(f"unexpected flood kind {h.kind} from {h.origin}")
+        # Someone back in reach after a while missed our deltas: send the whole map next.
+        last = self.last_heard.get(h.origin)
+        with self.lock:
+            now = self.s.step
+        if last is None or now - last > self.cfg.reach_steps:
+            self.full_wanted = True
+        self.last_heard[h.origin] = now
+        if h.kind == wire.KIND_BEACON:
+            wire.unpack_beacon(payload)
+            self.received["beacon"] += 1
+            self.events.write("recv", now, kind="beacon", frm=h.origin, seq=h.seq, sent=h.step)
+            return
         m = wire.unpack_map(payload, self.cfg.shape)
         with self.lock:
             s = self.s

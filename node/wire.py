@@ -7,10 +7,14 @@ Floods (UDP broadcast, see node.flood) carry a fixed header and a payload:
 `step` is the origin's step when it sent the flood. The only flood kind is MAP: part of the
 origin's own local map (cells its own laser saw), cropped to its known cells, with its
 position. Most map floods carry only the window its laser swept since its last flood (a
-delta); every `full_period` steps one carries the whole local map, so that a robot that missed
-deltas while out of reach catches up:
+delta). The whole local map goes out when the robot hears from a robot (or the display) it had
+not heard from for a while, so that whoever missed deltas while out of reach catches up, and
+every `full_period` steps in any case:
 
     f32 x f32 y u16 r0 u16 c0 u16 h u16 w, then the zlib'd 2-bit ternary cells (node.grid)
+
+The display, which explores nothing, floods a BEACON (its position) so that robots notice when
+it comes back into reach.
 
 Goals and re-plan requests travel over nanomsg TCP (node.goalnet) as small JSON objects:
 
@@ -36,6 +40,7 @@ from node.grid import decode_ternary, encode_ternary
 
 MAGIC = b"RMF1"
 KIND_MAP = 1
+KIND_BEACON = 2  # the display's "I am here": f32 x f32 y
 _HDR = struct.Struct("!4sBBHII")
 _MAP = struct.Struct("!ffHHHH")
 
@@ -65,6 +70,19 @@ def unpack_flood(data: bytes) -> tuple[FloodHeader, bytes]:
 def with_ttl(data: bytes, ttl: int) -> bytes:
     """The same flood with its TTL byte replaced (for relaying)."""
     return data[:5] + bytes([ttl]) + data[6:]
+
+
+_BEACON = struct.Struct("!ff")
+
+
+def pack_beacon(x: float, y: float) -> bytes:
+    return _BEACON.pack(x, y)
+
+
+def unpack_beacon(payload: bytes) -> tuple[float, float]:
+    if len(payload) != _BEACON.size:
+        raise ValueError("beacon payload has the wrong length")
+    return _BEACON.unpack(payload)
 
 
 def pack_map(x: float, y: float, ternary: np.ndarray, r_off: int = 0, c_off: int = 0) -> bytes:

@@ -429,6 +429,8 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
             # schedule (catching up by running steps back to back would squeeze the robots).
             missed_world += 1
             anchor += late
+            if len(timing.setdefault("missed_steps", [])) < 1000:
+                timing["missed_steps"].append((step, round(late * 1000, 1)))
         live = [r for r in robots.values() if not r.crashed]
         now = time.monotonic()
         if progress and (now - last_print > (0.5 if tty else 10.0)):
@@ -593,7 +595,10 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         "wall_time_s": round(total_wall, 2),
         "step_loop_wall_s": round(wall, 2),
         "display": {"robot": n + 1, "coverage_final": disp},
-        "world_timing_s": {k: round(v, 3) for k, v in timing.items()},
+        "world_timing_s": {
+            k: round(v, 3) for k, v in timing.items() if isinstance(v, float)
+        },
+        "world_missed_steps_ms_late": timing.get("missed_steps", []),
         "robots": robot_out,
     }  # fmt: skip
     result["config"]["extra"] = {k: v for k, v in config.items() if k not in result["config"]}

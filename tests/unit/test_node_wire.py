@@ -76,3 +76,9 @@ def test_body_messages_round_trip():
     for bad in [b"", b"Z", b"F" + bytes(3), body.frame(1, 0, 0, 0, r)[:-2]]:
         with pytest.raises(ValueError):
             body.parse(bad)
+
+
+def test_beacon_round_trip():
+    assert wire.unpack_beacon(wire.pack_beacon(10.0, 5.5)) == (10.0, 5.5)
+    with pytest.raises(ValueError):
+        wire.unpack_beacon(b"short")
