@@ -439,9 +439,13 @@ class AodvCore:
     # == RFC 6.7 receiving a RREP =========================================================
     def _rrep(self, now: float, src: str, m: Rrep, out: list[Action]) -> None:
         # RFC 6.8: "...the node receiving the RREP with the 'A' bit set... sends a
-        # RREP-ACK" back to the sender.
+        # RREP-ACK" back to the sender. (Queued after the forwarded RREP, which is on the
+        # discovery's critical path.)
+        self._rrep_body(now, src, m, out)
         if m.ack_required:
             out.append(Unicast(RrepAck(), src))
+
+    def _rrep_body(self, now: float, src: str, m: Rrep, out: list[Action]) -> None:
         self.bidirectional[src] = now
         # RFC 6.7: "...searches ... for a route to the previous hop. If needed, a route is
         # created for the previous hop, but without a valid sequence number".

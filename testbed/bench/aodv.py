@@ -20,6 +20,7 @@ next to the median, and the load average is recorded.
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -39,21 +40,25 @@ WARMUP_S = 8.0
 PORT = 47654
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
+# Long-lived helpers, started before the measurements, so that no interpreter starts or
+# exits (a CPU burst on this 2-core machine) while a discovery is being timed.
 RECEIVER = textwrap.dedent(f"""
-    import socket, sys, time
+    import socket, time
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.bind(("0.0.0.0", {PORT}))
     print("ready", flush=True)
-    s.settimeout(30)
-    s.recv(100)
-    print(time.monotonic(), flush=True)
+    while True:
+        s.recv(100)
+        print(time.monotonic(), flush=True)
 """)
 SENDER = textwrap.dedent(f"""
     import socket, sys, time
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    t = time.monotonic()
-    s.sendto(b"first", (sys.argv[1], {PORT}))
-    print(t, flush=True)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        t = time.monotonic()
+        s.sendto(b"first", (line.strip(), {PORT}))
+        print(t, flush=True)
 """)
 
 
@@ -94,30 +99,37 @@ def _stats(net: Network, k: int) -> dict:
 
 def discovery_once() -> dict[int, tuple[float, float]]:
     """{hops: (round latency s, first packet delivery s)} on one fresh 9-robot chain."""
-    spec = _spec(MAX_HOPS + 1)
+    n = MAX_HOPS + 1
+    spec = _spec(n)
     out = {}
     try:
         with Network(spec) as net:
-            _wait_ready(net, MAX_HOPS + 1)
-            time.sleep(0.5)
-            for h in range(1, MAX_HOPS + 1):
-                dst = h + 1
-                rx = net.spawn(
-                    dst, [sys.executable, "-c", RECEIVER], role="bench",
+            _wait_ready(net, n)
+            rx = {}
+            for k in range(2, n + 1):
+                rx[k] = net.spawn(
+                    k, [sys.executable, "-c", RECEIVER], role="bench",
                     stdout=subprocess.PIPE, text=True,
                 )  # fmt: skip
-                assert rx.stdout.readline().strip() == "ready"
-                tx = net.exec(
-                    1, [sys.executable, "-c", SENDER, f"10.0.0.{dst}"],
-                    capture_output=True, text=True, timeout=30,
-                )  # fmt: skip
-                line = rx.stdout.readline()
-                rx.wait(timeout=5)
-                if not line.strip():
+            tx = net.spawn(
+                1, [sys.executable, "-c", SENDER], role="bench",
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+            )  # fmt: skip
+            for proc in [*rx.values(), tx]:
+                if proc.stdout.readline().strip() != "ready":
+                    raise RuntimeError("bench helper did not start")
+            time.sleep(1.0)  # let the start-up CPU burst pass
+            for h in range(1, MAX_HOPS + 1):
+                dst = h + 1
+                tx.stdin.write(f"10.0.0.{dst}\n")
+                tx.stdin.flush()
+                t_tx = float(tx.stdout.readline())
+                ready, _, _ = select.select([rx[dst].stdout], [], [], 30)
+                if not ready:
                     log = open(f"{net.state_dir}/r1.aodv.log").read()[-2000:]
                     raise RuntimeError(f"datagram to robot {dst} not delivered; r1 log:\n{log}")
-                t_rx = float(line)
-                first = t_rx - float(tx.stdout)
+                first = float(rx[dst].stdout.readline()) - t_tx
+                time.sleep(0.2)
                 disc = [d for d in _stats(net, 1)["discoveries"] if d["dest"] == f"10.0.0.{dst}"]
                 if not disc or not disc[-1]["ok"]:
                     raise RuntimeError(f"discovery of robot {dst} not recorded")
