@@ -430,7 +430,7 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
             missed_world += 1
             anchor += late
             if len(timing.setdefault("missed_steps", [])) < 1000:
-                timing["missed_steps"].append((step, round(late * 1000, 1)))
+                timing["missed_steps"].append([step, round(late * 1000, 1)])
         live = [r for r in robots.values() if not r.crashed]
         now = time.monotonic()
         if progress and (now - last_print > (0.5 if tty else 10.0)):
