@@ -49,6 +49,7 @@ from node.rays import Laser
 log = logging.getLogger(__name__)
 
 INPROC = "inproc://inbox"
+STUCK_FRAMES = 5
 
 
 @dataclass(frozen=True)
@@ -165,6 +166,7 @@ class Robot:
         self.failed: Counter[str] = Counter()
         self.malformed = 0
         self.inbox_dropped = 0
+        self.stuck = 0
         # At most 1 ms, and at most a tenth of a step in wall time.
         self.linger = min(0.001, 0.01 / cfg.time_scale)
         self.frames = 0
@@ -274,7 +276,7 @@ class Robot:
                 s.pose = (f.x, f.y)
                 s.step = f.step
                 s.scans.append((f.step, f.x, f.y, f.ranges))
-                target = None if behind else self._follow()
+                target = None if behind else self._follow(moved)
             if behind:
                 self.skipped += 1  # a newer frame is waiting: act on that one
             else:
@@ -299,8 +301,11 @@ class Robot:
             min(h, int((y + rng) / c) + 2), min(w, int((x + rng) / c) + 2),
         )  # fmt: skip
 
-    def _follow(self) -> tuple[float, float] | None:
-        """The next waypoint of the current plan (lock held), None when there is none."""
+    def _follow(self, moved: bool) -> tuple[float, float] | None:
+        """The next waypoint of the current plan (lock held), None when there is none.
+
+        A robot that has not moved for STUCK_FRAMES frames while driving (its body refused the
+        move: a wall closer than the map showed) gives up that waypoint for the next one."""
         s = self.s
         if s.finished or s.plan is None:
             return None
@@ -308,6 +313,11 @@ class Robot:
         tol = 1e-3 + 0.01 * self.cfg.speed
         while s.wp < len(path) and math.dist(s.pose, path[s.wp]) <= tol:
             s.wp += 1
+        self.stuck = 0 if moved or s.wp >= len(path) else self.stuck + 1
+        if self.stuck >= STUCK_FRAMES:
+            self.stuck = 0
+            s.wp += 1
+            log.info("stuck at %s: skipping a waypoint", tuple(round(v, 2) for v in s.pose))
         return path[s.wp] if s.wp < len(path) else None
 
     def request(self, cause: str) -> None:

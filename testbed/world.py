@@ -86,6 +86,11 @@ class World:
         """Robot k (0-based) asks to drive toward `target` (None: stop)."""
         self.bodies[k].target = target
 
+    def _free(self, x: float, y: float) -> bool:
+        r, c = int(y / self.truth.cell), int(x / self.truth.cell)
+        h, w = self.blocked.shape
+        return 0 <= r < h and 0 <= c < w and not self.blocked[r, c]
+
     def move(self) -> None:
         """Advance every live robot by one step toward its target."""
         for i, b in enumerate(self.bodies):
@@ -96,15 +101,22 @@ class World:
             if d < 1e-9:
                 continue
             s = min(self.speed, d)
-            nx, ny = b.x + dx / d * s, b.y + dy / d * s
-            r, c = int(ny / self.truth.cell), int(nx / self.truth.cell)
-            if (
-                not (0 <= r < self.blocked.shape[0] and 0 <= c < self.blocked.shape[1])
-                or (self.blocked[r, c])
-            ):
+            ux, uy = dx / d, dy / d
+            # Straight on if the way is clear; else slide along whichever axis is (a robot
+            # grazing a wall keeps going along it); else stay and count a collision.
+            for mx, my in ((ux, uy), (math.copysign(1.0, ux), 0.0), (0.0, math.copysign(1.0, uy))):
+                if mx * ux + my * uy <= 1e-6:
+                    continue  # no progress toward the target that way
+                step_len = s if (mx, my) == (ux, uy) else min(s, abs(mx * dx + my * dy))
+                nx, ny = b.x + mx * step_len, b.y + my * step_len
+                if self._free(nx, ny):
+                    break
+            else:
                 b.collisions += 1
-                b.target = None
                 continue
+            if (mx, my) != (ux, uy):
+                b.collisions += 1
+            s = math.hypot(nx - b.x, ny - b.y)
             b.theta = math.atan2(dy, dx)
             b.path_length += s
             b.x, b.y = nx, ny

@@ -51,12 +51,12 @@ class GroundTruth:
         return not bool((self.occupied[r0 : r1 + 1, c0 : c1 + 1] & touch).any())
 
     def inflated(self, radius: float) -> np.ndarray:
-        """Cells whose centre is closer than `radius` (plus half a cell) to an obstacle cell.
+        """Cells whose centre is within `radius` of an obstacle cell's centre.
 
-        A robot whose centre is in a cell that is not inflated keeps its disc off obstacles
-        (to within half a cell): one lookup per move instead of a disc test.
+        A robot whose centre is in a cell that is not inflated keeps its disc off obstacles to
+        within half a cell: one lookup per move instead of a disc test.
         """
-        r = radius / self.cell + 0.5
+        r = radius / self.cell
         n = int(math.ceil(r))
         yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
         kernel = ((yy * yy + xx * xx) <= r * r).astype(np.uint8)

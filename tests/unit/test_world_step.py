@@ -34,8 +34,18 @@ def test_walls_stop_the_robot():
     for _ in range(20):
         w.move()
     b = w.bodies[0]
-    assert b.collisions == 1 and b.target is None
+    assert b.collisions > 0 and b.y == pytest.approx(1.0)
     assert b.x - 0.15 >= 0.1 - 0.05  # its disc stays off the 10 cm wall (within half a cell)
+
+
+def test_robot_slides_along_a_wall():
+    w = make([(1.0, 1.0)])
+    w.command(0, (-5.0, 3.0))  # into the west wall at a slant
+    for _ in range(40):
+        w.move()
+    b = w.bodies[0]
+    assert b.x - 0.15 >= 0.1 - 0.05
+    assert b.y > 2.0  # it kept going north along the wall
 
 
 def test_scan_and_coverage():
