@@ -57,6 +57,7 @@ IP_RECVTTL = 12  # linux/in.h; not in Python 3.11's socket module
 IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
 BROADCAST = "255.255.255.255"
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
+_U32 = struct.Struct("!I")
 
 
 def _checksum(data: bytes) -> int:
@@ -106,6 +107,9 @@ class Daemon:
         self.p = params
         self.stats_path = stats_path
         self.net = ipaddress.IPv4Network(net)
+        self._net = int(self.net.network_address)
+        self._mask = int(self.net.netmask)
+        self._bcast = int(self.net.broadcast_address)
         self._stop = False
         self._dump = False
         self._malformed_logged = 0
@@ -232,6 +236,9 @@ class Daemon:
 
         The answer is read by the loop (`_on_poll_answer`) over NETLINK_NETFILTER, so
         the loop never blocks on it (forking `nft` stalled discoveries by milliseconds)."""
+        if self.reader.busy and now - self._poll_started > 5 * self._poll_period():
+            log.warning("route-use poll got no answer; asking again")
+            self.reader.busy = False
         if self.reader.busy or not self.core.routes():
             return
         try:
@@ -284,6 +291,8 @@ class Daemon:
                 log.exception("error handling %s from %s", kind, src)
 
     def _check_addresses(self, src: str, msg: wire.Message) -> None:
+        """Every address a peer names must be a host of our network (integer math: the
+        ipaddress module cost 50 us a message)."""
         if isinstance(msg, (wire.Rreq, wire.Rrep)):
             addrs = [src, msg.dest, msg.orig]
         elif isinstance(msg, wire.Rerr):
@@ -291,12 +300,8 @@ class Daemon:
         else:
             addrs = [src]
         for a in addrs:
-            ip = ipaddress.IPv4Address(a)
-            if (
-                ip not in self.net
-                or ip == self.net.network_address
-                or ip == self.net.broadcast_address
-            ):
+            ip = _U32.unpack(socket.inet_aton(a))[0]
+            if ip & self._mask != self._net or ip in (self._net, self._bcast):
                 raise wire.MalformedPacket(f"address {a} outside {self.net}")
 
     def _drop(self, reason: str, src: str, err: Exception) -> None:
@@ -316,7 +321,7 @@ class Daemon:
                 continue
             src = socket.inet_ntoa(pkt[12:16])
             dst = socket.inet_ntoa(pkt[16:20])
-            if ipaddress.IPv4Address(dst) not in self.net:
+            if _U32.unpack_from(pkt, 16)[0] & self._mask != self._net:
                 self.stats.dropped["tun_foreign"] += 1
                 continue
             if src == self.addr:
