@@ -489,19 +489,9 @@ def _collect_routing(net, cfg, out) -> None:
     """Copy the routing daemons' logs (and AODV statistics) before the testbed goes away."""
     if cfg.routing == "none":
         return
-    st = net.state
-    if cfg.routing == "aodv" and st is not None:
-        # Stop the daemons first so that they write their final statistics.
-        for rec in st.processes:
-            if rec.role == "aodv":
-                p = net.children.get(rec.pid)
-                if p is not None and p.poll() is None:
-                    p.terminate()
-        for rec in st.processes:
-            p = net.children.get(rec.pid)
-            if rec.role == "aodv" and p is not None:
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    p.wait(timeout=5.0)
+    # Stop the daemons first so that they write their final statistics and logs.
+    net.stop(cfg.routing)
+    if cfg.routing == "aodv":
         os.makedirs(os.path.join(out, "aodv"), exist_ok=True)
     os.makedirs(os.path.join(out, "routing"), exist_ok=True)
     for k in range(1, cfg.robots + 2):

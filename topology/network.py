@@ -30,7 +30,7 @@ from testbed.errors import TestbedError, UsageError
 from topology import capture, names, netns, processes, ranges, routing, state
 from topology.impair import MissingKernelFeature
 from topology.medium import Medium
-from topology.spec import Impairment, NetworkSpec, Position
+from topology.spec import NO_IMPAIRMENT, Impairment, NetworkSpec, Position
 
 log = logging.getLogger(__name__)
 
@@ -173,6 +173,12 @@ class Network:
             state.write(self.name, self.state)
         return proc
 
+    def stop(self, role: str) -> None:
+        """Stop every process of this role (SIGTERM, then SIGKILL), e.g. the routing daemons
+        so that they write their final statistics before the results are collected."""
+        records = [p for p in (self.state.processes if self.state else []) if p.role == role]
+        processes.stop(records, self.children)
+
     def exec(self, k: int, argv: list[str], **run_kwargs) -> subprocess.CompletedProcess:
         """Run argv inside robot k's namespace to completion."""
         self._check_robot(k)
@@ -183,9 +189,10 @@ class Network:
     def wanted(self) -> dict[Pair, Impairment]:
         links = ranges.wanted_links(self.positions, self.spec.comm_range, self.spec.range_model)
         base = self.spec.impairment
-        none = Impairment()
+        if base.is_none and not self.link_impairments:
+            return links  # the common case, once per world step: nothing to combine
         return {
-            p: base.combined(imp).combined(self.link_impairments.get(p, none))
+            p: base.combined(imp).combined(self.link_impairments.get(p, NO_IMPAIRMENT))
             for p, imp in links.items()
         }
 

@@ -13,7 +13,7 @@ Pure functions of positions (no kernel). `wanted_links` returns a dict from an o
 
 import math
 
-from topology.spec import Impairment, Position
+from topology.spec import NO_IMPAIRMENT, Impairment, Position
 
 MAX_EDGE_LOSS_PCT = 50.0
 
@@ -25,7 +25,7 @@ def distance(a: Position, b: Position) -> float:
 def _lossy(d: float, comm_range: float) -> Impairment:
     frac = d / comm_range
     if frac <= 0.5:
-        return Impairment()
+        return NO_IMPAIRMENT
     return Impairment(loss_pct=float(round(MAX_EDGE_LOSS_PCT * ((frac - 0.5) / 0.5) ** 2)))
 
 
@@ -33,19 +33,18 @@ def wanted_links(
     positions: list[Position] | tuple[Position, ...], comm_range: float, model: str = "disc"
 ) -> dict[tuple[int, int], Impairment]:
     """Links among robots 1..N (positions[k-1] is robot k) under the given model."""
+    if model not in ("disc", "lossy"):
+        raise ValueError(f"unknown range model {model!r}")
     links: dict[tuple[int, int], Impairment] = {}
     n = len(positions)
     for i in range(n):
+        xi, yi = positions[i]
         for j in range(i + 1, n):
-            d = distance(positions[i], positions[j])
-            if d > comm_range:
-                continue
-            if model == "disc":
-                links[(i + 1, j + 1)] = Impairment()
-            elif model == "lossy":
-                links[(i + 1, j + 1)] = _lossy(d, comm_range)
-            else:
-                raise ValueError(f"unknown range model {model!r}")
+            d = math.hypot(xi - positions[j][0], yi - positions[j][1])
+            if d <= comm_range:
+                links[(i + 1, j + 1)] = (
+                    NO_IMPAIRMENT if model == "disc" else _lossy(d, comm_range)
+                )  # fmt: skip
     return links
 
 

@@ -37,7 +37,7 @@ class Impairment:
 
     @property
     def is_none(self) -> bool:
-        return self == Impairment()
+        return not (self.loss_pct or self.delay_ms or self.jitter_ms or self.rate_kbit)
 
     @property
     def needs_netem(self) -> bool:
@@ -57,6 +57,10 @@ class Impairment:
 
     def combined(self, other: "Impairment") -> "Impairment":
         """Both impairments in series: losses compound, delays add, the slower rate wins."""
+        if other.is_none:
+            return self
+        if self.is_none:
+            return other
         keep = (1 - self.loss_pct / 100) * (1 - other.loss_pct / 100)
         rates = [r for r in (self.rate_kbit, other.rate_kbit) if r > 0]
         return Impairment(
@@ -66,6 +70,8 @@ class Impairment:
             rate_kbit=min(rates) if rates else 0.0,
         )
 
+
+NO_IMPAIRMENT = Impairment()
 
 Position = tuple[float, float]
 
