@@ -68,6 +68,20 @@ class OccupancyGrid:
         if occ.size:
             flat[occ] = np.minimum(flat[occ] + p.l_occ, p.l_max)
 
+    def update_window(self, r0: int, c0: int, free: np.ndarray, occ: np.ndarray) -> np.ndarray:
+        """`update_cells` for one scan given as `Laser.scan_window` returns it; returns the
+        window of `Lp` it updated (a view). Free first, then occupied, as in update_cells."""
+        p = self.params
+        h, w = free.shape
+        win = self.Lp[r0 : r0 + h, c0 : c0 + w]
+        if r0 < 0 or c0 < 0 or win.shape != free.shape:
+            raise ValueError("scan window does not fit the grid")
+        np.copyto(win, np.maximum(win + p.l_free, -p.l_max), where=free)
+        if occ.size:
+            rr, cc = np.divmod(occ, w)
+            win[rr, cc] = np.minimum(win[rr, cc] + p.l_occ, p.l_max)
+        return win
+
     def integrate_scan(
         self, laser: Laser, x: float, y: float, ranges: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:

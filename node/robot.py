@@ -110,7 +110,7 @@ def _fatal_on_error(fn, name: str):
         if prof_dir:
             import cProfile
 
-            prof = cProfile.Profile()
+            prof = cProfile.Profile(time.thread_time)  # CPU, not waiting
             prof.enable()
         try:
             fn()
@@ -238,7 +238,6 @@ class Robot:
         )
 
     def _motion(self) -> None:
-        wp = self.s.grid.Lp.shape[1]
         started = False
         last_xy = None
         while not self.stopping.is_set():
@@ -263,15 +262,12 @@ class Robot:
             moved = (f.x, f.y) != last_xy
             last_xy = (f.x, f.y)
             if moved:
-                free, occ = self.laser.scan_cells(f.x, f.y, f.ranges, wp)
+                r0, c0, free, occ = self.laser.scan_window(f.x, f.y, f.ranges)
             behind = self.link.pending()
             with self.lock:
                 s = self.s
                 if moved:
-                    s.grid.update_cells(free, occ)
-                    own = s.own.reshape(-1)
-                    own[free] = FREE
-                    own[occ] = OCC
+                    self._put_scan(f, r0, c0, free, occ)
                     s.dirty = _grow_box(s.dirty, self._footprint(f.x, f.y))
                 s.pose = (f.x, f.y)
                 s.step = f.step
@@ -291,6 +287,23 @@ class Robot:
             if not started:
                 started = True
                 self.request("start")
+
+    def _put_scan(self, f: body.Frame, r0: int, c0: int, free, occ) -> None:
+        """Put one scan (as Laser.scan_window gives it) into the map and the local map."""
+        s = self.s
+        h, w = free.shape
+        own = s.own[r0 : r0 + h, c0 : c0 + w]
+        if own.shape != free.shape or r0 < 0 or c0 < 0:
+            # At the very edge of the map the window sticks out: the per-cell form.
+            free, occ = self.laser.scan_cells(f.x, f.y, f.ranges, s.grid.Lp.shape[1])
+            s.grid.update_cells(free, occ)
+            flat = s.own.reshape(-1)
+            flat[free] = FREE
+            flat[occ] = OCC
+            return
+        s.grid.update_window(r0, c0, free, occ)
+        own[free] = FREE
+        own[np.divmod(occ, w)] = OCC
 
     def _footprint(self, x: float, y: float) -> tuple[int, int, int, int]:
         """The map window (r0, c0, r1, c1) a scan from (x, y) can touch."""

@@ -76,3 +76,30 @@ def test_ternary_empty_and_malformed():
         decode_ternary(10, 10, b"not zlib")
     with pytest.raises(ValueError):
         decode_ternary(10**4, 10**4, b"")
+
+
+def test_window_update_matches_per_cell_update():
+    """scan_window + update_window leave the map exactly as scan_cells + update_cells."""
+    laser = Laser(max_range=2.0, n_rays=360)
+    rng = np.random.default_rng(5)
+    occ = rng.random((120, 120)) < 0.01
+    occ[30:90, 60:62] = True
+    occp = pad(occ, laser.pad, True)
+    a = OccupancyGrid(occ.shape, pad=laser.pad)
+    b = OccupancyGrid(occ.shape, pad=laser.pad)
+    for _ in range(40):
+        x, y = rng.uniform(0.0, 6.0, size=2)
+        ranges = laser.cast(occp, x, y)
+        a.update_cells(*laser.scan_cells(x, y, ranges, a.Lp.shape[1]))
+        r0, c0, free, hit = laser.scan_window(x, y, ranges)
+        b.update_window(r0, c0, free, hit)
+    assert np.array_equal(a.Lp, b.Lp)
+    assert (a.Lp != 0).sum() > 1000
+
+
+def test_window_that_does_not_fit_is_rejected():
+    laser = Laser(max_range=2.0, n_rays=36)
+    g = OccupancyGrid((100, 100), pad=laser.pad)
+    free = np.zeros((laser.window, laser.window), dtype=bool)
+    with pytest.raises(ValueError):
+        g.update_window(100, 0, free, np.zeros(0, dtype=np.intp))
