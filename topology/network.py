@@ -152,13 +152,27 @@ class Network:
                 raise TestbedError(f"packet capture: {exc}") from None
 
     def _start_routing(self) -> None:
+        started = []
         for k in self.spec.robot_ids():
             argv = routing.argv_for(self.spec.routing, k, self.state_dir, self.spec.time_scale)
             if argv is None:
                 continue
             logp = os.path.join(self.state_dir, f"r{k}.{self.spec.routing}.log")
             with open(logp, "w") as logf:
-                self.spawn(k, argv, role=self.spec.routing, stdout=logf, stderr=subprocess.STDOUT)
+                proc = self.spawn(k, argv, role=self.spec.routing, stdout=logf,
+                                  stderr=subprocess.STDOUT)  # fmt: skip
+            started.append((k, proc, logp))
+        # Return only once every daemon can route, so the first packet is not lost to a race.
+        deadline = time.monotonic() + routing.READY_TIMEOUT_S
+        for k, proc, logp in started:
+            ready = routing.ready_file(self.spec.routing, k, self.state_dir)
+            while ready and not os.path.exists(ready):
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    with open(logp) as f:
+                        last = (f.read().strip().splitlines() or ["(no output)"])[-1]
+                    what = "exited" if proc.poll() is not None else "did not start in time"
+                    raise TestbedError(f"{self.spec.routing} daemon of r{k} {what}: {last}")
+                time.sleep(0.01)
 
     # -- processes --------------------------------------------------------------------------
 

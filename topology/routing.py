@@ -54,6 +54,18 @@ PROTOCOLS: dict[str, ArgvBuilder | None] = {
 
 REQUIRED_TOOLS = {"none": [], "babel": ["babeld"], "aodv": []}
 
+# A file whose appearance says the daemon is up. The AODV daemon first writes its statistics
+# once its socket, TUN device and routes are ready; babeld says nothing we can wait for.
+READY_FILES: dict[str, Callable[[int, str], str]] = {
+    "aodv": lambda k, run_dir: f"{run_dir}/r{k}.aodv.json",
+}
+READY_TIMEOUT_S = 30.0
+
+
+def ready_file(routing: str, k: int, run_dir: str) -> str | None:
+    f = READY_FILES.get(routing)
+    return f(k, run_dir) if f else None
+
 
 def missing_tools(routing: str) -> list[str]:
     return [t for t in REQUIRED_TOOLS.get(routing, []) if shutil.which(t) is None]
