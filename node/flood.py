@@ -93,27 +93,35 @@ class Flooder:
 
     def receive(self) -> list[tuple[wire.FloodHeader, bytes]]:
         """Drain the socket: new floods (header, payload), relayed on the way."""
+        return [wire.unpack_flood(data) for data in self.receive_raw()]
+
+    def receive_raw(self) -> list[bytes]:
+        """Drain the socket: new floods as they arrived (wire form), relayed on the way.
+
+        Most datagrams are copies of a flood already seen (every neighbour relays it): the
+        duplicate check reads the header fields only, nothing else is built for them."""
         out = []
+        recvfrom, seen, me = self.sock.recvfrom, self.cache.seen, self.me
         while True:
             try:
-                data, _ = self.sock.recvfrom(65535)
+                data, _ = recvfrom(65535)
             except (BlockingIOError, InterruptedError):
                 return out
             try:
-                h, payload = wire.unpack_flood(data)
+                ttl, origin, seq = wire.flood_ids(data)
             except ValueError as e:
                 self.counts["malformed"] += 1
                 log.debug("dropped malformed flood: %s", e)
                 continue
             with self.cache_lock:
-                dup = h.origin == self.me or self.cache.seen(h.origin, h.seq)
+                dup = origin == me or seen(origin, seq)
             if dup:
                 self.counts["duplicate"] += 1
                 continue
-            if h.ttl > 1:
-                self._send(wire.with_ttl(data, h.ttl - 1))
+            if ttl > 1:
+                self._send(wire.with_ttl(data, ttl - 1))
                 self.counts["relayed"] += 1
-            out.append((h, payload))
+            out.append(data)
 
     def close(self) -> None:
         with contextlib.suppress(OSError):

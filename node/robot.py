@@ -464,7 +464,8 @@ class Robot:
 
         out = pynng.Push0(send_timeout=1000)
         out.dial(INPROC, block=False)  # connects once message processing listens
-        fds = [self.flooder.fileno(), self.goals.fileno()]
+        flood_fd, goals_fd = self.flooder.fileno(), self.goals.fileno()  # each once: pynng
+        fds = [flood_fd, goals_fd]  # reads its descriptor as a socket option every time
         try:
             while not self.stopping.is_set():
                 ready, _, _ = select.select(fds, [], [], 0.5)
@@ -475,9 +476,9 @@ class Robot:
                 time.sleep(self.linger)
                 ready, _, _ = select.select(fds, [], [], 0)
                 batch = []
-                if self.flooder.fileno() in ready:
-                    batch += [b"F" + wire.pack_flood(h, p) for h, p in self.flooder.receive()]
-                if self.goals.fileno() in ready:
+                if flood_fd in ready:
+                    batch += [b"F" + data for data in self.flooder.receive_raw()]
+                if goals_fd in ready:
                     batch += [b"G" + data for data in self.goals.receive()]
                 for data in batch:
                     try:

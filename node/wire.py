@@ -67,6 +67,16 @@ def unpack_flood(data: bytes) -> tuple[FloodHeader, bytes]:
     return FloodHeader(kind, ttl, origin, seq, step), data[_HDR.size :]
 
 
+def flood_ids(data: bytes) -> tuple[int, int, int]:
+    """(ttl, origin, seq) of a flood in wire form; ValueError as unpack_flood raises it."""
+    if len(data) < _HDR.size:
+        raise ValueError("flood shorter than its header")
+    magic, _, ttl, origin, seq, _ = _HDR.unpack_from(data)
+    if magic != MAGIC:
+        raise ValueError("not a robot flood (bad magic)")
+    return ttl, origin, seq
+
+
 def with_ttl(data: bytes, ttl: int) -> bytes:
     """The same flood with its TTL byte replaced (for relaying)."""
     return data[:5] + bytes([ttl]) + data[6:]
