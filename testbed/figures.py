@@ -391,18 +391,7 @@ def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
             )
             if not pts:
                 continue
-            err = [
-                [p[f"{key}_mean"] - p[f"{key}_min"] for p in pts],
-                [p[f"{key}_max"] - p[f"{key}_mean"] for p in pts],
-            ]
-            ax.errorbar(
-                [p["robots"] for p in pts],
-                [p[f"{key}_mean"] for p in pts],
-                yerr=err,
-                marker="o",
-                capsize=3,
-                label=f"range {_fmt(comm)} m",
-            )
+            _spread_line(ax, pts, "robots", key, f"range {_fmt(comm)} m")
         ax.set_xlabel("team size (robots)")
         ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
@@ -410,6 +399,16 @@ def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
     fig.suptitle("Routing metrics from the captures (Section 2.4)")
     fig.tight_layout()
     return _save(fig, stem)
+
+
+def _spread_line(ax, pts: list[dict], x: str, key: str, label: str) -> None:
+    """One line of means against `x`, with error bars from each point's min to max."""
+    err = [
+        [p[f"{key}_mean"] - p[f"{key}_min"] for p in pts],
+        [p[f"{key}_max"] - p[f"{key}_mean"] for p in pts],
+    ]
+    ax.errorbar([p[x] for p in pts], [p[f"{key}_mean"] for p in pts], yerr=err, marker="o",
+                capsize=3, label=label)  # fmt: skip
 
 
 def plot_impairments(rows: list[dict], stem: Path) -> list[Path]:
@@ -432,18 +431,8 @@ def plot_impairments(rows: list[dict], stem: Path) -> list[Path]:
             )
             if not pts:
                 continue
-            err = [
-                [p[f"{key}_mean"] - p[f"{key}_min"] for p in pts],
-                [p[f"{key}_max"] - p[f"{key}_mean"] for p in pts],
-            ]
-            ax.errorbar(
-                [p["loss_pct"] for p in pts],
-                [p[f"{key}_mean"] for p in pts],
-                yerr=err,
-                marker="o",
-                capsize=3,
-                label=f"{robots} robots, {_fmt(comm)} m, delay {_fmt(delay)} ms",
-            )
+            label = f"{robots} robots, {_fmt(comm)} m, delay {_fmt(delay)} ms"
+            _spread_line(ax, pts, "loss_pct", key, label)
         ax.set_xlabel("link loss (%)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
