@@ -50,6 +50,7 @@ class Laser:
         m = np.maximum(1, np.floor(self.n_rays * 0.8 * self.cell / (2 * math.pi * rr)))
         m = (2 ** np.floor(np.log2(m))).astype(np.int64)
         self.mark = (np.arange(self.n_rays)[:, None] % m[None, :]) == 0
+        self._mark_dx, self._mark_dy = self.dx[self.mark], self.dy[self.mark]
         if (2 * self.pad + 4096) ** 2 > 2**31:
             raise ValueError("laser range too long for int32 cell indices")
 
@@ -100,13 +101,26 @@ class Laser:
         """
         if ranges.shape != (self.n_rays,):
             raise ValueError(f"scan has {ranges.shape} ranges, expected {self.n_rays}")
-        r0, c0, flat = self.window_cells(x, y)
+        w = self.window
         idx = self.hit_index(ranges)
-        free = np.zeros(self.window * self.window, dtype=bool)
-        free[flat[self.mark & (self._k < idx[:, None])]] = True
         rays = np.flatnonzero(idx < self.n_samples)
-        occ = flat[rays, idx[rays]].astype(np.intp)
-        return r0, c0, free.reshape(self.window, self.window), occ
+        if rays.size:
+            r0, c0, flat = self.window_cells(x, y)
+            cells = flat[self.mark & (self._k < idx[:, None])]
+            occ = flat[rays, idx[rays]].astype(np.intp)
+        else:  # nothing hit: every marked sample is free, and only those are computed
+            fx = np.float32(x / self.cell + _BIAS)
+            fy = np.float32(y / self.cell + _BIAS)
+            cb, rb = int(fx), int(fy)
+            cells = (self._mark_dy + fy).astype(np.int32)
+            cells *= w
+            cells += (self._mark_dx + fx).astype(np.int32)
+            cells += (self.pad - rb) * w + (self.pad - cb)
+            r0, c0 = rb - _BIAS, cb - _BIAS
+            occ = np.zeros(0, dtype=np.intp)
+        # A histogram marks the cells: several times faster than a fancy-index assignment.
+        free = np.bincount(cells, minlength=w * w) > 0
+        return r0, c0, free.reshape(w, w), occ
 
     def cast(self, occupied_padded: np.ndarray, x: float, y: float) -> np.ndarray:
         """Noiseless ranges (float32, n_rays) on a padded boolean obstacle grid; +inf: none."""

@@ -82,19 +82,22 @@ def test_window_update_matches_per_cell_update():
     """scan_window + update_window leave the map exactly as scan_cells + update_cells."""
     laser = Laser(max_range=2.0, n_rays=360)
     rng = np.random.default_rng(5)
-    occ = rng.random((120, 120)) < 0.01
+    occ = rng.random((240, 240)) < 0.01
+    occ[:, 80:] = False  # open space: scans with no return at all
     occ[30:90, 60:62] = True
     occp = pad(occ, laser.pad, True)
     a = OccupancyGrid(occ.shape, pad=laser.pad)
     b = OccupancyGrid(occ.shape, pad=laser.pad)
-    for _ in range(40):
-        x, y = rng.uniform(0.0, 6.0, size=2)
+    no_return = 0
+    for _ in range(60):
+        x, y = rng.uniform(0.0, 12.0, size=2)
         ranges = laser.cast(occp, x, y)
+        no_return += np.isinf(ranges).all()
         a.update_cells(*laser.scan_cells(x, y, ranges, a.Lp.shape[1]))
         r0, c0, free, hit = laser.scan_window(x, y, ranges)
         b.update_window(r0, c0, free, hit)
     assert np.array_equal(a.Lp, b.Lp)
-    assert (a.Lp != 0).sum() > 1000
+    assert (a.Lp != 0).sum() > 1000 and no_return > 0
 
 
 def test_window_that_does_not_fit_is_rejected():
