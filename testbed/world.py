@@ -129,14 +129,30 @@ class World:
         cached = self._last_scan[k]
         if cached is not None and cached[0] == (b.x, b.y):
             return cached[1]  # it did not move: same scan, nothing new seen
+        r, c = int(b.y / self.truth.cell), int(b.x / self.truth.cell)
+        if self.open_space[r, c]:
+            # No obstacle within laser range: every ray runs out, the cast is skipped and the
+            # seen cells are the robot's own free cells for a scan without returns.
+            r0, c0, free, _ = self.laser.scan_window(b.x, b.y, self._no_returns)
+            h, w = free.shape
+            seen = self.seen_padded[r0 : r0 + h, c0 : c0 + w]
+            if r0 >= 0 and c0 >= 0 and seen.shape == free.shape:
+                seen |= free
+                self._last_scan[k] = ((b.x, b.y), self._no_returns)
+                return self._no_returns
+        else:
+            ranges = self._cast_window(b.x, b.y)
+            if ranges is not None:
+                self._last_scan[k] = ((b.x, b.y), ranges)
+                return ranges
+        # The laser's window sticks out of the map (its very edge): flat indices of it all.
         flat = self.laser.flat_cells(b.x, b.y, self.occ_padded.shape[1])
         seen = self.seen_padded.reshape(-1)
-        r, c = int(b.y / self.truth.cell), int(b.x / self.truth.cell)
         if not self.open_space[r, c]:
             hit = np.take(self.occ_padded.reshape(-1), flat)
             first = hit.argmax(axis=1)
             any_hit = hit[self._rays, first]
-        else:  # no obstacle within laser range: every ray runs out (and the cast is skipped)
+        else:  # open space where the window does not fit (the map's very edge)
             first = np.zeros(self.laser.n_rays, dtype=np.int64)
             any_hit = np.zeros(self.laser.n_rays, dtype=bool)
         if not any_hit.any():
@@ -150,6 +166,33 @@ class World:
             hits = np.flatnonzero(any_hit)
             seen[flat[hits, first[hits]]] = True
         self._last_scan[k] = ((b.x, b.y), ranges)
+        return ranges
+
+    def _cast_window(self, x: float, y: float) -> np.ndarray | None:
+        """Cast from (x, y) on the laser's square window of the map and mark what it saw;
+        None (nothing done) when the window does not fit in the padded map."""
+        laser = self.laser
+        r0, c0, loc = laser.window_cells(x, y)
+        w = laser.window
+        occ = self.occ_padded[r0 : r0 + w, c0 : c0 + w]
+        seen = self.seen_padded[r0 : r0 + w, c0 : c0 + w]
+        if r0 < 0 or c0 < 0 or occ.shape != (w, w):
+            return None
+        hit = np.take(occ.reshape(-1), loc)  # a copy of the small window, then the samples
+        first = hit.argmax(axis=1)
+        any_hit = hit[self._rays, first]
+        if not any_hit.any():
+            cells = loc[laser.mark]
+            ranges = self._no_returns
+        else:
+            first[~any_hit] = laser.n_samples
+            ranges = np.full(laser.n_rays, np.inf, dtype=np.float32)
+            ranges[any_hit] = ((first[any_hit] + 1) * laser.step).astype(np.float32)
+            hits = np.flatnonzero(any_hit)
+            cells = np.concatenate(
+                [loc[laser.mark & (self._k <= first[:, None])], loc[hits, first[hits]]]
+            )
+        seen |= (np.bincount(cells, minlength=w * w) > 0).reshape(w, w)
         return ranges
 
     def coverage(self) -> float:

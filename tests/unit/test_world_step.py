@@ -80,3 +80,44 @@ def test_world_scan_equals_the_plain_cast_everywhere():
         w.bodies[0].x, w.bodies[0].y = x, y
         assert np.array_equal(w.scan(0), laser.cast(occp, x, y))
     assert w.open_space.any() and not w.open_space.all()
+
+
+def test_open_space_scan_marks_the_marked_samples():
+    t = empty_terrain(20, 20)
+    w = World(t, [(10.0, 10.0)], Laser(2.0, 360), free_space(t, [(10.0, 10.0)]), 0.1, 0.15)
+    for x, y in [(10.0, 10.0), (7.37, 12.91), (13.02, 5.55)]:
+        w.bodies[0].x, w.bodies[0].y = x, y
+        assert w.open_space[int(y / 0.05), int(x / 0.05)]
+        before = w.seen_padded.copy()
+        assert np.isinf(w.scan(0)).all()
+        expect = before.reshape(-1).copy()
+        flat = w.laser.flat_cells(x, y, w.seen_padded.shape[1])
+        expect[flat[w.laser.mark]] = True
+        assert np.array_equal(w.seen_padded.reshape(-1), expect)
+
+
+def test_world_marks_seen_as_the_flat_cast_does():
+    from node.rays import pad
+
+    t = empty_terrain(8, 8)
+    occ = t.occupied.copy()
+    occ[60:100, 100:104] = True
+    w = make([(1.0, 1.0)], occ=occ)
+    laser = w.laser
+    occp = pad(occ, laser.pad, True)
+    expect = np.zeros(occp.shape, dtype=bool).reshape(-1)
+    rng = np.random.default_rng(4)
+    for _ in range(40):
+        x, y = rng.uniform(0.3, 7.7, 2)
+        if occ[int(y / 0.05), int(x / 0.05)]:
+            continue
+        w.bodies[0].x, w.bodies[0].y = x, y
+        w.scan(0)
+        flat = laser.flat_cells(x, y, occp.shape[1])
+        hit = occp.reshape(-1)[flat]
+        n = np.where(hit.any(axis=1), hit.argmax(axis=1), laser.n_samples)
+        k = np.arange(laser.n_samples)[None, :]
+        expect[flat[laser.mark & (k <= n[:, None])]] = True
+        rays = np.flatnonzero(n < laser.n_samples)
+        expect[flat[rays, n[rays]]] = True
+        assert np.array_equal(w.seen_padded.reshape(-1), expect)
