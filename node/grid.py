@@ -101,13 +101,13 @@ class OccupancyGrid:
         if r0 < 0 or c0 < 0 or r0 + h > self.shape[0] or c0 + w > self.shape[1]:
             raise ValueError("ternary map does not fit the grid")
         view = self.L[r0 : r0 + h, c0 : c0 + w]
-        unknown = np.abs(view) < self.params.threshold
-        m = self.params.merged
-        learn_free = unknown & (t == FREE)
-        learn_occ = unknown & (t == OCC)
-        view[learn_free] = -m
-        view[learn_occ] = m
-        return int(learn_free.sum() + learn_occ.sum())
+        learn = np.abs(view) < self.params.threshold  # unknown here...
+        learn &= t != UNKNOWN  # ...and known there
+        n = int(np.count_nonzero(learn))
+        if n:
+            m = np.float32(self.params.merged)
+            view[learn] = np.where(t[learn] == FREE, -m, m)
+        return n
 
 
 def classify(logodds: np.ndarray, threshold: float = 0.2) -> np.ndarray:

@@ -102,9 +102,12 @@ class Laser:
         if ranges.shape != (self.n_rays,):
             raise ValueError(f"scan has {ranges.shape} ranges, expected {self.n_rays}")
         w = self.window
-        idx = self.hit_index(ranges)
-        rays = np.flatnonzero(idx < self.n_samples)
-        if rays.size:
+        if np.isfinite(ranges).any():
+            idx = self.hit_index(ranges)
+            rays = np.flatnonzero(idx < self.n_samples)
+        else:
+            rays = ()
+        if len(rays):
             r0, c0, flat = self.window_cells(x, y)
             cells = flat[self.mark & (self._k < idx[:, None])]
             occ = flat[rays, idx[rays]].astype(np.intp)
@@ -137,7 +140,8 @@ class Laser:
         idx = np.full(ranges.shape, self.n_samples, dtype=np.int32)
         finite = np.isfinite(ranges)
         idx[finite] = np.rint(ranges[finite] / self.step).astype(np.int32) - 1
-        np.clip(idx, 0, self.n_samples, out=idx)
+        np.maximum(idx, 0, out=idx)  # np.clip's Python wrapper costs more than the work
+        np.minimum(idx, self.n_samples, out=idx)
         return idx
 
     def scan_cells(
