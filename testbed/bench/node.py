@@ -47,15 +47,14 @@ def simulate_exploration(seed: int = 1) -> dict:
     world = World(truth, starts, laser, free_space(truth, starts), 0.1, 0.15)
     grid = OccupancyGrid(truth.shape, truth.cell, pad=laser.pad)
     prm = PlannerParams(truth.cell, 2, 0.15)
-    wp = grid.Lp.shape[1]
     plan_ms, update_ms = [], []
     path, i, status, step = [], 0, "ok", 0
     for step in range(MAX_SIM_STEPS):
         b = world.bodies[0]
         ranges = world.scan(0)
         t0 = time.perf_counter()
-        free, occ = laser.scan_cells(b.x, b.y, ranges, wp)
-        grid.update_cells(free, occ)
+        r0, c0, free, occ = laser.scan_window(b.x, b.y, ranges)  # as node.robot does
+        grid.update_window(r0, c0, free, occ)
         update_ms.append((time.perf_counter() - t0) * 1000)
         if step % 20 == 0:
             t0 = time.perf_counter()
