@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from testbed import figures
-from testbed.errors import TestbedError, UsageError
+from testbed.errors import UsageError
 
 log = logging.getLogger(__name__)
 
@@ -482,17 +482,7 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _standalone(argv: list[str] | None = None) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    parser = argparse.ArgumentParser(prog="testbed report", description=__doc__.split("\n")[0])
-    add_arguments(parser)
-    args = parser.parse_args(argv)
-    try:
-        return main(args)
-    except TestbedError as e:
-        print(f"testbed report: {e}", file=sys.stderr)
-        return e.exit_status
+if __name__ == "__main__":  # `python -m testbed.report` is `testbed report`
+    from testbed.cli import main as cli_main
 
-
-if __name__ == "__main__":
-    sys.exit(_standalone())
+    sys.exit(cli_main(["report", *sys.argv[1:]]))

@@ -617,24 +617,7 @@ def _paths_png(world: World, path: str, scale: int = 2) -> None:
     cv2.imwrite(path, img)
 
 
-def _standalone(argv: list[str] | None = None) -> int:
-    """`python -m testbed.run ...` until the CLI wires `testbed run`."""
+if __name__ == "__main__":  # `python -m testbed.run` is `testbed run`
+    from testbed.cli import main as cli_main
 
-    class P(argparse.ArgumentParser):
-        def error(self, message):
-            sys.stderr.write(f"testbed run: {message}\n")
-            sys.exit(2)
-
-    p = P(prog="testbed run")
-    add_arguments(p)
-    args = p.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    try:
-        return main(args)
-    except TestbedError as e:
-        sys.stderr.write(f"testbed run: {str(e).splitlines()[0] if str(e) else e}\n")
-        return e.exit_status
-
-
-if __name__ == "__main__":
-    sys.exit(_standalone())
+    sys.exit(cli_main(["run", *sys.argv[1:]]))

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from testbed import sweepfile
-from testbed.errors import TestbedError, UsageError
+from testbed.errors import UsageError
 from testbed.sweepfile import PlannedRun
 
 log = logging.getLogger(__name__)
@@ -607,17 +607,7 @@ def main(args: argparse.Namespace) -> int:
     return sweep.run(p.todo, p.done, p.skipped)
 
 
-def _standalone(argv: list[str] | None = None) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    parser = argparse.ArgumentParser(prog="testbed sweep", description=__doc__.split("\n")[0])
-    add_arguments(parser)
-    args = parser.parse_args(argv)
-    try:
-        return main(args)
-    except TestbedError as e:
-        print(f"testbed sweep: {e}", file=sys.stderr)
-        return e.exit_status
+if __name__ == "__main__":  # `python -m testbed.sweep` is `testbed sweep`
+    from testbed.cli import main as cli_main
 
-
-if __name__ == "__main__":
-    sys.exit(_standalone())
+    sys.exit(cli_main(["sweep", *sys.argv[1:]]))
