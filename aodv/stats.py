@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import time
 from collections import Counter
 
@@ -56,3 +57,15 @@ class Stats:
         with open(tmp, "w") as f:
             json.dump(self.as_dict(), f, indent=1, sort_keys=True)
         os.replace(tmp, path)
+
+
+def read_fresh(path: str, proc, timeout: float = 3.0) -> dict:
+    """Ask a running daemon (`proc`, a Popen) for fresh statistics and read them: SIGUSR1
+    makes it rewrite `path`; wait for the rewrite (or `timeout`), then load the file."""
+    before = os.stat(path).st_mtime_ns
+    proc.send_signal(signal.SIGUSR1)
+    deadline = time.monotonic() + timeout
+    while os.stat(path).st_mtime_ns == before and time.monotonic() < deadline:
+        time.sleep(0.005)
+    with open(path) as f:
+        return json.load(f)

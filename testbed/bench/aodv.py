@@ -18,16 +18,15 @@ work per message); on a loaded machine the wake-ups dominate, hence the minimum 
 next to the median, and the load average is recorded.
 """
 
-import json
 import os
 import select
-import signal
 import subprocess
 import sys
 import textwrap
 import time
 import uuid
 
+from aodv.stats import read_fresh
 from testbed.bench.common import median, write
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
@@ -87,14 +86,7 @@ def _wait_ready(net: Network, n: int) -> None:
 
 
 def _stats(net: Network, k: int) -> dict:
-    path = f"{net.state_dir}/r{k}.aodv.json"
-    before = os.stat(path).st_mtime_ns
-    _daemon(net, k).send_signal(signal.SIGUSR1)
-    deadline = time.monotonic() + 3
-    while os.stat(path).st_mtime_ns == before and time.monotonic() < deadline:
-        time.sleep(0.005)
-    with open(path) as f:
-        return json.load(f)
+    return read_fresh(f"{net.state_dir}/r{k}.aodv.json", _daemon(net, k))
 
 
 def discovery_once() -> dict[int, tuple[float, float]]:

@@ -9,7 +9,6 @@ import contextlib
 import json
 import os
 import re
-import signal
 import subprocess
 import tempfile
 import textwrap
@@ -17,6 +16,7 @@ import time
 import uuid
 
 from aodv import packet as wire
+from aodv.stats import read_fresh
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 
@@ -69,14 +69,7 @@ def stats_path(net, k):
 
 def stats(net, k):
     """Fresh statistics: SIGUSR1 makes the daemon rewrite its file."""
-    path = stats_path(net, k)
-    before = os.stat(path).st_mtime_ns
-    daemon(net, k).send_signal(signal.SIGUSR1)
-    deadline = time.monotonic() + 3
-    while os.stat(path).st_mtime_ns == before and time.monotonic() < deadline:
-        time.sleep(0.01)
-    with open(path) as f:
-        return json.load(f)
+    return read_fresh(stats_path(net, k), daemon(net, k))
 
 
 def routes(net, k):
