@@ -22,6 +22,8 @@ import math
 import numpy as np
 
 _BIAS = 4096  # makes cell coordinates positive so truncation is floor
+_NO_CELLS = np.zeros(0, dtype=np.intp)
+_NO_CELLS.flags.writeable = False
 
 
 class Laser:
@@ -51,6 +53,10 @@ class Laser:
         m = (2 ** np.floor(np.log2(m))).astype(np.int64)
         self.mark = (np.arange(self.n_rays)[:, None] % m[None, :]) == 0
         self._mark_dx, self._mark_dy = self.dx[self.mark], self.dy[self.mark]
+        # The marked samples in that (ray-major) order: per ray how many, and each one's index
+        # along its ray, so a scan keeps a prefix of each ray's samples without a 2-D mask.
+        self._mark_count = self.mark.sum(axis=1)
+        self._mark_s = np.nonzero(self.mark)[1].astype(np.int32)
         if (2 * self.pad + 4096) ** 2 > 2**31:
             raise ValueError("laser range too long for int32 cell indices")
 
@@ -98,32 +104,36 @@ class Laser:
         `free` is a (W, W) boolean mask of the cells seen free, `occ` the flat window indices
         (intp, may repeat) of the cells seen occupied; the same cells as `scan_cells`. A dense
         mask over the ~7000 window cells is cheaper to apply than ~14000 repeated indices.
+
+        Only the marked samples are computed (the same float32 arithmetic as `window_cells`),
+        and of those each ray keeps the ones before its hit; each hit sample is computed
+        alone. tests/unit/test_node_rays.py checks this against `scan_cells` cell for cell.
         """
         if ranges.shape != (self.n_rays,):
             raise ValueError(f"scan has {ranges.shape} ranges, expected {self.n_rays}")
         w = self.window
+        fx = np.float32(x / self.cell + _BIAS)
+        fy = np.float32(y / self.cell + _BIAS)
+        cb, rb = int(fx), int(fy)
+        off = (self.pad - rb) * w + (self.pad - cb)
+        cells = (self._mark_dy + fy).astype(np.int32)
+        cells *= w
+        cells += (self._mark_dx + fx).astype(np.int32)
+        cells += off
+        occ = _NO_CELLS
         if np.isfinite(ranges).any():
             idx = self.hit_index(ranges)
+            cells = cells[self._mark_s < np.repeat(idx, self._mark_count)]
             rays = np.flatnonzero(idx < self.n_samples)
-        else:
-            rays = ()
-        if len(rays):
-            r0, c0, flat = self.window_cells(x, y)
-            cells = flat[self.mark & (self._k < idx[:, None])]
-            occ = flat[rays, idx[rays]].astype(np.intp)
-        else:  # nothing hit: every marked sample is free, and only those are computed
-            fx = np.float32(x / self.cell + _BIAS)
-            fy = np.float32(y / self.cell + _BIAS)
-            cb, rb = int(fx), int(fy)
-            cells = (self._mark_dy + fy).astype(np.int32)
-            cells *= w
-            cells += (self._mark_dx + fx).astype(np.int32)
-            cells += (self.pad - rb) * w + (self.pad - cb)
-            r0, c0 = rb - _BIAS, cb - _BIAS
-            occ = np.zeros(0, dtype=np.intp)
+            if len(rays):
+                at = rays * self.n_samples + idx[rays]  # the hit samples, flat
+                occ = (self.dy.take(at) + fy).astype(np.intp)
+                occ *= w
+                occ += (self.dx.take(at) + fx).astype(np.intp)
+                occ += off
         # A histogram marks the cells: several times faster than a fancy-index assignment.
         free = np.bincount(cells, minlength=w * w) > 0
-        return r0, c0, free.reshape(w, w), occ
+        return rb - _BIAS, cb - _BIAS, free.reshape(w, w), occ
 
     def cast(self, occupied_padded: np.ndarray, x: float, y: float) -> np.ndarray:
         """Noiseless ranges (float32, n_rays) on a padded boolean obstacle grid; +inf: none."""

@@ -77,3 +77,50 @@ def test_thinned_samples_mark_the_same_cells_as_all_samples():
         flat = laser.flat_cells(x, y, 200)
         assert set(np.unique(flat[laser.mark]).tolist()) == set(np.unique(flat).tolist())
     assert laser.mark.sum() < 0.7 * laser.mark.size
+
+
+def _window_as_flat(laser, r0, c0, free, occ, padded_width):
+    """scan_window's result as flat indices of the padded grid (sorted, unique)."""
+    w = laser.window
+    fr, fc = np.nonzero(free)
+    orr, occ_c = np.divmod(occ, w)
+    f = np.unique((fr + r0) * padded_width + fc + c0)
+    o = np.unique((orr + r0) * padded_width + occ_c + c0)
+    return f, o
+
+
+@pytest.mark.parametrize("max_range", [2.0, 1.5])
+def test_scan_window_equals_scan_cells_on_random_poses(max_range):
+    """The fast window form marks cell for cell what the per-cell reference form marks."""
+    laser = Laser(max_range=max_range, n_rays=360, cell=0.05)
+    occ = _box(200)  # 10 x 10 m room with walls
+    occ[60:140, 120:123] = True  # an inner wall
+    occ[30:34, 30:90] = True
+    occp = pad(occ, laser.pad, True)
+    pw = occp.shape[1]
+    rng = np.random.default_rng(11)
+    kinds = 0
+    for i in range(300):
+        if i % 3 == 0:  # near the outer walls, where the window reaches into the padding
+            x, y = rng.uniform(0.05, 2.5, 2)
+            if rng.integers(2):
+                x, y = 10.0 - x, 10.0 - y
+        else:
+            x, y = rng.uniform(0.05, 9.95, 2)
+        x, y = float(np.float32(x)), float(np.float32(y))
+        if occ[int(y / 0.05), int(x / 0.05)]:
+            continue
+        ranges = laser.cast(occp, x, y)
+        if i % 5 == 0:  # arbitrary ranges too: short, beyond range, zero
+            ranges = ranges.copy()
+            k = rng.integers(0, 360, 40)
+            ranges[k] = rng.choice([0.0, 0.01, 0.3, max_range - 0.01, max_range + 1, np.inf], 40)
+        r0, c0, free, hit = laser.scan_window(x, y, ranges)
+        if r0 < 0 or c0 < 0 or r0 + laser.window > occp.shape[0] or c0 + laser.window > pw:
+            continue
+        kinds += bool(np.isfinite(ranges).any())
+        f_ref, o_ref = laser.scan_cells(x, y, ranges, pw)
+        f, o = _window_as_flat(laser, r0, c0, free, hit, pw)
+        assert np.array_equal(f, np.unique(f_ref))
+        assert np.array_equal(o, np.unique(o_ref))
+    assert kinds > 50
