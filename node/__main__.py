@@ -13,7 +13,9 @@ import sys
 
 from node import body
 from node.events import EventLog
-from node.flood import Flooder
+from node.flood import MODES, Flooder
+
+STEP_S = 0.1  # emulated seconds per step
 
 
 def robot_number(text: str) -> int:
@@ -75,6 +77,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--timer-phase", type=int, default=0, help="steps added to the first timer")
     p.add_argument("--iface", default="wlan0", help="'' to not bind floods to a device")
     p.add_argument("--flood-port", type=positive(int), default=5100)
+    p.add_argument(
+        "--flood",
+        choices=MODES,
+        default="pruned",
+        help="map flooding: self-pruning (default) or blind (every robot relays)",
+    )
     p.add_argument("--goal-port", type=positive(int), default=5101)
     p.add_argument("--bind", help="address for the goal socket (default: the robot's)")
     p.add_argument("--out-dir", help="display: where snapshots and the video go")
@@ -110,7 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         role = body.ROLE_DISPLAY if args.role == "display" else body.ROLE_ROBOT
         link = body.BodyClient(args.body, me, role)
-        flooder = Flooder(me, args.flood_port, args.iface or None)
+        # A neighbour is forgotten 1.5 map periods after it was last heard (node.flood).
+        hold = 1.5 * args.map_period * STEP_S / args.time_scale
+        flooder = Flooder(me, args.flood_port, args.iface or None, mode=args.flood, hold=hold)
     except OSError as e:
         sys.stderr.write(f"node: r{me}: cannot start: {e}\n")
         return 1

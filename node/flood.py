@@ -1,14 +1,29 @@
-"""Flooding over UDP broadcast: send to everyone reachable, each robot relays once.
+"""Flooding over UDP broadcast: every robot reachable gets each flood once or more.
 
 Theory of operation. A flood is sent to 255.255.255.255 on `wlan0` (SO_BINDTODEVICE), so it
 reaches exactly the robots currently linked to the sender. A robot that receives a flood it
-has not seen before (by (origin, seq)) delivers it and, while its TTL allows, rebroadcasts it
-with the TTL lowered by one; a flood seen before, or one of its own, is dropped. The
+has not seen before (by (origin, seq)) delivers it and, while its TTL allows, may rebroadcast
+it with the TTL lowered by one; a flood seen before, or one of its own, is dropped. The
 duplicate cache keeps, per origin, the highest sequence number and the recent ones below it
 (floods overtake each other on different paths), so memory stays bounded.
 
-`Flooder` owns the socket and the cache; it never blocks on send (a full buffer drops the
-datagram, as a radio would).
+Whether a robot rebroadcasts is the flooding *mode*:
+
+- "blind": every robot relays every new flood once (simple flooding). In a dense team each
+  robot then receives a copy from every neighbour: n robots in range of each other send n
+  copies of each flood and receive n(n-1), the broadcast storm of Ni et al. (MobiCom 1999).
+- "pruned" (the default): self-pruning (Lim and Kim, "Flooding in wireless ad hoc networks",
+  Computer Communications 24, 2001). Every copy carries its sender and the neighbours the
+  sender heard recently; a robot relays a new flood only if it hears a neighbour that the
+  copy's sender does not (so someone may still be without it). A robot's neighbours are the
+  senders of the datagrams it received within `hold` seconds: every robot floods its map
+  every few steps, so the table follows the links. A team all in range of each other then
+  sends one copy per flood instead of n. The cost: a neighbour that appeared in the last
+  `hold` seconds, or one the sender lost in that time, may miss a flood that blind flooding
+  would have brought; the map floods are periodic and whole maps follow reunions.
+
+`Flooder` owns the socket, the cache and the neighbour table; it never blocks on send (a full
+buffer drops the datagram, as a radio would).
 """
 
 from __future__ import annotations
@@ -17,6 +32,7 @@ import contextlib
 import logging
 import socket
 import threading
+import time
 from collections import Counter
 
 from node import wire
@@ -24,6 +40,7 @@ from node import wire
 log = logging.getLogger(__name__)
 
 WINDOW = 256  # sequence numbers remembered per origin below its highest
+MODES = ("pruned", "blind")
 
 
 class DuplicateCache:
@@ -50,13 +67,28 @@ class DuplicateCache:
 
 
 class Flooder:
-    def __init__(self, me: int, port: int, iface: str | None = "wlan0", ttl: int = 16):
+    def __init__(
+        self,
+        me: int,
+        port: int,
+        iface: str | None = "wlan0",
+        ttl: int = 16,
+        mode: str = "pruned",
+        hold: float = 1.5,
+        clock=time.monotonic,
+    ):
+        if mode not in MODES:
+            raise ValueError(f"unknown flooding mode {mode!r} (one of {', '.join(MODES)})")
         self.me = me
         self.port = port
         self.ttl = ttl
+        self.mode = mode
+        self.hold = hold
+        self.clock = clock
         self.seq = 0
         self.cache = DuplicateCache()
         self.cache_lock = threading.Lock()  # the inbox relays while the timer originates
+        self.heard: dict[int, float] = {}  # neighbour -> when a datagram from it last came
         self.counts: Counter[str] = Counter()
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -73,6 +105,11 @@ class Flooder:
     def fileno(self) -> int:
         return self.sock.fileno()
 
+    def neighbours(self, now: float | None = None) -> list[int]:
+        """The robots heard within `hold` seconds."""
+        now = self.clock() if now is None else now
+        return [k for k, t in self.heard.items() if now - t <= self.hold]
+
     def _send(self, data: bytes) -> bool:
         try:
             self.sock.sendto(data, self.dest)
@@ -85,9 +122,10 @@ class Flooder:
     def originate(self, kind: int, step: int, payload: bytes) -> int:
         """Flood a new message of ours; returns its sequence number."""
         self.seq += 1
-        h = wire.FloodHeader(kind, self.ttl, self.me, self.seq, step)
         with self.cache_lock:
             self.cache.seen(self.me, self.seq)
+            nb = tuple(self.neighbours())
+        h = wire.FloodHeader(kind, self.ttl, self.me, self.seq, step, self.me, nb)
         self._send(wire.pack_flood(h, payload))
         return self.seq
 
@@ -95,32 +133,47 @@ class Flooder:
         """Drain the socket: new floods (header, payload), relayed on the way."""
         return [wire.unpack_flood(data) for data in self.receive_raw()]
 
+    def must_relay(self, sender: int, origin: int, covered, now: float) -> bool:
+        """The relay rule for a new flood whose copy came from `sender` (cache lock held)."""
+        if self.mode == "blind":
+            return True
+        skip = set(covered)
+        skip.update((sender, origin))
+        return any(k not in skip for k in self.neighbours(now))
+
     def receive_raw(self) -> list[bytes]:
         """Drain the socket: new floods as they arrived (wire form), relayed on the way.
 
-        Most datagrams are copies of a flood already seen (every neighbour relays it): the
-        duplicate check reads the header fields only, nothing else is built for them."""
+        A copy of a flood already seen costs a header read and a dictionary update (its
+        sender is a neighbour); nothing else is built for it."""
         out = []
-        recvfrom, seen, me = self.sock.recvfrom, self.cache.seen, self.me
+        recvfrom, seen, me, heard = self.sock.recvfrom, self.cache.seen, self.me, self.heard
+        now = self.clock()
         while True:
             try:
                 data, _ = recvfrom(65535)
             except (BlockingIOError, InterruptedError):
                 return out
             try:
-                ttl, origin, seq = wire.flood_ids(data)
+                ttl, origin, seq, sender = wire.flood_ids(data)
+                covered, _ = wire.flood_neighbours(data)
             except ValueError as e:
                 self.counts["malformed"] += 1
                 log.debug("dropped malformed flood: %s", e)
                 continue
+            if sender != me:
+                heard[sender] = now
             with self.cache_lock:
-                dup = origin == me or seen(origin, seq)
-            if dup:
-                self.counts["duplicate"] += 1
-                continue
-            if ttl > 1:
-                self._send(wire.with_ttl(data, ttl - 1))
+                if origin == me or seen(origin, seq):
+                    self.counts["duplicate"] += 1
+                    continue
+                relay = ttl > 1 and self.must_relay(sender, origin, covered, now)
+                nb = self.neighbours(now) if relay else ()
+            if relay:
+                self._send(wire.relayed(data, ttl - 1, me, nb))
                 self.counts["relayed"] += 1
+            elif ttl > 1:
+                self.counts["pruned"] += 1
             out.append(data)
 
     def close(self) -> None:

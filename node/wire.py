@@ -1,10 +1,15 @@
 """What robots say to each other on the emulated network.
 
-Floods (UDP broadcast, see node.flood) carry a fixed header and a payload:
+Floods (UDP broadcast, see node.flood) carry a header and a payload (network byte order):
 
-    'RMF1' u8 kind u8 ttl u16 origin u32 seq u32 step     (18 bytes, network byte order)
+    'RMF2' u8 kind u8 ttl u16 origin u32 seq u32 step    (16 bytes: the flood itself)
+    u16 sender u8 n, n x u16 neighbour                   (this copy: who sent it, and whom
+                                                           the sender hears)
 
-`step` is the origin's step when it sent the flood. The only flood kind is MAP: part of the
+`step` is the origin's step when it sent the flood. `sender` is the robot that transmitted
+this copy (the origin, or a relay) and the neighbours are the robots the sender heard
+recently: a relay rewrites both, and the receiver's self-pruning rule reads them
+(node.flood). The only flood kind is MAP: part of the
 origin's own local map (cells its own laser saw), cropped to its known cells, with its
 position. Most map floods carry only the window its laser swept since its last flood (a
 delta). The whole local map goes out when the robot hears from a robot (or the display) it had
@@ -38,11 +43,14 @@ import numpy as np
 
 from node.grid import decode_ternary, encode_ternary
 
-MAGIC = b"RMF1"
+MAGIC = b"RMF2"
 KIND_MAP = 1
 KIND_BEACON = 2  # the display's "I am here": f32 x f32 y
+MAX_NEIGHBOURS = 255
 _HDR = struct.Struct("!4sBBHII")
+_COPY = struct.Struct("!HB")
 _MAP = struct.Struct("!ffHHHH")
+_FIXED = _HDR.size + _COPY.size
 
 
 @dataclass(frozen=True)
@@ -52,34 +60,55 @@ class FloodHeader:
     origin: int
     seq: int
     step: int
+    sender: int = 0  # who transmitted this copy; pack_flood's callers set it
+    neighbours: tuple[int, ...] = ()  # whom the sender heard recently
+
+
+def _copy_part(sender: int, neighbours) -> bytes:
+    nb = sorted(neighbours)[:MAX_NEIGHBOURS]
+    return _COPY.pack(sender, len(nb)) + struct.pack(f"!{len(nb)}H", *nb)
 
 
 def pack_flood(h: FloodHeader, payload: bytes) -> bytes:
-    return _HDR.pack(MAGIC, h.kind, h.ttl, h.origin, h.seq, h.step) + payload
+    return (
+        _HDR.pack(MAGIC, h.kind, h.ttl, h.origin, h.seq, h.step)
+        + _copy_part(h.sender, h.neighbours)
+        + payload
+    )
 
 
-def unpack_flood(data: bytes) -> tuple[FloodHeader, bytes]:
-    if len(data) < _HDR.size:
-        raise ValueError("flood shorter than its header")
-    magic, kind, ttl, origin, seq, step = _HDR.unpack_from(data)
-    if magic != MAGIC:
-        raise ValueError("not a robot flood (bad magic)")
-    return FloodHeader(kind, ttl, origin, seq, step), data[_HDR.size :]
-
-
-def flood_ids(data: bytes) -> tuple[int, int, int]:
-    """(ttl, origin, seq) of a flood in wire form; ValueError as unpack_flood raises it."""
-    if len(data) < _HDR.size:
+def flood_ids(data: bytes) -> tuple[int, int, int, int]:
+    """(ttl, origin, seq, sender) of a flood in wire form; ValueError if it is not one."""
+    if len(data) < _FIXED:
         raise ValueError("flood shorter than its header")
     magic, _, ttl, origin, seq, _ = _HDR.unpack_from(data)
     if magic != MAGIC:
         raise ValueError("not a robot flood (bad magic)")
-    return ttl, origin, seq
+    return ttl, origin, seq, _COPY.unpack_from(data, _HDR.size)[0]
 
 
-def with_ttl(data: bytes, ttl: int) -> bytes:
-    """The same flood with its TTL byte replaced (for relaying)."""
-    return data[:5] + bytes([ttl]) + data[6:]
+def flood_neighbours(data: bytes) -> tuple[tuple[int, ...], int]:
+    """(the sender's neighbours, the payload's offset) of a flood that passed flood_ids."""
+    n = data[_HDR.size + 2]
+    end = _FIXED + 2 * n
+    if len(data) < end:
+        raise ValueError("flood shorter than its neighbour list")
+    return struct.unpack_from(f"!{n}H", data, _FIXED), end
+
+
+def unpack_flood(data: bytes) -> tuple[FloodHeader, bytes]:
+    ttl, origin, seq, sender = flood_ids(data)
+    neighbours, off = flood_neighbours(data)
+    kind, step = data[4], _HDR.unpack_from(data)[5]
+    return FloodHeader(kind, ttl, origin, seq, step, sender, neighbours), data[off:]
+
+
+def relayed(data: bytes, ttl: int, sender: int, neighbours) -> bytes:
+    """The same flood as retransmitted by `sender`: its TTL, sender and neighbours replaced."""
+    _, off = flood_neighbours(data)
+    return (
+        data[:5] + bytes([ttl]) + data[6 : _HDR.size] + _copy_part(sender, neighbours) + data[off:]
+    )
 
 
 _BEACON = struct.Struct("!ff")

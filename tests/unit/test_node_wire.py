@@ -8,16 +8,34 @@ from node.flood import WINDOW, DuplicateCache
 from node.grid import FREE, OCC
 
 
-def test_flood_header_round_trip_and_ttl_rewrite():
-    h = wire.FloodHeader(wire.KIND_MAP, 16, 3, 1234, 99)
+def test_flood_header_round_trip_and_relay_rewrite():
+    h = wire.FloodHeader(wire.KIND_MAP, 16, 3, 1234, 99, sender=3, neighbours=(5, 2))
     data = wire.pack_flood(h, b"payload")
     h2, p = wire.unpack_flood(data)
-    assert h2 == h and p == b"payload"
-    h3, p3 = wire.unpack_flood(wire.with_ttl(data, 7))
-    assert h3.ttl == 7 and h3.seq == 1234 and p3 == b"payload"
+    assert h2 == wire.FloodHeader(wire.KIND_MAP, 16, 3, 1234, 99, 3, (2, 5)) and p == b"payload"
+    assert wire.flood_ids(data) == (16, 3, 1234, 3)
+    h3, p3 = wire.unpack_flood(wire.relayed(data, 7, 5, [1, 3, 4]))
+    assert (h3.ttl, h3.origin, h3.seq, h3.step) == (7, 3, 1234, 99) and p3 == b"payload"
+    assert (h3.sender, h3.neighbours) == (5, (1, 3, 4))
 
 
-@pytest.mark.parametrize("bad", [b"", b"RMF", b"XXXX" + bytes(14)])
+def test_flood_header_bytes_laid_out_by_hand():
+    h = wire.FloodHeader(wire.KIND_BEACON, 2, 0x0102, 0x03040506, 7, sender=9, neighbours=(1,))
+    assert wire.pack_flood(h, b"") == (
+        b"RMF2" + bytes([2, 2, 1, 2, 3, 4, 5, 6, 0, 0, 0, 7]) + bytes([0, 9, 1, 0, 1])
+    )
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        b"",
+        b"RMF",
+        b"XXXX" + bytes(15),
+        b"RMF1" + bytes(15),  # the old format
+        b"RMF2" + bytes(14) + b"\x03" + bytes(4),  # claims 3 neighbours, carries 2
+    ],
+)
 def test_malformed_floods_are_rejected(bad):
     with pytest.raises(ValueError):
         wire.unpack_flood(bad)
