@@ -43,6 +43,7 @@ import cv2
 import numpy as np
 
 from node import body, render
+from node.flood import MODES as FLOOD_MODES
 from node.rays import Laser
 from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
@@ -77,6 +78,7 @@ class RunConfig:
     radius: float = 0.15
     plan_period: int = 20
     map_period: int = 10
+    flood: str = "pruned"  # node.flood: "pruned" (self-pruning) or "blind"
     display_pos: tuple[float, float] | None = None  # default: the map's centre
     snapshots: tuple[int, ...] = ()
     kill: tuple[tuple[int, int], ...] = ()  # (robot, step): fault injection, SIGKILL
@@ -150,6 +152,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--speed", type=_number(float, 0, True, "speed"), default=1.0, help="m/s")
     a("--map-period", type=_number(int, 1, name="map period"), default=10,
       help="steps between a robot's map floods (default 10)")  # fmt: skip
+    a(
+        "--flood",
+        choices=FLOOD_MODES,
+        default="pruned",
+        help="map flooding: self-pruning (default) or blind (every robot relays every flood)",
+    )
     a("--display-pos", type=_point, help="X,Y of the display (default: map centre)")
     a("--snapshots", type=_steps, default=(),
       help="display snapshot steps, e.g. 200,600 (default 100,250,500,1000,2000; always one "
@@ -173,7 +181,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
         max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
         speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
-        map_period=args.map_period,
+        map_period=args.map_period, flood=args.flood,
         kill=tuple(args.kill),
     )  # fmt: skip
 
@@ -276,8 +284,18 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
     cov_w.writerow(["step", "coverage"])
     display_proc = None
     server = None
+    parts: dict[str, float] = {}  # wall seconds of each part of the run
+    timing["parts"] = parts
+    mark = [time.monotonic()]
+
+    def phase(name: str) -> None:
+        now = time.monotonic()
+        parts[name] = round(now - mark[0], 3)
+        mark[0] = now
+
     try:
         with Network(spec) as net:
+            phase("network_up")
             server = BodyServer(os.path.join(net.state_dir, "body.sock"))
             for i, j in sorted(net.links()):
                 links_w.writerow([0, "add", i, j])
@@ -289,7 +307,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
                 "--laser-range", str(cfg.laser_range), "--laser-rays", str(cfg.laser_rays),
                 "--speed", str(cfg.speed), "--radius", str(cfg.radius),
                 "--plan-period", str(cfg.plan_period), "--map-period", str(cfg.map_period),
-                "--time-scale", str(cfg.time_scale),
+                "--time-scale", str(cfg.time_scale), "--flood", cfg.flood,
             ]  # fmt: skip
             outa = os.path.abspath(out)
             for k in range(1, n + 1):
@@ -314,6 +332,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
                     env=env,
                 )  # fmt: skip
             server.wait_for(set(robots), {display_k}, timeout=60.0 + 3.0 * n)
+            phase("processes_ready")
             missing = sorted(set(robots) - set(server.robots))
             if missing or display_k not in server.displays:
                 dead = [k for k in robots if robots[k].proc.poll() is not None]
@@ -329,8 +348,12 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
                 cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
                 progress, timing,
             )  # fmt: skip
+            phase("steps")
             _end(server, robots, display_k, display_proc, steps_done)
+            phase("processes_ended")
             _collect_routing(net, cfg, out)
+            phase("routing_stopped")
+        phase("network_down")
     except TestbedError as e:
         status, detail = "error", str(e).splitlines()[0] if str(e) else type(e).__name__
         log.error("run failed: %s", detail)
@@ -520,6 +543,7 @@ def read_events(path: str) -> list[dict]:
 
 def _results(cfg, config, out, world, robots, status, detail, steps, missed_world, wall,
              total_wall, timing) -> dict:  # fmt: skip
+    t_results = time.monotonic()
     n = cfg.robots
     robot_out = {}
     for k, r in robots.items():
@@ -584,6 +608,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         "deadlines_missed_world": missed_world,
         "wall_time_s": round(total_wall, 2),
         "step_loop_wall_s": round(wall, 2),
+        "wall_parts_s": dict(timing.get("parts", {})),
         "display": {"robot": n + 1, "coverage_final": disp},
         "world_timing_s": {
             k: round(v, 3) for k, v in timing.items() if isinstance(v, float)
@@ -592,6 +617,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         "robots": robot_out,
     }  # fmt: skip
     result["config"]["extra"] = {k: v for k, v in config.items() if k not in result["config"]}
+    result["wall_parts_s"]["results"] = round(time.monotonic() - t_results, 3)
     _write_json(os.path.join(out, "result.json"), result)
     return result
 
