@@ -325,11 +325,17 @@ def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:
     state = _read_json(sweep_dir / "sweep.json") or {}
     spec = state.get("spec") or {}
     if spec:
+        by_team = spec.get("time_scale_by_robots") or {}
+        scales = (
+            ", ".join(f"{v:g} for {k}" for k, v in by_team.items()) + " robots"
+            if by_team
+            else spec.get("time_scale")
+        )
         lines.append(
             f"Sweep file `{state.get('sweep_file', '?')}`: teams {spec.get('robots')}, ranges "
             f"{spec.get('comm_range')} m, lasers {spec.get('laser_range')} m, loss "
             f"{spec.get('loss_pct')} %, delay {spec.get('delay_ms')} ms, {spec.get('runs')} "
-            f"run(s) per point, time scale {spec.get('time_scale')}, routing "
+            f"run(s) per point, time scale {scales}, routing "
             f"{spec.get('routing')}."
         )
     planned = state.get("runs") or []

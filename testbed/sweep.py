@@ -18,12 +18,17 @@ On SIGINT or SIGTERM the sweep starts nothing new, forwards SIGINT to each runni
 waits, escalates to SIGTERM and then SIGKILL of the child's process group, and exits 130.
 A run that finishes during that grace period still counts.
 
-Concurrency starts at --jobs (default from the core count) and backs off: a run that reports
-deadline_miss_fraction above 1% while other runs shared the machine lowers the concurrency by
-one, and is redone once at the lower concurrency (a run that misses deadlines alone is kept:
-more concurrency would not help it). `DIR/sweep.json` holds the expanded plan and each run's
-status, rewritten atomically whenever something changes; a lock file keeps two sweeps out of
-one directory.
+Concurrency: at most --jobs runs at once (default from the core count) and, when the sweep file
+sets `load_limit`, only while the loads of the runs in flight add up to at most that: a run's
+load is (robots + 1) x time_scale, the process-steps it asks of the machine per emulated
+100 ms, so a sweep whose time scale falls with team size packs small teams side by side and
+gives a large one the machine alone. The queue is served first-fit: the first waiting run
+that fits starts. Concurrency backs off: a run that reports deadline_miss_fraction above 1%
+while another run shared the machine lowers the load limit to 80% of the load it ran under
+(without a load limit: the job count by one) and is redone once (a run that misses deadlines
+alone is kept: less concurrency would not help it). `DIR/sweep.json` holds the expanded plan
+and each run's status, rewritten atomically whenever something changes; a lock file keeps two
+sweeps out of one directory.
 """
 
 from __future__ import annotations
@@ -218,7 +223,12 @@ class Progress:
     def record(self, robots: int, seconds: float) -> None:
         self.durations.setdefault(robots, []).append(seconds)
 
-    def eta(self, remaining: list[PlannedRun], running: int, jobs: int) -> float | None:
+    def parallelism(self) -> float:
+        """Runs in flight on average so far: run wall time finished over sweep wall time."""
+        busy = sum(d for ds in self.durations.values() for d in ds)
+        return max(1.0, busy / max(1e-9, time.monotonic() - self.start))
+
+    def eta(self, remaining: list[PlannedRun], running: int, jobs: float) -> float | None:
         """Seconds left: each remaining run costs the mean time of finished runs with the same
         team size (or the overall mean), shared over the concurrency."""
         all_d = [d for ds in self.durations.values() for d in ds]
@@ -281,6 +291,15 @@ class _Child:
     started: float
     jobs_at_start: int
     log_file: object
+    load: float = 0.0
+    shared: bool = False  # another run was in flight at some time during this one
+    load_seen: float = 0.0  # the most load in flight while this one ran
+
+
+def run_load(run: PlannedRun) -> float:
+    """What a run asks of the machine: process-steps (robots, plus the display) per 100 ms of
+    emulated time."""
+    return (run.config["robots"] + 1) * float(run.config["time_scale"])
 
 
 def _atomic_write_json(path: Path, data) -> None:
@@ -308,6 +327,8 @@ class Sweep:
         self.out = out
         self.jobs = jobs
         self.jobs_requested = jobs
+        self.load_limit = getattr(spec, "load_limit", None)
+        self.load_limit_requested = self.load_limit
         self.netem = netem
         self.sweep_file = sweep_file
         self.command = command or run_command()
@@ -325,6 +346,8 @@ class Sweep:
             "spec": self.spec.to_dict(),
             "jobs_requested": self.jobs_requested,
             "jobs": self.jobs,
+            "load_limit_requested": self.load_limit_requested,
+            "load_limit": self.load_limit,
             "netem": self.netem,
             "backoffs": self.backoffs,
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
@@ -341,7 +364,8 @@ class Sweep:
 
     def _show(self, queue, event=None) -> None:
         done, running, failed = self._counts()
-        eta = self.progress.eta(list(queue), running, self.jobs)
+        jobs = self.jobs if self.load_limit is None else self.progress.parallelism()
+        eta = self.progress.eta(list(queue), running, jobs)
         self.progress.update(done, running, failed, eta, event)
 
     # -- signals
@@ -374,7 +398,9 @@ class Sweep:
             "pid": proc.pid,
             "attempts": self.status[run.run_id].get("attempts", 0) + 1,
         }
-        return _Child(run, proc, time.monotonic(), self.jobs, log_file)
+        child = _Child(run, proc, time.monotonic(), self.jobs, log_file, load=run_load(run))
+        child.load_seen = child.load
+        return child
 
     def _finish(self, child: _Child, queue: deque) -> str:
         """Record a child that exited; returns the event line for the progress display."""
@@ -400,7 +426,18 @@ class Sweep:
         event = f"{run.run_id}: {result.get('status')} in {wall:.0f} s"
         if isinstance(miss, int | float) and miss > DEADLINE_MISS_LIMIT:
             event += f", missed {miss:.1%} of step deadlines"
-            if child.jobs_at_start > 1:
+            if self.load_limit is not None and child.shared:
+                self.load_limit = round(min(self.load_limit, 0.8 * child.load_seen), 1)
+                self.backoffs.append(
+                    {"run": run.run_id, "deadline_miss_fraction": miss,
+                     "load_limit": self.load_limit}
+                )  # fmt: skip
+                event += f"; load limit down to {self.load_limit:g}"
+                if st["attempts"] < 2:
+                    st["status"] = "pending"
+                    queue.appendleft(run)
+                    event += ", redoing it"
+            elif self.load_limit is None and child.jobs_at_start > 1:
                 self.jobs = max(1, min(self.jobs, child.jobs_at_start) - 1)
                 self.backoffs.append(
                     {"run": run.run_id, "deadline_miss_fraction": miss, "jobs": self.jobs}
@@ -439,6 +476,18 @@ class Sweep:
             if st["status"] == "failed" and not is_done(self.out, rid):
                 st["status"] = "interrupted"
 
+    def _next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
+        """Take the first waiting run that fits under the load limit (any run, when nothing
+        is in flight); None when none fits."""
+        if self.load_limit is None or not children:
+            return queue.popleft()
+        room = self.load_limit - sum(c.load for c in children.values())
+        for i, run in enumerate(queue):
+            if run_load(run) <= room + 1e-9:
+                del queue[i]
+                return run
+        return None
+
     # -- the loop
 
     def run(self, todo: list[PlannedRun], done: list[PlannedRun], skipped: dict[str, str]) -> int:
@@ -457,8 +506,15 @@ class Sweep:
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
                 while queue and len(children) < self.jobs and self.stop_signal is None:
-                    run = queue.popleft()
-                    children[run.run_id] = self._start(run)
+                    run = self._next_fitting(queue, children)
+                    if run is None:
+                        break
+                    child = self._start(run)
+                    children[run.run_id] = child
+                    in_flight = sum(c.load for c in children.values())
+                    for c in children.values():
+                        c.shared = c.shared or len(children) > 1
+                        c.load_seen = max(c.load_seen, in_flight)
                     self._write_state()
                     self._show(queue)
                 exited = [rid for rid, c in children.items() if c.proc.poll() is not None]

@@ -15,7 +15,10 @@ for every run of the sweep::
     runs = 1                      # runs per point, default 1
 
     [run]
-    time_scale = 5.0              # default 1.0
+    time_scale = 5.0              # default 1.0; or per team size (every size in the grid):
+    # time_scale = { 1 = 12.0, 2 = 10.0, 3 = 8.0 }
+    load_limit = 60               # optional: runs share the machine while the sum of their
+                                  # loads, (robots + 1) x time_scale, stays within this
     routing = "aodv"              # aodv | babel | none, default aodv
     max_steps = 3000              # default 3000
     capture = true                # default false
@@ -47,7 +50,7 @@ ROUTINGS = ("aodv", "babel", "none")
 _TOP_KEYS = {"description", "grid", "run"}
 _GRID_LISTS = ("robots", "comm_range", "laser_range", "loss_pct", "delay_ms")
 _GRID_KEYS = set(_GRID_LISTS) | {"runs"}
-_RUN_KEYS = {"time_scale", "routing", "max_steps", "capture", "map", "seed"}
+_RUN_KEYS = {"time_scale", "routing", "max_steps", "capture", "map", "seed", "load_limit"}
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,9 @@ class SweepSpec:
     loss_pct: tuple[float, ...] = (0.0,)
     delay_ms: tuple[float, ...] = (0.0,)
     runs: int = 1
-    time_scale: float = 1.0
+    time_scale: float = 1.0  # for team sizes without an entry in time_scale_by_robots
+    time_scale_by_robots: tuple[tuple[int, float], ...] = ()
+    load_limit: float | None = None
     routing: str = "aodv"
     max_steps: int = 3000
     capture: bool = False
@@ -69,7 +74,13 @@ class SweepSpec:
     description: str = ""
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["time_scale_by_robots"] = {str(n): v for n, v in self.time_scale_by_robots}
+        return d
+
+    def scale_for(self, robots: int) -> float:
+        """The time scale of a run of `robots` robots."""
+        return dict(self.time_scale_by_robots).get(robots, self.time_scale)
 
 
 @dataclass(frozen=True)
@@ -131,6 +142,27 @@ def _number_list(path, key: str, value, *, integer: bool, low: float, low_open: 
     return tuple(out)
 
 
+def _positive(path, key: str, v) -> float:
+    if not _is_number(v):
+        raise _fail(path, key, f"expected a number, got {v!r}")
+    if v <= 0:
+        raise _fail(path, key, f"must be > 0, got {v}")
+    return float(v)
+
+
+def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
+    """`time_scale = { 1 = 12.0, 2 = 10.0 }`: a time scale for each team size of the grid."""
+    out = {}
+    for key, v in table.items():
+        if not key.isdigit() or int(key) < 1:
+            raise _fail(path, f"run.time_scale.{key}", "keys are team sizes (1, 2, ...)")
+        out[int(key)] = _positive(path, f"run.time_scale.{key}", v)
+    missing = [n for n in robots if n not in out]
+    if missing:
+        raise _fail(path, "run.time_scale", f"no entry for team size {missing[0]}")
+    return tuple(sorted(out.items()))
+
+
 def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
     """Validate the parsed TOML `data` and return its SweepSpec (UsageError if invalid)."""
     _check_table(path, "", data, _TOP_KEYS)
@@ -171,11 +203,12 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
 
     if "time_scale" in run:
         ts = run["time_scale"]
-        if not _is_number(ts):
-            raise _fail(path, "run.time_scale", f"expected a number, got {ts!r}")
-        if ts <= 0:
-            raise _fail(path, "run.time_scale", f"must be > 0, got {ts}")
-        kw["time_scale"] = float(ts)
+        if isinstance(ts, dict):
+            kw["time_scale_by_robots"] = _scale_table(path, ts, kw["robots"])
+        else:
+            kw["time_scale"] = _positive(path, "run.time_scale", ts)
+    if "load_limit" in run:
+        kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
     if "routing" in run:
         routing = run["routing"]
         if routing not in ROUTINGS:
@@ -269,7 +302,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 "comm_range": comm,
                 "laser_range": laser,
                 "seed": derive_seed(spec.seed, robots, comm, laser, loss, delay, index),
-                "time_scale": spec.time_scale,
+                "time_scale": spec.scale_for(robots),
                 "routing": spec.routing,
                 "map": spec.map,
                 "loss_pct": loss,

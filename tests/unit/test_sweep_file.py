@@ -52,6 +52,10 @@ def parse(text: str):
         (GOOD.replace("runs = 2", "runs = 1.5"), "grid.runs"),
         (GOOD.replace("time_scale = 4", 'time_scale = "fast"'), "run.time_scale"),
         (GOOD.replace("time_scale = 4", "time_scale = 0"), "run.time_scale"),
+        (GOOD.replace("time_scale = 4", "time_scale = { 1 = 8 }"), "run.time_scale"),
+        (GOOD.replace("time_scale = 4", "time_scale = { 1 = 8, 2 = -1 }"), "run.time_scale.2"),
+        (GOOD.replace("time_scale = 4", "time_scale = { 1 = 8, two = 4 }"), "run.time_scale.two"),
+        (GOOD + "load_limit = 0\n", "run.load_limit"),
         (GOOD.replace("capture = true", 'capture = "yes"'), "run.capture"),
         (GOOD + 'routing = "olsr"\n', "run.routing"),
         (GOOD + "max_steps = true\n", "run.max_steps"),
@@ -158,3 +162,13 @@ def test_cli_bad_file_one_line_exit_2(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "grid.robots" in lines[0], r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_time_scale_per_team_size():
+    spec = parse(
+        GOOD.replace("time_scale = 4", "time_scale = { 2 = 6, 1 = 12.5 }\nload_limit = 40")
+    )
+    assert spec.time_scale_by_robots == ((1, 12.5), (2, 6.0)) and spec.load_limit == 40.0
+    scales = {(r.config["robots"], r.config["time_scale"]) for r in sweepfile.expand(spec)}
+    assert scales == {(1, 12.5), (2, 6.0)}
+    assert spec.to_dict()["time_scale_by_robots"] == {"1": 12.5, "2": 6.0}

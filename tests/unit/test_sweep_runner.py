@@ -30,6 +30,7 @@ p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
 p.add_argument("--capture", action="store_true"); p.add_argument("--quiet", action="store_true")
 a = p.parse_args()
 signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+t_start = time.monotonic()
 pids = os.environ.get("STANDIN_PIDS")
 if pids:
     with open(os.path.join(pids, str(os.getpid())), "w") as f:
@@ -59,6 +60,10 @@ tmp = os.path.join(a.out, "result.json.tmp")
 with open(tmp, "w") as f:
     json.dump(res, f)
 os.replace(tmp, os.path.join(a.out, "result.json"))
+times = os.environ.get("STANDIN_TIMES")
+if times:
+    with open(os.path.join(times, str(os.getpid())), "w") as f:
+        f.write(f"{t_start} {time.monotonic()} {a.robots} {a.time_scale}")
 """
 
 SWEEP = """
@@ -211,3 +216,27 @@ def test_failed_runs_are_reported_and_retried_on_resume(env):
     assert all("failing on purpose" in x["reason"] for x in failed)
     r = run_sweep(env, out, "--resume")
     assert r.returncode == 0 and len(results(out)) == 6
+
+
+def test_load_limit_packs_small_teams_and_never_overloads(env):
+    """Per-team time scales and a load limit: runs share the machine only while the sum of
+    their loads, (robots + 1) x time_scale, stays within the limit."""
+    env["file"].write_text(
+        SWEEP.replace("time_scale = 5", "time_scale = { 1 = 10, 2 = 8, 3 = 6 }\nload_limit = 45")
+    )
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "3", STANDIN_SLEEP="0.6", STANDIN_TIMES=str(times))
+    assert r.returncode == 0, r.stderr
+    spans = [tuple(float(v) for v in p.read_text().split()) for p in times.iterdir()]
+    assert sorted((int(n), ts) for _, _, n, ts in spans) == [(1, 10), (1, 10), (2, 8), (2, 8),
+                                                            (3, 6), (3, 6)]  # fmt: skip
+    overlapped = False
+    for t0, _, _, _ in spans:  # the load in flight whenever a run started
+        now = [(n + 1) * ts for s0, s1, n, ts in spans if s0 <= t0 < s1]
+        assert sum(now) <= 45
+        overlapped |= len(now) > 1
+    assert overlapped  # the small teams did share the machine
+    state = json.loads((out / "sweep.json").read_text())
+    assert state["load_limit"] == 45 and state["spec"]["time_scale_by_robots"]["3"] == 6
