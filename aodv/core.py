@@ -15,8 +15,10 @@ monotonic clock), and executes the actions it returns, in order:
                                              DiscoveryDone(dest, ok, latency, round_latency)
 
 After every call `next_deadline()` says when `on_timer` must run next. Route actions are
-a diff of the valid routing-table entries against what was already installed, and come
-first in every returned list, so a Release always follows the Install it needs.
+a diff of the valid routing-table entries against what was already installed. Every
+returned list is ordered for the discovery's critical path (see `_finish`): RREQs, RREPs
+and RERRs first, then route actions, then releases, drops and DiscoveryDone (a Release
+always follows the Install it needs), and RREP-ACKs last.
 
 Where the RFC leaves a choice, the decision is written next to the rule as "Decision:".
 The main ones, for a reader in a hurry:
@@ -439,8 +441,7 @@ class AodvCore:
     # == RFC 6.7 receiving a RREP =========================================================
     def _rrep(self, now: float, src: str, m: Rrep, out: list[Action]) -> None:
         # RFC 6.8: "...the node receiving the RREP with the 'A' bit set... sends a
-        # RREP-ACK" back to the sender. (Queued after the forwarded RREP, which is on the
-        # discovery's critical path.)
+        # RREP-ACK" back to the sender. (`_finish` puts it after everything else.)
         self._rrep_body(now, src, m, out)
         if m.ack_required:
             out.append(Unicast(RrepAck(), src))
@@ -787,7 +788,25 @@ class AodvCore:
 
     def _finish(self, now: float, out: list[Action]) -> list[Action]:
         self._complete_discoveries(now, out)
-        return self._sync_routes() + out
+        routes = self._sync_routes()
+        if not out:
+            return routes
+        # Decision: control messages leave before the route changes of the same event,
+        # because they are what the next node waits for. They never need those routes:
+        # they go to a neighbour or to the limited broadcast address (RFC 3561 6.5: a
+        # forwarded RREQ is broadcast; 6.6/6.7: a RREP is unicast to the next hop towards
+        # the originator, which is the neighbour it came from). A data packet that would
+        # beat the install to the kernel cannot draw a RERR either: it reaches the core
+        # through `on_no_route`, which finds the valid entry and installs it. RREP-ACKs
+        # (RFC 6.8, only ever awaited for NEXT_HOP_WAIT) go last, after the releases
+        # and DiscoveryDone: nobody's discovery waits for them.
+        sends, rest, acks = [], [], []
+        for a in out:
+            if isinstance(a, (Unicast, Broadcast)):
+                (acks if isinstance(a.msg, RrepAck) else sends).append(a)
+            else:
+                rest.append(a)
+        return sends + routes + rest + acks
 
     def _sync_routes(self) -> list[Action]:
         """Install/delete actions that bring the kernel in line with the valid entries."""

@@ -3,11 +3,13 @@
 - `KernelRoutes`: /32 routes of our own routing protocol number. Neighbours are
   `dev wlan0 scope link`, others `via NEXT dev wlan0 onlink`. Requests are rtnetlink
   messages packed here and written to a raw NETLINK_ROUTE socket. At run time installs and
-  deletes do not wait for their acknowledgement: the kernel applies a route request within
-  the send() call, so a packet sent right after sees the route, and the daemon's loop reads
-  the acknowledgements (`read_acks`) and logs errors. Start-up and teardown requests wait
-  for theirs. (pyroute2's IPRoute costs ~1.5 ms a request, more than a discovery hop, and
-  its import 18 MB and half a second per daemon: the daemon does not use it.)
+  deletes ask for no acknowledgement: the kernel applies a route request within the
+  send() call, so a packet sent right after sees the route, and it answers a request
+  without NLM_F_ACK only when the request failed; the daemon's loop wakes on that answer
+  and `read_acks` names the failed request. (Asking for every acknowledgement cost one
+  more loop turn per discovery hop.) Start-up and teardown requests ask and wait.
+  (pyroute2's IPRoute costs ~1.5 ms a request, more than a discovery hop, and its import
+  18 MB and half a second per daemon: the daemon does not use it.)
 - `Tun`: the TUN device that catches packets with no route (a 10.0.0.0/16 route points at
   it, less specific than every /32), IPv6 disabled on it.
 - `UseMonitor`: an nftables table whose dynamic set collects the addresses of data packets
@@ -99,6 +101,8 @@ def _attr(kind: int, data: bytes) -> bytes:
 
 
 class KernelRoutes:
+    PENDING_MAX = 1024
+
     def __init__(self, ifname: str) -> None:
         self.ifindex = ifindex(ifname)
         self.ifname = ifname
@@ -106,6 +110,9 @@ class KernelRoutes:
         self.nl.bind((0, 0))
         self.nl.setblocking(False)
         self._seq = 0
+        # What each recent request was, to name the one an error is about. Requests sent
+        # without NLM_F_ACK are answered only on failure, at once (within send()): only
+        # the newest PENDING_MAX are kept.
         self._pending: dict[int, str] = {}
         self.errors = 0
 
@@ -115,6 +122,8 @@ class KernelRoutes:
         body = rtmsg + attrs
         hdr = _NLMSGHDR.pack(_NLMSGHDR.size + len(body), rtm_type, flags, self._seq, 0)
         self._pending[self._seq] = what
+        if len(self._pending) > self.PENDING_MAX:
+            del self._pending[next(iter(self._pending))]
         try:
             self.nl.send(hdr + body)
         except OSError as e:
@@ -148,7 +157,7 @@ class KernelRoutes:
         return None
 
     def read_acks(self) -> list[str]:
-        """Read pending acknowledgements; return one message per failed request."""
+        """Read the kernel's answers that arrived; return one message per failed request."""
         failures = []
         for mtype, seq, payload in self._messages():
             if mtype == _NLMSG_ERROR and len(payload) >= 4:
@@ -208,11 +217,14 @@ class KernelRoutes:
         """Delete every route with our protocol number; return how many there were."""
         found = self.ours()
         for dst, plen in found:
-            self._wait(self.delete(dst, plen))
+            self._wait(self.delete(dst, plen, ack=True))
         return len(found)
 
-    def install(self, dest: str, next_hop: str) -> int:
-        """`ip route replace DEST/32 [via NEXT onlink] dev IFACE proto RTPROT_AODV`."""
+    def install(self, dest: str, next_hop: str, ack: bool = False) -> int:
+        """`ip route replace DEST/32 [via NEXT onlink] dev IFACE proto RTPROT_AODV`.
+
+        Returns the request's sequence number. Without `ack` the kernel answers only if the
+        request failed (`read_acks`); with it, always (`_wait` needs that)."""
         attrs = _attr(_RTA_DST, socket.inet_aton(dest)) + _attr(
             _RTA_OIF, struct.pack("=I", self.ifindex)
         )
@@ -224,18 +236,18 @@ class KernelRoutes:
         rtmsg = _RTMSG.pack(
             socket.AF_INET, 32, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, scope, _RTN_UNICAST, rflags
         )
-        flags = _NLM_F_REQUEST | _NLM_F_ACK | _NLM_F_REPLACE | _NLM_F_CREATE
+        flags = _NLM_F_REQUEST | _NLM_F_REPLACE | _NLM_F_CREATE | (_NLM_F_ACK if ack else 0)
         return self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {dest} via {next_hop}")
 
-    def delete(self, dest: str, plen: int = 32) -> int:
-        """`ip route del DEST/PLEN proto RTPROT_AODV`; a route already gone is no error."""
+    def delete(self, dest: str, plen: int = 32, ack: bool = False) -> int:
+        """`ip route del DEST/PLEN proto RTPROT_AODV`; a route already gone is no error.
+        `ack` as for `install`."""
         rtmsg = _RTMSG.pack(
             socket.AF_INET, plen, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, _RT_SCOPE_NOWHERE, 0, 0
         )
         attrs = _attr(_RTA_DST, socket.inet_aton(dest))
-        return self._request(
-            _RTM_DELROUTE, _NLM_F_REQUEST | _NLM_F_ACK, rtmsg, attrs, f"delete route {dest}"
-        )
+        flags = _NLM_F_REQUEST | (_NLM_F_ACK if ack else 0)
+        return self._request(_RTM_DELROUTE, flags, rtmsg, attrs, f"delete route {dest}")
 
     def catch_all(self, oif: int, net: str, src: str) -> None:
         """`ip route replace NET dev TUN src SRC metric 1000 proto RTPROT_AODV`: packets
