@@ -24,6 +24,11 @@ import numpy as np
 _BIAS = 4096  # makes cell coordinates positive so truncation is floor
 _NO_CELLS = np.zeros(0, dtype=np.intp)
 _NO_CELLS.flags.writeable = False
+# Pose-fraction tables (Laser.window_marks). A float32 in [_BIAS, 2 * _BIAS) is a multiple of
+# 1 / _FRAC, so a laser position is its cell plus one of _FRAC x _FRAC sub-cell positions;
+# a table is kept for each of _BUCKETS x _BUCKETS classes of those.
+_FRAC = 2048
+_BUCKETS = 16
 
 
 class Laser:
@@ -57,6 +62,7 @@ class Laser:
         # along its ray, so a scan keeps a prefix of each ray's samples without a 2-D mask.
         self._mark_count = self.mark.sum(axis=1)
         self._mark_s = np.nonzero(self.mark)[1].astype(np.int32)
+        self._tables: dict[tuple[int, int], tuple] = {}  # see _table
         if (2 * self.pad + 4096) ** 2 > 2**31:
             raise ValueError("laser range too long for int32 cell indices")
 
@@ -105,25 +111,55 @@ class Laser:
         (intp, may repeat) of the cells seen occupied; the same cells as `scan_cells`. A dense
         mask over the ~7000 window cells is cheaper to apply than ~14000 repeated indices.
 
-        Only the marked samples are computed (the same float32 arithmetic as `window_cells`),
-        and of those each ray keeps the ones before its hit; each hit sample is computed
-        alone. tests/unit/test_node_rays.py checks this against `scan_cells` cell for cell.
+        How: only the marked samples are computed (the float32 arithmetic of `window_cells`),
+        and of those each ray keeps the ones before its hit; each hit sample is computed alone.
+        A scan without hits takes its cells from a table for the laser's sub-cell position
+        (`_table`) plus the few samples the table leaves open. tests/unit/test_node_rays.py
+        checks the result against `scan_cells` cell for cell.
         """
         if ranges.shape != (self.n_rays,):
             raise ValueError(f"scan has {ranges.shape} ranges, expected {self.n_rays}")
+        return self.window_marks(
+            x, y, self.hit_index(ranges) if np.isfinite(ranges).any() else None
+        )
+
+    def window_marks(
+        self, x: float, y: float, idx: np.ndarray | None
+    ) -> tuple[int, int, np.ndarray, np.ndarray]:
+        """`scan_window` given each ray's hit sample index (`hit_index`; n_samples: no hit),
+        or None when no ray hit anything."""
         w = self.window
         fx = np.float32(x / self.cell + _BIAS)
         fy = np.float32(y / self.cell + _BIAS)
         cb, rb = int(fx), int(fy)
         off = (self.pad - rb) * w + (self.pad - cb)
-        cells = (self._mark_dy + fy).astype(np.int32)
-        cells *= w
-        cells += (self._mark_dx + fx).astype(np.int32)
-        cells += off
+        # Pose-fraction table: only without hits, and only where every sample's float32
+        # position lies in [_BIAS, 2 * _BIAS) (see _table).
+        if (
+            idx is None
+            and _BIAS <= min(cb, rb) - self.pad - 1 < max(cb, rb) + self.pad + 1 < 2 * _BIAS
+        ):
+            size = _FRAC // _BUCKETS
+            bx = int((float(fx) - cb) * _FRAC) // size
+            by = int((float(fy) - rb) * _FRAC) // size
+            sure, open_dx, open_dy = self._table(bx, by)
+            cells = (open_dy + fy).astype(np.int32)
+            cells *= w
+            cells += (open_dx + fx).astype(np.int32)
+            cells += off
+            free = sure.copy()
+            free[cells] = True
+        else:
+            cells = (self._mark_dy + fy).astype(np.int32)
+            cells *= w
+            cells += (self._mark_dx + fx).astype(np.int32)
+            cells += off
+            if idx is not None:  # each ray's marked samples before its hit
+                cells = cells[self._mark_s < np.repeat(idx, self._mark_count)]
+            # A histogram marks the cells: several times faster than a fancy assignment.
+            free = np.bincount(cells, minlength=w * w) > 0
         occ = _NO_CELLS
-        if np.isfinite(ranges).any():
-            idx = self.hit_index(ranges)
-            cells = cells[self._mark_s < np.repeat(idx, self._mark_count)]
+        if idx is not None:
             rays = np.flatnonzero(idx < self.n_samples)
             if len(rays):
                 at = rays * self.n_samples + idx[rays]  # the hit samples, flat
@@ -131,9 +167,44 @@ class Laser:
                 occ *= w
                 occ += (self.dx.take(at) + fx).astype(np.intp)
                 occ += off
-        # A histogram marks the cells: several times faster than a fancy-index assignment.
-        free = np.bincount(cells, minlength=w * w) > 0
         return rb - _BIAS, cb - _BIAS, free.reshape(w, w), occ
+
+    def _table(self, bx: int, by: int) -> tuple:
+        """Marks of a scan without hits for laser positions in sub-cell class (bx, by).
+
+        Within a class a marked sample's cell, relative to the laser's cell, is either the
+        same for every position in the class ("sure": both ends of the class agree, and the
+        float32 sum is monotonic) or not ("open"). Returns the window mask of the sure
+        samples' cells and the dx, dy of the open samples that could land outside it. Relative
+        cells do not depend on which cell the laser is in while every float32 position lies
+        in [_BIAS, 2 * _BIAS): all are multiples of 1 / _FRAC there, and adding a whole number
+        of cells rounds the same (window_marks checks that range). Built on first use.
+        """
+        t = self._tables.get((bx, by))
+        if t is not None:
+            return t
+        size = _FRAC // _BUCKETS
+
+        base = _BIAS + self.pad + 2  # a cell where every sample stays in [_BIAS, 2 * _BIAS)
+
+        def rel(d: np.ndarray, code: int) -> np.ndarray:  # cells from the laser's cell
+            return (d + np.float32(base + code / _FRAC)).astype(np.int32) - base
+
+        col, col1 = rel(self._mark_dx, bx * size), rel(self._mark_dx, (bx + 1) * size - 1)
+        row, row1 = rel(self._mark_dy, by * size), rel(self._mark_dy, (by + 1) * size - 1)
+        sure = (col == col1) & (row == row1)
+        w = self.window
+        at = self.pad * (w + 1)
+        marks = np.bincount((at + row * w + col)[sure], minlength=w * w) > 0
+        # An open sample that can land only in cells the sure samples mark anyway is dropped.
+        covered = np.ones_like(sure)
+        for r, c in ((row, col), (row, col1), (row1, col), (row1, col1)):
+            covered &= marks[at + r * w + c]
+        need = np.flatnonzero(~sure & ~covered)
+        marks.flags.writeable = False
+        t = (marks, self._mark_dx[need], self._mark_dy[need])
+        self._tables[(bx, by)] = t
+        return t
 
     def cast(self, occupied_padded: np.ndarray, x: float, y: float) -> np.ndarray:
         """Noiseless ranges (float32, n_rays) on a padded boolean obstacle grid; +inf: none."""

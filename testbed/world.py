@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from node.rays import Laser, pad
+from node.rays import _BIAS, Laser, pad
 from testbed.worldmap import GroundTruth
 
 
@@ -72,6 +72,14 @@ class World:
         near = cv2.dilate(blocked, disc)[reach:-reach, reach:-reach]
         self.open_space = near == 0
         self._k = np.arange(laser.n_samples, dtype=np.int32)[None, :]
+        # Samples a cast from a cell may skip: a sample at radius rho (cells) from a laser in a
+        # cell whose centre is d from the nearest obstacle cell's centre (the map's outside
+        # included) can only fall in an obstacle cell when d <= rho + sqrt(2) (half a cell's
+        # diagonal on each end); skipped: samples with rho = (s + 1) / 2 < d - 1.5.
+        ring = pad(truth.occupied, 1, True)
+        clear = cv2.distanceTransform((~ring).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        skip = np.ceil(2.0 * clear[1:-1, 1:-1].astype(np.float64) - 4.0)
+        self._skip = np.clip(skip, 0, laser.n_samples).astype(np.int32)
         # Cells where a robot's centre may be: obstacles grown by the robot's radius.
         self.blocked = truth.inflated(radius)
 
@@ -133,7 +141,7 @@ class World:
         if self.open_space[r, c]:
             # No obstacle within laser range: every ray runs out, the cast is skipped and the
             # seen cells are the robot's own free cells for a scan without returns.
-            r0, c0, free, _ = self.laser.scan_window(b.x, b.y, self._no_returns)
+            r0, c0, free, _ = self.laser.window_marks(b.x, b.y, None)
             h, w = free.shape
             seen = self.seen_padded[r0 : r0 + h, c0 : c0 + w]
             if r0 >= 0 and c0 >= 0 and seen.shape == free.shape:
@@ -141,7 +149,7 @@ class World:
                 self._last_scan[k] = ((b.x, b.y), self._no_returns)
                 return self._no_returns
         else:
-            ranges = self._cast_window(b.x, b.y)
+            ranges = self._cast_window(b.x, b.y, int(self._skip[r, c]))
             if ranges is not None:
                 self._last_scan[k] = ((b.x, b.y), ranges)
                 return ranges
@@ -168,31 +176,44 @@ class World:
         self._last_scan[k] = ((b.x, b.y), ranges)
         return ranges
 
-    def _cast_window(self, x: float, y: float) -> np.ndarray | None:
+    def _cast_window(self, x: float, y: float, s0: int = 0) -> np.ndarray | None:
         """Cast from (x, y) on the laser's square window of the map and mark what it saw;
-        None (nothing done) when the window does not fit in the padded map."""
+        None (nothing done) when the window does not fit in the padded map. Samples before
+        `s0` are known to fall in free cells and are not looked at."""
         laser = self.laser
-        r0, c0, loc = laser.window_cells(x, y)
         w = laser.window
+        fx = np.float32(x / laser.cell + _BIAS)
+        fy = np.float32(y / laser.cell + _BIAS)
+        cb, rb = int(fx), int(fy)
+        r0, c0 = rb - _BIAS, cb - _BIAS
         occ = self.occ_padded[r0 : r0 + w, c0 : c0 + w]
         seen = self.seen_padded[r0 : r0 + w, c0 : c0 + w]
         if r0 < 0 or c0 < 0 or occ.shape != (w, w):
             return None
-        hit = np.take(occ.reshape(-1), loc)  # a copy of the small window, then the samples
-        first = hit.argmax(axis=1)
-        any_hit = hit[self._rays, first]
-        if not any_hit.any():
-            cells = loc[laser.mark]
-            ranges = self._no_returns
+        any_hit = None
+        if s0 < laser.n_samples:
+            # window_cells for samples s0.. only (the same float32 arithmetic).
+            loc = (laser.dy[:, s0:] + fy).astype(np.int32)
+            loc *= w
+            loc += (laser.dx[:, s0:] + fx).astype(np.int32)
+            loc += (laser.pad - rb) * w + (laser.pad - cb)
+            hit = np.take(occ.reshape(-1), loc)  # a copy of the small window, then samples
+            first = hit.argmax(axis=1)
+            any_hit = hit[self._rays, first]
+        if any_hit is None or not any_hit.any():
+            ranges, idx = self._no_returns, None
         else:
+            first += s0
             first[~any_hit] = laser.n_samples
             ranges = np.full(laser.n_rays, np.inf, dtype=np.float32)
             ranges[any_hit] = ((first[any_hit] + 1) * laser.step).astype(np.float32)
-            hits = np.flatnonzero(any_hit)
-            cells = np.concatenate(
-                [loc[laser.mark & (self._k <= first[:, None])], loc[hits, first[hits]]]
-            )
-        seen |= (np.bincount(cells, minlength=w * w) > 0).reshape(w, w)
+            idx = first
+        # Seen: the marked samples up to each ray's hit and every hit sample (scan_window's
+        # free and occupied cells).
+        _, _, free, hits = laser.window_marks(x, y, idx)
+        seen |= free
+        if len(hits):
+            seen[np.divmod(hits, w)] = True
         return ranges
 
     def coverage(self) -> float:

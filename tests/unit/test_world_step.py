@@ -121,3 +121,37 @@ def test_world_marks_seen_as_the_flat_cast_does():
         rays = np.flatnonzero(n < laser.n_samples)
         expect[flat[rays, n[rays]]] = True
         assert np.array_equal(w.seen_padded.reshape(-1), expect)
+
+
+@pytest.mark.parametrize("max_range", [2.0, 1.5])
+def test_world_scan_and_seen_equal_the_reference_on_random_poses(max_range):
+    """The world's shortcuts (open space, skipped near samples, window tables) change nothing:
+    ranges as Laser.cast, seen cells as the flat per-sample marking, on a cluttered map."""
+    from node.rays import pad
+
+    t = empty_terrain(12, 12)
+    occ = t.occupied.copy()
+    rng = np.random.default_rng(9)
+    for _ in range(12):  # scattered boxes and thin walls
+        r, c = rng.integers(10, 220, 2)
+        occ[r : r + rng.integers(1, 30), c : c + rng.integers(1, 4)] = True
+    w = World(GroundTruth(occ), [(6.0, 6.0)], Laser(max_range, 360), np.ones_like(occ), 0.1, 0.15)
+    laser = w.laser
+    occp = pad(occ, laser.pad, True)
+    expect = np.zeros(occp.shape, dtype=bool).reshape(-1)
+    k = np.arange(laser.n_samples)[None, :]
+    done = 0
+    while done < 150:
+        x, y = (float(v) for v in rng.uniform(0.05, 11.95, 2))
+        if occ[int(y / 0.05), int(x / 0.05)]:
+            continue
+        done += 1
+        w.bodies[0].x, w.bodies[0].y = x, y
+        assert np.array_equal(w.scan(0), laser.cast(occp, x, y))
+        flat = laser.flat_cells(x, y, occp.shape[1])
+        hit = occp.reshape(-1)[flat]
+        n = np.where(hit.any(axis=1), hit.argmax(axis=1), laser.n_samples)
+        expect[flat[laser.mark & (k <= n[:, None])]] = True
+        rays = np.flatnonzero(n < laser.n_samples)
+        expect[flat[rays, n[rays]]] = True
+        assert np.array_equal(w.seen_padded.reshape(-1), expect)
