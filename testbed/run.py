@@ -49,6 +49,7 @@ from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
 from testbed.world import World
 from testbed.worldmap import empty_terrain, free_space, load_png, start_positions
+from topology.forkserver import ForkServer, ForkServerError
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +57,8 @@ STEP_S = 0.1  # emulated seconds per step
 DEFAULT_SNAPSHOTS = (100, 250, 500, 1000, 2000)  # display PNGs (plus one at the end)
 ROUTINGS = ("babel", "aodv", "none")
 PROJECT_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# What the fork server imports once for every robot and the display (topology.forkserver).
+NODE_PRELOAD = ["node.__main__", "node.robot", "node.goalnet", "node.display", "topology.names"]
 
 
 @dataclass(frozen=True)
@@ -293,16 +296,20 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         parts[name] = round(now - mark[0], 3)
         mark[0] = now
 
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PROJECT_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    env["OPENBLAS_NUM_THREADS"] = "1"  # a robot's numpy needs no thread pool of its own
+    forks = None
     try:
+        # Started first, so that its imports overlap the network's bring-up.
+        forks = ForkServer(NODE_PRELOAD, env=env)
         with Network(spec) as net:
             phase("network_up")
             server = BodyServer(os.path.join(net.state_dir, "body.sock"))
             for i, j in sorted(net.links()):
                 links_w.writerow([0, "add", i, j])
-            env = dict(os.environ)
-            env["PYTHONPATH"] = PROJECT_ROOT + os.pathsep + env.get("PYTHONPATH", "")
             common = [
-                sys.executable, "-m", "node", "--robots", str(n), "--body", server.path,
+                "--robots", str(n), "--body", server.path,
                 "--map-size", f"{truth.shape[0]}x{truth.shape[1]}", "--cell", str(truth.cell),
                 "--laser-range", str(cfg.laser_range), "--laser-rays", str(cfg.laser_rays),
                 "--speed", str(cfg.speed), "--radius", str(cfg.radius),
@@ -311,27 +318,25 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
             ]  # fmt: skip
             outa = os.path.abspath(out)
             for k in range(1, n + 1):
-                with open(os.path.join(out, "robots", f"r{k}.log"), "w") as logf:
-                    argv = common + [
-                        "--robot", f"r{k}", "--timer-phase", str(phases[k - 1]),
-                        "--events", os.path.join(outa, "robots", f"r{k}.events.jsonl"),
-                    ]  # fmt: skip
-                    robots[k].proc = net.spawn(
-                        k, argv, role="robot", stdout=logf, stderr=subprocess.STDOUT, env=env
-                    )
-            with open(os.path.join(out, "display", "display.log"), "w") as logf:
-                snaps = ",".join(str(s) for s in cfg.snapshots or DEFAULT_SNAPSHOTS)
                 argv = common + [
-                    "--robot", f"r{display_k}", "--role", "display",
-                    "--out-dir", os.path.join(os.path.abspath(out), "display"),
-                    "--events", os.path.join(os.path.abspath(out), "display", "events.jsonl"),
-                    "--snapshots", snaps,
+                    "--robot", f"r{k}", "--timer-phase", str(phases[k - 1]),
+                    "--events", os.path.join(outa, "robots", f"r{k}.events.jsonl"),
                 ]  # fmt: skip
-                display_proc = net.spawn(
-                    display_k, argv, role="display", stdout=logf, stderr=subprocess.STDOUT,
-                    env=env,
-                )  # fmt: skip
-            server.wait_for(set(robots), {display_k}, timeout=60.0 + 3.0 * n)
+                robots[k].proc = _start_node(
+                    net, forks, k, argv, os.path.join(outa, "robots", f"r{k}.log"), "robot"
+                )
+            snaps = ",".join(str(s) for s in cfg.snapshots or DEFAULT_SNAPSHOTS)
+            argv = common + [
+                "--robot", f"r{display_k}", "--role", "display",
+                "--out-dir", os.path.join(outa, "display"),
+                "--events", os.path.join(outa, "display", "events.jsonl"),
+                "--snapshots", snaps,
+            ]  # fmt: skip
+            display_proc = _start_node(
+                net, forks, display_k, argv, os.path.join(outa, "display", "display.log"),
+                "display",
+            )  # fmt: skip
+            _wait_connected(server, robots, display_k, display_proc, 60.0 + 3.0 * n)
             phase("processes_ready")
             missing = sorted(set(robots) - set(server.robots))
             if missing or display_k not in server.displays:
@@ -354,7 +359,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
             _collect_routing(net, cfg, out)
             phase("routing_stopped")
         phase("network_down")
-    except TestbedError as e:
+    except (TestbedError, ForkServerError) as e:
         status, detail = "error", str(e).splitlines()[0] if str(e) else type(e).__name__
         log.error("run failed: %s", detail)
     except KeyboardInterrupt:
@@ -364,6 +369,8 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         cov_f.close()
         if server is not None:
             server.close()
+        if forks is not None:
+            forks.close()
     result = _results(cfg, config, out, world, robots, status, detail, steps_done,
                       missed_world, wall, time.monotonic() - t_start, timing)  # fmt: skip
     return result
@@ -490,6 +497,28 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
         r = crashed[0]
         detail = f"r{r.k} exited with status {r.exit_status} at step {r.crash_step}; all died"
     return status, detail, step, missed_world, wall
+
+
+def _start_node(net, forks, k: int, argv: list[str], log_path: str, role: str):
+    """`python -m node ARGV` in robot k's namespace, forked from the fork server (the imports
+    are already done there), recorded with the testbed so that teardown stops it."""
+    with open(log_path, "w"):
+        pass  # the child appends: the log starts empty
+    proc = forks.spawn(net.robot_ns(k), "node.__main__", argv, log_path)
+    net.adopt(k, proc, role)
+    return proc
+
+
+def _wait_connected(server, robots, display_k, display_proc, timeout: float) -> None:
+    """Wait until every robot and the display said hello, or one of them died, or timeout."""
+    deadline = time.monotonic() + timeout
+    procs = [r.proc for r in robots.values()] + [display_proc]
+    while time.monotonic() < deadline:
+        server.wait_for(set(robots), {display_k}, timeout=0.2)
+        if set(robots) <= set(server.robots) and display_k in server.displays:
+            return
+        if any(p.poll() is not None for p in procs):
+            return
 
 
 def _end(server, robots, display_k, display_proc, step) -> None:

@@ -124,6 +124,12 @@ def remove(name: str) -> bool:
     return True
 
 
+def enter(name: str) -> None:
+    """Move the calling thread into namespace `name` (a single-threaded process moves whole:
+    that is how the fork server's children enter theirs)."""
+    _enter(name)
+
+
 def _enter(name: str) -> None:
     fd = os.open(path(name), os.O_RDONLY)
     try:

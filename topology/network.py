@@ -187,6 +187,16 @@ class Network:
             state.write(self.name, self.state)
         return proc
 
+    def adopt(self, k: int, proc, role: str) -> None:
+        """Record a process that was started in robot k's namespace by other means (the fork
+        server): teardown stops it like the ones `spawn` started. `proc` answers poll()."""
+        self._check_robot(k)
+        self.children[proc.pid] = proc
+        with state.locked(self.name):
+            self.state = state.read(self.name) or self.state
+            self.state.processes.append(processes.record(proc, k, role))
+            state.write(self.name, self.state)
+
     def stop(self, role: str) -> None:
         """Stop every process of this role (SIGTERM, then SIGKILL), e.g. the routing daemons
         so that they write their final statistics before the results are collected."""

@@ -1,0 +1,67 @@
+"""The fork server (topology.forkserver) with real namespaces: its children run in the
+namespace asked for, with their own session and log, and their exit statuses come back."""
+
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+
+from topology import netns
+from topology.forkserver import ForkServer, ForkServerError
+from topology.network import Network
+from topology.spec import NetworkSpec
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def test_children_run_in_their_namespace_and_report_exit(tmp_path, tb_name):
+    env = dict(os.environ, PYTHONPATH=REPO)
+    spec = NetworkSpec(name=tb_name, positions=((0, 0), (5, 0)), comm_range=10, routing="none")
+    forks = ForkServer(["tests.integration.forkprobe"], env=env)
+    try:
+        with Network(spec) as net:
+            log = str(tmp_path / "r1.log")
+            probe = "tests.integration.forkprobe"
+            p1 = forks.spawn(net.robot_ns(1), probe, [str(tmp_path / "r1.out"), "7"], log)
+            out2, log2 = str(tmp_path / "r2.out"), str(tmp_path / "r2.log")
+            p2 = forks.spawn(net.robot_ns(2), probe, [out2, "sleep"], log2)
+            net.adopt(2, p2, "probe")
+            assert p1.wait(timeout=20) == 7
+            ino, own_session = (tmp_path / "r1.out").read_text().split("\n")[0].split()
+            want = os.stat(netns.path(net.robot_ns(1))).st_ino
+            assert int(ino) == want and own_session == "True"
+            assert "probe ran" in open(log).read()
+            assert p2.poll() is None
+            p2.send_signal(signal.SIGKILL)
+            for _ in range(200):  # poll() alone (no wait) sees the exit: a run's step loop does
+                if p2.poll() is not None:
+                    break
+                time.sleep(0.01)
+            assert p2.returncode == -signal.SIGKILL
+            with pytest.raises(ForkServerError, match="no network namespace"):
+                forks.spawn(tb_name + "-nope", "tests.integration.forkprobe", ["x", "0"], log)
+    finally:
+        forks.close()
+    assert forks.proc.returncode == 0  # hanging up ends the server
+
+
+def test_server_dies_with_its_parent(tmp_path):
+    code = (
+        "import os, sys, time; from topology.forkserver import ForkServer; "
+        "f = ForkServer([]); print(f.proc.pid, flush=True); time.sleep(60)"
+    )
+    parent = subprocess.Popen(["python3", "-c", code], stdout=subprocess.PIPE, text=True,
+                              env=dict(os.environ, PYTHONPATH=REPO), cwd=REPO)  # fmt: skip
+    server = int(parent.stdout.readline())
+    parent.kill()
+    parent.wait()
+    for _ in range(100):
+        try:
+            os.kill(server, 0)
+        except ProcessLookupError:
+            break
+        subprocess.run(["sleep", "0.05"])
+    else:
+        pytest.fail("the fork server outlived its parent")
