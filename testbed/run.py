@@ -504,7 +504,7 @@ def _start_node(net, forks, k: int, argv: list[str], log_path: str, role: str):
     are already done there), recorded with the testbed so that teardown stops it."""
     with open(log_path, "w"):
         pass  # the child appends: the log starts empty
-    proc = forks.spawn(net.robot_ns(k), "node.__main__", argv, log_path)
+    proc = forks.spawn(net.robot_ns(k), "node.__main__", argv, log_path, title=f"r{k} {role}")
     net.adopt(k, proc, role)
     return proc
 

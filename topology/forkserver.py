@@ -13,7 +13,7 @@ the imported pages with the server until they write them.
 Protocol over a Unix socketpair, one JSON object per line:
 
     -> {"id": 1, "ns": "tb-x-r1", "module": "node.__main__", "argv": [...], "log": PATH,
-        "env": {...}}
+        "env": {...}, "title": "r1 robot"}
     <- {"id": 1, "pid": 1234}            or {"id": 1, "error": "..."}
     <- {"exit": 1234, "status": 0}       when a child ends (negative: killed by that signal)
 
@@ -39,6 +39,8 @@ import time
 from topology import netns
 
 _PR_SET_PDEATHSIG = 1
+_PR_SET_NAME = 15
+_libc = ctypes.CDLL(None, use_errno=True)
 
 
 class ForkServerError(RuntimeError):
@@ -57,6 +59,8 @@ def _child(req: dict, ctl: socket.socket) -> None:
         signal.signal(signal.SIGINT, signal.SIG_DFL)
         signal.signal(signal.SIGCHLD, signal.SIG_DFL)
         os.setsid()
+        if req.get("title"):  # what ps -o comm and top show (the cmdline stays the server's)
+            _libc.prctl(_PR_SET_NAME, req["title"].encode()[:15], 0, 0, 0)
         netns.enter(req["ns"])
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
@@ -84,7 +88,8 @@ def _child(req: dict, ctl: socket.socket) -> None:
 
 def serve(fd: int, preload: list[str]) -> int:
     """The server's loop: fork on request, report exits; ends when the caller hangs up."""
-    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    _libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    _libc.prctl(_PR_SET_NAME, b"forkserver", 0, 0, 0)
     for module in preload:
         importlib.import_module(module)
     ctl = socket.socket(fileno=fd)
@@ -221,10 +226,15 @@ class ForkServer:
         """Take in the exit reports that have arrived (waiting at most `timeout`)."""
         self._read(timeout, lambda m: False)
 
-    def spawn(self, ns: str, module: str, argv: list[str], log: str, env=None) -> Forked:
+    def spawn(
+        self, ns: str, module: str, argv: list[str], log: str, env=None, title: str = ""
+    ) -> Forked:
+        """Fork `module.main(argv)` in namespace `ns`, output appended to `log`; `title` (at
+        most 15 characters) is the process name that ps and top show."""
         self.next_id += 1
         rid = self.next_id
-        req = {"id": rid, "ns": ns, "module": module, "argv": argv, "log": log, "env": env}
+        req = {"id": rid, "ns": ns, "module": module, "argv": argv, "log": log, "env": env,
+               "title": title}  # fmt: skip
         self.ctl.sendall(json.dumps(req).encode() + b"\n")
         msg = self.replies.pop(rid, None) or self._read(30.0, lambda m: m.get("id") == rid)
         self.replies.pop(rid, None)

@@ -26,7 +26,7 @@ def test_children_run_in_their_namespace_and_report_exit(tmp_path, tb_name):
             probe = "tests.integration.forkprobe"
             p1 = forks.spawn(net.robot_ns(1), probe, [str(tmp_path / "r1.out"), "7"], log)
             out2, log2 = str(tmp_path / "r2.out"), str(tmp_path / "r2.log")
-            p2 = forks.spawn(net.robot_ns(2), probe, [out2, "sleep"], log2)
+            p2 = forks.spawn(net.robot_ns(2), probe, [out2, "sleep"], log2, title="r2 probe")
             net.adopt(2, p2, "probe")
             assert p1.wait(timeout=20) == 7
             ino, own_session = (tmp_path / "r1.out").read_text().split("\n")[0].split()
@@ -34,6 +34,7 @@ def test_children_run_in_their_namespace_and_report_exit(tmp_path, tb_name):
             assert int(ino) == want and own_session == "True"
             assert "probe ran" in open(log).read()
             assert p2.poll() is None
+            assert open(f"/proc/{p2.pid}/comm").read().strip() == "r2 probe"
             p2.send_signal(signal.SIGKILL)
             for _ in range(200):  # poll() alone (no wait) sees the exit: a run's step loop does
                 if p2.poll() is not None:
