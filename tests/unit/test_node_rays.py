@@ -124,3 +124,27 @@ def test_scan_window_equals_scan_cells_on_random_poses(max_range):
         assert np.array_equal(f, np.unique(f_ref))
         assert np.array_equal(o, np.unique(o_ref))
     assert kinds > 50
+
+
+@pytest.mark.parametrize("max_range", [2.0, 1.5])
+def test_scans_without_hits_from_tables_equal_scan_cells(max_range):
+    """The pose-fraction tables (every sub-cell class, both ends of each) mark what the
+    per-cell form marks, and so does the exact form near the map's low edges."""
+    laser = Laser(max_range=max_range, n_rays=360, cell=0.05)
+    pw = 400 + 2 * laser.pad
+    none = np.full(360, np.inf, dtype=np.float32)
+    rng = np.random.default_rng(5)
+    poses = []
+    for k in range(16):  # class boundaries: sub-cell positions k/16 and k/16 - 1/2048
+        for frac in (k / 16, (k + 1) / 16 - 1 / 2048):
+            c, r = rng.integers(50, 350, 2)
+            poses.append(((c + frac) * 0.05, (r + rng.random()) * 0.05))
+            poses.append(((c + rng.random()) * 0.05, (r + frac) * 0.05))
+    poses += [tuple(rng.uniform(0.0, 20.0, 2)) for _ in range(60)]  # edges included
+    for x, y in poses:
+        r0, c0, free, hit = laser.scan_window(x, y, none)
+        assert hit.size == 0
+        f_ref, _ = laser.scan_cells(x, y, none, pw)
+        f, _ = _window_as_flat(laser, r0, c0, free, hit, pw)
+        assert np.array_equal(f, np.unique(f_ref))
+    assert len(laser._tables) > 20
