@@ -257,13 +257,16 @@ class AodvCore:
         return self._finish(now, out)
 
     def next_deadline(self) -> float:
-        cands = [self.next_hello]
-        for t in (self.table.next_deadline(), self.neighbors.next_deadline(), self.reboot_until):
-            if t is not None:
-                cands.append(t)
-        cands.extend(d.deadline for d in self.discoveries.values())
-        cands.extend(self.pending_acks.values())
-        return min(cands)
+        t = self.next_hello
+        for c in (self.table.next_deadline(), self.neighbors.next_deadline(), self.reboot_until):
+            if c is not None and c < t:
+                t = c
+        for d in self.discoveries.values():
+            if d.deadline < t:
+                t = d.deadline
+        if self.pending_acks:
+            t = min(t, *self.pending_acks.values())
+        return t
 
     # == RFC 6.5 RREQ =====================================================================
     def _rreq(self, now: float, src: str, ttl: int, m: Rreq, out: list[Action]) -> None:
@@ -809,16 +812,25 @@ class AodvCore:
         return sends + routes + rest + acks
 
     def _sync_routes(self) -> list[Action]:
-        """Install/delete actions that bring the kernel in line with the valid entries."""
+        """Install/delete actions that bring the kernel in line with the valid entries.
+        (One pass over the table: this runs after every event.)"""
         acts: list[Action] = []
-        valid = {r.dest: r.kernel_key() for r in self.table if r.valid}
-        for dest in [d for d in self._installed if d not in valid]:
-            del self._installed[dest]
-            acts.append(DeleteRoute(dest))
-        for dest, key in valid.items():
-            if self._installed.get(dest) != key:
-                self._installed[dest] = key
-                acts.append(InstallRoute(dest, key[0], key[1]))
+        installed = self._installed
+        n_valid = 0
+        for r in self.table.entries():
+            if r.valid:
+                n_valid += 1
+                key = r.kernel_key()
+                if installed.get(r.dest) != key:
+                    installed[r.dest] = key
+                    acts.append(InstallRoute(r.dest, *key))
+            elif r.dest in installed:
+                del installed[r.dest]
+                acts.append(DeleteRoute(r.dest))
+        if len(installed) > n_valid:  # installed entries that left the table
+            for dest in [d for d in installed if self.table.valid(d) is None]:
+                del installed[dest]
+                acts.append(DeleteRoute(dest))
         return acts
 
     # == inspection =======================================================================

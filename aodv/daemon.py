@@ -16,7 +16,8 @@ Control socket: bound to 0.0.0.0:654 and to the interface (SO_BINDTODEVICE), wit
 SO_BROADCAST; the IP TTL is set before each send and read on receipt (IP_RECVTTL = 12,
 missing from Python 3.11's socket module). Broadcasts go to 255.255.255.255; unicasts use
 MSG_DONTROUTE, as a control message always goes to a neighbour on the link. The socket
-hears our own broadcasts: they are dropped by source address.
+hears our own broadcasts: a socket filter drops them by source address (`_on_udp` checks
+again).
 
 Routes of the daemon carry protocol number RTPROT_AODV; they are flushed at start and at
 exit. Finding such routes at start means a previous instance died: the core then applies
@@ -28,6 +29,7 @@ the ad hoc network, is counted in stats["dropped"] and logged (rate-limited), ne
 
 from __future__ import annotations
 
+import gc
 import ipaddress
 import logging
 import selectors
@@ -47,7 +49,14 @@ from aodv.core import (
     ReleasePackets,
     Unicast,
 )
-from aodv.kernel import KernelError, KernelRoutes, SetReader, Tun, UseMonitor
+from aodv.kernel import (
+    KernelError,
+    KernelRoutes,
+    SetReader,
+    Tun,
+    UseMonitor,
+    drop_own_datagrams,
+)
 from aodv.params import Params
 from aodv.stats import Stats
 
@@ -135,6 +144,9 @@ class Daemon:
             self.reader = SetReader()
             self._open_sockets()
             self.core = AodvCore(self.addr, self.p, time.monotonic(), rebooted=rebooted)
+            # What start-up allocated lives for good: keep it out of the collector's
+            # full passes, which would otherwise walk it on some discovery's hot path.
+            gc.freeze()
             log.info("AODV up on %s (%s), time scale %g", self.iface, self.addr, self.p.time_scale)
             self._loop()
         finally:
@@ -152,6 +164,7 @@ class Daemon:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         s.setsockopt(socket.IPPROTO_IP, IP_RECVTTL, 1)
         s.bind(("0.0.0.0", wire.AODV_PORT))
+        drop_own_datagrams(s, self.addr)
         s.setblocking(False)
         self.sock = s
         self._ttl = None

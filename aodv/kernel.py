@@ -21,6 +21,7 @@ Every failure of a kernel command raises `KernelError` carrying the command's me
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import fcntl
 import ipaddress
@@ -56,6 +57,35 @@ _IFF_UP = 0x1
 _TUNSETIFF = 0x400454CA
 _IFF_TUN = 0x0001
 _IFF_NO_PI = 0x1000
+
+
+_SO_ATTACH_FILTER = 26
+_SKF_NET_OFF = -0x100000
+_BPF_LD_W_ABS, _BPF_JEQ_K, _BPF_RET_K = 0x20, 0x15, 0x06
+_SOCK_FILTER = struct.Struct("=HBBI")
+
+
+def drop_own_datagrams(sock: socket.socket, own: str) -> None:
+    """Attach a socket filter that drops datagrams whose IP source is `own`.
+
+    The kernel loops every broadcast we send back to our own socket; dropped there, it
+    costs no wake-up and no receive call. The program (classic BPF): load the IP source
+    address (SKF_NET_OFF + 12), equal to `own`? return 0 (drop), else accept all."""
+    prog = b"".join(
+        _SOCK_FILTER.pack(*insn)
+        for insn in (
+            (_BPF_LD_W_ABS, 0, 0, (_SKF_NET_OFF + 12) & 0xFFFFFFFF),
+            (_BPF_JEQ_K, 1, 0, struct.unpack("!I", socket.inet_aton(own))[0]),
+            (_BPF_RET_K, 0, 0, 0xFFFFFFFF),
+            (_BPF_RET_K, 0, 0, 0),
+        )
+    )
+    buf = ctypes.create_string_buffer(prog)
+    fprog = struct.pack("HL", len(prog) // _SOCK_FILTER.size, ctypes.addressof(buf))
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, fprog)
+    except OSError as e:
+        raise KernelError(f"socket filter: {e}") from e
 
 
 class KernelError(RuntimeError):

@@ -80,11 +80,6 @@ def _check_u32(name: str, value: int) -> None:
         raise ValueError(f"{name}={value} does not fit in 32 bits")
 
 
-def _check_u8(name: str, value: int) -> None:
-    if not 0 <= value <= 0xFF:
-        raise ValueError(f"{name}={value} does not fit in 8 bits")
-
-
 @dataclass(frozen=True)
 class Rreq:
     """Route Request (RFC 3561 section 5.1)."""
@@ -104,9 +99,6 @@ class Rreq:
     type_name = "RREQ"
 
     def encode(self) -> bytes:
-        _check_u8("hop_count", self.hop_count)
-        for name in ("rreq_id", "dest_seq", "orig_seq"):
-            _check_u32(name, getattr(self, name))
         flags = (
             (_RREQ_J if self.join else 0)
             | (_RREQ_R if self.repair else 0)
@@ -114,17 +106,20 @@ class Rreq:
             | (_RREQ_D if self.dest_only else 0)
             | (_RREQ_U if self.unknown_seq else 0)
         )
-        return _RREQ.pack(
-            RREQ_TYPE,
-            flags,
-            0,
-            self.hop_count,
-            self.rreq_id,
-            _raw(self.dest),
-            self.dest_seq,
-            _raw(self.orig),
-            self.orig_seq,
-        )
+        try:  # struct checks every field's range (one pack: this runs on every hop)
+            return _RREQ.pack(
+                RREQ_TYPE,
+                flags,
+                0,
+                self.hop_count,
+                self.rreq_id,
+                _raw(self.dest),
+                self.dest_seq,
+                _raw(self.orig),
+                self.orig_seq,
+            )
+        except struct.error as e:
+            raise ValueError(f"{self}: a field does not fit ({e})") from None
 
 
 @dataclass(frozen=True)
@@ -144,25 +139,24 @@ class Rrep:
     type_name = "RREP"
 
     def encode(self) -> bytes:
-        _check_u8("hop_count", self.hop_count)
-        _check_u32("dest_seq", self.dest_seq)
-        _check_u32("lifetime_ms", self.lifetime_ms)
         if not 0 <= self.prefix_size <= 31:
             raise ValueError(f"prefix_size={self.prefix_size} does not fit in 5 bits")
         flags = (_RREP_R if self.repair else 0) | (_RREP_A if self.ack_required else 0)
-        out = _RREP.pack(
-            RREP_TYPE,
-            flags,
-            self.prefix_size,
-            self.hop_count,
-            _raw(self.dest),
-            self.dest_seq,
-            _raw(self.orig),
-            self.lifetime_ms,
-        )
-        if self.hello_interval_ms is not None:
-            _check_u32("hello_interval_ms", self.hello_interval_ms)
-            out += bytes((EXT_HELLO_INTERVAL, 4)) + _U32.pack(self.hello_interval_ms)
+        try:  # struct checks every other field's range
+            out = _RREP.pack(
+                RREP_TYPE,
+                flags,
+                self.prefix_size,
+                self.hop_count,
+                _raw(self.dest),
+                self.dest_seq,
+                _raw(self.orig),
+                self.lifetime_ms,
+            )
+            if self.hello_interval_ms is not None:
+                out += bytes((EXT_HELLO_INTERVAL, 4)) + _U32.pack(self.hello_interval_ms)
+        except struct.error as e:
+            raise ValueError(f"{self}: a field does not fit ({e})") from None
         return out
 
 

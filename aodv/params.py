@@ -1,7 +1,8 @@
 """Protocol parameters of RFC 3561 section 10, as one frozen dataclass.
 
 Inputs are fields with the RFC's defaults (times in RFC milliseconds); every derived value is
-a property computed from its inputs, so changing an input can never leave a copy stale.
+a property computed from its inputs, so changing an input can never leave a copy stale (the
+inputs are frozen, so each is computed once and cached: the core reads them on every hop).
 Every time the core uses is in seconds of the run's clock and divided by `time_scale`: a
 run at time scale K runs all protocol timers K times faster.
 
@@ -15,6 +16,7 @@ Decision (MIN_REPAIR_TTL): local repair is not implemented, so it is not defined
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 
 @dataclass(frozen=True)
@@ -50,59 +52,59 @@ class Params:
         return ms / 1000.0 / self.time_scale
 
     # -- times in scaled seconds ------------------------------------------------------
-    @property
+    @cached_property
     def active_route_timeout(self) -> float:
         return self._s(self.active_route_timeout_ms)
 
-    @property
+    @cached_property
     def hello_interval(self) -> float:
         return self._s(self.hello_interval_ms)
 
-    @property
+    @cached_property
     def node_traversal_time(self) -> float:
         return self._s(self.node_traversal_time_ms)
 
-    @property
+    @cached_property
     def net_traversal_time(self) -> float:
         """2 * NODE_TRAVERSAL_TIME * NET_DIAMETER."""
         return 2 * self.node_traversal_time * self.net_diameter
 
-    @property
+    @cached_property
     def path_discovery_time(self) -> float:
         """2 * NET_TRAVERSAL_TIME."""
         return 2 * self.net_traversal_time
 
-    @property
+    @cached_property
     def blacklist_timeout(self) -> float:
         """RREQ_RETRIES * NET_TRAVERSAL_TIME."""
         return self.rreq_retries * self.net_traversal_time
 
-    @property
+    @cached_property
     def delete_period(self) -> float:
         """K * max(ACTIVE_ROUTE_TIMEOUT, HELLO_INTERVAL), K = 5."""
         return self.delete_period_k * max(self.active_route_timeout, self.hello_interval)
 
-    @property
+    @cached_property
     def my_route_timeout(self) -> float:
         """2 * ACTIVE_ROUTE_TIMEOUT."""
         return 2 * self.active_route_timeout
 
-    @property
+    @cached_property
     def next_hop_wait(self) -> float:
         """NODE_TRAVERSAL_TIME + 10 ms."""
         return self.node_traversal_time + self._s(10)
 
-    @property
+    @cached_property
     def neighbor_timeout(self) -> float:
         """ALLOWED_HELLO_LOSS * HELLO_INTERVAL (sections 6.9, 6.10)."""
         return self.allowed_hello_loss * self.hello_interval
 
-    @property
+    @cached_property
     def max_repair_ttl(self) -> int:
         """0.3 * NET_DIAMETER."""
         return int(0.3 * self.net_diameter)
 
-    @property
+    @cached_property
     def rate_window(self) -> float:
         """The 'per second' of RREQ_RATELIMIT and RERR_RATELIMIT, scaled."""
         return self._s(1000)

@@ -7,7 +7,7 @@ at which a valid entry becomes invalid, or at which an invalid entry is deleted.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 
@@ -49,7 +49,12 @@ class RoutingTable:
         self._routes.pop(dest, None)
 
     def __iter__(self) -> Iterator[Route]:
+        """A snapshot: the loop may add or remove entries."""
         return iter(list(self._routes.values()))
+
+    def entries(self) -> Iterable[Route]:
+        """The live entries, for loops that change no entry's presence."""
+        return self._routes.values()
 
     def __len__(self) -> int:
         return len(self._routes)
