@@ -9,7 +9,9 @@ Persistent testbeds that are up, and testbeds whose owner still runs, are left a
 `everything` is set (`testbed clean --all`).
 """
 
+import fcntl
 import logging
+import os
 
 from topology import names, netns, state
 from topology.network import destroy
@@ -33,7 +35,30 @@ def leftovers(everything: bool = False) -> list[str]:
     return sorted(found)
 
 
+def _orphan_locks() -> None:
+    """Lock files of testbeds with no state left (older versions did not remove them): each
+    is removed only if nobody holds it."""
+    try:
+        entries = os.listdir(state.state_dir())
+    except FileNotFoundError:
+        return
+    recorded = set(state.names())
+    for entry in entries:
+        if not (entry.startswith(".") and entry.endswith(".lock")):
+            continue
+        if entry[1:-5] in recorded:
+            continue
+        path = os.path.join(state.state_dir(), entry)
+        try:
+            with open(path) as f:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                os.unlink(path)
+        except OSError:
+            continue  # held by a live testbed, or already gone
+
+
 def clean(everything: bool = False) -> list[str]:
+    _orphan_locks()
     removed = []
     for name in leftovers(everything):
         with state.locked(name):

@@ -155,8 +155,10 @@ def read(name: str) -> TestbedState | None:
 
 
 def remove(name: str) -> None:
-    with contextlib.suppress(FileNotFoundError):
-        os.unlink(state_path(name))
+    """Forget testbed `name`: its state file and its lock file (the testbed is gone)."""
+    for p in (state_path(name), os.path.join(state_dir(), f".{name}.lock")):
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(p)
 
 
 def names() -> list[str]:
