@@ -31,6 +31,15 @@ _FRAC = 2048
 _BUCKETS = 16
 
 
+_SHARED_TABLES: dict[tuple[float, int, float], dict] = {}  # geometry -> pose-fraction tables
+
+
+def warm(max_range: float, n_rays: int, cell: float) -> None:
+    """Build every pose-fraction table of this geometry in this process, for the processes
+    forked from it later (topology.forkserver)."""
+    Laser(max_range, n_rays, cell).prepare_tables()
+
+
 class Laser:
     """Tabulated ray geometry: `max_range` metres, `n_rays` over 360 degrees, `cell` metres."""
 
@@ -62,7 +71,10 @@ class Laser:
         # along its ray, so a scan keeps a prefix of each ray's samples without a 2-D mask.
         self._mark_count = self.mark.sum(axis=1)
         self._mark_s = np.nonzero(self.mark)[1].astype(np.int32)
-        self._tables: dict[tuple[int, int], tuple] = {}  # see _table
+        # Tables are read-only once built: lasers of one geometry share them (a fork server
+        # builds them once for every robot it forks, see warm()).
+        key = (self.max_range, self.n_rays, self.cell)
+        self._tables: dict[tuple[int, int], tuple] = _SHARED_TABLES.setdefault(key, {})
         if (2 * self.pad + 4096) ** 2 > 2**31:
             raise ValueError("laser range too long for int32 cell indices")
 

@@ -17,7 +17,7 @@ Five threads:
 - message processing: merges maps, records teammates' goals, settles goal conflicts (the
   winner by priority asks the loser to re-plan; the loser re-plans on that request);
 - inbox: receives from the network (UDP floods, relayed on the way; nanomsg TCP) and hands
-  each new message to message processing over a nanomsg inproc socket.
+  each new message to message processing through a bounded queue (full: dropped, counted).
 
 A teammate is *reachable* while its map floods keep arriving (within `reach_steps`): a flood
 only arrives over a path that exists. Every plan, send and receipt goes to the event log with
@@ -37,7 +37,6 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
-import pynng
 
 from node import body, planner, wire
 from node.events import EventLog
@@ -48,7 +47,8 @@ from node.rays import Laser
 
 log = logging.getLogger(__name__)
 
-INPROC = "inproc://inbox"
+FLOOD, MESSAGE = "flood", "message"  # what the inbox hands message processing
+INBOX_LIMIT = 10_000  # messages waiting for processing; beyond, the inbox drops
 STUCK_FRAMES = 5
 
 
@@ -160,6 +160,7 @@ class Robot:
         self.lock = threading.Lock()
         self.tick = threading.Condition()
         self.requests: queue.Queue[str] = queue.Queue()
+        self.inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(INBOX_LIMIT)
         self.stopping = threading.Event()
         self.sent: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
@@ -195,6 +196,7 @@ class Robot:
             self.threads.append(t)
         for j in self.s.teammates:
             self.goals.connect(j)
+        self.laser.prepare_tables()  # none is built mid-run (done already when forked warm)
         self.link.ready()
         try:
             _fatal_on_error(self._motion, "motion")()
@@ -462,53 +464,41 @@ class Robot:
     def _inbox(self) -> None:
         import select
 
-        out = pynng.Push0(send_timeout=1000)
-        out.dial(INPROC, block=False)  # connects once message processing listens
         flood_fd, goals_fd = self.flooder.fileno(), self.goals.fileno()  # each once: pynng
         fds = [flood_fd, goals_fd]  # reads its descriptor as a socket option every time
-        try:
-            while not self.stopping.is_set():
-                ready, _, _ = select.select(fds, [], [], 0.5)
-                if not ready:
-                    continue
-                # Copies of a flood arrive in bursts (every neighbour relays it): linger a
-                # moment so that one wake-up drains the burst instead of one per datagram.
-                time.sleep(self.linger)
-                ready, _, _ = select.select(fds, [], [], 0)
-                batch = []
-                if flood_fd in ready:
-                    batch += [b"F" + data for data in self.flooder.receive_raw()]
-                if goals_fd in ready:
-                    batch += [b"G" + data for data in self.goals.receive()]
-                for data in batch:
-                    try:
-                        out.send(data)
-                    except (pynng.Timeout, pynng.Closed):
-                        if self.stopping.is_set():
-                            return  # message processing has shut down
-                        self.inbox_dropped += 1  # processing is stuck: drop, never block
-        finally:
-            out.close()
+        while not self.stopping.is_set():
+            ready, _, _ = select.select(fds, [], [], 0.5)
+            if not ready:
+                continue
+            # Copies of a flood arrive in bursts (neighbours relay it): linger a moment so
+            # that one wake-up drains the burst instead of one per datagram.
+            time.sleep(self.linger)
+            ready, _, _ = select.select(fds, [], [], 0)
+            batch = []
+            if flood_fd in ready:
+                batch += [(FLOOD, data) for data in self.flooder.receive_raw()]
+            if goals_fd in ready:
+                batch += [(MESSAGE, data) for data in self.goals.receive()]
+            for item in batch:
+                try:
+                    self.inbox.put_nowait(item)
+                except queue.Full:
+                    self.inbox_dropped += 1  # processing is stuck: drop, never block
 
     def _processing(self) -> None:
-        inq = pynng.Pull0(recv_timeout=500)
-        inq.listen(INPROC)
-        try:
-            while not self.stopping.is_set():
-                try:
-                    data = inq.recv()
-                except pynng.Timeout:
-                    continue
-                try:
-                    if data[:1] == b"F":
-                        self._on_flood(data[1:])
-                    elif data[:1] == b"G":
-                        self._on_message(data[1:])
-                except ValueError as e:
-                    self.malformed += 1
-                    log.warning("dropped a malformed message: %s", e)
-        finally:
-            inq.close()
+        while not self.stopping.is_set():
+            try:
+                kind, data = self.inbox.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            try:
+                if kind is FLOOD:
+                    self._on_flood(data)
+                else:
+                    self._on_message(data)
+            except ValueError as e:
+                self.malformed += 1
+                log.warning("dropped a malformed message: %s", e)
 
     def _on_flood(self, data: bytes) -> None:
         t_cpu = time.thread_time()

@@ -303,7 +303,10 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
     forks = None
     try:
         # Started first, so that its imports overlap the network's bring-up.
-        forks = ForkServer(NODE_PRELOAD, env=env)
+        forks = ForkServer(
+            NODE_PRELOAD, env=env,
+            warm=[["node.rays", "warm", [cfg.laser_range, cfg.laser_rays, truth.cell]]],
+        )  # fmt: skip
         with Network(spec) as net:
             phase("network_up")
             server = BodyServer(os.path.join(net.state_dir, "body.sock"))
