@@ -74,44 +74,46 @@ LOCAL_TTL = 1
 
 
 # -- actions ---------------------------------------------------------------------------
-@dataclass(frozen=True)
+# Plain slotted dataclasses (values by convention): a frozen one costs several times as
+# much to build, and every control message builds two or three actions.
+@dataclass(slots=True)
 class Unicast:
     msg: Message
     dst: str
     ttl: int = UNICAST_TTL
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Broadcast:
     msg: Message
     ttl: int
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class InstallRoute:
     dest: str
     next_hop: str
     hops: int
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class DeleteRoute:
     dest: str
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class ReleasePackets:
     dest: str
     packets: tuple[bytes, ...]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class DropPackets:
     dest: str
     packets: tuple[bytes, ...]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class DiscoveryDone:
     dest: str
     ok: bool
@@ -437,7 +439,7 @@ class AodvCore:
         # RREP-ACK or a RREP, i.e. picked us as its next hop) within DELETE_PERIOD.
         proof = self.bidirectional.get(next_hop)
         if proof is None or proof < now - self.p.delete_period:
-            rrep = Rrep(**{**rrep.__dict__, "ack_required": True})
+            rrep = rrep._replace(ack_required=True)
             self.pending_acks[next_hop] = now + self.p.next_hop_wait
         out.append(Unicast(rrep, next_hop))
 

@@ -10,6 +10,12 @@ all positions to the topology controller (links follow before the step goes on),
 each robot its frame (step, pose, scan) and the display its clock. Between frames it collects
 the robots' commands until the step's deadline.
 
+Processes: the robots and the display fork from one fork server (topology.forkserver) that
+imported the node package and built the laser's tables once, so a dozen processes are ready
+in a fraction of a second instead of each paying for numpy. The step loop runs at real-time
+priority (SCHED_RR 1): it is the clock, and a robot woken by its frame must not preempt the
+world before the other robots' frames are out.
+
 Deadlines: a step's deadline is t0 + (step + 1) * period. The world misses it when its own
 work overruns (the schedule then shifts by the overrun, so one hiccup counts once and the
 achieved time scale shows the slip); a robot misses it when it has not answered the step's

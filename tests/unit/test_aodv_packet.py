@@ -93,7 +93,7 @@ def test_every_rreq_flag_bit_is_where_the_figure_puts_it():
         ("unknown_seq", 0x08),
     ]:
         msg = Rreq(rreq_id=1, dest="10.0.0.2", dest_seq=0, orig="10.0.0.1", orig_seq=1)
-        raw = encode(Rreq(**{**msg.__dict__, name: True}))
+        raw = encode(msg._replace(**{name: True}))
         assert raw[1] == bit, name
 
 
