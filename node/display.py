@@ -58,6 +58,7 @@ class Display:
         self.paths: dict[int, list[tuple[float, float]]] = {}
         self.lock = threading.Lock()
         self.stopping = threading.Event()
+        self.wake_r, self.wake_w = os.pipe()  # wakes the inbox's select at the end
         self.received: Counter[int] = Counter()
         self.malformed = 0
         self.step = -1
@@ -73,6 +74,7 @@ class Display:
             self._visualization()
         finally:
             self.stopping.set()
+            os.write(self.wake_w, b"x")
             t.join(timeout=2.0)
             self._snapshot(self.step, final=True)
             self.video.close()
@@ -123,8 +125,8 @@ class Display:
 
     def _inbox(self) -> None:
         while not self.stopping.is_set():
-            ready, _, _ = select.select([self.flooder.fileno()], [], [], 0.5)
-            if not ready:
+            ready, _, _ = select.select([self.flooder.fileno(), self.wake_r], [], [], 0.5)
+            if self.flooder.fileno() not in ready:
                 continue
             for h, payload in self.flooder.receive():
                 if h.kind == wire.KIND_BEACON:

@@ -49,6 +49,7 @@ from node.rays import Laser
 log = logging.getLogger(__name__)
 
 FLOOD, MESSAGE = "flood", "message"  # what the inbox hands message processing
+STOP = "stop"  # put in the queues by stop()
 INBOX_LIMIT = 10_000  # messages waiting for processing; beyond, the inbox drops
 STUCK_FRAMES = 5
 MOTION_NICE = -5  # the motion-control thread's scheduling priority (the others run at 0)
@@ -163,6 +164,7 @@ class Robot:
         self.tick = threading.Condition()
         self.requests: queue.Queue[str] = queue.Queue()
         self.inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(INBOX_LIMIT)
+        self.wake_r, self.wake_w = os.pipe()  # stop() wakes the inbox's select through it
         self.stopping = threading.Event()
         self.sent: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
@@ -207,8 +209,14 @@ class Robot:
 
     def stop(self) -> None:
         self.stopping.set()
+        # Wake every part now rather than at its next 0.5 s timeout.
         with self.tick:
             self.tick.notify_all()
+        self.requests.put(STOP)
+        with contextlib.suppress(queue.Full):
+            self.inbox.put_nowait((STOP, b""))
+        with contextlib.suppress(OSError):
+            os.write(self.wake_w, b"x")
         for t in self.threads:
             t.join(timeout=2.0)
         parts = sum(THREAD_CPU.values())
@@ -357,6 +365,8 @@ class Robot:
                 cause = self.requests.get(timeout=0.5)
             except queue.Empty:
                 continue
+            if cause is STOP:
+                break
             with self.lock:
                 s = self.s
                 t = s.grid.ternary()
@@ -473,7 +483,8 @@ class Robot:
         import select
 
         flood_fd, goals_fd = self.flooder.fileno(), self.goals.fileno()  # each once: pynng
-        fds = [flood_fd, goals_fd]  # reads its descriptor as a socket option every time
+        fds = [flood_fd, goals_fd, self.wake_r]  # pynng reads its descriptor as a socket
+        # option every time; wake_r is stop()'s
         while not self.stopping.is_set():
             ready, _, _ = select.select(fds, [], [], 0.5)
             if not ready:
@@ -499,6 +510,8 @@ class Robot:
                 kind, data = self.inbox.get(timeout=0.5)
             except queue.Empty:
                 continue
+            if kind is STOP:
+                break
             try:
                 if kind is FLOOD:
                     self._on_flood(data)
