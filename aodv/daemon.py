@@ -123,6 +123,8 @@ class Daemon:
         self._dump = False
         self._malformed_logged = 0
         self._poll_started = 0.0
+        # When the newest RREQ of our own for each destination went to sendto().
+        self._rreq_sent: dict[str, float] = {}
 
     # -- lifecycle -----------------------------------------------------------------------
     def run(self) -> int:
@@ -378,15 +380,19 @@ class Daemon:
                         self.tun.write(icmp_host_unreachable(self.addr, pkt))
                         self.stats.icmp_unreachable += 1
             elif isinstance(a, DiscoveryDone):
-                # The round ends when the route is in the kernel: the core's latencies
-                # run to `now`, the install took until `routed`.
+                # Both latencies end when the route is in the kernel (the core's run to
+                # `now`, the install took until `routed`). The round starts when the RREQ
+                # that succeeded went to sendto() (the core's round starts at the event
+                # that made it send, before the core ran and the RREQ was encoded).
                 extra = routed - now
+                sent = self._rreq_sent.pop(a.dest, None)
+                rnd = a.round_latency + extra if sent is None else routed - sent
                 self.stats.discoveries.append(
                     {
                         "dest": a.dest,
                         "ok": a.ok,
                         "latency_s": round(a.latency + extra, 6),
-                        "round_latency_s": round(a.round_latency + extra, 6),
+                        "round_latency_s": round(rnd, 6),
                         "t": round(time.time(), 3),
                     }
                 )
@@ -402,6 +408,8 @@ class Daemon:
         if ttl != self._ttl:
             self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_TTL, ttl)
             self._ttl = ttl
+        if isinstance(msg, wire.Rreq) and msg.orig == self.addr:
+            self._rreq_sent[msg.dest] = time.monotonic()
         try:
             self.sock.sendto(data, flags, (dst, wire.AODV_PORT))
         except OSError as e:
