@@ -13,7 +13,7 @@ the robots' commands until the step's deadline.
 Processes: the robots and the display fork from one fork server (topology.forkserver) that
 imported the node package and built the laser's tables once, so a dozen processes are ready
 in a fraction of a second instead of each paying for numpy. The step loop runs at real-time
-priority (SCHED_RR 1): it is the clock, and a robot woken by its frame must not preempt the
+priority (SCHED_RR 2): it is the clock, and a robot woken by its frame must not preempt the
 world before the other robots' frames are out.
 
 Deadlines: a step's deadline is t0 + (step + 1) * period. The world misses it when its own
@@ -60,7 +60,8 @@ from topology.forkserver import ForkServer, ForkServerError
 log = logging.getLogger(__name__)
 
 STEP_S = 0.1  # emulated seconds per step
-WORLD_NICE = -10  # the step loop's scheduling priority (robots run at 0)
+WORLD_RT_PRIORITY = 2  # the step loop's SCHED_RR priority (robots' motion control: 1)
+WORLD_NICE = -10  # its nice value where real-time priority is refused
 DEFAULT_SNAPSHOTS = (100, 250, 500, 1000, 2000)  # display PNGs (plus one at the end)
 ROUTINGS = ("babel", "aodv", "none")
 PROJECT_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -388,13 +389,14 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
 
 def _clock_priority() -> str:
     """Schedule the step loop ahead of the robots it simulates: it keeps the clock that every
-    robot is measured against. Round-robin real-time priority 1 (a robot woken by its frame
+    robot is measured against. Round-robin real-time priority 2, above the robots' motion
+    control (node.robot) and everything else (a robot woken by its frame
     then cannot preempt the world before the other frames are out; the loop sleeps between
     steps, and the kernel's RT throttling bounds it anyway), else nice -10, else nothing.
     This thread only; needs root, as runs do. Returns what it got."""
     try:
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(1))
-        return "SCHED_RR 1"
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(WORLD_RT_PRIORITY))
+        return f"SCHED_RR {WORLD_RT_PRIORITY}"
     except (OSError, AttributeError):
         pass
     try:
