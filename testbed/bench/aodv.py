@@ -5,7 +5,8 @@
   REPEATS). Ascending order keeps every discovery honest: the new destination has never
   sent anything, so no intermediate node can answer for it. Per hop count:
   * round: the successful discovery round, from the RREQ that succeeds being sent to the
-    route being in the kernel (measured by the daemon, its stats "round_latency_s");
+    route being in the kernel (measured by the daemon, its stats "round_latency_s": from
+    the RREQ's sendto() to the return of the route install's netlink send());
   * first packet: from the datagram's sendto() on robot 1 to its receipt on robot h+1,
     with the default expanding ring search (TTL 1, 3, 5, 7, then NET_DIAMETER).
 - steady state: 10 robots in a chain, robot k pinging robot 11-k once a second; over
@@ -13,8 +14,16 @@
   a fraction of one core, its resident memory, and the control packets per second sent by
   all daemons together.
 Targets: <= 1 ms per hop for the successful round, <= 2 % of a core and <= 40 MB per daemon.
-The round latency is mostly scheduling: each hop wakes a Python process (about 60 us of
-work per message); on a loaded machine the wake-ups dominate, hence the minimum is kept
+Where a round's time goes (daemon traces with SO_TIMESTAMPNS, 2 cores, load average 2-3):
+each hop costs two daemon turns, the RREQ forwarded out and the RREP forwarded back. A
+turn is a wake-up (150-250 us from the datagram's arrival to recvmsg() returning: the
+scheduler, on cores shared with the other daemons), decoding (about 70 us), the core
+(40-180 us) and the sendto(), in which the kernel carries the frame across the emulated
+medium to the next robot, ARP included (50-140 us). Python runs 3-5 times slower on a
+wake-up than in a warm loop, so the daemon keeps its turn short: the RREQ or RREP leaves
+before the route changes (unacknowledged netlink requests, about 55 us each), route
+changes are not logged at INFO, its own broadcasts are dropped by a socket filter and
+RREP-ACKs go last. On a loaded machine the wake-ups dominate, hence the minimum is kept
 next to the median, and the load average is recorded.
 """
 
