@@ -257,6 +257,8 @@ class Robot:
         # real-time priority 1, one below the world's clock (it works ~0.5 ms per frame, then
         # blocks on the next one), else at nice -5; without root, at the default.
         try:
+            if os.environ.get("TESTBED_REALTIME", "1") == "0":
+                raise OSError("real-time priority turned off")
             os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(MOTION_RT_PRIORITY))
         except OSError:
             with contextlib.suppress(OSError):

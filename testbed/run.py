@@ -395,6 +395,8 @@ def _clock_priority() -> str:
     steps, and the kernel's RT throttling bounds it anyway), else nice -10, else nothing.
     This thread only; needs root, as runs do. Returns what it got."""
     try:
+        if os.environ.get("TESTBED_REALTIME", "1") == "0":
+            raise OSError("real-time priority turned off")
         os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(WORLD_RT_PRIORITY))
         return f"SCHED_RR {WORLD_RT_PRIORITY}"
     except (OSError, AttributeError):

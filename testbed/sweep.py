@@ -25,10 +25,12 @@ load is (robots + 1) x time_scale, the process-steps it asks of the machine per 
 gives a large one the machine alone. The queue is served first-fit: the first waiting run
 that fits starts. Concurrency backs off: a run that reports deadline_miss_fraction above 1%
 while another run shared the machine lowers the load limit to 80% of the load it ran under
-(without a load limit: the job count by one) and is redone once (a run that misses deadlines
-alone is kept: less concurrency would not help it). `DIR/sweep.json` holds the expanded plan
-and each run's status, rewritten atomically whenever something changes; a lock file keeps two
-sweeps out of one directory.
+(without a load limit: the job count by one) and is redone once. A run that misses deadlines
+alone means the machine is slower than the file's time scales assume (a shared machine
+varies): every later run's time scale is multiplied by 0.75 (down to 0.25) and the run is
+redone, up to twice; after 12 clean runs in a row the factor goes back up a notch.
+`DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
+something changes; a lock file keeps two sweeps out of one directory.
 """
 
 from __future__ import annotations
@@ -58,6 +60,10 @@ from testbed.sweepfile import PlannedRun
 log = logging.getLogger(__name__)
 
 DEADLINE_MISS_LIMIT = 0.01
+SLOWDOWN = 0.75  # time scale factor applied when a run alone misses over the limit
+MIN_SCALE_FACTOR = 0.25
+CLEAN_MISS = 0.002  # a run this clean counts towards speeding up again
+CLEAN_RUNS_TO_SPEED_UP = 12
 # Environment variable naming the command that runs one run (tests use a stand-in program).
 RUN_COMMAND_ENV = "TESTBED_SWEEP_RUN_COMMAND"
 # Config keys that are passed to `testbed run` as --flag VALUE (booleans as bare flags).
@@ -130,6 +136,8 @@ def config_mismatch(out: Path, run: PlannedRun) -> str | None:
     except (OSError, ValueError, KeyError, TypeError):
         return None  # unreadable results are the report's problem, not a reason to stop
     for key, want in run.config.items():
+        if key == "time_scale":
+            continue  # how fast, not what: the sweep may have run it slower (Sweep._finish)
         if key in recorded and recorded[key] != want:
             return f"{key} is {recorded[key]!r} there, {want!r} in the sweep file"
     return None
@@ -329,6 +337,8 @@ class Sweep:
         self.jobs_requested = jobs
         self.load_limit = getattr(spec, "load_limit", None)
         self.load_limit_requested = self.load_limit
+        self.scale_factor = 1.0  # applied to every run's time scale (see _finish)
+        self.clean_runs = 0
         self.netem = netem
         self.sweep_file = sweep_file
         self.command = command or run_command()
@@ -348,6 +358,7 @@ class Sweep:
             "jobs": self.jobs,
             "load_limit_requested": self.load_limit_requested,
             "load_limit": self.load_limit,
+            "time_scale_factor": round(self.scale_factor, 3),
             "netem": self.netem,
             "backoffs": self.backoffs,
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
@@ -385,7 +396,10 @@ class Sweep:
             shutil.rmtree(rdir)
         (self.out / "logs").mkdir(exist_ok=True)
         log_file = open(self.out / "logs" / f"{run.run_id}.log", "wb")  # noqa: SIM115
-        argv = run_argv(self.command, run.config, rdir)
+        config = run.config
+        if self.scale_factor < 1.0:
+            config = dict(config, time_scale=round(config["time_scale"] * self.scale_factor, 3))
+        argv = run_argv(self.command, config, rdir)
         proc = subprocess.Popen(
             argv,
             stdin=subprocess.DEVNULL,
@@ -447,6 +461,27 @@ class Sweep:
                     st["status"] = "pending"
                     queue.appendleft(run)
                     event += ", redoing it"
+            elif not child.shared and self.scale_factor > MIN_SCALE_FACTOR:
+                # Alone and still late: the machine is slower than the sweep file's time scales
+                # assume (a shared machine varies). Every later run goes slower, this one again.
+                self.scale_factor = max(MIN_SCALE_FACTOR, self.scale_factor * SLOWDOWN)
+                self.clean_runs = 0
+                self.backoffs.append(
+                    {"run": run.run_id, "deadline_miss_fraction": miss,
+                     "time_scale_factor": round(self.scale_factor, 3)}
+                )  # fmt: skip
+                event += f"; time scales down to {self.scale_factor:.0%} of the file's"
+                if st["attempts"] < 3:
+                    st["status"] = "pending"
+                    queue.appendleft(run)
+                    event += ", redoing it"
+        elif isinstance(miss, int | float) and miss <= CLEAN_MISS and self.scale_factor < 1.0:
+            self.clean_runs += 1
+            if self.clean_runs >= CLEAN_RUNS_TO_SPEED_UP:  # the machine got quicker again
+                self.clean_runs = 0
+                self.scale_factor = min(1.0, self.scale_factor / SLOWDOWN)
+                self.backoffs.append({"run": run.run_id, "time_scale_factor": self.scale_factor})
+                event += f"; time scales up to {self.scale_factor:.0%} of the file's"
         return event
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
