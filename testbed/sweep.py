@@ -442,39 +442,25 @@ class Sweep:
             event += f", missed {miss:.1%} of step deadlines"
             if self.load_limit is not None and child.shared:
                 self.load_limit = round(min(self.load_limit, 0.8 * child.load_seen), 1)
-                self.backoffs.append(
-                    {"run": run.run_id, "deadline_miss_fraction": miss,
-                     "load_limit": self.load_limit}
+                event += self._back_off(
+                    run, st, queue, miss, {"load_limit": self.load_limit},
+                    f"load limit down to {self.load_limit:g}", attempts=2,
                 )  # fmt: skip
-                event += f"; load limit down to {self.load_limit:g}"
-                if st["attempts"] < 2:
-                    st["status"] = "pending"
-                    queue.appendleft(run)
-                    event += ", redoing it"
             elif self.load_limit is None and child.jobs_at_start > 1:
                 self.jobs = max(1, min(self.jobs, child.jobs_at_start) - 1)
-                self.backoffs.append(
-                    {"run": run.run_id, "deadline_miss_fraction": miss, "jobs": self.jobs}
-                )
-                event += f"; concurrency down to {self.jobs}"
-                if st["attempts"] < 2:
-                    st["status"] = "pending"
-                    queue.appendleft(run)
-                    event += ", redoing it"
+                event += self._back_off(
+                    run, st, queue, miss, {"jobs": self.jobs},
+                    f"concurrency down to {self.jobs}", attempts=2,
+                )  # fmt: skip
             elif not child.shared and self.scale_factor > MIN_SCALE_FACTOR:
                 # Alone and still late: the machine is slower than the sweep file's time scales
                 # assume (a shared machine varies). Every later run goes slower, this one again.
                 self.scale_factor = max(MIN_SCALE_FACTOR, self.scale_factor * SLOWDOWN)
                 self.clean_runs = 0
-                self.backoffs.append(
-                    {"run": run.run_id, "deadline_miss_fraction": miss,
-                     "time_scale_factor": round(self.scale_factor, 3)}
+                event += self._back_off(
+                    run, st, queue, miss, {"time_scale_factor": round(self.scale_factor, 3)},
+                    f"time scales down to {self.scale_factor:.0%} of the file's", attempts=3,
                 )  # fmt: skip
-                event += f"; time scales down to {self.scale_factor:.0%} of the file's"
-                if st["attempts"] < 3:
-                    st["status"] = "pending"
-                    queue.appendleft(run)
-                    event += ", redoing it"
         elif isinstance(miss, int | float) and miss <= CLEAN_MISS and self.scale_factor < 1.0:
             self.clean_runs += 1
             if self.clean_runs >= CLEAN_RUNS_TO_SPEED_UP:  # the machine got quicker again
@@ -482,6 +468,18 @@ class Sweep:
                 self.scale_factor = min(1.0, self.scale_factor / SLOWDOWN)
                 self.backoffs.append({"run": run.run_id, "time_scale_factor": self.scale_factor})
                 event += f"; time scales up to {self.scale_factor:.0%} of the file's"
+        return event
+
+    def _back_off(self, run, st: dict, queue: deque, miss: float, change: dict, what: str,
+                  attempts: int) -> str:  # fmt: skip
+        """Record a back-off and put the late run back at the head of the queue, unless it
+        has had `attempts` already; returns the words for the progress line."""
+        self.backoffs.append({"run": run.run_id, "deadline_miss_fraction": miss, **change})
+        event = f"; {what}"
+        if st["attempts"] < attempts:
+            st["status"] = "pending"
+            queue.appendleft(run)
+            event += ", redoing it"
         return event
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
