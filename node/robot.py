@@ -545,7 +545,8 @@ class Robot:
         if h.kind == wire.KIND_BEACON:
             wire.unpack_beacon(payload)
             self.received["beacon"] += 1
-            self.events.write("recv", now, kind="beacon", frm=h.origin, seq=h.seq, sent=h.step)
+            self.events.write("recv", now, kind="beacon", frm=h.origin, seq=h.seq, sent=h.step,
+                              t=round(time.monotonic(), 4))  # fmt: skip
             return
         m = wire.unpack_map(payload, self.cfg.shape)
         with self.lock:
@@ -559,7 +560,7 @@ class Robot:
         self.received["map"] += 1
         self.events.write(
             "recv", step, kind="map", frm=h.origin, seq=h.seq, sent=h.step, ttl=h.ttl,
-            learnt=learnt,
+            learnt=learnt, t=round(time.monotonic(), 4),
         )  # fmt: skip
         self.busy["merge"] += time.thread_time() - t_cpu
 
@@ -579,7 +580,8 @@ class Robot:
             mine = s.plan.goal if (s.plan and not s.finished) else None
             my_cost = s.plan.cost if s.plan else 0.0
         self.received[m["k"]] += 1
-        self.events.write("recv", step, kind=m["k"], frm=j, sent=m["step"])
+        self.events.write("recv", step, kind=m["k"], frm=j, sent=m["step"],
+                          t=round(time.monotonic(), 4))  # fmt: skip
         if m["k"] == "goal":
             if m["fallback"]:
                 return  # its robot had nowhere better to go: asking again would not help

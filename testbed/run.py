@@ -313,6 +313,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         forks = ForkServer(
             NODE_PRELOAD, env=env,
             warm=[["node.rays", "warm", [cfg.laser_range, cfg.laser_rays, truth.cell]]],
+            label=os.path.abspath(out),
         )  # fmt: skip
         with Network(spec) as net:
             phase("network_up")
@@ -378,6 +379,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
     finally:
         links_f.close()
         cov_f.close()
+        _write_clock(os.path.join(out, "clock.csv"), timing.get("clock", []))
         if server is not None:
             server.close()
         if forks is not None:
@@ -418,6 +420,7 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
         kills.setdefault(s, []).append(k)
     missed_world = 0
     timing.update(net_s=0.0, net_max_s=0.0, world_s=0.0, scan_s=0.0, send_s=0.0)
+    clock = timing.setdefault("clock", [])  # CLOCK_MONOTONIC when each step's frames went out
     tty = progress and sys.stderr.isatty()
     last_print = 0.0
     step = 0
@@ -429,6 +432,7 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
 
     def send_frames(step: int) -> None:
         now = time.monotonic()
+        clock.append(round(now, 4))
         for k in range(1, n + 1):
             r = robots[k]
             if r.crashed:
@@ -534,6 +538,15 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
         r = crashed[0]
         detail = f"r{r.k} exited with status {r.exit_status} at step {r.crash_step}; all died"
     return status, detail, step, missed_world, wall
+
+
+def _write_clock(path: str, clock: list[float]) -> None:
+    """clock.csv: when (CLOCK_MONOTONIC, the clock robots log receipts with) each step began;
+    what lets testbed.runcheck place a receipt at the world's step, not the robot's."""
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["step", "t"])
+        w.writerows(enumerate(clock))
 
 
 def _start_node(net, forks, k: int, argv: list[str], log_path: str, role: str):

@@ -7,12 +7,15 @@ the sender at the send step, the set of robots the message could have reached gr
 step, by the connected components of that step's links. A message that arrived anyway came
 around the emulated network (or through a bug), which is what the check is for.
 
-Steps in the logs are the robots' own steps (the last frame each had processed), which can lag
-the world's by a step or two; `slack` widens the window by that much on each side.
+Steps in the logs are the robots' own steps (the last frame each had processed), which lag
+the world's when a robot falls behind. Where the run wrote clock.csv (when each step began,
+on the CLOCK_MONOTONIC that receipts are logged with as "t"), a receipt's window ends at the
+world's step at that moment; `slack` widens the window by a step or two on each side.
 """
 
 from __future__ import annotations
 
+import bisect
 import csv
 import json
 import os
@@ -77,6 +80,15 @@ def received(out: str, robots: int) -> list[dict]:
     return evs
 
 
+def step_clock(out: str) -> list[float]:
+    """When each step began (clock.csv), or [] for runs without it."""
+    try:
+        with open(os.path.join(out, "clock.csv")) as f:
+            return [float(row["t"]) for row in csv.DictReader(f)]
+    except (OSError, KeyError, ValueError):
+        return []
+
+
 def causality_violations(out: str, slack: int = 2) -> tuple[int, list[dict]]:
     """(messages checked, messages that had no time-respecting path from their sender)."""
     with open(os.path.join(out, "result.json")) as f:
@@ -85,10 +97,14 @@ def causality_violations(out: str, slack: int = 2) -> tuple[int, list[dict]]:
     steps = result["steps"]
     sets = links_by_step(out, steps + slack + 1)
     evs = received(out, robots)
+    clock = step_clock(out)
     bad = []
     for e in evs:
         start = max(0, e["sent"] - slack)
-        end = min(len(sets) - 1, max(e["step"], start) + slack)
+        at = e["step"]
+        if clock and "t" in e:  # the world's step when the robot logged the receipt
+            at = max(at, bisect.bisect_right(clock, e["t"]) - 1)
+        end = min(len(sets) - 1, max(at, start) + slack)
         reached = {e["frm"]}
         for t in range(start, end + 1):
             reached = _grow(reached, sets[t])

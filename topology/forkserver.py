@@ -180,14 +180,22 @@ class ForkServer:
     """Starts the server with `preload` imported and `warm` calls made (see serve); `spawn`
     forks programs from it."""
 
-    def __init__(self, preload: list[str], env: dict | None = None, warm: list | None = None):
+    def __init__(
+        self,
+        preload: list[str],
+        env: dict | None = None,
+        warm: list | None = None,
+        label: str = "",
+    ):
         ours, theirs = socket.socketpair()
         code = (
             "import sys, json; from topology.forkserver import serve; "
             f"sys.exit(serve({theirs.fileno()}, {preload!r}, json.loads({json.dumps(warm)!r})))"
         )
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", code],
+            # `label` (e.g. the run's directory) is in the command line of the server and of
+            # every child, for ps and for finding a run's processes.
+            [sys.executable, "-c", code] + ([label] if label else []),
             pass_fds=(theirs.fileno(),),
             stdin=subprocess.DEVNULL,
             env=env,

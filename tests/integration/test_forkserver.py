@@ -4,6 +4,7 @@ namespace asked for, with their own session and log, and their exit statuses com
 import os
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
@@ -53,7 +54,7 @@ def test_server_dies_with_its_parent(tmp_path):
         "import os, sys, time; from topology.forkserver import ForkServer; "
         "f = ForkServer([]); print(f.proc.pid, flush=True); time.sleep(60)"
     )
-    parent = subprocess.Popen(["python3", "-c", code], stdout=subprocess.PIPE, text=True,
+    parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
                               env=dict(os.environ, PYTHONPATH=REPO), cwd=REPO)  # fmt: skip
     server = int(parent.stdout.readline())
     parent.kill()

@@ -83,7 +83,7 @@ def test_team_explores_the_empty_terrain(tmp_path, tn_name, robots, comm_range):
 @pytest.mark.slow
 @pytest.mark.parametrize("comm_range", [20.0, 5.0])
 def test_ten_robots_explore_the_empty_terrain(tmp_path, tn_name, comm_range):
-    out, result = explore(tmp_path, tn_name, 10, comm_range, time_scale=5.0)
+    out, result = explore(tmp_path, tn_name, 10, comm_range, time_scale=4.0)
     check_exploration(out, result, 10, comm_range)
 
 

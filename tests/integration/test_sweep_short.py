@@ -167,7 +167,11 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
     final = results(out)
     assert set(final) == set(plan)
     for rid, doc in final.items():
-        assert {k: doc["config"][k] for k in plan[rid]} == plan[rid]
+        # The same point as planned; the time scale may be lower: on a slow machine the sweep
+        # slows its runs down (testbed.sweep), which changes how fast, not what is run.
+        want = {k: v for k, v in plan[rid].items() if k != "time_scale"}
+        assert {k: doc["config"][k] for k in want} == want
+        assert doc["config"]["time_scale"] <= plan[rid]["time_scale"]
     # finished runs were not redone
     for rid, mtime in done_before.items():
         assert (out / "runs" / rid / "result.json").stat().st_mtime_ns == mtime
