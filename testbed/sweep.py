@@ -27,9 +27,10 @@ that fits starts. Concurrency backs off: a run that reports deadline_miss_fracti
 while another run shared the machine lowers the load limit to 80% of the load it ran under
 (without a load limit: the job count by one) and is redone once. A run that misses deadlines
 alone means the machine is slower than the file's time scales assume (a shared machine
-varies): every later run's time scale is multiplied by 0.85 (down to 0.25), and the run is
-redone (up to twice) if it missed more than 5% (below that it is kept: its result records
-what it missed); after 6 clean runs in a row the factor goes back up a notch.
+varies): the later runs of that team size and of larger ones get their time scale multiplied
+by 0.85 (down to 0.25), and the run is redone (up to twice) if it missed more than 5% (below
+that it is kept: its result records what it missed); after 6 clean runs of a team size in a
+row its factor goes back up a notch.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -339,8 +340,10 @@ class Sweep:
         self.jobs_requested = jobs
         self.load_limit = getattr(spec, "load_limit", None)
         self.load_limit_requested = self.load_limit
-        self.scale_factor = 1.0  # applied to every run's time scale (see _finish)
-        self.clean_runs = 0
+        # Per team size, applied to its runs' time scales (see _finish): a large team that
+        # runs short of CPU says nothing about a lone robot, which is bound by latency.
+        self.scale_factors: dict[int, float] = {}
+        self.clean_runs: dict[int, int] = {}
         self.netem = netem
         self.sweep_file = sweep_file
         self.command = command or run_command()
@@ -360,7 +363,9 @@ class Sweep:
             "jobs": self.jobs,
             "load_limit_requested": self.load_limit_requested,
             "load_limit": self.load_limit,
-            "time_scale_factor": round(self.scale_factor, 3),
+            "time_scale_factor": {
+                str(n): round(f, 3) for n, f in sorted(self.scale_factors.items())
+            },
             "netem": self.netem,
             "backoffs": self.backoffs,
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
@@ -399,8 +404,9 @@ class Sweep:
         (self.out / "logs").mkdir(exist_ok=True)
         log_file = open(self.out / "logs" / f"{run.run_id}.log", "wb")  # noqa: SIM115
         config = run.config
-        if self.scale_factor < 1.0:
-            config = dict(config, time_scale=round(config["time_scale"] * self.scale_factor, 3))
+        factor = self.scale_factors.get(config["robots"], 1.0)
+        if factor < 1.0:
+            config = dict(config, time_scale=round(config["time_scale"] * factor, 3))
         argv = run_argv(self.command, config, rdir)
         proc = subprocess.Popen(
             argv,
@@ -438,6 +444,7 @@ class Sweep:
         st["result_status"] = result.get("status")
         miss = result.get("deadline_miss_fraction")
         st["deadline_miss_fraction"] = miss
+        n = run.config["robots"]
         self.progress.record(run.config["robots"], wall)
         event = f"{run.run_id}: {result.get('status')} in {wall:.0f} s"
         if isinstance(miss, int | float) and miss > DEADLINE_MISS_LIMIT:
@@ -454,24 +461,33 @@ class Sweep:
                     run, st, queue, miss, {"jobs": self.jobs},
                     f"concurrency down to {self.jobs}", attempts=2,
                 )  # fmt: skip
-            elif not child.shared and self.scale_factor > MIN_SCALE_FACTOR:
+            elif not child.shared and self._factor(n) > MIN_SCALE_FACTOR:
                 # Alone and still late: the machine is slower than the sweep file's time scales
                 # assume (a shared machine varies). Every later run goes slower, this one again.
-                self.scale_factor = max(MIN_SCALE_FACTOR, self.scale_factor * SLOWDOWN)
-                self.clean_runs = 0
+                # This team size and every larger one (they need more CPU still).
+                new = max(MIN_SCALE_FACTOR, self._factor(n) * SLOWDOWN)
+                for m in {r.config["robots"] for r in self.runs} | {n}:
+                    if m >= n and self._factor(m) > new:
+                        self.scale_factors[m] = new
+                        self.clean_runs[m] = 0
                 event += self._back_off(
-                    run, st, queue, miss, {"time_scale_factor": round(self.scale_factor, 3)},
-                    f"time scales down to {self.scale_factor:.0%} of the file's",
+                    run, st, queue, miss, {"robots": n, "time_scale_factor": round(new, 3)},
+                    f"time scales of teams of {n} or more down to {new:.0%} of the file's",
                     attempts=3 if miss > REDO_MISS else 1,
                 )  # fmt: skip
-        elif isinstance(miss, int | float) and miss <= CLEAN_MISS and self.scale_factor < 1.0:
-            self.clean_runs += 1
-            if self.clean_runs >= CLEAN_RUNS_TO_SPEED_UP:  # the machine got quicker again
-                self.clean_runs = 0
-                self.scale_factor = min(1.0, self.scale_factor / SLOWDOWN)
-                self.backoffs.append({"run": run.run_id, "time_scale_factor": self.scale_factor})
-                event += f"; time scales up to {self.scale_factor:.0%} of the file's"
+        elif isinstance(miss, int | float) and miss <= CLEAN_MISS and self._factor(n) < 1.0:
+            self.clean_runs[n] = self.clean_runs.get(n, 0) + 1
+            if self.clean_runs[n] >= CLEAN_RUNS_TO_SPEED_UP:  # the machine got quicker again
+                self.clean_runs[n] = 0
+                self.scale_factors[n] = min(1.0, self._factor(n) / SLOWDOWN)
+                self.backoffs.append(
+                    {"run": run.run_id, "robots": n, "time_scale_factor": self.scale_factors[n]}
+                )
+                event += f"; time scales of teams of {n} up to {self.scale_factors[n]:.0%}"
         return event
+
+    def _factor(self, robots: int) -> float:
+        return self.scale_factors.get(robots, 1.0)
 
     def _back_off(self, run, st: dict, queue: deque, miss: float, change: dict, what: str,
                   attempts: int) -> str:  # fmt: skip
