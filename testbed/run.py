@@ -375,7 +375,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         status, detail = "error", str(e).splitlines()[0] if str(e) else type(e).__name__
         log.error("run failed: %s", detail)
     except KeyboardInterrupt:
-        status, detail = "error", "interrupted"
+        status, detail = "interrupted", "interrupted (SIGINT or SIGTERM) before the end"
     finally:
         links_f.close()
         cov_f.close()
@@ -683,7 +683,7 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         "time_scale_requested": cfg.time_scale,
         "time_scale_achieved": round(achieved, 3),
         "deadlines_missed": missed,
-        "deadline_miss_fraction": round(missed / checks, 5),
+        "deadline_miss_fraction": round(missed / checks, 5) if steps else 0.0,
         "deadlines_missed_world": missed_world,
         "wall_time_s": round(total_wall, 2),
         "step_loop_wall_s": round(wall, 2),

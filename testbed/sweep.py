@@ -97,8 +97,12 @@ def run_dir(out: Path, run_id: str) -> Path:
 
 
 def is_done(out: Path, run_id: str) -> bool:
-    """A run is done iff its result.json exists (the contract's completion marker)."""
-    return (run_dir(out, run_id) / "result.json").is_file()
+    """A run is done iff its result.json exists (the contract's completion marker) and does
+    not say it was interrupted (a run stopped by Ctrl-C keeps what it had, but is redone)."""
+    path = run_dir(out, run_id) / "result.json"
+    if not path.is_file():
+        return False
+    return (_read_json(path) or {}).get("status") != "interrupted"
 
 
 @dataclass

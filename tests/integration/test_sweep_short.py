@@ -166,6 +166,10 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
     assert r.returncode == 0, r.stderr[-2000:]
     final = results(out)
     assert set(final) == set(plan)
+    # Every run is a finished one: the run interrupted mid-way was redone, not kept.
+    assert all(doc["status"] in ("complete", "step_cap") for doc in final.values()), {
+        rid: doc["status"] for rid, doc in final.items()
+    }
     for rid, doc in final.items():
         # The same point as planned; the time scale may be lower: on a slow machine the sweep
         # slows its runs down (testbed.sweep), which changes how fast, not what is run.

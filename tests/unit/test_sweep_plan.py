@@ -117,3 +117,14 @@ def test_sweep_json_is_written_atomically(tmp_path):
     assert [r["id"] for r in doc["runs"]] == [r.run_id for r in runs]
     assert all(r["status"] == "pending" for r in doc["runs"])
     assert not (tmp_path / "sweep.json.tmp").exists()
+
+
+def test_an_interrupted_run_is_not_done(tmp_path):
+    """A run stopped by Ctrl-C writes its result.json (nothing lost) but is redone."""
+    runs = sweepfile.expand(spec())
+    write_run(tmp_path, runs[0])
+    doc = json.loads((sweep.run_dir(tmp_path, runs[0].run_id) / "result.json").read_text())
+    doc["status"] = "interrupted"
+    write_run(tmp_path, runs[1], doc=doc)
+    p = sweep.plan(runs, tmp_path, netem=False)
+    assert runs[0] in p.done and runs[1] in p.todo and runs[1] in p.partial
