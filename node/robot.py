@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from node import body, planner, wire
+from node import body, planner, sched, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
@@ -256,13 +256,7 @@ class Robot:
         # a control loop has its own CPU and they would not compete. So this thread runs at
         # real-time priority 1, one below the world's clock (it works ~0.5 ms per frame, then
         # blocks on the next one), else at nice -5; without root, at the default.
-        try:
-            if os.environ.get("TESTBED_REALTIME", "1") == "0":
-                raise OSError("real-time priority turned off")
-            os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(MOTION_RT_PRIORITY))
-        except OSError:
-            with contextlib.suppress(OSError):
-                os.setpriority(os.PRIO_PROCESS, 0, MOTION_NICE)
+        sched.raise_priority(MOTION_RT_PRIORITY, MOTION_NICE)
         started = False
         last_xy = None
         while not self.stopping.is_set():

@@ -51,6 +51,7 @@ import numpy as np
 from node import body, render
 from node.flood import MODES as FLOOD_MODES
 from node.rays import Laser
+from node.sched import raise_priority
 from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
 from testbed.world import World
@@ -396,18 +397,7 @@ def _clock_priority() -> str:
     then cannot preempt the world before the other frames are out; the loop sleeps between
     steps, and the kernel's RT throttling bounds it anyway), else nice -10, else nothing.
     This thread only; needs root, as runs do. Returns what it got."""
-    try:
-        if os.environ.get("TESTBED_REALTIME", "1") == "0":
-            raise OSError("real-time priority turned off")
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(WORLD_RT_PRIORITY))
-        return f"SCHED_RR {WORLD_RT_PRIORITY}"
-    except (OSError, AttributeError):
-        pass
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, WORLD_NICE)
-        return f"nice {WORLD_NICE}"
-    except OSError:
-        return "normal"
+    return raise_priority(WORLD_RT_PRIORITY, WORLD_NICE)
 
 
 def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
