@@ -63,22 +63,32 @@ def test_scan_and_coverage():
     assert np.isfinite(w.scan(0)).any()  # now the north wall is in range
 
 
-def test_world_scan_equals_the_plain_cast_everywhere():
+def walled_world():
+    """One robot in an 8 x 8 m terrain with an inner wall: (world, padded obstacle grid)."""
     from node.rays import pad
 
     t = empty_terrain(8, 8)
     occ = t.occupied.copy()
     occ[60:100, 100:104] = True  # an inner wall
     w = make([(1.0, 1.0)], occ=occ)
-    laser = w.laser
-    occp = pad(occ, laser.pad, True)
-    rng = np.random.default_rng(2)
-    for _ in range(40):
-        x, y = rng.uniform(0.5, 7.5, 2)
-        if occ[int(y / 0.05), int(x / 0.05)]:
+    return w, pad(occ, w.laser.pad, True)
+
+
+def free_poses(w, seed: int, lo: float, hi: float, n: int = 40):
+    """Up to n random poses in [lo, hi)^2 off the obstacles; moves robot 1 to each in turn."""
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        x, y = rng.uniform(lo, hi, 2)
+        if w.truth.occupied[int(y / 0.05), int(x / 0.05)]:
             continue
         w.bodies[0].x, w.bodies[0].y = x, y
-        assert np.array_equal(w.scan(0), laser.cast(occp, x, y))
+        yield x, y
+
+
+def test_world_scan_equals_the_plain_cast_everywhere():
+    w, occp = walled_world()
+    for x, y in free_poses(w, seed=2, lo=0.5, hi=7.5):
+        assert np.array_equal(w.scan(0), w.laser.cast(occp, x, y))
     assert w.open_space.any() and not w.open_space.all()
 
 
@@ -97,21 +107,10 @@ def test_open_space_scan_marks_the_marked_samples():
 
 
 def test_world_marks_seen_as_the_flat_cast_does():
-    from node.rays import pad
-
-    t = empty_terrain(8, 8)
-    occ = t.occupied.copy()
-    occ[60:100, 100:104] = True
-    w = make([(1.0, 1.0)], occ=occ)
+    w, occp = walled_world()
     laser = w.laser
-    occp = pad(occ, laser.pad, True)
     expect = np.zeros(occp.shape, dtype=bool).reshape(-1)
-    rng = np.random.default_rng(4)
-    for _ in range(40):
-        x, y = rng.uniform(0.3, 7.7, 2)
-        if occ[int(y / 0.05), int(x / 0.05)]:
-            continue
-        w.bodies[0].x, w.bodies[0].y = x, y
+    for x, y in free_poses(w, seed=4, lo=0.3, hi=7.7):
         w.scan(0)
         flat = laser.flat_cells(x, y, occp.shape[1])
         hit = occp.reshape(-1)[flat]
