@@ -1,20 +1,30 @@
 """Scheduling priority for the threads that keep step deadlines (the world's clock, each
 robot's motion control): round-robin real-time priority where allowed, else a nice value.
 
+The priority is the calling thread's alone and never leaks: real-time priority is set with
+SCHED_RESET_ON_FORK, so a process forked while it holds (a fork server, a routing daemon)
+starts at the default policy and nice, and `deadline_priority` puts the thread back as it was
+when its block ends (a process that runs several runs in turn, as the benchmark does, would
+otherwise start the next run's fork server, and so every robot, at the world's priority).
+
 `TESTBED_REALTIME=0` in the environment turns real-time priority off everywhere."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 
 
 def raise_priority(rt_priority: int, nice: int) -> str:
-    """Give the calling thread SCHED_RR `rt_priority`, else nice `nice` (both need root),
-    else leave it; returns what it got ("SCHED_RR 2", "nice -10" or "normal")."""
+    """Give the calling thread SCHED_RR `rt_priority` (reset in its children), else nice
+    `nice` (both need root), else leave it; returns what it got ("SCHED_RR 2", "nice -10" or
+    "normal")."""
     try:
         if os.environ.get("TESTBED_REALTIME", "1") == "0":
             raise OSError("real-time priority turned off")
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(rt_priority))
+        policy = os.SCHED_RR | os.SCHED_RESET_ON_FORK
+        os.sched_setscheduler(0, policy, os.sched_param(rt_priority))
         return f"SCHED_RR {rt_priority}"
     except (OSError, AttributeError):
         pass
@@ -23,3 +33,20 @@ def raise_priority(rt_priority: int, nice: int) -> str:
         return f"nice {nice}"
     except OSError:
         return "normal"
+
+
+@contextlib.contextmanager
+def deadline_priority(rt_priority: int, nice: int) -> Iterator[str]:
+    """`raise_priority` for the block, yielding what it got; the thread's policy, real-time
+    priority and nice are restored afterwards (as root; without root there was no real-time
+    priority to take back, and a nice once raised stays)."""
+    policy = os.sched_getscheduler(0)
+    param = os.sched_getparam(0)
+    niceness = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        yield raise_priority(rt_priority, nice)
+    finally:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, policy, param)
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, 0, niceness)

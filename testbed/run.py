@@ -51,7 +51,7 @@ import numpy as np
 from node import body, render
 from node.flood import MODES as FLOOD_MODES
 from node.rays import Laser
-from node.sched import raise_priority
+from node.sched import deadline_priority
 from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
 from testbed.world import World
@@ -362,10 +362,11 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
                         else ""
                     )
                 )
-            status, detail, steps_done, missed_world, wall = _step_loop(
-                cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
-                progress, timing,
-            )  # fmt: skip
+            with _clock_priority() as timing["priority"]:
+                status, detail, steps_done, missed_world, wall = _step_loop(
+                    cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
+                    progress, timing,
+                )  # fmt: skip
             phase("steps")
             _end(server, robots, display_k, display_proc, steps_done)
             phase("processes_ended")
@@ -390,21 +391,21 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
     return result
 
 
-def _clock_priority() -> str:
+def _clock_priority():
     """Schedule the step loop ahead of the robots it simulates: it keeps the clock that every
     robot is measured against. Round-robin real-time priority 2, above the robots' motion
     control (node.robot) and everything else (a robot woken by its frame
     then cannot preempt the world before the other frames are out; the loop sleeps between
     steps, and the kernel's RT throttling bounds it anyway), else nice -10, else nothing.
-    This thread only; needs root, as runs do. Returns what it got."""
-    return raise_priority(WORLD_RT_PRIORITY, WORLD_NICE)
+    This thread only and for the step loop only; needs root, as runs do. A context manager
+    that yields what it got."""
+    return deadline_priority(WORLD_RT_PRIORITY, WORLD_NICE)
 
 
 def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w, cov_w,
                progress, timing):  # fmt: skip
     n = cfg.robots
     period = STEP_S / cfg.time_scale
-    timing["priority"] = _clock_priority()
     kills = dict()
     for k, s in cfg.kill:
         kills.setdefault(s, []).append(k)
