@@ -67,6 +67,7 @@ IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
 BROADCAST = "255.255.255.255"
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
 _U32 = struct.Struct("!I")
+ICMP_DEST_UNREACH = 3
 
 
 def _checksum(data: bytes) -> int:
@@ -100,6 +101,28 @@ def icmp_host_unreachable(own: str, original: bytes) -> bytes:
     )
     hdr = hdr[:10] + struct.pack("!H", _checksum(hdr)) + hdr[12:]
     return hdr + icmp
+
+
+def quoted_datagram(icmp_packet: bytes, own: str) -> tuple[int, bytes] | None:
+    """From an IPv4 packet carrying an ICMP destination unreachable, the AODV datagram it
+    quotes if `own` sent it (UDP from port 654 to port 654): (its UDP length, the quoted
+    part of its payload); None for anything else, short or malformed packets included."""
+    try:
+        outer = (icmp_packet[0] & 0x0F) * 4
+        if icmp_packet[outer] != ICMP_DEST_UNREACH:
+            return None
+        inner = outer + 8
+        ihl = (icmp_packet[inner] & 0x0F) * 4
+        if icmp_packet[inner + 9] != socket.IPPROTO_UDP:
+            return None
+        if icmp_packet[inner + 12 : inner + 16] != socket.inet_aton(own):
+            return None
+        sport, dport, length = struct.unpack_from("!HHH", icmp_packet, inner + ihl)
+    except (IndexError, struct.error):
+        return None
+    if sport != wire.AODV_PORT or dport != wire.AODV_PORT or length < 8:
+        return None
+    return length, icmp_packet[inner + ihl + 8 : inner + ihl + length]
 
 
 class Daemon:
@@ -140,6 +163,7 @@ class Daemon:
         self.monitor = None
         self.reader = None
         self.sock = None
+        self.icmp = None
         try:
             self.routes.catch_all(self.tun.ifindex, str(self.net), self.addr)
             self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
@@ -171,6 +195,8 @@ class Daemon:
         self.sock = s
         self._ttl = None
         self.raw = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
+        self.icmp = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_ICMP)
+        self.icmp.setblocking(False)
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -191,6 +217,7 @@ class Daemon:
             lambda: self.routes.flush(),
             lambda: self.monitor and self.monitor.remove(),
             lambda: self.tun.close(),
+            lambda: self.icmp and self._on_icmp(),  # what the kernel reported meanwhile
             lambda: self.sock and self.sock.close(),
             lambda: self._write_stats(),
             lambda: self.routes.close(),
@@ -216,6 +243,7 @@ class Daemon:
         sel.register(self._wake_r, selectors.EVENT_READ, self._on_wake)
         sel.register(self.routes.nl, selectors.EVENT_READ, self._on_netlink)
         sel.register(self.reader.sock, selectors.EVENT_READ, self._on_poll_answer)
+        sel.register(self.icmp, selectors.EVENT_READ, self._on_icmp)
         next_poll = time.monotonic() + self._poll_period()
         next_stats = time.monotonic()
         while not self._stop:
@@ -304,6 +332,31 @@ class Daemon:
             except Exception:  # a bug must not kill the daemon; count it loudly
                 self.stats.dropped["error"] += 1
                 log.exception("error handling %s from %s", kind, src)
+
+    def _on_icmp(self) -> None:
+        """ICMP errors about datagrams of ours: the kernel took a message (`_send` counted it
+        as sent) but never transmitted it. A unicast to a neighbour whose ARP failed (the
+        link broke) is dropped with an ICMP host unreachable to its sender, here through lo.
+        The UDP socket cannot be told (IP_RECVERR finds no socket bound to wlan0 for an
+        error that arrives on lo), so a raw ICMP socket reads them. Counted by kind as not
+        transmitted: sent minus not transmitted is what went on the air, as a capture of
+        wlan0 sees it."""
+        for _ in range(64):
+            try:
+                data = self.icmp.recv(2048)
+            except BlockingIOError:
+                return
+            quoted = quoted_datagram(data, self.addr)
+            if quoted is None:
+                continue
+            udp_len, payload = quoted
+            try:
+                kind = wire.decode(payload).type_name
+            except wire.MalformedPacket:
+                kind = "unknown"
+            self.stats.not_transmitted[kind] += 1
+            self.stats.bytes_not_transmitted += udp_len - 8
+            log.info("a %s of ours was not transmitted (ICMP destination unreachable)", kind)
 
     def _check_addresses(self, src: str, msg: wire.Message) -> None:
         """Every address a peer names must be a host of our network (integer math: the

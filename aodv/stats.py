@@ -19,6 +19,9 @@ class Stats:
         self.bytes_sent = 0
         self.bytes_received = 0
         self.dropped: Counter[str] = Counter()
+        # Sent (handed to the kernel) but reported back untransmitted (IP_RECVERR).
+        self.not_transmitted: Counter[str] = Counter()
+        self.bytes_not_transmitted = 0
         self.route_installs = 0
         self.route_deletes = 0
         self.packets_buffered = 0
@@ -36,6 +39,8 @@ class Stats:
             "pid": os.getpid(),
             "uptime_s": round(time.time() - self.started, 3),
             "messages_sent": dict(self.sent),
+            "messages_not_transmitted": dict(self.not_transmitted),
+            "bytes_not_transmitted": self.bytes_not_transmitted,
             "messages_received": dict(self.received),
             "bytes_sent": self.bytes_sent,
             "bytes_received": self.bytes_received,

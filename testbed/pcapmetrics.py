@@ -305,11 +305,18 @@ def daemon_counts(run_dir: Path) -> dict[str, dict] | None:
     for p in sorted(d.glob("r*.json")):
         try:
             doc = json.loads(p.read_text())
-            by_type = {str(k): int(v) for k, v in doc["messages_sent"].items()}
+            by_type = Counter({str(k): int(v) for k, v in doc["messages_sent"].items()})
+            # What the kernel took but reported back untransmitted (a unicast whose next
+            # hop's ARP failed) never reaches wlan0, so no capture can hold it.
+            unsent = Counter(
+                {str(k): int(v) for k, v in doc.get("messages_not_transmitted", {}).items()}
+            )
+            by_type.subtract(unsent)
             out[p.stem] = {
                 "packets": sum(by_type.values()),
-                "bytes": int(doc.get("bytes_sent", 0)),
-                "by_type": by_type,
+                "bytes": int(doc.get("bytes_sent", 0)) - int(doc.get("bytes_not_transmitted", 0)),
+                "by_type": {k: n for k, n in by_type.items() if n},
+                "not_transmitted": sum(unsent.values()),
             }
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
             log.warning("%s: unreadable AODV counters (%s)", p, e)

@@ -390,3 +390,47 @@ def test_restart_after_crash_applies_the_reboot_rule():
         assert s2["messages_received"].get("RREQ", 0) >= 2
         new.terminate()
         new.wait(timeout=10)
+
+
+GHOST_RREQ = textwrap.dedent("""
+    # A RREQ from an address nobody holds (argv 2), sent as a raw IP datagram to argv 3.
+    import socket, struct, sys
+    sys.path.insert(0, sys.argv[1])
+    from aodv import packet as wire
+    src, dst = sys.argv[2], sys.argv[3]
+    body = wire.encode(wire.Rreq(1, dst, 0, src, 1))
+    udp = struct.pack("!HHHH", 654, 654, 8 + len(body), 0) + body
+    ip = struct.pack("!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), 1, 0, 64, 17, 0,
+                     socket.inet_aton(src), socket.inet_aton(dst))
+    s = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
+    s.sendto(ip + udp, (dst, 0))
+""")
+
+
+def test_a_reply_the_kernel_could_not_transmit_is_counted_as_such():
+    """Robot 2 answers a RREQ from a neighbour that is gone before the RREP leaves (robot 1
+    sends it from an address nobody holds): ARP for it fails, the kernel reports the RREP
+    back to the daemon (IP_RECVERR), and the daemon counts it as sent but not transmitted,
+    which is what robot 2's capture shows."""
+    ghost = "10.0.0.77"
+    with tempfile.TemporaryDirectory(prefix="ta-aodv-") as cap:
+        with aodv_net(CHAIN5[:2], 1.0, cap) as net:
+            assert " 0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
+            replies = stats(net, 2)["messages_sent"]["RREP"]
+            net.exec(1, [PY, "-c", GHOST_RREQ, REPO, ghost, "10.0.0.2"], check=True, timeout=30)
+            deadline = time.monotonic() + 15  # ARP gives up after 3 probes 1 s apart
+            while True:
+                s2 = stats(net, 2)
+                if s2["messages_not_transmitted"].get("RREP") or time.monotonic() > deadline:
+                    break
+                time.sleep(0.5)
+            assert s2["messages_sent"]["RREP"] == replies + 1
+            assert s2["messages_not_transmitted"] == {"RREP": 1}
+            assert s2["bytes_not_transmitted"] == 20
+            assert s2["dropped"].get("send_failed", 0) == 0
+            assert daemon(net, 2).poll() is None
+        out = subprocess.run(
+            ["tshark", "-r", os.path.join(cap, "r2.pcap"), "-Y", f"aodv && ip.dst == {ghost}"],
+            capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        assert out.stdout.strip() == ""  # it never reached wlan0

@@ -1,4 +1,5 @@
-"""Pure helpers of the daemon: the ICMP error it injects, the address filter for peers."""
+"""Pure helpers of the daemon: the ICMP error it injects, the one it reads back about its own
+messages, the address filter for peers."""
 
 import socket
 import struct
@@ -6,13 +7,12 @@ import struct
 import pytest
 
 from aodv import packet as wire
-from aodv.daemon import Daemon, _checksum, icmp_host_unreachable
+from aodv.daemon import Daemon, _checksum, icmp_host_unreachable, quoted_datagram
 from aodv.params import Params
 
 
-def udp_packet(src, dst):
-    payload = b"hello world"
-    udp = struct.pack("!HHHH", 40000, 5555, 8 + len(payload), 0) + payload
+def udp_packet(src, dst, payload=b"hello world", ports=(40000, 5555)):
+    udp = struct.pack("!HHHH", *ports, 8 + len(payload), 0) + payload
     hdr = struct.pack(
         "!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), 1, 0, 64, 17, 0,
         socket.inet_aton(src), socket.inet_aton(dst),
@@ -44,3 +44,29 @@ def test_peer_addresses_outside_the_network_are_malformed():
     ]:
         with pytest.raises(wire.MalformedPacket):
             d._check_addresses(src, msg)
+
+
+def kernel_unreachable(original: bytes, icmp_type: int = 3) -> bytes:
+    """What the kernel hands a raw ICMP socket when ARP for `original`'s next hop failed: an
+    IP packet from the robot to itself, ICMP type 3 code 1, quoting the whole datagram."""
+    icmp = bytes([icmp_type, 1, 0, 0, 0, 0, 0, 0]) + original
+    hdr = struct.pack(
+        "!BBHHHBBH4s4s", 0x45, 0xC0, 20 + len(icmp), 7, 0, 64, 1, 0,
+        socket.inet_aton("10.0.0.2"), socket.inet_aton("10.0.0.2"),
+    )  # fmt: skip
+    return hdr + icmp
+
+
+def test_quoted_datagram_finds_our_untransmitted_messages_only():
+    rrep = wire.encode(wire.Rrep("10.0.0.2", 1, "10.0.0.77", 6000))
+    ours = udp_packet("10.0.0.2", "10.0.0.77", rrep, (654, 654))
+    assert quoted_datagram(kernel_unreachable(ours), "10.0.0.2") == (8 + len(rrep), rrep)
+    assert wire.decode(quoted_datagram(kernel_unreachable(ours), "10.0.0.2")[1]).type_name == "RREP"
+    # someone else's, another port, another ICMP type, truncated: not ours to count
+    assert quoted_datagram(kernel_unreachable(ours), "10.0.0.3") is None
+    other_port = udp_packet("10.0.0.2", "10.0.0.77", rrep, (40000, 654))
+    assert quoted_datagram(kernel_unreachable(other_port), "10.0.0.2") is None
+    assert quoted_datagram(kernel_unreachable(ours, icmp_type=11), "10.0.0.2") is None
+    full = kernel_unreachable(ours)
+    for cut in (0, 1, 10, 20, 28, 40, 50):
+        assert quoted_datagram(full[:cut], "10.0.0.2") is None

@@ -147,7 +147,9 @@ def test_daemon_comparison(tmp_path):
     (tmp_path / "aodv" / "r3.json").write_text(daemon_doc({"RREQ": 1, "RREP": 1, "HELLO": 1}, 68))
     (tmp_path / "aodv" / "r2.json").write_text("{broken")
     daemons = pm.daemon_counts(tmp_path)
-    assert daemons["r1"] == {"packets": 2, "bytes": 44, "by_type": {"RREQ": 1, "HELLO": 1}}
+    assert daemons["r1"] == {
+        "packets": 2, "bytes": 44, "by_type": {"RREQ": 1, "HELLO": 1}, "not_transmitted": 0
+    }  # fmt: skip
     assert set(daemons) == {"r1", "r3"}
     cmp = pm.compare_with_daemons(pm.compute(chain_captures(), ADDRS), daemons)
     assert cmp["robots"] == ["r1", "r3"]
@@ -160,6 +162,13 @@ def test_daemon_comparison(tmp_path):
     (tmp_path / "aodv" / "r1.json").write_text(daemon_doc({"RREQ": 2, "HELLO": 1}, 68))
     cmp = pm.compare_with_daemons(pm.compute(chain_captures(), ADDRS), pm.daemon_counts(tmp_path))
     assert cmp["relative_difference"] == pytest.approx(1 / 6)
+    # ... unless the daemon heard back from the kernel that it never went out (IP_RECVERR)
+    doc = json.loads(daemon_doc({"RREQ": 2, "HELLO": 1}, 68))
+    doc.update(messages_not_transmitted={"RREQ": 1}, bytes_not_transmitted=24)
+    (tmp_path / "aodv" / "r1.json").write_text(json.dumps(doc))
+    cmp = pm.compare_with_daemons(pm.compute(chain_captures(), ADDRS), pm.daemon_counts(tmp_path))
+    assert cmp["relative_difference"] == 0.0 and cmp["relative_difference_bytes"] == 0.0
+    assert cmp["by_type"]["RREQ"] == {"pcap": 2, "daemon": 2}
     assert pm.daemon_counts(tmp_path / "nothing") is None
     assert pm.compare_with_daemons({}, None) is None
 
