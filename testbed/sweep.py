@@ -27,8 +27,8 @@ that fits starts. Concurrency backs off: a run that reports deadline_miss_fracti
 while another run shared the machine lowers the load limit to 80% of the load it ran under
 (without a load limit: the job count by one) and is redone once. A run that misses deadlines
 alone means the machine is slower than the file's time scales assume (a shared machine
-varies): the later runs of that team size and of larger ones get their time scale multiplied
-by 0.85 (down to 0.25), and the run is redone (up to twice) if it missed more than 5% (below
+varies): the later runs of that team size get their time scale multiplied by 0.85 (down to
+0.25), and the run is redone (up to twice) if it missed more than 5% (below
 that it is kept: its result records what it missed); after 6 clean runs of a team size in a
 row its factor goes back up a notch.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
@@ -467,16 +467,16 @@ class Sweep:
                 )  # fmt: skip
             elif not child.shared and self._factor(n) > MIN_SCALE_FACTOR:
                 # Alone and still late: the machine is slower than the sweep file's time scales
-                # assume (a shared machine varies). Every later run goes slower, this one again.
-                # This team size and every larger one (they need more CPU still).
+                # assume (a shared machine varies). The later runs of this team size go slower,
+                # this one again. Only this size: a small team is bound by the latency of a
+                # step's round trip (a host that steals the CPU for milliseconds), a large one
+                # by CPU, so one says little about the other; each size finds its own.
                 new = max(MIN_SCALE_FACTOR, self._factor(n) * SLOWDOWN)
-                for m in {r.config["robots"] for r in self.runs} | {n}:
-                    if m >= n and self._factor(m) > new:
-                        self.scale_factors[m] = new
-                        self.clean_runs[m] = 0
+                self.scale_factors[n] = new
+                self.clean_runs[n] = 0
                 event += self._back_off(
                     run, st, queue, miss, {"robots": n, "time_scale_factor": round(new, 3)},
-                    f"time scales of teams of {n} or more down to {new:.0%} of the file's",
+                    f"time scales of teams of {n} down to {new:.0%} of the file's",
                     attempts=3 if miss > REDO_MISS else 1,
                 )  # fmt: skip
         elif isinstance(miss, int | float) and miss <= CLEAN_MISS and self._factor(n) < 1.0:
