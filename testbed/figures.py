@@ -251,6 +251,7 @@ def routing_per_run(runs: list[Run], metrics_of) -> list[dict]:
         cmp = m.get("daemon_comparison") or {}
         row["daemon_tx_packets"] = cmp.get("daemon_tx_packets")
         row["daemon_relative_difference"] = cmp.get("relative_difference")
+        row["capture_dropped_packets"] = (m.get("capture_dropped") or {}).get("packets")
         rows.append(row)
     return rows
 

@@ -52,7 +52,7 @@ CONTROL_PORTS = {"aodv": 654, "babel": 6696, "none": 654}
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 
 _FIELDS = (
     "frame.time_epoch",
@@ -359,6 +359,19 @@ def compare_with_daemons(metrics: dict, daemons: dict[str, dict] | None) -> dict
     }
 
 
+def capture_drops(run_dir: Path) -> dict[str, int]:
+    """Per robot, the packets its capture lost in the kernel (tcpdump's last words, "N packets
+    dropped by kernel", in pcaps/daemons/rK.tcpdump.log): what no count from the pcaps can
+    include. Robots whose log has no such line are left out."""
+    out = {}
+    for p in sorted((Path(run_dir) / "pcaps" / "daemons").glob("r*.tcpdump.log")):
+        with contextlib.suppress(OSError):
+            m = re.search(r"(\d+) packets? dropped by kernel", p.read_text())
+            if m:
+                out[p.name.split(".")[0]] = int(m[1])
+    return out
+
+
 # ---------------------------------------------------------------- a run directory
 
 
@@ -404,6 +417,8 @@ def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
     )
     metrics["pcaps"] = stamp
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
+    drops = capture_drops(run_dir)
+    metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
     try:
         tmp = cache.with_name(CACHE_NAME + ".tmp")
         tmp.write_text(json.dumps(metrics, indent=1) + "\n")

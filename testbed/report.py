@@ -313,11 +313,21 @@ def _daemon_section(per_run: list[dict]) -> list[str]:
         return ["No run has both captures and AODV daemon counters to compare."]
     worst_run, worst = max(diffs, key=lambda d: d[1])
     within = sum(d <= DAEMON_AGREEMENT for _, d in diffs)
-    return [
+    lines = [
         f"AODV control packets counted in the captures against the daemons' own counters: "
         f"{within} of {len(diffs)} runs agree within {DAEMON_AGREEMENT:.0%}; largest "
         f"difference {worst:.2%} ({worst_run})."
     ]
+    drops = [(r["run"], r["capture_dropped_packets"]) for r in per_run
+             if r.get("capture_dropped_packets")]  # fmt: skip
+    if drops:
+        worst_run, worst = max(drops, key=lambda d: d[1])
+        lines.append(
+            f"Captures of {len(drops)} runs lost packets in the kernel (tcpdump: dropped by "
+            f"kernel), {sum(n for _, n in drops)} in all, at most {worst} ({worst_run}); "
+            "a difference above is most likely those."
+        )
+    return lines
 
 
 def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:

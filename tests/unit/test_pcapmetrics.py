@@ -186,3 +186,17 @@ def test_ipv6_udp_is_recognised():
     caps = {1: [f, udp(0.0, M1, BCAST_MAC, A1, "255.255.255.255", None, port=5000)]}
     m = pm.compute(caps, {1: A1}, port=6696)
     assert m["control_tx_packets"] == 1 and m["tx_packets"] == 2
+
+
+def test_capture_drops_are_read_from_tcpdumps_last_words(tmp_path):
+    logs = tmp_path / "pcaps" / "daemons"
+    logs.mkdir(parents=True)
+    (logs / "r1.tcpdump.log").write_text(
+        "tcpdump: listening on wlan0, link-type EN10MB (Ethernet), snapshot length 262144 bytes\n"
+        "5137 packets captured\n5149 packets received by filter\n12 packets dropped by kernel\n"
+    )
+    (logs / "r2.tcpdump.log").write_text("0 packets dropped by kernel\n")
+    (logs / "r3.tcpdump.log").write_text("tcpdump: listening on wlan0\n")  # killed: no summary
+    (logs / "r1.aodv.log").write_text("99 packets dropped by kernel\n")  # not a capture's log
+    assert pm.capture_drops(tmp_path) == {"r1": 12, "r2": 0}
+    assert pm.capture_drops(tmp_path / "none") == {}

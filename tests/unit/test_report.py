@@ -134,3 +134,16 @@ def test_cli_not_a_sweep_directory(tmp_path):
     )
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1 and "DIR" in r.stderr
+
+
+def test_daemon_section_names_the_captures_kernel_drops():
+    runs = [
+        {"run": "a", "daemon_relative_difference": 0.0, "capture_dropped_packets": 0},
+        {"run": "b", "daemon_relative_difference": 0.012, "capture_dropped_packets": 30},
+        {"run": "c", "daemon_relative_difference": 0.001, "capture_dropped_packets": 4},
+    ]
+    first, second = report._daemon_section(runs)
+    assert "2 of 3 runs agree within 1%; largest difference 1.20% (b)" in first
+    assert "Captures of 2 runs lost packets in the kernel" in second
+    assert "34 in all, at most 30 (b)" in second
+    assert report._daemon_section(runs[:1]) == [report._daemon_section(runs[:1])[0]]
