@@ -383,10 +383,22 @@ def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:
             f"step deadlines missed: up to {max(misses):.1%} of steps "
             f"({sum(m > 0.01 for m in misses)} run(s) above 1%)."
         )
-    if state.get("backoffs"):
+    backoffs = state.get("backoffs") or []
+    concurrency = [b for b in backoffs if "jobs" in b or "load_limit" in b]
+    if concurrency:
         lines.append(
-            f"The sweep lowered its concurrency {len(state['backoffs'])} time(s) because runs "
-            f"missed step deadlines (now {state.get('jobs')})."
+            f"The sweep lowered its concurrency {len(concurrency)} time(s) because runs "
+            f"missed step deadlines (now {state.get('jobs')} job(s) at most)."
+        )
+    scale = [b for b in backoffs if "time_scale_factor" in b]
+    if scale:
+        factors = state.get("time_scale_factor") or {}
+        lines.append(
+            f"The sweep changed a team size's time scale {len(scale)} time(s) as runs missed step "
+            "deadlines alone (down) or ran clean (up); the factors it ended with, of the file's "
+            "time scale: "
+            + (", ".join(f"{v:g} for {k}" for k, v in factors.items()) or "none")
+            + "."
         )
     return lines
 

@@ -147,3 +147,19 @@ def test_daemon_section_names_the_captures_kernel_drops():
     assert "Captures of 2 runs lost packets in the kernel" in second
     assert "34 in all, at most 30 (b)" in second
     assert report._daemon_section(runs[:1]) == [report._daemon_section(runs[:1])[0]]
+
+
+def test_sweep_section_tells_time_scale_changes_from_concurrency_changes(tmp_path):
+    state = {
+        "jobs": 1,
+        "time_scale_factor": {"1": 0.85, "10": 0.72},
+        "backoffs": [
+            {"run": "a", "deadline_miss_fraction": 0.02, "robots": 1, "time_scale_factor": 0.85},
+            {"run": "b", "deadline_miss_fraction": 0.03, "jobs": 1},
+        ],
+    }
+    (tmp_path / "sweep.json").write_text(json.dumps(state))
+    text = " ".join(report._sweep_section(tmp_path, []))
+    assert "lowered its concurrency 1 time(s)" in text and "now 1 job(s) at most" in text
+    assert "changed a team size's time scale 1 time(s)" in text
+    assert "0.85 for 1, 0.72 for 10" in text
