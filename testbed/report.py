@@ -435,16 +435,20 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     ]
     out += [f"- {rule}" for rule in RULES] + [""]
     out += ["## Figures", ""]
-    for name, caption in (
-        ("fig2a", "Fig. 2(a): exploration steps against team size, first laser range"),
-        ("fig2b", "Fig. 2(b): exploration steps against team size, second laser range"),
-        ("fig4", "Fig. 4: interval between successive plan generations (20-step timer dashed)"),
-        ("routing", "Routing metrics from the captures against team size"),
-        ("impairments", "Exploration steps and packet delivery fraction against link loss"),
-    ):
+    for name, data, caption in (
+        ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),
+        ("fig2b", "fig2", "Fig. 2(b): exploration steps against team size, second laser range"),
+        ("fig4", "fig4", "Fig. 4: interval between successive plan generations (20-step timer "
+         "dashed)"),
+        ("routing", "routing", "Routing metrics from the captures against team size"),
+        ("impairments", "impairments", "Exploration steps and packet delivery fraction against "
+         "link loss"),
+    ):  # fmt: skip
         img = _img(name, figdir)
         if img:
-            out += [f"{caption} (numbers: `figures/{name}.csv`).", "", img, ""]
+            if (figdir / f"{data}.csv").is_file():
+                caption += f" (numbers: `figures/{data}.csv`)"
+            out += [f"{caption}.", "", img, ""]
     paths = sorted((figdir / "paths").glob("*.png")) if (figdir / "paths").is_dir() else []
     if paths:
         out += [f"Path pictures (Figs. 3 and 5): {len(paths)} in `figures/paths/`, e.g.", ""]

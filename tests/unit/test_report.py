@@ -1,6 +1,7 @@
 """Report verdicts on synthetic data whose answer is known, and the report end to end."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -109,6 +110,9 @@ def test_report_end_to_end(tmp_path):
     assert "![fig2a](figures/fig2a.png)" in text and "![fig4](figures/fig4.png)" in text
     assert "| 5.1 | Team work beats one robot" in text
     assert "No run has packet captures" in text
+    named = re.findall(r"numbers: `(figures/[^`]+)`", text)
+    assert "figures/fig2.csv" in named and "figures/fig4.csv" in named
+    assert all((tmp_path / f).is_file() for f in named)  # every file the report names exists
     saved = json.loads((tmp_path / "figures" / "verdicts.json").read_text())
     assert [v["verdict"] for v in saved] == [HOLDS] * 6
 
