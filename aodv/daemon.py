@@ -67,6 +67,8 @@ IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
 BROADCAST = "255.255.255.255"
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
 _U32 = struct.Struct("!I")
+_I32 = struct.Struct("i")  # a received TTL's cmsg data (native int)
+HOSTS_REMEMBERED = 4096  # bound of the checked-address memory
 
 
 def _checksum(data: bytes) -> int:
@@ -122,6 +124,7 @@ class Daemon:
         self._stop = False
         self._dump = False
         self._malformed_logged = 0
+        self._hosts: set[str] = set()  # addresses _check_addresses found in our network
         self._poll_started = 0.0
         # When the newest RREQ of our own for each destination went to sendto().
         self._rreq_sent: dict[str, float] = {}
@@ -288,7 +291,7 @@ class Daemon:
             ttl = 0
             for level, ctype, cdata in anc:
                 if level == socket.IPPROTO_IP and ctype == IP_TTL_CMSG and len(cdata) >= 4:
-                    ttl = struct.unpack("i", cdata[:4])[0]
+                    ttl = _I32.unpack_from(cdata)[0]
             self.stats.bytes_received += len(data)
             try:
                 msg = wire.decode(data)
@@ -307,17 +310,24 @@ class Daemon:
 
     def _check_addresses(self, src: str, msg: wire.Message) -> None:
         """Every address a peer names must be a host of our network (integer math: the
-        ipaddress module cost 50 us a message)."""
+        ipaddress module cost 50 us a message; addresses that passed are remembered, as a
+        few robots' addresses come back in every message)."""
         if isinstance(msg, (wire.Rreq, wire.Rrep)):
-            addrs = [src, msg.dest, msg.orig]
+            addrs = (src, msg.dest, msg.orig)
         elif isinstance(msg, wire.Rerr):
-            addrs = [src, *(a for a, _ in msg.unreachable)]
+            addrs = (src, *(a for a, _ in msg.unreachable))
         else:
-            addrs = [src]
+            addrs = (src,)
+        hosts = self._hosts
         for a in addrs:
+            if a in hosts:
+                continue
             ip = _U32.unpack(socket.inet_aton(a))[0]
             if ip & self._mask != self._net or ip in (self._net, self._bcast):
                 raise wire.MalformedPacket(f"address {a} outside {self.net}")
+            if len(hosts) >= HOSTS_REMEMBERED:
+                hosts.clear()
+            hosts.add(a)
 
     def _drop(self, reason: str, src: str, err: Exception) -> None:
         self.stats.dropped[reason] += 1
