@@ -58,6 +58,7 @@ from aodv.kernel import (
     drop_own_datagrams,
 )
 from aodv.params import Params
+from aodv.sim import warm_up
 from aodv.stats import Stats
 
 log = logging.getLogger(__name__)
@@ -148,6 +149,9 @@ class Daemon:
             self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
             self.reader = SetReader()
             self._open_sockets()
+            # Exercise the core and the codec before the first real message (sim.warm_up).
+            warm_up(self.p)
+            gc.collect()
             self.core = AodvCore(self.addr, self.p, time.monotonic(), rebooted=rebooted)
             # What start-up allocated lives for good: keep it out of the collector's
             # full passes, which would otherwise walk it on some discovery's hot path.
