@@ -327,19 +327,11 @@ class AodvCore:
         if known is not None and known.valid_seq:
             dest_seq = known.seq if unknown else seqnum.newest(m.dest_seq, known.seq)
             unknown = False
+        # (Positional: keyword arguments cost a NamedTuple twice as much, on every hop.)
         fwd_msg = Rreq(
-            rreq_id=m.rreq_id,
-            dest=m.dest,
-            dest_seq=dest_seq,
-            orig=m.orig,
-            orig_seq=m.orig_seq,
-            hop_count=hops,
-            join=m.join,
-            repair=m.repair,
-            gratuitous=m.gratuitous,
-            dest_only=m.dest_only,
-            unknown_seq=unknown,
-        )
+            m.rreq_id, m.dest, dest_seq, m.orig, m.orig_seq, hops,
+            m.join, m.repair, m.gratuitous, m.dest_only, unknown,
+        )  # fmt: skip
         self._broadcast(now, fwd_msg, ttl - 1, out)
 
     def _update_reverse_route(self, now: float, src: str, m: Rreq, hops: int) -> Route:
@@ -514,14 +506,9 @@ class AodvCore:
         nh_src = self.table.valid(rev.next_hop)
         if nh_src is not None:
             nh_src.precursors.add(r.next_hop)
-        fwd = Rrep(
-            dest=m.dest,
-            dest_seq=m.dest_seq,
-            orig=m.orig,
-            lifetime_ms=m.lifetime_ms,
-            hop_count=hops,
-            prefix_size=m.prefix_size,
-        )
+        # Positional, as the forwarded RREQ: dest, dest_seq, orig, lifetime_ms, hop_count,
+        # repair, ack_required (decided by _send_rrep), prefix_size.
+        fwd = Rrep(m.dest, m.dest_seq, m.orig, m.lifetime_ms, hops, False, False, m.prefix_size)
         self._send_rrep(now, fwd, rev.next_hop, out)
 
     def _rrep_ack(self, now: float, src: str) -> None:
@@ -792,7 +779,8 @@ class AodvCore:
         self.next_hello = now + self.p.hello_interval
 
     def _finish(self, now: float, out: list[Action]) -> list[Action]:
-        self._complete_discoveries(now, out)
+        if self.discoveries:
+            self._complete_discoveries(now, out)
         routes = self._sync_routes()
         if not out:
             return routes

@@ -58,6 +58,7 @@ from aodv.kernel import (
     drop_own_datagrams,
 )
 from aodv.params import Params
+from aodv.sim import warm_up
 from aodv.stats import Stats
 
 log = logging.getLogger(__name__)
@@ -68,6 +69,8 @@ BROADCAST = "255.255.255.255"
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
 _U32 = struct.Struct("!I")
 ICMP_DEST_UNREACH = 3
+_I32 = struct.Struct("i")  # a received TTL's cmsg data (native int)
+HOSTS_REMEMBERED = 4096  # bound of the checked-address memory
 
 
 def _checksum(data: bytes) -> int:
@@ -145,6 +148,7 @@ class Daemon:
         self._stop = False
         self._dump = False
         self._malformed_logged = 0
+        self._hosts: set[str] = set()  # addresses _check_addresses found in our network
         self._poll_started = 0.0
         # When the newest RREQ of our own for each destination went to sendto().
         self._rreq_sent: dict[str, float] = {}
@@ -169,6 +173,9 @@ class Daemon:
             self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
             self.reader = SetReader()
             self._open_sockets()
+            # Exercise the core and the codec before the first real message (sim.warm_up).
+            warm_up(self.p)
+            gc.collect()
             self.core = AodvCore(self.addr, self.p, time.monotonic(), rebooted=rebooted)
             # What start-up allocated lives for good: keep it out of the collector's
             # full passes, which would otherwise walk it on some discovery's hot path.
@@ -316,7 +323,7 @@ class Daemon:
             ttl = 0
             for level, ctype, cdata in anc:
                 if level == socket.IPPROTO_IP and ctype == IP_TTL_CMSG and len(cdata) >= 4:
-                    ttl = struct.unpack("i", cdata[:4])[0]
+                    ttl = _I32.unpack_from(cdata)[0]
             self.stats.bytes_received += len(data)
             try:
                 msg = wire.decode(data)
@@ -360,17 +367,24 @@ class Daemon:
 
     def _check_addresses(self, src: str, msg: wire.Message) -> None:
         """Every address a peer names must be a host of our network (integer math: the
-        ipaddress module cost 50 us a message)."""
+        ipaddress module cost 50 us a message; addresses that passed are remembered, as a
+        few robots' addresses come back in every message)."""
         if isinstance(msg, (wire.Rreq, wire.Rrep)):
-            addrs = [src, msg.dest, msg.orig]
+            addrs = (src, msg.dest, msg.orig)
         elif isinstance(msg, wire.Rerr):
-            addrs = [src, *(a for a, _ in msg.unreachable)]
+            addrs = (src, *(a for a, _ in msg.unreachable))
         else:
-            addrs = [src]
+            addrs = (src,)
+        hosts = self._hosts
         for a in addrs:
+            if a in hosts:
+                continue
             ip = _U32.unpack(socket.inet_aton(a))[0]
             if ip & self._mask != self._net or ip in (self._net, self._bcast):
                 raise wire.MalformedPacket(f"address {a} outside {self.net}")
+            if len(hosts) >= HOSTS_REMEMBERED:
+                hosts.clear()
+            hosts.add(a)
 
     def _drop(self, reason: str, src: str, err: Exception) -> None:
         self.stats.dropped[reason] += 1

@@ -50,6 +50,7 @@ _RREP = struct.Struct("!BBBB4sI4sI")
 _RERR_HEAD = struct.Struct("!BBBB")
 _RERR_DEST = struct.Struct("!4sI")
 _U32 = struct.Struct("!I")
+_RREQ_SIZE, _RREP_SIZE = _RREQ.size, _RREP.size
 
 # RREQ flag bits in the second byte (RFC 3561 section 5.1 figure).
 _RREQ_J, _RREQ_R, _RREQ_G, _RREQ_D, _RREQ_U = 0x80, 0x40, 0x20, 0x10, 0x08
@@ -60,6 +61,17 @@ _RREP_R, _RREP_A = 0x80, 0x40
 _RERR_N = 0x80
 
 MAX_U32 = 0xFFFFFFFF
+
+
+# decode() builds a message from the flag byte through these tables (one lookup instead of
+# five masks and bools) and with tuple.__new__ (positional, no keyword parsing): a decode
+# runs on every hop of every discovery, right after a wake-up, when Python is slowest.
+_RREQ_FLAGS = tuple(
+    (bool(f & _RREQ_J), bool(f & _RREQ_R), bool(f & _RREQ_G), bool(f & _RREQ_D), bool(f & _RREQ_U))
+    for f in range(256)
+)
+_RREP_FLAGS = tuple((bool(f & _RREP_R), bool(f & _RREP_A)) for f in range(256))
+_new = tuple.__new__
 
 
 class MalformedPacket(ValueError):
@@ -229,39 +241,34 @@ def decode(data: bytes) -> Message:
     if not data:
         raise MalformedPacket("empty datagram")
     mtype = data[0]
+    n = len(data)
     if mtype == RREQ_TYPE:
-        if len(data) < _RREQ.size:
-            raise MalformedPacket(f"RREQ of {len(data)} bytes, needs {_RREQ.size}")
+        if n < _RREQ_SIZE:
+            raise MalformedPacket(f"RREQ of {n} bytes, needs {_RREQ_SIZE}")
         _, flags, _, hops, rid, dest, dseq, orig, oseq = _RREQ.unpack_from(data)
-        _extensions(data[_RREQ.size :])
-        return Rreq(
-            rreq_id=rid,
-            dest=_addr(dest),
-            dest_seq=dseq,
-            orig=_addr(orig),
-            orig_seq=oseq,
-            hop_count=hops,
-            join=bool(flags & _RREQ_J),
-            repair=bool(flags & _RREQ_R),
-            gratuitous=bool(flags & _RREQ_G),
-            dest_only=bool(flags & _RREQ_D),
-            unknown_seq=bool(flags & _RREQ_U),
-        )
+        if n > _RREQ_SIZE:
+            _extensions(data[_RREQ_SIZE:])
+        # Field order of Rreq: rreq_id, dest, dest_seq, orig, orig_seq, hop_count, flags.
+        return _new(Rreq, (rid, _addr(dest), dseq, _addr(orig), oseq, hops, *_RREQ_FLAGS[flags]))
     if mtype == RREP_TYPE:
-        if len(data) < _RREP.size:
-            raise MalformedPacket(f"RREP of {len(data)} bytes, needs {_RREP.size}")
+        if n < _RREP_SIZE:
+            raise MalformedPacket(f"RREP of {n} bytes, needs {_RREP_SIZE}")
         _, flags, prefix, hops, dest, dseq, orig, lifetime = _RREP.unpack_from(data)
-        exts = _extensions(data[_RREP.size :])
-        return Rrep(
-            dest=_addr(dest),
-            dest_seq=dseq,
-            orig=_addr(orig),
-            lifetime_ms=lifetime,
-            hop_count=hops,
-            repair=bool(flags & _RREP_R),
-            ack_required=bool(flags & _RREP_A),
-            prefix_size=prefix & 0x1F,
-            hello_interval_ms=_hello_interval(exts),
+        hello = _hello_interval(_extensions(data[_RREP_SIZE:])) if n > _RREP_SIZE else None
+        # Field order of Rrep: dest, dest_seq, orig, lifetime_ms, hop_count, repair,
+        # ack_required, prefix_size, hello_interval_ms.
+        return _new(
+            Rrep,
+            (
+                _addr(dest),
+                dseq,
+                _addr(orig),
+                lifetime,
+                hops,
+                *_RREP_FLAGS[flags],
+                prefix & 0x1F,
+                hello,
+            ),
         )
     if mtype == RERR_TYPE:
         if len(data) < _RERR_HEAD.size:

@@ -17,9 +17,10 @@ Targets: <= 1 ms per hop for the successful round, <= 2 % of a core and <= 40 MB
 Where a round's time goes (daemon traces with SO_TIMESTAMPNS, 2 cores, load average 2-3):
 each hop costs two daemon turns, the RREQ forwarded out and the RREP forwarded back. A
 turn is a wake-up (150-250 us from the datagram's arrival to recvmsg() returning: the
-scheduler, on cores shared with the other daemons), decoding (about 70 us), the core
-(40-180 us) and the sendto(), in which the kernel carries the frame across the emulated
-medium to the next robot, ARP included (50-140 us). Python runs 3-5 times slower on a
+scheduler, on cores shared with the other daemons), decoding (about 45 us), the core
+(45-80 us after the daemon's start-up warm-up, 70-160 us without) and the sendto(), in
+which the kernel carries the frame across the emulated medium to the next robot, ARP
+included (50-140 us). Python runs 3-5 times slower on a
 wake-up than in a warm loop, so the daemon keeps its turn short: the RREQ or RREP leaves
 before the route changes (unacknowledged netlink requests, about 55 us each), route
 changes are not logged at INFO, its own broadcasts are dropped by a socket filter and
