@@ -7,8 +7,10 @@
 - 10-robot runs (empty terrain, comm range 20 m, babel) capped at RUN_STEPS steps (the
   start, when all ten explore at once, is the busiest part) at increasing time scales: the
   fraction of step deadlines missed (world and robots, see testbed/run.py) at each, and the
-  highest scale missing under 1 % (best of two attempts per scale). Per robot: CPU (fraction
-  of a core, ms per step) and peak resident memory.
+  highest scale missing under 1 % (best of two attempts per scale), searched three times:
+  the median is the result, since a host that steals CPU time for a minute (recorded per
+  run from /proc/stat) decides one search alone. Per robot: CPU (fraction of a core, ms per
+  step) and peak resident memory.
 Targets: plan <= 20 ms median; a 10-robot run at time scale >= 5 missing < 1 % of deadlines;
 <= 150 MB per robot process. The machine is shared: its load average is recorded.
 """
@@ -35,6 +37,8 @@ from testbed.worldmap import empty_terrain, free_space, start_positions
 
 RUN_STEPS = 300
 ATTEMPTS = 2
+SEARCHES = 3  # the result is the median of this many searches
+CLK_TCK = os.sysconf("SC_CLK_TCK")
 SCALES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
 MAX_SIM_STEPS = 6000
 
@@ -130,18 +134,32 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
     }
 
 
-def run() -> dict:
-    sim = simulate_exploration()
-    runs = []
-    best = None
+def _steal_jiffies() -> int:
+    """CPU time the hypervisor took from this machine so far (/proc/stat, all CPUs)."""
+    with open("/proc/stat") as f:
+        fields = f.readline().split()
+    return int(fields[8]) if len(fields) > 8 else 0
+
+
+def scale_search() -> tuple[float | None, list[dict]]:
+    """Raise the time scale until a 10-robot run misses 1% of its deadlines (best of
+    ATTEMPTS per scale); the highest scale that did not, and every run."""
+    runs, best = [], None
     for k in SCALES:
         ok = False
         for _ in range(ATTEMPTS):  # the machine is shared: one unlucky run does not decide
+            st0, t0 = _steal_jiffies(), time.monotonic()
             res = ten_robot_run(k)
+            wall = time.monotonic() - t0
+            cores = os.cpu_count() or 1
+            res["host_steal_fraction"] = round(
+                (_steal_jiffies() - st0) / CLK_TCK / (wall * cores), 3
+            )
             runs.append(res)
             print(
                 f"bench node: 10 robots at time scale {k}: {res['deadline_miss_fraction']:.2%} "
-                f"deadlines missed, achieved {res['time_scale_achieved']}x",
+                f"deadlines missed, achieved {res['time_scale_achieved']}x, host steal "
+                f"{res['host_steal_fraction']:.0%}",
                 file=sys.stderr,
             )
             if res["deadline_miss_fraction"] < 0.01:
@@ -150,6 +168,18 @@ def run() -> dict:
         if not ok:
             break  # higher scales only miss more
         best = k
+    return best, runs
+
+
+def run() -> dict:
+    sim = simulate_exploration()
+    searches = []
+    for _ in range(SEARCHES):  # a host that steals CPU for a while decides one search alone
+        found, found_runs = scale_search()
+        searches.append({"max_time_scale_under_1pct_missed": found, "runs": found_runs})
+    bests = sorted(x["max_time_scale_under_1pct_missed"] or 0.0 for x in searches)
+    best = bests[len(bests) // 2] or None
+    runs = [r for x in searches for r in x["runs"]]
     ref = next((r for r in runs if r["time_scale"] == 5.0), runs[-1])
     # What the CPU alone allows: 10 K steps per second of wall time, each costing the robots'
     # and the world's CPU per step, on all of this machine's cores (an upper bound: start-up
@@ -164,8 +194,9 @@ def run() -> dict:
             "grid": "400 x 400 map (5 cm), planned on 200 x 200 cells of 10 cm",
             **sim,
         },
-        "ten_robot_runs": runs,
+        "scale_searches": searches,
         "max_time_scale_under_1pct_missed": best,
+        "max_time_scale_each_search": [x["max_time_scale_under_1pct_missed"] for x in searches],
         "cpu_bound_time_scale_estimate": cpu_bound,
         "cores": cores,
         "per_robot": {
