@@ -28,9 +28,9 @@ while another run shared the machine lowers the load limit to 80% of the load it
 (without a load limit: the job count by one) and is redone once. A run that misses deadlines
 alone means the machine is slower than the file's time scales assume (a shared machine
 varies): the later runs of that team size get their time scale multiplied by 0.85 (down to
-0.25), and the run is redone (up to twice) if it missed more than 5% (below
-that it is kept: its result records what it missed); after 6 clean runs of a team size in a
-row its factor goes back up a notch.
+0.25), and the run is redone (up to twice) if it missed more than 5% (below that it is kept:
+its result records what it missed); after 6 clean runs of a team size in a row its factor
+goes back up a notch.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -408,7 +408,7 @@ class Sweep:
         (self.out / "logs").mkdir(exist_ok=True)
         log_file = open(self.out / "logs" / f"{run.run_id}.log", "wb")  # noqa: SIM115
         config = run.config
-        factor = self.scale_factors.get(config["robots"], 1.0)
+        factor = self._factor(config["robots"])
         if factor < 1.0:
             config = dict(config, time_scale=round(config["time_scale"] * factor, 3))
         argv = run_argv(self.command, config, rdir)
@@ -449,7 +449,7 @@ class Sweep:
         miss = result.get("deadline_miss_fraction")
         st["deadline_miss_fraction"] = miss
         n = run.config["robots"]
-        self.progress.record(run.config["robots"], wall)
+        self.progress.record(n, wall)
         event = f"{run.run_id}: {result.get('status')} in {wall:.0f} s"
         if isinstance(miss, int | float) and miss > DEADLINE_MISS_LIMIT:
             event += f", missed {miss:.1%} of step deadlines"

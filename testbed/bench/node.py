@@ -151,9 +151,8 @@ def scale_search() -> tuple[float | None, list[dict]]:
             st0, t0 = _steal_jiffies(), time.monotonic()
             res = ten_robot_run(k)
             wall = time.monotonic() - t0
-            cores = os.cpu_count() or 1
             res["host_steal_fraction"] = round(
-                (_steal_jiffies() - st0) / CLK_TCK / (wall * cores), 3
+                (_steal_jiffies() - st0) / CLK_TCK / (wall * (os.cpu_count() or 1)), 3
             )
             runs.append(res)
             print(
