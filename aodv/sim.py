@@ -181,7 +181,7 @@ class Medium:
         ]
 
 
-def warm_up(params: Params, chains: int = 4, hops: int = 4) -> None:
+def warm_up(params: Params | None = None, chains: int = 4, hops: int = 4) -> None:
     """Run discoveries over `hops` hops on throwaway in-memory chains (no IO; ~25 ms).
 
     The daemon calls this once at start. A fresh interpreter runs a code path several times
@@ -189,7 +189,9 @@ def warm_up(params: Params, chains: int = 4, hops: int = 4) -> None:
     objects and memory it touches are new): without it, every daemon paid that on the
     first discoveries of a run, the core's part of a hop's RREQ or RREP taking 70-160 us
     instead of 45-80 us on the 8-hop bench chain. Addresses are from 10.255.0.0/24 and
-    nothing leaves this function."""
+    nothing leaves this function. Without `params`, the RFC's defaults (what the routing fork
+    server, topology.routing, warms its children with)."""
+    params = params if params is not None else Params()
     for _ in range(chains):
         m = Medium(params)
         addrs = [f"10.255.0.{i}" for i in range(1, hops + 2)]

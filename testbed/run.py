@@ -56,7 +56,7 @@ from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
 from testbed.world import World
 from testbed.worldmap import empty_terrain, free_space, load_png, start_positions
-from topology.forkserver import ForkServer, ForkServerError
+from topology.forkserver import ForkServer, ForkServerError, python_env
 
 log = logging.getLogger(__name__)
 
@@ -305,8 +305,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         parts[name] = round(now - mark[0], 3)
         mark[0] = now
 
-    env = dict(os.environ)
-    env["PYTHONPATH"] = PROJECT_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    env = python_env()
     env["OPENBLAS_NUM_THREADS"] = "1"  # a robot's numpy needs no thread pool of its own
     forks = None
     try:

@@ -5,15 +5,21 @@ import the same heavy modules (numpy, pynng, the node package): about 0.4 s of C
 on a 2-core machine is seconds of wall time per run before the first step. The fork server is
 one process, started with `preload` modules imported and nothing else running (no threads,
 no sockets but its control socket), that forks a child per request. The child enters the
-robot's network namespace (setns on the /run/netns bind mount, as `ip netns exec` does), gets
-its own session, its stdin from /dev/null and its output into the given log file, and calls
-the requested module's `main(argv)`; its exit status is main's return value. Children share
-the imported pages with the server until they write them.
+robot's network namespace (setns on the /run/netns bind mount, as `ip netns exec` does; or
+stays in the server's own, for `"ns": null`), gets its own session, its stdin from /dev/null
+and its output into the given log file, the signal dispositions of a fresh interpreter
+(SIGINT raises KeyboardInterrupt), optionally a parent-death signal, and calls the requested
+module's `main(argv)`; its exit status is main's return value. Children share the imported
+pages with the server until they write them.
+
+The caller does not wait for the server's imports: `ForkServer()` returns at once and the
+first `spawn` waits for "ready", so the imports overlap whatever the caller does meanwhile
+(a run builds its network).
 
 Protocol over a Unix socketpair, one JSON object per line:
 
     -> {"id": 1, "ns": "tb-x-r1", "module": "node.__main__", "argv": [...], "log": PATH,
-        "env": {...}, "title": "r1 robot"}
+        "env": {...}, "title": "r1 robot", "pdeathsig": 2}
     <- {"id": 1, "pid": 1234}            or {"id": 1, "error": "..."}
     <- {"exit": 1234, "status": 0}       when a child ends (negative: killed by that signal)
 
@@ -47,21 +53,34 @@ class ForkServerError(RuntimeError):
     pass
 
 
+def python_env() -> dict[str, str]:
+    """The environment for a fork server: this one, with this project importable."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
 # -- the server process --------------------------------------------------------------------
 
 
-def _child(req: dict, ctl: socket.socket) -> None:
+def _child(req: dict, ctl: socket.socket, server_pid: int) -> None:
     """In the forked child: become the requested program. Never returns."""
     status = 1
     try:
         ctl.close()
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         signal.signal(signal.SIGCHLD, signal.SIG_DFL)
         os.setsid()
+        if req.get("pdeathsig"):
+            _libc.prctl(_PR_SET_PDEATHSIG, int(req["pdeathsig"]), 0, 0, 0)
+            if os.getppid() != server_pid:  # the server died before prctl took effect
+                os._exit(1)
         if req.get("title"):  # what ps -o comm and top show (the cmdline stays the server's)
             _libc.prctl(_PR_SET_NAME, req["title"].encode()[:15], 0, 0, 0)
-        netns.enter(req["ns"])
+        if req.get("ns"):
+            netns.enter(req["ns"])
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
         out = os.open(req["log"], os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
@@ -104,7 +123,8 @@ def serve(fd: int, preload: list[str], warm: list | None = None) -> int:
     def reply(obj: dict) -> None:
         ctl.sendall(json.dumps(obj).encode() + b"\n")
 
-    reply({"ready": os.getpid()})
+    server_pid = os.getpid()
+    reply({"ready": server_pid})
     while True:
         ready, _, _ = select.select([ctl], [], [], 0.05)
         if ready:
@@ -119,14 +139,14 @@ def serve(fd: int, preload: list[str], warm: list | None = None) -> int:
                 line, buf = buf.split(b"\n", 1)
                 req = json.loads(line)
                 try:
-                    if not os.path.exists(netns.path(req["ns"])):
+                    if req.get("ns") and not os.path.exists(netns.path(req["ns"])):
                         raise ForkServerError(f"no network namespace {req['ns']}")
                     pid = os.fork()
                 except (OSError, ForkServerError) as e:
                     reply({"id": req["id"], "error": str(e)})
                     continue
                 if pid == 0:
-                    _child(req, ctl)
+                    _child(req, ctl, server_pid)
                 children.add(pid)
                 reply({"id": req["id"], "pid": pid})
         while children:
@@ -207,10 +227,19 @@ class ForkServer:
         self.next_id = 0
         self.children: dict[int, Forked] = {}
         self.replies: dict[int, dict] = {}
-        msg = self._read(60.0, lambda m: "ready" in m)
+        self.ready = False
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        """Block until the server has done its imports (spawn calls this)."""
+        if self.ready:
+            return
+        try:
+            msg = self._read(timeout, lambda m: "ready" in m)
+        except ForkServerError:
+            msg = None
         if msg is None:
-            self.close()
             raise ForkServerError("the fork server did not start")
+        self.ready = True
 
     def _read(self, timeout: float, want) -> dict | None:
         """Read messages until one satisfies `want` (returned) or the timeout passes."""
@@ -241,14 +270,23 @@ class ForkServer:
         self._read(timeout, lambda m: False)
 
     def spawn(
-        self, ns: str, module: str, argv: list[str], log: str, env=None, title: str = ""
+        self,
+        ns: str | None,
+        module: str,
+        argv: list[str],
+        log: str,
+        env=None,
+        title: str = "",
+        pdeathsig: int = 0,
     ) -> Forked:
-        """Fork `module.main(argv)` in namespace `ns`, output appended to `log`; `title` (at
-        most 15 characters) is the process name that ps and top show."""
+        """Fork `module.main(argv)` in namespace `ns` (None: the server's), output appended to
+        `log`; `title` (at most 15 characters) is the process name that ps and top show;
+        `pdeathsig`, if given, is the signal the child gets when the server dies."""
+        self.wait_ready()
         self.next_id += 1
         rid = self.next_id
         req = {"id": rid, "ns": ns, "module": module, "argv": argv, "log": log, "env": env,
-               "title": title}  # fmt: skip
+               "title": title, "pdeathsig": int(pdeathsig)}  # fmt: skip
         self.ctl.sendall(json.dumps(req).encode() + b"\n")
         msg = self.replies.pop(rid, None) or self._read(30.0, lambda m: m.get("id") == rid)
         self.replies.pop(rid, None)

@@ -20,11 +20,10 @@ import os
 import queue
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pyroute2 import IPRoute
-
-from topology import rtnl
+if TYPE_CHECKING:
+    from pyroute2 import IPRoute
 
 NETNS_DIR = "/run/netns"
 CLONE_NEWNET = 0x40000000
@@ -200,6 +199,12 @@ class NsWorker:
             raise error
 
     def _loop(self, ready: queue.Queue) -> None:
+        # pyroute2 is imported here, not at the top: it takes 0.2 s, and the fork servers
+        # (topology.forkserver), which only enter namespaces, start without it.
+        from pyroute2 import IPRoute
+
+        from topology import rtnl
+
         try:
             _enter(self.name)
             ipr = IPRoute()
@@ -222,7 +227,7 @@ class NsWorker:
             ipr.close()
             self.nl.close()
 
-    def call(self, fn: Callable[[IPRoute], Any]) -> Any:
+    def call(self, fn: Callable[["IPRoute"], Any]) -> Any:
         """Run fn(ipr) in the namespace and return its result (or raise its exception)."""
         reply: queue.Queue = queue.Queue(maxsize=1)
         self._jobs.put((fn, reply))

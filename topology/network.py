@@ -8,7 +8,9 @@ Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kerne
 3. per robot, a bridge in the medium and a veth whose far end is the robot's wlan0
    (topology.medium), addressed 10.0.0.K/32 with the sysctls DESIGN.md lists;
 4. the links the range model wants for the initial positions, with their impairments;
-5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing).
+5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing); a
+   daemon written in Python is forked from a fork server started at step 1, whose imports
+   run while the kernel objects are made.
 
 Teardown (`destroy`) is the same function for a clean exit, an exception during bring-up,
 `testbed net down` and `testbed clean`: stop the recorded processes (SIGTERM, then SIGKILL),
@@ -28,6 +30,7 @@ from dataclasses import asdict
 
 from testbed.errors import TestbedError, UsageError
 from topology import capture, names, netns, processes, ranges, routing, state
+from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
 from topology.medium import Medium
 from topology.spec import NO_IMPAIRMENT, Impairment, NetworkSpec, Position
@@ -51,6 +54,7 @@ class Network:
         self.state: state.TestbedState | None = None
         self.children: dict[int, subprocess.Popen] = {}
         self._owner = False
+        self._routing_forks: ForkServer | None = None
 
     # -- names ------------------------------------------------------------------------------
 
@@ -100,6 +104,13 @@ class Network:
         t0 = time.perf_counter()
         os.makedirs(self.state_dir, exist_ok=True)
         robots = list(self.spec.robot_ids())
+        forkable = routing.FORKABLE.get(self.spec.routing)
+        if forkable is not None:
+            self._routing_forks = ForkServer(
+                list(forkable.preload), env=python_env(),
+                warm=[[m, f, list(a)] for m, f, a in forkable.warm],
+                label=f"{self.name} {self.spec.routing}",
+            )  # fmt: skip
         self._create_namespace(names.medium_ns(self.name))
         self.medium.open()
         self.medium.setup()
@@ -153,14 +164,27 @@ class Network:
 
     def _start_routing(self) -> None:
         started = []
+        forkable = routing.FORKABLE.get(self.spec.routing)
         for k in self.spec.robot_ids():
             argv = routing.argv_for(self.spec.routing, k, self.state_dir, self.spec.time_scale)
             if argv is None:
                 continue
             logp = os.path.join(self.state_dir, f"r{k}.{self.spec.routing}.log")
-            with open(logp, "w") as logf:
-                proc = self.spawn(k, argv, role=self.spec.routing, stdout=logf,
-                                  stderr=subprocess.STDOUT)  # fmt: skip
+            if forkable is not None and self._routing_forks is not None:
+                open(logp, "w").close()  # the child appends
+                args = forkable.args(k, self.state_dir, self.spec.time_scale)
+                try:
+                    proc = self._routing_forks.spawn(
+                        self.robot_ns(k), forkable.module, args, logp,
+                        title=f"r{k} {self.spec.routing}",
+                    )  # fmt: skip
+                except ForkServerError as exc:
+                    raise TestbedError(f"{self.spec.routing} daemon of r{k}: {exc}") from None
+                self.adopt(k, proc, self.spec.routing)
+            else:
+                with open(logp, "w") as logf:
+                    proc = self.spawn(k, argv, role=self.spec.routing, stdout=logf,
+                                      stderr=subprocess.STDOUT)  # fmt: skip
             started.append((k, proc, logp))
         # Return only once every daemon can route, so the first packet is not lost to a race.
         deadline = time.monotonic() + routing.READY_TIMEOUT_S
@@ -306,13 +330,21 @@ class Network:
         return net
 
     def detach(self) -> None:
-        """Let go of the testbed without tearing it down."""
+        """Let go of the testbed without tearing it down (its daemons run on)."""
         self.medium.close()
+        if self._routing_forks is not None:
+            self._routing_forks.close()
+            self._routing_forks = None
         self._owner = False
 
     def down(self) -> None:
         self.medium.close()
-        destroy(self.name, self.children)
+        try:
+            destroy(self.name, self.children)
+        finally:
+            if self._routing_forks is not None:
+                self._routing_forks.close()
+                self._routing_forks = None
         self._owner = False
 
 
