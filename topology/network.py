@@ -221,6 +221,15 @@ class Network:
             self.state.processes.append(processes.record(proc, k, role))
             state.write(self.name, self.state)
 
+    def process(self, k: int, role: str):
+        """The newest live process of `role` (e.g. "aodv", the routing daemon) that this
+        Network started in robot k, by spawn or adopt; None if there is none."""
+        for rec in reversed(self.state.processes if self.state else []):
+            proc = self.children.get(rec.pid)
+            if rec.robot == k and rec.role == role and proc is not None and proc.poll() is None:
+                return proc
+        return None
+
     def stop(self, role: str) -> None:
         """Stop every process of this role (SIGTERM, then SIGKILL), e.g. the routing daemons
         so that they write their final statistics before the results are collected."""

@@ -80,11 +80,11 @@ def _spec(n: int) -> NetworkSpec:
     )
 
 
-def _daemon(net: Network, k: int) -> subprocess.Popen:
-    for proc in net.children.values():
-        if "aodv" in proc.args and f"r{k}" in proc.args:
-            return proc
-    raise RuntimeError(f"no AODV daemon for robot {k}")
+def _daemon(net: Network, k: int):
+    proc = net.process(k, "aodv")
+    if proc is None:
+        raise RuntimeError(f"no AODV daemon for robot {k}")
+    return proc
 
 
 def _wait_ready(net: Network, n: int) -> None:

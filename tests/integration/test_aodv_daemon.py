@@ -46,10 +46,9 @@ def aodv_net(positions, time_scale=1.0, capture_dir=None):
 
 def daemon(net, k):
     """The live AODV daemon of robot k (the newest, if it was restarted)."""
-    for proc in reversed(list(net.children.values())):
-        if "aodv" in proc.args and f"r{k}" in proc.args and proc.poll() is None:
-            return proc
-    raise AssertionError(f"no AODV daemon for robot {k}")
+    proc = net.process(k, "aodv")
+    assert proc is not None, f"no AODV daemon for robot {k}"
+    return proc
 
 
 def wait_ready(net, n, timeout=30.0):
