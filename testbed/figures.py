@@ -1,7 +1,7 @@
 """Figures of a sweep: the paper's Figs. 2 to 5, routing metrics and impairments.
 
 Theory of operation. `load_runs` reads every finished run of a sweep directory (`runs/*/`
-with a result.json, see notes/run-results.md). The numbers behind each figure come from pure
+with a result.json, see docs/run-results.md). The numbers behind each figure come from pure
 functions of those runs (`fig2_rows`, `fig4_rows`, `routing_rows`, `impairment_rows`), which
 the report reuses for its verdicts; `make_all` plots them with matplotlib (Agg backend) as
 PNG and PDF into `DIR/figures/` and writes each figure's numbers next to it as CSV and JSON, so

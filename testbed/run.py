@@ -23,7 +23,7 @@ frame by then. Both are counted; `deadline_miss_fraction` is misses over steps x
 
 The run ends when every robot that is still alive has finished (no reachable frontier on its
 own map), or at the step cap. A robot process that dies before the end is recorded with its
-exit status and step; the others carry on. Results follow /work/notes/run-results.md:
+exit status and step; the others carry on. Results follow docs/run-results.md:
 config.json first, result.json last (atomically).
 """
 

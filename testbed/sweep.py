@@ -3,7 +3,7 @@
 Theory of operation. The sweep file expands (testbed.sweepfile) into planned runs, each with an
 id derived from its parameters. Run `R` lives in `DIR/runs/R/` and is *done* iff
 `DIR/runs/R/result.json` exists: `testbed run` writes that file last and atomically (see
-notes/run-results.md), so the file system alone says what is finished. `plan` sorts the planned
+docs/run-results.md), so the file system alone says what is finished. `plan` sorts the planned
 runs into done, to do (absent, or partial: a directory without result.json, deleted before the
 run is redone) and skipped (points this machine cannot run, e.g. delay without sch_netem, with
 the reason recorded).

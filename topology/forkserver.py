@@ -117,6 +117,13 @@ def serve(fd: int, preload: list[str], warm: list | None = None) -> int:
     for module, function, args in warm or []:
         getattr(importlib.import_module(module), function)(*args)
     ctl = socket.socket(fileno=fd)
+    try:
+        return _loop(ctl)
+    except (BrokenPipeError, ConnectionResetError):
+        return 0  # the caller hung up, perhaps before it ever asked for anything
+
+
+def _loop(ctl: socket.socket) -> int:
     buf = b""
     children: set[int] = set()
 

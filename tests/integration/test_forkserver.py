@@ -67,3 +67,32 @@ def test_server_dies_with_its_parent(tmp_path):
         subprocess.run(["sleep", "0.05"])
     else:
         pytest.fail("the fork server outlived its parent")
+
+
+def test_hanging_up_before_the_server_is_ready_is_quiet():
+    # ForkServer() does not wait for the imports; a caller that gives up at once (a network
+    # whose bring-up failed) hangs up while the server still imports: it must exit 0 without
+    # a traceback when its "ready" finds nobody listening.
+    code = (
+        "from topology.forkserver import ForkServer; "
+        "f = ForkServer(['numpy', 'json']); f.close(); print(f.ready, f.proc.returncode)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env=dict(os.environ, PYTHONPATH=REPO), cwd=REPO, timeout=60)  # fmt: skip
+    assert r.returncode == 0 and r.stdout.split() == ["False", "0"], r.stdout + r.stderr
+    assert r.stderr == ""
+
+
+def test_children_of_a_server_without_a_namespace_stay_in_its_own(tmp_path):
+    # The sweep forks whole runs this way: no namespace, SIGINT as a fresh interpreter has it
+    # (KeyboardInterrupt, so a run tears down), and a parent-death signal.
+    forks = ForkServer(["tests.integration.forkprobe"], env=dict(os.environ, PYTHONPATH=REPO))
+    try:
+        out, log = str(tmp_path / "p.out"), str(tmp_path / "p.log")
+        p = forks.spawn(None, "tests.integration.forkprobe", [out, "5"], log, pdeathsig=2)
+        assert p.wait(timeout=20) == 5
+        lines = open(out).read().splitlines()
+        assert int(lines[0].split()[0]) == os.stat("/proc/self/ns/net").st_ino
+        assert lines[2] == "True 2", "SIGINT raises KeyboardInterrupt; SIGINT when orphaned"
+    finally:
+        forks.close()

@@ -1,7 +1,7 @@
 """The sweep runner end to end with a stand-in for `testbed run`.
 
 The stand-in is a real program that parses the flags the sweep passes, writes config.json
-first and result.json last (atomically), as notes/run-results.md says `testbed run` does, and
+first and result.json last (atomically), as docs/run-results.md says `testbed run` does, and
 stops on SIGINT/SIGTERM without a result. With it the sweep's process handling (concurrency,
 interrupt, resume, back-off, failures) is exercised for real, without namespaces. The same
 scenarios against the real `testbed run` are in tests/integration/test_sweep_short.py.

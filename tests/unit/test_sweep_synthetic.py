@@ -1,4 +1,4 @@
-"""Synthetic sweep directories that follow notes/run-results.md exactly, for the figure, report
+"""Synthetic sweep directories that follow docs/run-results.md exactly, for the figure, report
 and sweep tests; and tests that what they write is what the contract says."""
 
 import json
