@@ -47,7 +47,8 @@ with open(os.path.join(a.out, "config.json"), "w") as f:
     json.dump(cfg, f)
 time.sleep(float(os.environ.get("STANDIN_SLEEP", "0.05")))
 miss = float(os.environ.get("STANDIN_MISS", "0")) if str(a.robots) in os.environ.get(
-    "STANDIN_MISS_ROBOTS", "").split(",") else 0.0
+    "STANDIN_MISS_ROBOTS", "").split(",") or os.path.basename(a.out) in os.environ.get(
+    "STANDIN_MISS_IDS", "").split(",") else 0.0
 robots = {f"r{k}": {"finish_step": 100 + k, "crashed": False, "exit_status": 0,
                     "plans": [{"step": 0, "cause": "start"}, {"step": 20, "cause": "timer"}],
                     "messages": {"sent": {}, "received": {}}, "path_length_m": 1.0}
@@ -272,3 +273,22 @@ def test_a_run_a_little_late_is_kept(env):
     state = json.loads((out / "sweep.json").read_text())
     assert all(x["attempts"] == 1 for x in state["runs"])
     assert state["time_scale_factor"]["2"] == pytest.approx(0.85**2, abs=1e-3)
+
+
+def test_a_team_size_speeds_up_again_after_clean_runs(env):
+    """A burst on the host: one run of a lone robot misses 2% and the lone robot's later runs
+    go at 85%; three clean runs later they are back at the file's scale."""
+    sweep_file = env["tmp"] / "ones.toml"
+    sweep_file.write_text(SWEEP.replace("robots = [1, 2, 3]", "robots = [1]").replace(
+        "comm_range = [5, 20]", "comm_range = [5, 10, 15, 20, 25]"))  # fmt: skip
+    out = env["tmp"] / "out"
+    r = run_sweep(dict(env, file=sweep_file), out, "--jobs", "1", STANDIN_MISS="0.02",
+                  STANDIN_MISS_IDS="n01-c5-l2-k1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    scales = {rid: res["config"]["time_scale"] for rid, res in results(out).items()}
+    assert scales["n01-c5-l2-k1"] == 5
+    assert [scales[f"n01-c{c}-l2-k1"] for c in (10, 15, 20)] == [4.25] * 3
+    assert scales["n01-c25-l2-k1"] == 5
+    state = json.loads((out / "sweep.json").read_text())
+    assert state["time_scale_factor"]["1"] == pytest.approx(1.0)
+    assert "time scales of teams of 1 up to 100%" in r.stderr
