@@ -54,6 +54,7 @@ from node.rays import Laser
 from node.sched import deadline_priority
 from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
+from testbed.stalls import StallTracker
 from testbed.world import World
 from testbed.worldmap import empty_terrain, free_space, load_png, start_positions
 from topology.forkserver import ForkServer, ForkServerError, python_env
@@ -416,6 +417,8 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
     step = 0
     scans = [world.scan(i) for i in range(n)]
     cov_w.writerow([0, f"{world.coverage():.5f}"])
+    stalls = StallTracker(period)
+    timing["stalls"] = stalls
     t0 = time.monotonic()
     anchor = t0  # step k's deadline is anchor + (k + 1) * period
     cpu0 = time.process_time()
@@ -448,10 +451,12 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
                     r.finish_step = step
             if left <= 0:
                 break
+        stalls.late(step, time.monotonic() - deadline)
         # The step is over: who answered its frame in time?
         for r in robots.values():
             if not r.crashed and r.last_cmd < step:
                 r.missed += 1
+                stalls.count(step, 1)
                 if len(r.missed_steps) < 1000:
                     r.missed_steps.append(step)
         step += 1
@@ -489,6 +494,8 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
             # The world's own work ran past this step's deadline: count it once and move the
             # schedule (catching up by running steps back to back would squeeze the robots).
             missed_world += 1
+            stalls.late(step, late)
+            stalls.count(step, 1)
             anchor += late
             if len(timing.setdefault("missed_steps", [])) < 1000:
                 timing["missed_steps"].append([step, round(late * 1000, 1)])
@@ -655,6 +662,10 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         _write_json(os.path.join(out, "robots", f"r{k}.json"), detail_rec)
     missed = missed_world + sum(r.missed for r in robots.values())
     checks = max(1, steps * (n + 1))
+    stalls = timing.get("stalls")
+    stall_summary = (
+        stalls.summary() if stalls else {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0}
+    )
     achieved = steps * STEP_S / wall if wall > 0 else 0.0
     try:
         _paths_png(world, os.path.join(out, "paths.png"))
@@ -675,6 +686,12 @@ def _results(cfg, config, out, world, robots, status, detail, steps, missed_worl
         "deadlines_missed": missed,
         "deadline_miss_fraction": round(missed / checks, 5) if steps else 0.0,
         "deadlines_missed_world": missed_world,
+        # Misses while the host stalled the whole machine (testbed.stalls), and the fraction
+        # without them: what a lower time scale could have avoided.
+        "host_stalls": stall_summary,
+        "deadline_miss_fraction_outside_stalls": (
+            round((missed - stall_summary["deadlines_missed"]) / checks, 5) if steps else 0.0
+        ),
         "wall_time_s": round(total_wall, 2),
         "step_loop_wall_s": round(wall, 2),
         "wall_parts_s": dict(timing.get("parts", {})),
