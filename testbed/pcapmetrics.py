@@ -412,8 +412,8 @@ def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
     routing = "aodv"
     with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
         routing = json.loads((run_dir / "result.json").read_text())["config"]["routing"]
-    # One tshark per capture, as many at once as there are cores (the report reads 1500
-    # captures for the paper's sweep: 7 minutes one at a time on 2 cores).
+    # One tshark per capture, as many at once as there are cores (tshark's start-up alone is
+    # 0.4 s; 120 captures took 54.8 s one at a time, 28.2 s two at a time on 2 cores).
     with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
         captures = dict(zip(pcaps, pool.map(read_pcap, pcaps.values()), strict=True))
     metrics = compute(

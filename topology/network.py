@@ -170,7 +170,7 @@ class Network:
             if argv is None:
                 continue
             logp = os.path.join(self.state_dir, f"r{k}.{self.spec.routing}.log")
-            if forkable is not None and self._routing_forks is not None:
+            if self._routing_forks is not None:  # started in _build iff `forkable`
                 open(logp, "w").close()  # the child appends
                 args = forkable.args(k, self.state_dir, self.spec.time_scale)
                 try:
