@@ -1,11 +1,12 @@
 """Routing metrics of a run from its packet captures (the paper's Section 2.4).
 
 Theory of operation. Each robot K has one capture, `pcaps/rK.pcap`, of its own `wlan0`; all
-captures are stamped by the host clock. `read_pcap` turns one capture into frames with a single
-tshark invocation (`-T fields`, first occurrence of each field). A capture on a veth does not
-mark direction, so a robot's own MAC address is inferred: the most common Ethernet source of
-frames whose IP source is the robot's address. Frames from that MAC were *transmitted* by the
-robot (its own traffic and what it forwards); the rest were received.
+captures are stamped by the host clock. `read_pcaps` turns a run's captures into frames with a
+single tshark invocation (`-T fields`, first occurrence of each field): mergecap joins them as
+separate interfaces and `frame.interface_id` says whose capture each frame came from. A
+capture on a veth does not mark direction, so a robot's own MAC address is inferred: the most
+common Ethernet source of frames whose IP source is the robot's address. Frames from that MAC
+were *transmitted* by the robot (its own traffic and what it forwards); the rest were received.
 
 `compute` is pure (frames in, numbers out) and defines the metrics:
 
@@ -42,6 +43,7 @@ import re
 import statistics
 import subprocess
 import sys
+import tempfile
 from collections import Counter, defaultdict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -73,6 +75,7 @@ _FIELDS = (
     "tcp.len",
     "aodv.type",
     "ipv6.nxt",
+    "frame.interface_id",  # in a merged capture, which input file the frame came from
 )
 
 
@@ -94,6 +97,7 @@ class Frame:
     tcp_seq: int | None = None
     tcp_len: int | None = None
     aodv_type: int | None = None
+    interface: int = 0
 
 
 def _int(s: str) -> int | None:
@@ -127,6 +131,7 @@ def parse_fields(text: str) -> list[Frame]:
                     tcp_seq=_int(f[13]),
                     tcp_len=_int(f[14]),
                     aodv_type=_int(f[15]),
+                    interface=_int(f[17]) or 0,
                 )
             )
         except ValueError:
@@ -134,17 +139,59 @@ def parse_fields(text: str) -> list[Frame]:
     return frames
 
 
-def read_pcap(path: str | Path) -> list[Frame]:
-    """All frames of one capture (one tshark process)."""
-    argv = ["tshark", "-n", "-r", str(path), "-T", "fields", "-E", "separator=/t"]
+def _tshark_argv(path: str) -> list[str]:
+    argv = ["tshark", "-n", "-r", path, "-T", "fields", "-E", "separator=/t"]
     argv += ["-E", "occurrence=f"]
     for name in _FIELDS:
         argv += ["-e", name]
-    r = subprocess.run(argv, capture_output=True, text=True)
+    return argv
+
+
+def read_pcap(path: str | Path) -> list[Frame]:
+    """All frames of one capture (one tshark process)."""
+    r = subprocess.run(_tshark_argv(str(path)), capture_output=True, text=True)
     if r.returncode != 0:
         # tshark exits 2 on a capture cut short (a run killed mid-write); keep what it read.
         log.warning("tshark on %s: status %d: %s", path, r.returncode, r.stderr.strip()[-200:])
     return parse_fields(r.stdout)
+
+
+def read_pcaps(paths: dict[int, Path]) -> dict[int, list[Frame]]:
+    """All frames of several captures, by key, with one tshark process.
+
+    tshark spends 0.3-0.4 s starting up (its dissectors) and a robot's capture takes it a
+    tenth of that to read, so a run's captures are read together: mergecap joins them into one
+    pcapng stream with each file as its own interface (`-I none`, in the order given) and
+    `frame.interface_id` maps each frame back to its file. mergecap stops at the first capture
+    cut short (a run killed mid-write); then each capture is read on its own, which keeps
+    everything every file holds."""
+    keys = sorted(paths)
+    if len(keys) < 2:
+        return {k: read_pcap(paths[k]) for k in keys}
+    with tempfile.TemporaryFile() as merge_err:
+        merge = subprocess.Popen(
+            ["mergecap", "-I", "none", "-F", "pcapng", "-w", "-", *(str(paths[k]) for k in keys)],
+            stdout=subprocess.PIPE,
+            stderr=merge_err,
+        )
+        try:
+            r = subprocess.run(
+                _tshark_argv("-"), stdin=merge.stdout, capture_output=True, text=True
+            )
+        finally:
+            merge.stdout.close()
+            merge.wait()
+        merge_err.seek(0)
+        why = merge_err.read().decode(errors="replace").strip()
+    if merge.returncode != 0 or r.returncode != 0:
+        why = why or r.stderr.strip()
+        log.warning("merged read of %d captures failed (%s); reading each", len(keys), why[-200:])
+        with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+            return dict(zip(keys, pool.map(read_pcap, (paths[k] for k in keys)), strict=True))
+    out: dict[int, list[Frame]] = {k: [] for k in keys}
+    for f in parse_fields(r.stdout):
+        out[keys[f.interface]].append(f)
+    return out
 
 
 def own_mac(frames: list[Frame], addr: str) -> str | None:
@@ -412,10 +459,7 @@ def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
     routing = "aodv"
     with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
         routing = json.loads((run_dir / "result.json").read_text())["config"]["routing"]
-    # One tshark per capture, as many at once as there are cores (tshark's start-up alone is
-    # 0.4 s; 120 captures took 54.8 s one at a time, 28.2 s two at a time on 2 cores).
-    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-        captures = dict(zip(pcaps, pool.map(read_pcap, pcaps.values()), strict=True))
+    captures = read_pcaps(pcaps)
     metrics = compute(
         captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
     )

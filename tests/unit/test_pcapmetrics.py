@@ -1,6 +1,9 @@
 """Routing metrics on hand-made frames (the real-capture test is in tests/integration)."""
 
 import json
+import shutil
+import socket
+import struct
 
 import pytest
 
@@ -200,3 +203,67 @@ def test_capture_drops_are_read_from_tcpdumps_last_words(tmp_path):
     (logs / "r1.aodv.log").write_text("99 packets dropped by kernel\n")  # not a capture's log
     assert pm.capture_drops(tmp_path) == {"r1": 12, "r2": 0}
     assert pm.capture_drops(tmp_path / "none") == {}
+
+
+# ---------------------------------------------------------------- real files, real tshark
+
+
+def _pcap_record(t: float, src_mac: str, src: str, payload: bytes) -> bytes:
+    """One Ethernet/IPv4/UDP 654 broadcast frame as a pcap record (checksums left zero)."""
+    udp_hdr = struct.pack("!HHHH", 654, 654, 8 + len(payload), 0)
+    total = 20 + len(udp_hdr) + len(payload)
+    ip_hdr = struct.pack("!BBHHHBBH4s4s", 0x45, 0, total, 0, 0, 1, 17, 0,
+                         socket.inet_aton(src), socket.inet_aton("255.255.255.255"))  # fmt: skip
+    eth = bytes.fromhex("ff" * 6) + bytes.fromhex(src_mac.replace(":", "")) + b"\x08\x00"
+    frame = eth + ip_hdr + udp_hdr + payload
+    sec, usec = int(t), round((t - int(t)) * 1e6)
+    return struct.pack("<IIII", sec, usec, len(frame), len(frame)) + frame
+
+
+def _write_pcap(path, records: list[bytes]) -> None:
+    header = struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 262144, 1)  # Ethernet
+    path.write_bytes(header + b"".join(records))
+
+
+HELLO = bytes([2, 0, 0, 0]) + bytes(16)  # a RREP's 20 bytes: type 2
+
+
+needs_tshark = pytest.mark.skipif(
+    not all(shutil.which(t) for t in ("tshark", "mergecap")),
+    reason="tshark and mergecap come with `make setup`",
+)
+
+
+@needs_tshark
+def test_a_runs_captures_are_read_with_one_tshark_and_split_back(tmp_path, caplog):
+    """Interleaved timestamps across files: each frame goes back to the capture it came from,
+    and the merged read gives what reading each file alone gives."""
+    paths = {}
+    for k, (mac, addr) in {1: (M1, A1), 2: (M2, A2), 10: (M3, A3)}.items():
+        paths[k] = tmp_path / f"r{k}.pcap"
+        times = [100.0 + k * 0.001 + i * 0.5 for i in range(k + 2)]
+        _write_pcap(paths[k], [_pcap_record(t, mac, addr, HELLO) for t in times])
+    merged = pm.read_pcaps(paths)
+    assert "reading each" not in caplog.text  # the merged read itself succeeded
+    assert {k: len(v) for k, v in merged.items()} == {1: 3, 2: 4, 10: 12}
+    for k, frames in merged.items():
+        assert {f.ip_src for f in frames} == {ADDRS[{10: 3}.get(k, k)]}
+        alone = pm.read_pcap(paths[k])
+        assert [(f.time, f.eth_src, f.aodv_type) for f in frames] == [
+            (f.time, f.eth_src, f.aodv_type) for f in alone
+        ]
+        assert all(f.aodv_type == 2 and f.udp_dport == 654 for f in frames)
+
+
+@needs_tshark
+def test_a_capture_cut_short_is_read_alone_and_nothing_else_is_lost(tmp_path, caplog):
+    """mergecap stops at the first capture cut short; the reader falls back to one tshark per
+    capture, so the whole of the intact one and what the cut one holds are both kept."""
+    paths = {1: tmp_path / "r1.pcap", 2: tmp_path / "r2.pcap"}
+    _write_pcap(paths[1], [_pcap_record(1.0 + i, M1, A1, HELLO) for i in range(6)])
+    _write_pcap(paths[2], [_pcap_record(1.5 + i, M2, A2, HELLO) for i in range(6)])
+    data = paths[2].read_bytes()
+    paths[2].write_bytes(data[: len(data) - 30])  # the last record cut in half
+    frames = pm.read_pcaps(paths)
+    assert len(frames[1]) == 6 and len(frames[2]) == 5
+    assert "reading each" in caplog.text
