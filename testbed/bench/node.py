@@ -120,6 +120,10 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
         "time_scale_achieved": r["time_scale_achieved"],
         "deadline_miss_fraction": r["deadline_miss_fraction"],
         "deadlines_missed_world": r["deadlines_missed_world"],
+        # For reading, not for the search (which counts every miss): how many of the misses
+        # fell while the host held the machine (testbed/stalls.py).
+        "deadline_miss_fraction_outside_stalls": r.get("deadline_miss_fraction_outside_stalls"),
+        "host_stalls": r.get("host_stalls"),
         "world_cpu_ms_per_step": round(
             1000 * r["world_timing_s"].get("world_cpu_s", 0) / max(1, r["steps"]), 2
         ),
