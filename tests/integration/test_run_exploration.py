@@ -1,10 +1,10 @@
 """Whole runs: robots explore the empty 20 x 20 m terrain over the emulated network.
 
-Each run is real: one namespace and one process per robot, babel routing, the world's step
-clock at a raised time scale. Checked: the run stops by itself with >= 99% of the free space
-covered, writes the run-results contract, and no robot ever received a map or a goal from a
-robot it had no (time-respecting, multi-hop) path to; with 20 m every robot hears every other.
-"""
+Each run is real: one namespace and one process per robot, babel routing (AODV in one test),
+the world's step clock at a raised time scale. Checked: the run stops by itself with >= 99% of
+the free space covered, writes the run-results contract, and no robot ever received a map or a
+goal from a robot it had no (time-respecting, multi-hop) path to; with 20 m every robot hears
+every other."""
 
 import json
 import os
@@ -49,11 +49,11 @@ def check_contract(out: str, result: dict, robots: int) -> None:
         assert r["messages"]["sent"].get("map", 0) > 0
 
 
-def explore(tmp_path, name, robots, comm_range, time_scale=10.0, **kw) -> tuple[str, dict]:
+def explore(tmp_path, name, robots, comm_range, time_scale=10.0, routing="babel", **kw):
     out = str(tmp_path / "run")
     cfg = RunConfig(
         robots=robots, comm_range=comm_range, laser_range=2.0, seed=robots * 7 + 1,
-        time_scale=time_scale, routing="babel", max_steps=6000, **kw,
+        time_scale=time_scale, routing=routing, max_steps=6000, **kw,
     )  # fmt: skip
     return out, run(cfg, out, name, progress=False)
 
@@ -78,6 +78,14 @@ def check_exploration(out: str, result: dict, robots: int, comm_range: float) ->
 def test_team_explores_the_empty_terrain(tmp_path, tn_name, robots, comm_range):
     out, result = explore(tmp_path, tn_name, robots, comm_range)
     check_exploration(out, result, robots, comm_range)
+
+
+def test_three_robots_explore_over_aodv_and_hear_only_along_paths(tmp_path, tn_name):
+    """The same run over the AODV daemon (the paper's sweep's routing) instead of babel: 5 m
+    range, so the goals' TCP needs routes found on demand, often over several hops."""
+    out, result = explore(tmp_path, tn_name, 3, 5.0, routing="aodv")
+    check_exploration(out, result, 3, 5.0)
+    assert all(os.path.exists(os.path.join(out, "aodv", f"r{k}.json")) for k in (1, 2, 3))
 
 
 @pytest.mark.slow
