@@ -365,8 +365,15 @@ def main(argv: list[str] | None = None) -> int:
         print("testbed: interrupted", file=sys.stderr)
         return 130
     except (OSError, NetlinkError) as exc:  # a kernel or file operation that failed
-        print(f"testbed: error: {exc}", file=sys.stderr)
+        print(f"testbed: error: {_os_error_text(exc)}", file=sys.stderr)
         return 1
+
+
+def _os_error_text(exc: OSError) -> str:
+    """`/etc/passwd/x: Not a directory` rather than `[Errno 20] Not a directory: '...'`."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    return str(exc)
 
 
 if __name__ == "__main__":

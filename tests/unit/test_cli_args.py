@@ -48,3 +48,11 @@ def test_help_works():
     r = subprocess.run([sys.executable, "-m", "testbed.cli", "net", "up", "--help"],
                        capture_output=True, text=True)  # fmt: skip
     assert r.returncode == 0 and "--comm-range" in r.stdout
+
+
+def test_a_failed_file_operation_is_one_line_naming_the_file(tmp_path, capsys):
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "figures").write_text("a file where the report wants a directory")
+    assert cli.main(["report", str(tmp_path)]) == 1
+    (err,) = capsys.readouterr().err.strip().splitlines()
+    assert err == f"testbed: error: {tmp_path / 'figures'}: File exists"
