@@ -68,3 +68,16 @@ def test_aodv_regression_chain_middle_node_leaves():
     # incremented past the one the old route had), so no stale route can answer it.
     first_cut = [s for s in m.sent("RREQ", src=N1) if s.time > T / 3][0]
     assert not first_cut.msg.unknown_seq and first_cut.msg.dest_seq == 1
+
+
+def test_warm_up_leaves_nothing_in_the_robots_log(caplog):
+    """The daemon warms up on throwaway chains before its first message: their links going
+    silent must not appear in the robot's log as if they were its own (10.255.0.x)."""
+    import logging
+
+    from aodv.sim import warm_up
+
+    with caplog.at_level(logging.DEBUG):
+        warm_up(Params(time_scale=4.0))  # a run's scale: its chains' links time out
+        logging.getLogger("aodv.core").info("after the warm-up")
+    assert [r.getMessage() for r in caplog.records] == ["after the warm-up"]
