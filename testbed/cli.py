@@ -369,8 +369,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-def _os_error_text(exc: OSError) -> str:
-    """`/etc/passwd/x: Not a directory` rather than `[Errno 20] Not a directory: '...'`."""
+def _os_error_text(exc: Exception) -> str:
+    """`/etc/passwd/x: Not a directory` rather than `[Errno 20] Not a directory: '...'`;
+    a NetlinkError (not an OSError) as it prints itself."""
     if isinstance(exc, OSError) and exc.strerror:
         return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
     return str(exc)
