@@ -102,10 +102,22 @@ def sweep_argv(env, out, *extra):
 
 
 def run_sweep(env, out, *extra, **env_over):
+    """The sweep to its end. One CI run saw a sweep stop making progress (2 of 6 runs done
+    after 10 s, then nothing for 110 s) and never again in hundreds of runs: should it come
+    back, the failure shows where the sweep was (faulthandler's stacks on SIGABRT) and which
+    stand-ins had started."""
     e = dict(env["env"], **env_over)
-    return subprocess.run(
-        sweep_argv(env, out, *extra), env=e, cwd=REPO, capture_output=True, text=True, timeout=120
-    )
+    argv = [sys.executable, "-X", "faulthandler", *sweep_argv(env, out, *extra)[1:]]
+    p = subprocess.Popen(argv, env=e, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)  # fmt: skip
+    try:
+        stdout, stderr = p.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGABRT)
+        stdout, stderr = p.communicate()
+        started = sorted(os.listdir(env["pids"]))
+        pytest.fail(f"sweep still running after 120 s; stand-ins started: {started}\n{stderr}")
+    return subprocess.CompletedProcess(argv, p.returncode, stdout, stderr)
 
 
 def results(out: Path) -> dict:
