@@ -238,8 +238,9 @@ needs_tshark = pytest.mark.skipif(
 def test_a_runs_captures_are_read_with_one_tshark_and_split_back(tmp_path, caplog):
     """Interleaved timestamps across files: each frame goes back to the capture it came from,
     and the merged read gives what reading each file alone gives."""
+    robots = {1: (M1, A1), 2: (M2, A2), 10: (M3, A3)}
     paths = {}
-    for k, (mac, addr) in {1: (M1, A1), 2: (M2, A2), 10: (M3, A3)}.items():
+    for k, (mac, addr) in robots.items():
         paths[k] = tmp_path / f"r{k}.pcap"
         times = [100.0 + k * 0.001 + i * 0.5 for i in range(k + 2)]
         _write_pcap(paths[k], [_pcap_record(t, mac, addr, HELLO) for t in times])
@@ -247,7 +248,7 @@ def test_a_runs_captures_are_read_with_one_tshark_and_split_back(tmp_path, caplo
     assert "reading each" not in caplog.text  # the merged read itself succeeded
     assert {k: len(v) for k, v in merged.items()} == {1: 3, 2: 4, 10: 12}
     for k, frames in merged.items():
-        assert {f.ip_src for f in frames} == {ADDRS[{10: 3}.get(k, k)]}
+        assert {f.ip_src for f in frames} == {robots[k][1]}
         alone = pm.read_pcap(paths[k])
         assert [(f.time, f.eth_src, f.aodv_type) for f in frames] == [
             (f.time, f.eth_src, f.aodv_type) for f in alone
