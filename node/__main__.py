@@ -11,9 +11,9 @@ import re
 import signal
 import sys
 
-from node import body
 from node.events import EventLog
 from node.flood import MODES, Flooder
+from testbed.world import body
 
 STEP_S = 0.1  # emulated seconds per step
 

@@ -314,7 +314,7 @@ def _clean(args) -> int:
 DELEGATED = {
     "run": ("testbed.run", "run one exploration experiment"),
     "sweep": ("testbed.sweep", "run a sweep of experiments from a TOML file"),
-    "report": ("testbed.report", "figures and a report from a sweep's results"),
+    "report": ("testbed.analysis.report", "figures and a report from a sweep's results"),
 }
 
 

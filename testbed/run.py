@@ -48,15 +48,15 @@ from dataclasses import asdict, dataclass, field
 import cv2
 import numpy as np
 
-from node import body, render
 from node.flood import MODES as FLOOD_MODES
-from node.rays import Laser
 from node.sched import deadline_priority
-from testbed.bodylink import BodyServer
 from testbed.errors import TestbedError, UsageError
 from testbed.stalls import StallTracker
-from testbed.world import World
-from testbed.worldmap import empty_terrain, free_space, load_png, start_positions
+from testbed.world import body, render
+from testbed.world.bodylink import BodyServer
+from testbed.world.rays import Laser
+from testbed.world.world import World
+from testbed.world.worldmap import empty_terrain, free_space, load_png, start_positions
 from topology.forkserver import ForkServer, ForkServerError, python_env
 
 log = logging.getLogger(__name__)
@@ -313,7 +313,7 @@ def run(cfg: RunConfig, out: str, name: str, progress: bool = True) -> dict:
         # Started first, so that its imports overlap the network's bring-up.
         forks = ForkServer(
             NODE_PRELOAD, env=env,
-            warm=[["node.rays", "warm", [cfg.laser_range, cfg.laser_rays, truth.cell]]],
+            warm=[["testbed.world.rays", "warm", [cfg.laser_range, cfg.laser_rays, truth.cell]]],
             label=os.path.abspath(out),
         )  # fmt: skip
         with Network(spec) as net:
@@ -539,7 +539,7 @@ def _step_loop(cfg, world, net, server, robots, display_k, display_pos, links_w,
 
 def _write_clock(path: str, clock: list[float]) -> None:
     """clock.csv: when (CLOCK_MONOTONIC, the clock robots log receipts with) each step began;
-    what lets testbed.runcheck place a receipt at the world's step, not the robot's."""
+    what lets testbed.analysis.runcheck place a receipt at the world's step, not the robot's."""
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["step", "t"])

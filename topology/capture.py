@@ -11,7 +11,7 @@ into a root-owned directory. `-B` gives each capture a 16 MiB kernel buffer inst
 libpcap's 2 MiB: tcpdump runs at ordinary priority beside real-time robots, and with the
 default a 10-robot run lost up to 273 packets in the kernel while tcpdump was not scheduled
 (it says so on exit, "N packets dropped by kernel", in its log, kept next to the pcaps and
-read by testbed.pcapmetrics). At teardown tcpdump is stopped after everything else, so the
+read by testbed.analysis.pcapmetrics). At teardown tcpdump is stopped after everything else, so the
 routing daemons' last words are in the file.
 """
 

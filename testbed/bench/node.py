@@ -30,10 +30,10 @@ import numpy as np
 
 from node.grid import OccupancyGrid
 from node.planner import PlannerParams, plan
-from node.rays import Laser
 from testbed.bench.common import median, write
-from testbed.world import World
-from testbed.worldmap import empty_terrain, free_space, start_positions
+from testbed.world.rays import Laser
+from testbed.world.world import World
+from testbed.world.worldmap import empty_terrain, free_space, start_positions
 
 RUN_STEPS = 300
 ATTEMPTS = 2

@@ -12,7 +12,7 @@ import uuid
 
 import pytest
 
-from testbed import runcheck
+from testbed.analysis import runcheck
 from testbed.run import RunConfig, run
 from topology.network import destroy
 

@@ -17,7 +17,7 @@ import uuid
 
 import pytest
 
-from testbed import pcapmetrics
+from testbed.analysis import pcapmetrics
 
 pytestmark = pytest.mark.skipif(
     os.geteuid() != 0 or shutil.which("tcpdump") is None or shutil.which("tshark") is None,

@@ -6,7 +6,8 @@ import statistics
 
 import pytest
 
-from testbed import figures, sweepfile
+from testbed import sweepfile
+from testbed.analysis import figures
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 

@@ -7,8 +7,8 @@ import struct
 
 import pytest
 
-from testbed import pcapmetrics as pm
-from testbed.pcapmetrics import Frame
+from testbed.analysis import pcapmetrics as pm
+from testbed.analysis.pcapmetrics import Frame
 
 M1, M2, M3 = "02:00:00:00:00:01", "02:00:00:00:00:02", "02:00:00:00:00:03"
 A1, A2, A3 = "10.0.0.1", "10.0.0.2", "10.0.0.3"

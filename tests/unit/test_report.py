@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from testbed import report, sweepfile
-from testbed.report import FAILS, HOLDS, NO_DATA, PARTLY
+from testbed import sweepfile
+from testbed.analysis import report
+from testbed.analysis.report import FAILS, HOLDS, NO_DATA, PARTLY
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 REPO = Path(__file__).resolve().parents[2]
@@ -131,7 +132,7 @@ def test_report_counts_excluded_runs(tmp_path):
 
 def test_cli_not_a_sweep_directory(tmp_path):
     r = subprocess.run(
-        [sys.executable, "-m", "testbed.report", str(tmp_path / "nothing")],
+        [sys.executable, "-m", "testbed.analysis.report", str(tmp_path / "nothing")],
         capture_output=True,
         text=True,
         cwd=REPO,

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from node import body
-from testbed.bodylink import BodyServer
+from testbed.world import body
+from testbed.world.bodylink import BodyServer
 
 
 def test_body_link_round_trip(tmp_path):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from testbed.errors import UsageError
-from testbed.worldmap import empty_terrain, free_space, load_png, start_positions
+from testbed.world.worldmap import empty_terrain, free_space, load_png, start_positions
 
 
 def test_empty_terrain_is_the_papers():

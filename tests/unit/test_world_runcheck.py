@@ -2,7 +2,7 @@
 
 import json
 
-from testbed import runcheck
+from testbed.analysis import runcheck
 
 
 def write_run(d, links, recvs, robots=3, steps=20):

@@ -20,7 +20,7 @@ failed are left out and counted by the report. The paper's figures use the unimp
   happened at, by cause, with the 20-step timer as a reference line.
 - Figs. 3 and 5: the runs' own path pictures (paths.png), collected under figures/paths/.
 - Routing: overhead, packet delivery fraction, end-to-end delay and throughput from the pcaps
-  (testbed.pcapmetrics) against team size, one line per range (all laser ranges pooled).
+  (testbed.analysis.pcapmetrics) against team size, one line per range (all laser ranges pooled).
 - Impairments: exploration steps and packet delivery fraction against link loss.
 """
 
@@ -467,7 +467,7 @@ def collect_paths(runs: list[Run], dest: Path) -> list[Path]:
 def make_all(sweep_dir: str | Path, metrics_of=None) -> dict:
     """Write every figure the sweep has data for into DIR/figures/; returns what was made:
     {"files": [...], "runs": [...], "tables": {name: rows}}."""
-    from testbed import pcapmetrics
+    from testbed.analysis import pcapmetrics
 
     if metrics_of is None:
 

@@ -1,6 +1,6 @@
 """`testbed report DIR`: figures plus a Markdown report that checks the paper's claims.
 
-Theory of operation. `testbed.figures.make_all` draws the figures and returns the tables of
+Theory of operation. `testbed.analysis.figures.make_all` draws the figures and returns the tables of
 numbers behind them; each claim of the paper's Section 5 is a pure function of those tables
 (`verdict_*`) that returns a `Verdict`: holds / partly / does not hold / not enough data, with
 the numbers it was decided on. `render` puts the verdicts, the figures and the sweep's
@@ -38,7 +38,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed import figures
+from testbed.analysis import figures
 from testbed.errors import UsageError
 
 log = logging.getLogger(__name__)
@@ -525,7 +525,7 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-if __name__ == "__main__":  # `python -m testbed.report` is `testbed report`
+if __name__ == "__main__":  # `python -m testbed.analysis.report` is `testbed report`
     from testbed.cli import main as cli_main
 
     sys.exit(cli_main(["report", *sys.argv[1:]]))

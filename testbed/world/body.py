@@ -1,6 +1,6 @@
 """The robot's link to its body: a local IPC channel to the world, as a driver to hardware.
 
-The world (testbed.bodylink) listens on a Unix SOCK_SEQPACKET socket in the testbed's state
+The world (testbed.world.bodylink) listens on a Unix SOCK_SEQPACKET socket in the testbed's state
 directory. A Unix socket lives in the filesystem, so a robot process inside its network
 namespace reaches it without crossing the emulated network. Messages (one datagram each,
 network byte order):

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from node.rays import _BIAS, Laser, pad
-from testbed.worldmap import GroundTruth
+from testbed.world.rays import _BIAS, Laser, pad
+from testbed.world.worldmap import GroundTruth
 
 
 @dataclass
