@@ -1,0 +1,144 @@
+"""What a run is asked to do: `RunConfig`, and the `testbed run` options that make one.
+
+`RunConfig` is the whole description of a run; `config.json` is its `to_dict()` plus what
+the run derived from it (start positions, timer phases), so a run can be repeated from its
+directory. The command line's checks live here; the run itself is testbed.run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from dataclasses import asdict, dataclass
+
+from node.flood import MODES as FLOOD_MODES
+from testbed.errors import UsageError
+
+STEP_S = 0.1  # emulated seconds per step
+ROUTINGS = ("babel", "aodv", "none")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    robots: int
+    comm_range: float
+    laser_range: float = 2.0
+    seed: int = 1
+    time_scale: float = 1.0
+    routing: str = "babel"
+    map: str | None = None
+    loss_pct: float = 0.0
+    delay_ms: float = 0.0
+    capture: bool = False
+    max_steps: int = 3000
+    # Beyond the contract's config keys (recorded too, so a run is reproducible):
+    map_cell: float = 0.05
+    laser_rays: int = 360
+    speed: float = 0.1  # m per step (1 m/s)
+    radius: float = 0.15
+    plan_period: int = 20
+    map_period: int = 10
+    flood: str = "pruned"  # node.flood: "pruned" (self-pruning) or "blind"
+    display_pos: tuple[float, float] | None = None  # default: the map's centre
+    snapshots: tuple[int, ...] = ()
+    kill: tuple[tuple[int, int], ...] = ()  # (robot, step): fault injection, SIGKILL
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["display_pos"] = list(self.display_pos) if self.display_pos else None
+        d["snapshots"] = list(self.snapshots)
+        d["kill"] = [f"{k}:{s}" for k, s in self.kill]
+        return d
+
+
+def _number(kind, lo=None, lo_open=False, name="value"):
+    def conv(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r} is not a number") from None
+        if isinstance(v, float) and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{name} {text!r} must be finite")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            rel = ">" if lo_open else ">="
+            raise argparse.ArgumentTypeError(f"{name} {text!r} must be {rel} {lo}")
+        return v
+
+    return conv
+
+
+def _kill(text: str) -> tuple[int, int]:
+    m = re.fullmatch(r"r?(\d+):(\d+)", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"--kill {text!r} is not ROBOT:STEP (e.g. r2:150)")
+    return int(m[1]), int(m[2])
+
+
+def _point(text: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y in metres") from None
+    return x, y
+
+
+def _steps(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(sorted({int(s) for s in text.split(",") if s.strip()}))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a list of steps") from None
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The `testbed run` options."""
+    a = parser.add_argument
+    a("--robots", type=_number(int, 1, name="robots"), required=True, help="team size")
+    a("--comm-range", type=_number(float, 0, True, "comm range"), required=True, help="metres")
+    a("--laser-range", type=_number(float, 0, True, "laser range"), default=2.0, help="metres")
+    a("--seed", type=_number(int, 0, name="seed"), default=1)
+    a("--out", required=True, help="run directory to write")
+    a("--time-scale", type=_number(float, 0, True, "time scale"), default=1.0)
+    a("--routing", choices=ROUTINGS, default="babel")
+    a("--map", help="PNG map (dark pixels are obstacles); default: empty 20 x 20 m")
+    a("--map-cell", type=_number(float, 0, True, "map cell"), default=0.05, help="m per pixel")
+    a("--loss", type=_number(float, 0, name="loss"), default=0.0, help="percent, every link")
+    a("--delay", type=_number(float, 0, name="delay"), default=0.0, help="ms, every link")
+    a("--capture", action="store_true", help="write pcaps/rK.pcap")
+    a("--max-steps", type=_number(int, 1, name="max steps"), default=3000)
+    a("--laser-rays", type=_number(int, 4, name="laser rays"), default=360)
+    a("--speed", type=_number(float, 0, True, "speed"), default=1.0, help="m/s")
+    a("--map-period", type=_number(int, 1, name="map period"), default=10,
+      help="steps between a robot's map floods (default 10)")  # fmt: skip
+    a(
+        "--flood",
+        choices=FLOOD_MODES,
+        default="pruned",
+        help="map flooding: self-pruning (default) or blind (every robot relays every flood)",
+    )
+    a("--display-pos", type=_point, help="X,Y of the display (default: map centre)")
+    a("--snapshots", type=_steps, default=(),
+      help="display snapshot steps, e.g. 200,600 (default 100,250,500,1000,2000; always one "
+           "at the end)")  # fmt: skip
+    a("--kill", type=_kill, action="append", default=[], help="ROBOT:STEP, SIGKILL (testing)")
+    a("--name", help="testbed name (default: random 'run' + 4 hex digits)")
+    a("--quiet", action="store_true", help="no progress line")
+
+
+def config_from_args(args: argparse.Namespace) -> RunConfig:
+    if args.loss > 100:
+        raise UsageError(f"loss {args.loss}% is more than 100%")
+    if args.robots > 50:
+        raise UsageError(f"at most 50 robots ({args.robots} asked)")
+    for k, _ in args.kill:
+        if not 1 <= k <= args.robots:
+            raise UsageError(f"--kill names robot {k}, but the team is r1..r{args.robots}")
+    return RunConfig(
+        robots=args.robots, comm_range=args.comm_range, laser_range=args.laser_range,
+        seed=args.seed, time_scale=args.time_scale, routing=args.routing, map=args.map,
+        loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
+        max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
+        speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
+        map_period=args.map_period, flood=args.flood,
+        kill=tuple(args.kill),
+    )  # fmt: skip
