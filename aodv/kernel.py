@@ -312,7 +312,7 @@ class Tun:
         except OSError as e:
             raise KernelError(f"create TUN {name}: {e}") from e
         self.name = name
-        # DESIGN: the daemon ignores IPv6 and disables it on its own TUN device.
+        # docs/architecture.md: the daemon ignores IPv6 and disables it on its own TUN device.
         write_sysctl(f"net.ipv6.conf.{name}.disable_ipv6", "1")
         # ICMP errors we inject come from our own address: accept them on the TUN.
         write_sysctl(f"net.ipv4.conf.{name}.accept_local", "1")
