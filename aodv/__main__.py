@@ -8,6 +8,8 @@ import logging
 import os
 import sys
 
+from topology.argtypes import number
+
 EXIT_USAGE = 2
 EXIT_FAILURE = 1
 
@@ -30,16 +32,6 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(EXIT_USAGE)
 
 
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not v > 0 or v == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number: {text!r}")
-    return v
-
-
 def _network(text: str) -> str:
     try:
         return str(ipaddress.IPv4Network(text))
@@ -56,7 +48,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--iface", default="wlan0", help="radio interface (default wlan0)")
     p.add_argument(
         "--time-scale",
-        type=_positive,
+        type=number(float, "time scale", above=0),
         default=1.0,
         help="run every protocol timer K times faster (default 1)",
     )

@@ -8,6 +8,8 @@ import signal
 import time
 from collections import Counter
 
+from topology.jsonfile import write_json_atomic
+
 
 class Stats:
     def __init__(self, robot: str, addr: str) -> None:
@@ -58,10 +60,7 @@ class Stats:
         }
 
     def write(self, path: str) -> None:
-        tmp = f"{path}.tmp"
-        with open(tmp, "w") as f:
-            json.dump(self.as_dict(), f, indent=1, sort_keys=True)
-        os.replace(tmp, path)
+        write_json_atomic(path, self.as_dict(), sort_keys=True)
 
 
 def read_fresh(path: str, proc, timeout: float = 3.0) -> dict:

@@ -14,6 +14,7 @@ import sys
 from node.events import EventLog
 from node.flood import MODES, Flooder
 from testbed.world import body
+from topology.argtypes import number
 
 STEP_S = 0.1  # emulated seconds per step
 
@@ -32,19 +33,6 @@ def shape(text: str) -> tuple[int, int]:
     return int(m[1]), int(m[2])
 
 
-def positive(kind):
-    def conv(text: str):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not v > 0:
-            raise argparse.ArgumentTypeError(f"{text!r} must be positive")
-        return v
-
-    return conv
-
-
 def steps(text: str) -> set[int]:
     try:
         return {int(s) for s in text.split(",") if s.strip()}
@@ -61,33 +49,40 @@ class _Parser(argparse.ArgumentParser):
 def parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m node", description=__doc__)
     p.add_argument("--robot", type=robot_number, required=True)
-    p.add_argument("--robots", type=positive(int), required=True, help="team size (exploring)")
+    p.add_argument(
+        "--robots",
+        type=number(int, "--robots", above=0),
+        required=True,
+        help="team size (exploring)",
+    )
     p.add_argument("--role", choices=("robot", "display"), default="robot")
     p.add_argument("--body", required=True, help="Unix socket of the world's body link")
     p.add_argument("--events", help="JSON-lines event log to append to")
     p.add_argument("--map-size", type=shape, default=(400, 400), help="ROWSxCOLS cells")
-    p.add_argument("--cell", type=positive(float), default=0.05)
-    p.add_argument("--laser-range", type=positive(float), default=2.0)
-    p.add_argument("--laser-rays", type=positive(int), default=360)
-    p.add_argument("--speed", type=positive(float), default=0.1, help="metres per step")
-    p.add_argument("--radius", type=positive(float), default=0.15)
-    p.add_argument("--plan-period", type=positive(int), default=20)
-    p.add_argument("--map-period", type=positive(int), default=10)
-    p.add_argument("--time-scale", type=positive(float), default=1.0)
+    p.add_argument("--cell", type=number(float, "--cell", above=0), default=0.05)
+    p.add_argument("--laser-range", type=number(float, "--laser-range", above=0), default=2.0)
+    p.add_argument("--laser-rays", type=number(int, "--laser-rays", above=0), default=360)
+    p.add_argument(
+        "--speed", type=number(float, "--speed", above=0), default=0.1, help="metres per step"
+    )
+    p.add_argument("--radius", type=number(float, "--radius", above=0), default=0.15)
+    p.add_argument("--plan-period", type=number(int, "--plan-period", above=0), default=20)
+    p.add_argument("--map-period", type=number(int, "--map-period", above=0), default=10)
+    p.add_argument("--time-scale", type=number(float, "--time-scale", above=0), default=1.0)
     p.add_argument("--timer-phase", type=int, default=0, help="steps added to the first timer")
     p.add_argument("--iface", default="wlan0", help="'' to not bind floods to a device")
-    p.add_argument("--flood-port", type=positive(int), default=5100)
+    p.add_argument("--flood-port", type=number(int, "--flood-port", above=0), default=5100)
     p.add_argument(
         "--flood",
         choices=MODES,
         default="pruned",
         help="map flooding: self-pruning (default) or blind (every robot relays)",
     )
-    p.add_argument("--goal-port", type=positive(int), default=5101)
+    p.add_argument("--goal-port", type=number(int, "--goal-port", above=0), default=5101)
     p.add_argument("--bind", help="address for the goal socket (default: the robot's)")
     p.add_argument("--out-dir", help="display: where snapshots and the video go")
     p.add_argument("--snapshots", type=steps, default=set(), help="display: steps, e.g. 100,500")
-    p.add_argument("--video-every", type=positive(int), default=10)
+    p.add_argument("--video-every", type=number(int, "--video-every", above=0), default=10)
     return p
 
 

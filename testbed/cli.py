@@ -15,6 +15,7 @@ import sys
 from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
+from topology.argtypes import number
 
 log = logging.getLogger("testbed")
 
@@ -24,23 +25,6 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         raise UsageError(f"{self.prog}: {message}")
-
-
-def _float(what: str, *, positive: bool = False, nonneg: bool = False):
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what} must be a number, not {text!r}") from None
-        if value != value or value in (float("inf"), float("-inf")):
-            raise argparse.ArgumentTypeError(f"{what} must be finite, not {text!r}")
-        if positive and value <= 0:
-            raise argparse.ArgumentTypeError(f"{what} must be greater than 0, not {text}")
-        if nonneg and value < 0:
-            raise argparse.ArgumentTypeError(f"{what} must not be negative, not {text}")
-        return value
-
-    return parse
 
 
 def _robot_count(text: str) -> int:
@@ -95,17 +79,17 @@ def _add_net(sub) -> None:
     up.add_argument("name", type=_name)
     up.add_argument("--robots", type=_robot_count, required=True)
     up.add_argument("--layout", choices=("chain", "grid", "random"))
-    up.add_argument("--spacing", type=_float("spacing", positive=True), default=8.0)
+    up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0)
     up.add_argument("--positions", type=_positions, help='"X,Y X,Y ..." in metres')
-    up.add_argument("--comm-range", type=_float("communication range", positive=True),
+    up.add_argument("--comm-range", type=number(float, "communication range", above=0),
                     required=True)  # fmt: skip
     up.add_argument("--range-model", choices=("disc", "lossy"), default="disc")
     up.add_argument("--routing", choices=("none", "babel", "aodv"), default="none")
-    up.add_argument("--loss", type=_float("loss", nonneg=True), default=0.0, metavar="PCT")
-    up.add_argument("--delay", type=_float("delay", nonneg=True), default=0.0, metavar="MS")
+    up.add_argument("--loss", type=number(float, "loss", minimum=0), default=0.0, metavar="PCT")
+    up.add_argument("--delay", type=number(float, "delay", minimum=0), default=0.0, metavar="MS")
     up.add_argument("--capture", metavar="DIR", help="write one pcap per robot here")
     up.add_argument("--seed", type=int, default=None)
-    up.add_argument("--time-scale", type=_float("time scale", positive=True), default=1.0)
+    up.add_argument("--time-scale", type=number(float, "time scale", above=0), default=1.0)
 
     ex = nsub.add_parser("exec", help="run a command in a robot's namespace")
     ex.add_argument("name", type=_name)
@@ -115,17 +99,17 @@ def _add_net(sub) -> None:
     mv = nsub.add_parser("move", help="move a robot; links follow before this returns")
     mv.add_argument("name", type=_name)
     mv.add_argument("robot", type=_robot_ref)
-    mv.add_argument("x", type=_float("x"))
-    mv.add_argument("y", type=_float("y"))
+    mv.add_argument("x", type=number(float, "x"))
+    mv.add_argument("y", type=number(float, "y"))
 
     im = nsub.add_parser("impair", help="impair one link (both directions), or clear it")
     im.add_argument("name", type=_name)
     im.add_argument("robot_a", type=_robot_ref)
     im.add_argument("robot_b", type=_robot_ref)
-    im.add_argument("--loss", type=_float("loss", nonneg=True), default=0.0, metavar="PCT")
-    im.add_argument("--delay", type=_float("delay", nonneg=True), default=0.0, metavar="MS")
-    im.add_argument("--jitter", type=_float("jitter", nonneg=True), default=0.0, metavar="MS")
-    im.add_argument("--rate", type=_float("rate", nonneg=True), default=0.0, metavar="KBIT")
+    im.add_argument("--loss", type=number(float, "loss", minimum=0), default=0.0, metavar="PCT")
+    im.add_argument("--delay", type=number(float, "delay", minimum=0), default=0.0, metavar="MS")
+    im.add_argument("--jitter", type=number(float, "jitter", minimum=0), default=0.0, metavar="MS")
+    im.add_argument("--rate", type=number(float, "rate", minimum=0), default=0.0, metavar="KBIT")
 
     ln = nsub.add_parser("links", help="print the current links, one 'i j' pair per line")
     ln.add_argument("name", type=_name)

@@ -1,23 +1,7 @@
-"""The two kinds of error the testbed distinguishes, and how the CLI reports them.
+"""The testbed's two kinds of error, defined in topology.errors (the lowest layer that raises
+them) and re-exported here for the code of runs, sweeps and reports: `UsageError` (bad input,
+exit 2) and `TestbedError` (a failure while working, exit 1)."""
 
-`UsageError` is bad input from the user (CLI arguments, a config or sweep file, not root, a
-missing tool): the CLI prints it as one line and exits with status 2. `TestbedError` is a
-failure while doing the work (a kernel command that failed, a robot that crashed): one line,
-exit status 1. Anything else is a bug and keeps its traceback.
-"""
+from topology.errors import EXIT_FAILURE, EXIT_USAGE, TestbedError, UsageError
 
-EXIT_USAGE = 2
-EXIT_FAILURE = 1
-
-
-class TestbedError(Exception):
-    """A failure while running the testbed; its message is one line for the user."""
-
-    exit_status = EXIT_FAILURE
-    __test__ = False  # not a pytest test class despite the name
-
-
-class UsageError(TestbedError):
-    """Bad input from the user: arguments, files, privileges, missing tools."""
-
-    exit_status = EXIT_USAGE
+__all__ = ["EXIT_FAILURE", "EXIT_USAGE", "TestbedError", "UsageError"]

@@ -42,7 +42,6 @@ import csv
 import logging
 import os
 import secrets
-import shutil
 import signal
 import subprocess
 import sys
@@ -528,19 +527,13 @@ class Run:
     def _keep_routing_files(self) -> None:
         """Stop the routing daemons (they write their final statistics and logs as they stop)
         and copy those into the run directory before the testbed goes away."""
+        from topology.routing import keep_daemon_files
+
         routing = self.cfg.routing
         if routing != "none":
             self.net.stop(routing)
-            if routing == "aodv":
-                os.makedirs(self._path("aodv"), exist_ok=True)
-            os.makedirs(self._path("routing"), exist_ok=True)
-            for k in range(1, self.n + 2):
-                src = os.path.join(self.net.state_dir, f"r{k}.{routing}.log")
-                if os.path.exists(src):
-                    shutil.copy(src, self._path("routing", f"r{k}.{routing}.log"))
-                stats = os.path.join(self.net.state_dir, f"r{k}.aodv.json")
-                if routing == "aodv" and os.path.exists(stats):
-                    shutil.copy(stats, self._path("aodv", f"r{k}.json"))
+            keep_daemon_files(routing, range(1, self.n + 2), self.net.state_dir,
+                              self._path("routing"), self._path(routing))  # fmt: skip
         self._phase("routing_stopped")
 
     def _write_clock(self) -> None:

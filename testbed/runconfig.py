@@ -8,12 +8,12 @@ directory. The command line's checks live here; the run itself is testbed.run.
 from __future__ import annotations
 
 import argparse
-import math
 import re
 from dataclasses import asdict, dataclass
 
 from node.flood import MODES as FLOOD_MODES
 from testbed.errors import UsageError
+from topology.argtypes import number
 
 STEP_S = 0.1  # emulated seconds per step
 ROUTINGS = ("babel", "aodv", "none")
@@ -52,22 +52,6 @@ class RunConfig:
         return d
 
 
-def _number(kind, lo=None, lo_open=False, name="value"):
-    def conv(text: str):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} {text!r} is not a number") from None
-        if isinstance(v, float) and not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"{name} {text!r} must be finite")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            rel = ">" if lo_open else ">="
-            raise argparse.ArgumentTypeError(f"{name} {text!r} must be {rel} {lo}")
-        return v
-
-    return conv
-
-
 def _kill(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"r?(\d+):(\d+)", text)
     if not m:
@@ -93,22 +77,22 @@ def _steps(text: str) -> tuple[int, ...]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The `testbed run` options."""
     a = parser.add_argument
-    a("--robots", type=_number(int, 1, name="robots"), required=True, help="team size")
-    a("--comm-range", type=_number(float, 0, True, "comm range"), required=True, help="metres")
-    a("--laser-range", type=_number(float, 0, True, "laser range"), default=2.0, help="metres")
-    a("--seed", type=_number(int, 0, name="seed"), default=1)
+    a("--robots", type=number(int, "robots", minimum=1), required=True, help="team size")
+    a("--comm-range", type=number(float, "comm range", above=0), required=True, help="metres")
+    a("--laser-range", type=number(float, "laser range", above=0), default=2.0, help="metres")
+    a("--seed", type=number(int, "seed", minimum=0), default=1)
     a("--out", required=True, help="run directory to write")
-    a("--time-scale", type=_number(float, 0, True, "time scale"), default=1.0)
+    a("--time-scale", type=number(float, "time scale", above=0), default=1.0)
     a("--routing", choices=ROUTINGS, default="babel")
     a("--map", help="PNG map (dark pixels are obstacles); default: empty 20 x 20 m")
-    a("--map-cell", type=_number(float, 0, True, "map cell"), default=0.05, help="m per pixel")
-    a("--loss", type=_number(float, 0, name="loss"), default=0.0, help="percent, every link")
-    a("--delay", type=_number(float, 0, name="delay"), default=0.0, help="ms, every link")
+    a("--map-cell", type=number(float, "map cell", above=0), default=0.05, help="m per pixel")
+    a("--loss", type=number(float, "loss", minimum=0), default=0.0, help="percent, every link")
+    a("--delay", type=number(float, "delay", minimum=0), default=0.0, help="ms, every link")
     a("--capture", action="store_true", help="write pcaps/rK.pcap")
-    a("--max-steps", type=_number(int, 1, name="max steps"), default=3000)
-    a("--laser-rays", type=_number(int, 4, name="laser rays"), default=360)
-    a("--speed", type=_number(float, 0, True, "speed"), default=1.0, help="m/s")
-    a("--map-period", type=_number(int, 1, name="map period"), default=10,
+    a("--max-steps", type=number(int, "max steps", minimum=1), default=3000)
+    a("--laser-rays", type=number(int, "laser rays", minimum=4), default=360)
+    a("--speed", type=number(float, "speed", above=0), default=1.0, help="m/s")
+    a("--map-period", type=number(int, "map period", minimum=1), default=10,
       help="steps between a robot's map floods (default 10)")  # fmt: skip
     a(
         "--flood",

@@ -67,7 +67,10 @@ from pathlib import Path
 from testbed import sweepfile
 from testbed.errors import TestbedError, UsageError
 from testbed.sweepfile import PlannedRun
+from topology.argtypes import number
 from topology.forkserver import ForkServer, ForkServerError, python_env
+from topology.impair import kernel_has_netem
+from topology.jsonfile import read_json, write_json_atomic
 from topology.state import is_alive, proc_start_time
 
 log = logging.getLogger(__name__)
@@ -115,7 +118,7 @@ def is_done(out: Path, run_id: str) -> bool:
     path = run_dir(out, run_id) / "result.json"
     if not path.is_file():
         return False
-    return (_read_json(path) or {}).get("status") != "interrupted"
+    return (read_json(path) or {}).get("status") != "interrupted"
 
 
 @dataclass
@@ -167,31 +170,6 @@ def default_jobs(cores: int | None = None) -> int:
     """Concurrent runs to start with: half the cores (a run is a world plus N robots)."""
     cores = cores or os.cpu_count() or 1
     return max(1, cores // 2)
-
-
-def netem_available() -> bool:
-    """True if a netem qdisc can be made (tried in a throwaway network namespace)."""
-    try:
-        r = subprocess.run(
-            [
-                "unshare",
-                "--net",
-                "tc",
-                "qdisc",
-                "add",
-                "dev",
-                "lo",
-                "root",
-                "netem",
-                "delay",
-                "1ms",
-            ],
-            capture_output=True,
-            timeout=10,
-        )
-    except (OSError, subprocess.TimeoutExpired):
-        return False
-    return r.returncode == 0
 
 
 def run_command() -> list[str] | None:
@@ -343,12 +321,6 @@ def run_load(run: PlannedRun) -> float:
     return (run.config["robots"] + 1) * float(run.config["time_scale"])
 
 
-def _atomic_write_json(path: Path, data) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n")
-    os.replace(tmp, path)
-
-
 class Sweep:
     """Runs the to-do runs of one sweep directory; `run()` returns the process exit status."""
 
@@ -405,7 +377,7 @@ class Sweep:
                 for r in self.runs
             ],
         }
-        _atomic_write_json(self.out / "sweep.json", data)
+        write_json_atomic(self.out / "sweep.json", data)
 
     def _counts(self):
         st = [s["status"] for s in self.status.values()]
@@ -474,7 +446,7 @@ class Sweep:
                 f"exited with status {child.proc.returncode} without result.json"
             )
             return f"{run.run_id}: FAILED ({st['reason']})"
-        result = _read_json(run_dir(self.out, run.run_id) / "result.json") or {}
+        result = read_json(run_dir(self.out, run.run_id) / "result.json") or {}
         st["status"] = "done"
         st["result_status"] = result.get("status")
         miss = result.get("deadline_miss_fraction")
@@ -591,7 +563,7 @@ class Sweep:
     def run(self, todo: list[PlannedRun], done: list[PlannedRun], skipped: dict[str, str]) -> int:
         for r in done:
             self.status[r.run_id] = {"status": "done", "previous_sweep": True}
-            res = _read_json(run_dir(self.out, r.run_id) / "result.json") or {}
+            res = read_json(run_dir(self.out, r.run_id) / "result.json") or {}
             self.status[r.run_id]["result_status"] = res.get("status")
         for rid, reason in skipped.items():
             self.status[rid] = {"status": "skipped", "reason": reason}
@@ -653,13 +625,6 @@ class Sweep:
         return 0
 
 
-def _read_json(path: Path):
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-
-
 def _last_line(path: Path) -> str:
     try:
         lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
@@ -675,7 +640,7 @@ def _wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
     """A SIGKILLed sweep's children get SIGINT (PDEATHSIG); wait until they are gone before
     redoing their runs, and SIGKILL any still running after `timeout` (only the very processes
     recorded in sweep.json: pid and start time)."""
-    state = _read_json(out / "sweep.json") or {}
+    state = read_json(out / "sweep.json") or {}
     procs = [
         (e["pid"], e.get("pid_start"))
         for e in state.get("runs", [])
@@ -704,7 +669,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="sweep directory")
     parser.add_argument(
         "--jobs",
-        type=int,
+        type=number(int, "--jobs", minimum=1),
         default=None,
         metavar="J",
         help=f"runs at once (default {default_jobs()} on this machine; "
@@ -719,8 +684,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     spec = sweepfile.load(args.file)
-    if args.jobs is not None and args.jobs < 1:
-        raise UsageError(f"--jobs: must be >= 1, got {args.jobs}")
     jobs = args.jobs or default_jobs()
     out = Path(args.out)
     runs = sweepfile.expand(spec)
@@ -739,7 +702,7 @@ def main(args: argparse.Namespace) -> int:
         )
     if args.resume:
         _wait_for_orphans(out)
-    netem = netem_available() if any(d > 0 for d in spec.delay_ms) else False
+    netem = kernel_has_netem() if any(d > 0 for d in spec.delay_ms) else False
     p = plan(runs, out, netem)
     for r in p.done:
         diff = config_mismatch(out, r)

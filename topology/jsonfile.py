@@ -1,4 +1,8 @@
-"""JSON files that readers may look at any time: written whole or not at all."""
+"""JSON files that other processes may read at any time: written whole or not at all.
+
+The one atomic write and the one tolerant read of the project (run results, sweep state,
+testbed state, the AODV daemons' statistics, the routing-metrics cache).
+"""
 
 from __future__ import annotations
 
@@ -6,17 +10,24 @@ import json
 import os
 
 
-def write_json_atomic(path, obj) -> None:
-    """`path` holds `obj` (indent 1, newline-terminated) or what it held before: the text goes
-    to `path.tmp` first and is renamed over `path`."""
-    tmp = f"{path}.tmp"
-    with open(tmp, "w") as f:
-        f.write(json.dumps(obj, indent=1) + "\n")
-    os.replace(tmp, path)
+def write_json_atomic(path, obj, *, sort_keys: bool = False) -> None:
+    """`path` holds `obj` (indent 1, newline-terminated) or what it held before, never a part:
+    the text goes to a temporary file of this process first and is renamed over `path`."""
+    tmp = f"{path}.{os.getpid()}.tmp"
+    try:
+        with open(tmp, "w") as f:
+            f.write(json.dumps(obj, indent=1, sort_keys=sort_keys) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
 
 
 def read_json(path):
-    """The JSON in `path`, or None when it is missing or not valid JSON."""
+    """The JSON in `path`, or None when it is missing, unreadable or not valid JSON."""
     try:
         with open(path) as f:
             return json.load(f)

@@ -1,12 +1,12 @@
 """The radio medium: one namespace of bridges and veth links that decides who hears whom.
 
-Theory of operation (DESIGN.md, "The radio medium"). The medium namespace holds, per robot K,
-a bridge `brK` with one ordinary port `rpK`, the veth peer of robot K's `wlan0`. A link between
-robots i and j is one veth pair `lixj` <-> `ljxi`, `lixj` a port of `bri` and `ljxi` a port of
-`brj`, both marked *isolated*. An isolated port forwards only to non-isolated ports, so a
-frame that robot i sends enters `bri` at `rpi`, goes out through every link port of `bri`,
-arrives at the far bridges and leaves only through their robot ports: a broadcast from i
-reaches exactly the robots linked to i, once each, and never hops link to link.
+Theory of operation (docs/architecture.md, "The radio medium"). The medium namespace holds,
+per robot K, a bridge `brK` with one ordinary port `rpK`, the veth peer of robot K's `wlan0`.
+A link between robots i and j is one veth pair `lixj` <-> `ljxi`, `lixj` a port of `bri` and
+`ljxi` a port of `brj`, both marked *isolated*. An isolated port forwards only to non-isolated
+ports, so a frame that robot i sends enters `bri` at `rpi`, goes out through every link port
+of `bri`, arrives at the far bridges and leaves only through their robot ports: a broadcast
+from i reaches exactly the robots linked to i, once each, and never hops link to link.
 
 Frames leaving through `lixj` travel from i to j, so a qdisc on `lixj` shapes exactly that
 direction of that link (see topology.impair). Removing a link disables the bridge port of
@@ -30,7 +30,8 @@ from topology.spec import Impairment
 
 log = logging.getLogger(__name__)
 
-# Set before wlan0 exists so that it inherits them from conf.default (DESIGN.md).
+# Set before wlan0 exists so that it inherits them from conf.default (docs/architecture.md,
+# "Kernel facts that shaped this").
 # accept_dad=0: the IPv6 link-local address (babeld speaks over it) is usable at once.
 ROBOT_SYSCTLS = (
     ("net.ipv4.ip_forward", 1),
@@ -262,10 +263,6 @@ class Medium:
         """Apply `imp` to both directions of link i-j."""
         self.impairer.apply(names.link_end(i, j), imp)
         self.impairer.apply(names.link_end(j, i), imp)
-
-    def set_direction_impairment(self, i: int, j: int, imp: Impairment) -> None:
-        """Apply `imp` to frames going from i to j only."""
-        self.impairer.apply(names.link_end(i, j), imp)
 
     def kernel_links(self) -> set[tuple[int, int]]:
         """The links as the kernel has them: pairs (i, j), i < j, whose near end forwards.

@@ -166,11 +166,6 @@ def write_sysctl(key: str, value: str | int) -> None:
         f.write(str(value))
 
 
-def read_sysctl(key: str) -> str:
-    with open("/proc/sys/" + key.replace(".", "/")) as f:
-        return f.read().strip()
-
-
 def popen_argv(name: str, argv: list[str]) -> list[str]:
     """The argv that runs `argv` inside namespace `name` (the pid stays that of argv)."""
     return ["ip", "netns", "exec", name, *argv]

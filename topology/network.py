@@ -6,7 +6,7 @@ Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kerne
    crash at any later point leaves a record that `testbed clean` can act on;
 2. create the medium namespace and one namespace per robot (names from topology.names);
 3. per robot, a bridge in the medium and a veth whose far end is the robot's wlan0
-   (topology.medium), addressed 10.0.0.K/32 with the sysctls DESIGN.md lists;
+   (topology.medium), addressed 10.0.0.K/32 with the sysctls docs/architecture.md lists;
 4. the links the range model wants for the initial positions, with their impairments;
 5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing); a
    daemon written in Python is forked from a fork server started at step 1, whose imports
@@ -28,8 +28,8 @@ import subprocess
 import time
 from dataclasses import asdict
 
-from testbed.errors import TestbedError, UsageError
 from topology import capture, names, netns, processes, ranges, routing, state
+from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
 from topology.medium import Medium
@@ -169,7 +169,7 @@ class Network:
             argv = routing.argv_for(self.spec.routing, k, self.state_dir, self.spec.time_scale)
             if argv is None:
                 continue
-            logp = os.path.join(self.state_dir, f"r{k}.{self.spec.routing}.log")
+            logp = routing.log_file(self.spec.routing, k, self.state_dir)
             if self._routing_forks is not None:  # started in _build iff `forkable`
                 open(logp, "w").close()  # the child appends
                 args = forkable.args(k, self.state_dir, self.spec.time_scale)

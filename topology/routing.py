@@ -18,9 +18,10 @@ on two cores (about 0.2 s of CPU each for start-up and imports); from the fork s
 started at the beginning of the network's bring-up, 0.34-0.49 s.
 """
 
+import os
 import shutil
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from topology import names
@@ -41,12 +42,22 @@ def babel_argv(k: int, run_dir: str, time_scale: float) -> list[str]:
     ]  # fmt: skip
 
 
+def log_file(routing: str, k: int, run_dir: str) -> str:
+    """Where robot k's daemon writes its log (stdout and stderr), in the testbed's run dir."""
+    return os.path.join(run_dir, f"r{k}.{routing}.log")
+
+
+def aodv_stats_file(k: int, run_dir: str) -> str:
+    """Where robot k's AODV daemon writes its statistics (aodv/stats.py)."""
+    return os.path.join(run_dir, f"r{k}.aodv.json")
+
+
 def aodv_args(k: int, run_dir: str, time_scale: float) -> list[str]:
     return [
         "--robot", f"r{k}",
         "--iface", names.ROBOT_IFACE,
         "--time-scale", repr(time_scale),
-        "--stats", f"{run_dir}/r{k}.aodv.json",
+        "--stats", aodv_stats_file(k, run_dir),
     ]  # fmt: skip
 
 
@@ -86,9 +97,9 @@ REQUIRED_TOOLS = {"none": [], "babel": ["babeld"], "aodv": []}
 
 # A file whose appearance says the daemon is up. The AODV daemon first writes its statistics
 # once its socket, TUN device and routes are ready; babeld says nothing we can wait for.
-READY_FILES: dict[str, Callable[[int, str], str]] = {
-    "aodv": lambda k, run_dir: f"{run_dir}/r{k}.aodv.json",
-}
+READY_FILES: dict[str, Callable[[int, str], str]] = {"aodv": aodv_stats_file}
+# The statistics a protocol's daemons write, if any.
+STATS_FILES: dict[str, Callable[[int, str], str]] = {"aodv": aodv_stats_file}
 READY_TIMEOUT_S = 30.0
 
 
@@ -99,6 +110,24 @@ def ready_file(routing: str, k: int, run_dir: str) -> str | None:
 
 def missing_tools(routing: str) -> list[str]:
     return [t for t in REQUIRED_TOOLS.get(routing, []) if shutil.which(t) is None]
+
+
+def keep_daemon_files(
+    routing: str, robots: Iterable[int], run_dir: str, logs_dir: str, stats_dir: str | None
+) -> None:
+    """Copy what each robot's routing daemon left in the testbed's run dir: its log into
+    `logs_dir` (same name, rK.<routing>.log) and its statistics, for a protocol whose daemons
+    write any, into `stats_dir` as rK.json. Files a daemon did not write are skipped."""
+    stats = STATS_FILES.get(routing) if stats_dir else None
+    for d in (logs_dir, stats_dir if stats else None):
+        if d:
+            os.makedirs(d, exist_ok=True)
+    for k in robots:
+        src = log_file(routing, k, run_dir)
+        if os.path.exists(src):
+            shutil.copy(src, os.path.join(logs_dir, os.path.basename(src)))
+        if stats and os.path.exists(stats(k, run_dir)):
+            shutil.copy(stats(k, run_dir), os.path.join(stats_dir, f"r{k}.json"))
 
 
 def argv_for(routing: str, k: int, run_dir: str, time_scale: float) -> list[str] | None:

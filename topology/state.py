@@ -19,6 +19,7 @@ import os
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from topology.jsonfile import write_json_atomic
 from topology.spec import Impairment, NetworkSpec
 
 DEFAULT_STATE_DIR = "/run/testbed"
@@ -105,7 +106,7 @@ class TestbedState:
         return self.owner_pid is None or not is_alive(self.owner_pid, self.owner_start)
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=1)
+        return json.dumps(asdict(self), indent=1) + "\n"
 
     @classmethod
     def from_json(cls, text: str) -> "TestbedState":
@@ -129,11 +130,7 @@ def spec_from_dict(d: dict[str, Any]) -> NetworkSpec:
 
 def write(name: str, st: TestbedState) -> None:
     os.makedirs(state_dir(), exist_ok=True)
-    path = state_path(name)
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "w") as f:
-        f.write(st.to_json())
-    os.replace(tmp, path)
+    write_json_atomic(state_path(name), asdict(st))
 
 
 def create(name: str, st: TestbedState) -> None:

@@ -49,6 +49,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+from topology.jsonfile import write_json_atomic
+
 log = logging.getLogger(__name__)
 
 CONTROL_PORTS = {"aodv": 654, "babel": 6696, "none": 654}
@@ -468,9 +470,7 @@ def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
     try:
-        tmp = cache.with_name(CACHE_NAME + ".tmp")
-        tmp.write_text(json.dumps(metrics, indent=1) + "\n")
-        os.replace(tmp, cache)
+        write_json_atomic(cache, metrics)
     except OSError as e:
         log.warning("cannot cache routing metrics in %s: %s", run_dir, e)
     return metrics

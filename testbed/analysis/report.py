@@ -40,6 +40,7 @@ from pathlib import Path
 
 from testbed.analysis import figures
 from testbed.errors import UsageError
+from topology.jsonfile import read_json
 
 log = logging.getLogger(__name__)
 
@@ -332,7 +333,7 @@ def _daemon_section(per_run: list[dict]) -> list[str]:
 
 def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:
     lines = []
-    state = _read_json(sweep_dir / "sweep.json") or {}
+    state = read_json(sweep_dir / "sweep.json") or {}
     spec = state.get("spec") or {}
     if spec:
         by_team = spec.get("time_scale_by_robots") or {}
@@ -412,13 +413,6 @@ def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:
             + "."
         )
     return lines
-
-
-def _read_json(path: Path):
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
 
 
 def _img(name: str, figdir: Path) -> str | None:

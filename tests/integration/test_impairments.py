@@ -10,7 +10,7 @@ import time
 import pytest
 
 from topology import netns
-from topology.impair import netem_available
+from topology.impair import kernel_has_netem
 from topology.network import Network
 from topology.spec import Impairment, NetworkSpec
 
@@ -19,20 +19,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 PORT = 47100
 
 
-def _kernel_has_netem() -> bool:
-    probe_ns = f"itprobe{os.getpid()}"
-    netns.create(probe_ns)
-    try:
-        worker = netns.NsWorker(probe_ns)
-        try:
-            return netem_available(worker)
-        finally:
-            worker.close()
-    finally:
-        netns.remove(probe_ns)
-
-
-HAVE_NETEM = os.geteuid() == 0 and _kernel_has_netem()
+HAVE_NETEM = os.geteuid() == 0 and kernel_has_netem()
 needs_netem = pytest.mark.skipif(not HAVE_NETEM, reason="sch_netem missing: run `make vm-test`")
 
 

@@ -1,0 +1,36 @@
+"""The one number check of every command line in the project (testbed, node, aodv).
+
+`number(kind, what, ...)` is an argparse `type=`: it turns the text into an int or a float
+and rejects, in one line that names the value and what it is for, anything that is not a
+number, not finite, or out of range. argparse then prints that line and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+
+
+def number(
+    kind: type, what: str, *, minimum: float | None = None, above: float | None = None
+) -> Callable[[str], int | float]:
+    """An argparse type for a finite `kind` (int or float) that is at least `minimum` and
+    greater than `above` (each when given): e.g. `number(float, "comm range", above=0)`."""
+
+    def parse(text: str) -> int | float:
+        try:
+            value = kind(text)
+        except ValueError:
+            noun = "a whole number" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"{what} must be {noun}, not {text!r}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{what} must be finite, not {text!r}")
+        if above is not None and not value > above:
+            raise argparse.ArgumentTypeError(f"{what} must be greater than {above:g}, not {text}")
+        if minimum is not None and value < minimum:
+            least = "not be negative" if minimum == 0 else f"be at least {minimum:g}"
+            raise argparse.ArgumentTypeError(f"{what} must {least}, not {text}")
+        return value
+
+    return parse
