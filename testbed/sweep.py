@@ -27,19 +27,9 @@ sets `load_limit`, only while the loads of the runs in flight add up to at most 
 load is (robots + 1) x time_scale, the process-steps it asks of the machine per emulated
 100 ms, so a sweep whose time scale falls with team size packs small teams side by side and
 gives a large one the machine alone. The queue is served first-fit: the first waiting run
-that fits starts. Concurrency backs off: a run that reports deadline_miss_fraction above 1%
-while another run shared the machine lowers the load limit to 80% of the load it ran under
-(without a load limit: the job count by one) and is redone once. Misses while the host
-stalled the whole machine (testbed.stalls: the world, at real-time priority, woke late) count
-against neither, since a slower clock would not have avoided them; a run that missed over 5%
-in stalls is redone as it was. A run that misses deadlines alone outside stalls means the
-machine is slower than the file's time scales assume (a shared machine varies): the later
-runs of that team size get their time scale multiplied by 0.85 (down to 0.25), and the run is
-redone (up to twice) if it missed more than 5% (below that it is kept: its result records what
-it missed); after 3 clean runs (under 0.5% missed outside stalls) of a team size since its
-last slow-down, its factor goes back up a notch (at most to the file's scale). Before stalls
-were told apart, a ratchet that needed 6 runs under 0.3% to speed up again took the paper
-sweep's team sizes down to 0.44-0.72 of the file's scales on 2026-11-22.
+that fits starts. What happens when a run misses step deadlines (the concurrency backs off,
+a team size's time scale goes down and up again, a run is redone) is decided by the pure
+rules of testbed.sweeppolicy; `Sweep._finish` only applies them.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -64,7 +54,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed import sweepfile
+from testbed import sweepfile, sweeppolicy
 from testbed.errors import TestbedError, UsageError
 from testbed.sweepfile import PlannedRun
 from topology.argtypes import number
@@ -75,12 +65,6 @@ from topology.state import is_alive, proc_start_time
 
 log = logging.getLogger(__name__)
 
-DEADLINE_MISS_LIMIT = 0.01
-SLOWDOWN = 0.85  # time scale factor applied when a run alone misses over the limit
-MIN_SCALE_FACTOR = 0.25
-REDO_MISS = 0.05  # a run alone that missed more than this is redone (slower); less is kept
-CLEAN_MISS = 0.005  # a run this clean counts towards speeding up again
-CLEAN_RUNS_TO_SPEED_UP = 3
 # Environment variable naming the command that runs one run (tests use a stand-in program).
 RUN_COMMAND_ENV = "TESTBED_SWEEP_RUN_COMMAND"
 # What the run server imports once for every run (testbed.cli imports the rest on demand).
@@ -451,73 +435,41 @@ class Sweep:
         st["result_status"] = result.get("status")
         miss = result.get("deadline_miss_fraction")
         st["deadline_miss_fraction"] = miss
-        # What a slower clock could have avoided: misses while the host stalled the whole
-        # machine do not count against the time scale or the concurrency (testbed.stalls).
-        ours = result.get("deadline_miss_fraction_outside_stalls", miss)
         n = run.config["robots"]
         self.progress.record(n, wall)
-        event = f"{run.run_id}: {result.get('status')} in {wall:.0f} s"
-        if isinstance(miss, int | float) and miss > DEADLINE_MISS_LIMIT:
-            event += f", missed {miss:.1%} of step deadlines"
-            if isinstance(ours, int | float) and ours < miss:
-                event += f" ({miss - ours:.1%} in host stalls)"
-            if isinstance(ours, int | float) and ours <= DEADLINE_MISS_LIMIT:
-                if miss > REDO_MISS:  # the host, not the load: again, at the same scale
-                    event += self._back_off(
-                        run, st, queue, miss, {"in_host_stalls": True},
-                        "the host's stalls, time scale kept", attempts=3,
-                    )  # fmt: skip
-            elif self.load_limit is not None and child.shared:
-                self.load_limit = round(min(self.load_limit, 0.8 * child.load_seen), 1)
-                event += self._back_off(
-                    run, st, queue, miss, {"load_limit": self.load_limit},
-                    f"load limit down to {self.load_limit:g}", attempts=2,
-                )  # fmt: skip
-            elif self.load_limit is None and child.jobs_at_start > 1:
-                self.jobs = max(1, min(self.jobs, child.jobs_at_start) - 1)
-                event += self._back_off(
-                    run, st, queue, miss, {"jobs": self.jobs},
-                    f"concurrency down to {self.jobs}", attempts=2,
-                )  # fmt: skip
-            elif not child.shared and self._factor(n) > MIN_SCALE_FACTOR:
-                # Alone and still late: the machine is slower than the sweep file's time scales
-                # assume (a shared machine varies). The later runs of this team size go slower,
-                # this one again. Only this size: a small team is bound by the latency of a
-                # step's round trip (a host that steals the CPU for milliseconds), a large one
-                # by CPU, so one says little about the other; each size finds its own.
-                new = max(MIN_SCALE_FACTOR, self._factor(n) * SLOWDOWN)
-                self.scale_factors[n] = new
-                self.clean_runs[n] = 0
-                event += self._back_off(
-                    run, st, queue, miss, {"robots": n, "time_scale_factor": round(new, 3)},
-                    f"time scales of teams of {n} down to {new:.0%} of the file's",
-                    attempts=3 if miss > REDO_MISS else 1,
-                )  # fmt: skip
-        if isinstance(ours, int | float) and ours <= CLEAN_MISS and self._factor(n) < 1.0:
-            self.clean_runs[n] = self.clean_runs.get(n, 0) + 1
-            if self.clean_runs[n] >= CLEAN_RUNS_TO_SPEED_UP:  # the machine got quicker again
-                self.clean_runs[n] = 0
-                self.scale_factors[n] = min(1.0, self._factor(n) / SLOWDOWN)
-                self.backoffs.append(
-                    {"run": run.run_id, "robots": n, "time_scale_factor": self.scale_factors[n]}
-                )
-                event += f"; time scales of teams of {n} up to {self.scale_factors[n]:.0%}"
-        return event
+        outcome = sweeppolicy.Outcome(
+            robots=n,
+            miss=miss,
+            # Misses while the host stalled the whole machine (testbed.stalls) are told apart.
+            miss_outside_stalls=result.get("deadline_miss_fraction_outside_stalls", miss),
+            shared=child.shared,
+            load_seen=child.load_seen,
+            jobs_at_start=child.jobs_at_start,
+            attempts=st["attempts"],
+        )
+        decision = sweeppolicy.decide(outcome, self._policy_state())
+        self._apply(decision, run, st, queue)
+        return f"{run.run_id}: {result.get('status')} in {wall:.0f} s" + decision.words
+
+    def _policy_state(self) -> sweeppolicy.State:
+        return sweeppolicy.State(
+            jobs=self.jobs,
+            load_limit=self.load_limit,
+            scale_factors=dict(self.scale_factors),
+            clean_runs=dict(self.clean_runs),
+        )
+
+    def _apply(self, d: sweeppolicy.Decision, run: PlannedRun, st: dict, queue: deque) -> None:
+        """Carry out what the policy decided about `run` (status entry `st`)."""
+        self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
+        self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
+        self.backoffs += [{"run": run.run_id, **record} for record in d.backoffs]
+        if d.redo:
+            st["status"] = "pending"
+            queue.appendleft(run)
 
     def _factor(self, robots: int) -> float:
         return self.scale_factors.get(robots, 1.0)
-
-    def _back_off(self, run, st: dict, queue: deque, miss: float, change: dict, what: str,
-                  attempts: int) -> str:  # fmt: skip
-        """Record a back-off and put the late run back at the head of the queue, unless it
-        has had `attempts` already; returns the words for the progress line."""
-        self.backoffs.append({"run": run.run_id, "deadline_miss_fraction": miss, **change})
-        event = f"; {what}"
-        if st["attempts"] < attempts:
-            st["status"] = "pending"
-            queue.appendleft(run)
-            event += ", redoing it"
-        return event
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
         for child in children.values():

@@ -1,0 +1,145 @@
+"""The sweep's rules for runs that missed step deadlines: a pure `decide(outcome, state)`.
+
+Theory of operation. A run records the fraction of step deadlines it missed, and how much of
+that fell in host stalls (testbed.stalls: the machine itself stopped, so no slower clock
+would have helped). When a run ends, the sweep (testbed.sweep, the mechanism) describes it
+as an `Outcome`, hands it with the sweep's `State` to `decide`, and applies the `Decision`:
+the new state, the back-off records for sweep.json, whether to redo the run, and the words
+for the progress line. `decide` reads no clock, does no IO and changes nothing it is given.
+
+The rules, in the order they are tried (each is cited at its branch below):
+
+1. A run that missed at most DEADLINE_MISS_LIMIT of its deadlines is kept; nothing changes.
+2. Over the limit, but within it once the misses in host stalls are left out: the host,
+   not the load, is to blame. The time scale is kept; the run is redone (at most 3
+   attempts) only if it missed more than REDO_MISS in all, else kept as it is.
+3. Over the limit outside stalls while another run shared the machine, under a load limit:
+   the limit falls to 80% of the most load in flight while this run ran; redo (2 attempts).
+4. The same without a load limit, when more than one run was allowed at its start: one run
+   fewer at a time; redo (2 attempts).
+5. Over the limit outside stalls while alone: the machine is slower than the sweep file's
+   time scales assume (a shared machine varies). Later runs of this team size get their
+   time scale multiplied by SLOWDOWN (down to MIN_SCALE_FACTOR of the file's), and this
+   run is redone (3 attempts) if it missed more than REDO_MISS, else kept. Only this team
+   size: a small team is bound by the latency of a step's round trip, a large one by CPU,
+   so one says little about the other; each finds its own scale.
+6. A run of a slowed-down team size that missed at most CLEAN_MISS outside stalls counts
+   as clean; after CLEAN_RUNS_TO_SPEED_UP clean runs since the last change the factor goes
+   back up a notch (divided by SLOWDOWN, never past the file's scale). Before stalls were
+   told apart, a ratchet that needed 6 runs under 0.3% to speed up again took the paper
+   sweep's team sizes down to 0.44-0.72 of the file's scales (2026-11-22).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+DEADLINE_MISS_LIMIT = 0.01
+SLOWDOWN = 0.85  # time scale factor applied when a run alone misses over the limit
+MIN_SCALE_FACTOR = 0.25
+REDO_MISS = 0.05  # a run alone that missed more than this is redone (slower); less is kept
+CLEAN_MISS = 0.005  # a run this clean counts towards speeding up again
+CLEAN_RUNS_TO_SPEED_UP = 3
+LOAD_BACKOFF = 0.8  # rule 3: the new load limit, as a share of the load the late run saw
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a finished run reported, and how it ran."""
+
+    robots: int
+    miss: float | None  # deadline_miss_fraction (None: the run did not say)
+    miss_outside_stalls: float | None
+    shared: bool = False  # another run was in flight at some time during this one
+    load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.run_load)
+    jobs_at_start: int = 1  # the concurrency allowed when it started
+    attempts: int = 1  # how many times it has been started, this one included
+
+
+@dataclass(frozen=True)
+class State:
+    """What the rules read and change: the sweep's concurrency and per-team-size scales."""
+
+    jobs: int
+    load_limit: float | None = None
+    scale_factors: dict[int, float] = field(default_factory=dict)  # robots -> factor (< 1)
+    clean_runs: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
+
+    def factor(self, robots: int) -> float:
+        return self.scale_factors.get(robots, 1.0)
+
+
+@dataclass(frozen=True)
+class Decision:
+    state: State  # the sweep's state from now on
+    backoffs: tuple[dict, ...] = ()  # records for sweep.json (the sweep adds the run id)
+    redo: bool = False  # run it again (it goes to the head of the queue)
+    words: str = ""  # appended to the run's line in the progress display
+
+
+def _number(x) -> bool:
+    return isinstance(x, int | float)
+
+
+def _back_off(o: Outcome, state: State, change: dict, what: str, attempts: int) -> Decision:
+    """A back-off: recorded, and the run redone unless it has had `attempts` already."""
+    redo = o.attempts < attempts
+    words = f"; {what}" + (", redoing it" if redo else "")
+    record = {"deadline_miss_fraction": o.miss, **change}
+    return Decision(state, (record,), redo, words)
+
+
+def decide(o: Outcome, state: State) -> Decision:
+    """What the sweep does about a finished run (the rules of the module docstring)."""
+    n, miss, ours = o.robots, o.miss, o.miss_outside_stalls
+    d = Decision(state)
+    if _number(miss) and miss > DEADLINE_MISS_LIMIT:
+        words = f", missed {miss:.1%} of step deadlines"
+        if _number(ours) and ours < miss:
+            words += f" ({miss - ours:.1%} in host stalls)"
+        if _number(ours) and ours <= DEADLINE_MISS_LIMIT:
+            # Rule 2: the host's stalls, not the load: the scale stays; redo only a bad run.
+            if miss > REDO_MISS:
+                d = _back_off(o, state, {"in_host_stalls": True},
+                              "the host's stalls, time scale kept", attempts=3)  # fmt: skip
+        elif state.load_limit is not None and o.shared:
+            # Rule 3: shared under a load limit: the limit falls below what this run saw.
+            limit = round(min(state.load_limit, LOAD_BACKOFF * o.load_seen), 1)
+            d = _back_off(o, replace(state, load_limit=limit), {"load_limit": limit},
+                          f"load limit down to {limit:g}", attempts=2)  # fmt: skip
+        elif state.load_limit is None and o.jobs_at_start > 1:
+            # Rule 4: shared by job count: one run fewer at a time.
+            jobs = max(1, min(state.jobs, o.jobs_at_start) - 1)
+            d = _back_off(o, replace(state, jobs=jobs), {"jobs": jobs},
+                          f"concurrency down to {jobs}", attempts=2)  # fmt: skip
+        elif not o.shared and state.factor(n) > MIN_SCALE_FACTOR:
+            # Rule 5: alone and still late: this team size slows down, this run again if bad.
+            new = max(MIN_SCALE_FACTOR, state.factor(n) * SLOWDOWN)
+            slower = replace(
+                state,
+                scale_factors={**state.scale_factors, n: new},
+                clean_runs={**state.clean_runs, n: 0},
+            )
+            d = _back_off(
+                o, slower, {"robots": n, "time_scale_factor": round(new, 3)},
+                f"time scales of teams of {n} down to {new:.0%} of the file's",
+                attempts=3 if miss > REDO_MISS else 1,
+            )  # fmt: skip
+        d = replace(d, words=words + d.words)
+    s = d.state
+    if _number(ours) and ours <= CLEAN_MISS and s.factor(n) < 1.0:
+        # Rule 6: a clean run of a slowed-down size; enough of them speed it up a notch.
+        clean = s.clean_runs.get(n, 0) + 1
+        if clean < CLEAN_RUNS_TO_SPEED_UP:
+            return replace(d, state=replace(s, clean_runs={**s.clean_runs, n: clean}))
+        up = min(1.0, s.factor(n) / SLOWDOWN)
+        faster = replace(
+            s, scale_factors={**s.scale_factors, n: up}, clean_runs={**s.clean_runs, n: 0}
+        )
+        return replace(
+            d,
+            state=faster,
+            backoffs=d.backoffs + ({"robots": n, "time_scale_factor": up},),
+            words=d.words + f"; time scales of teams of {n} up to {up:.0%}",
+        )
+    return d

@@ -1,0 +1,116 @@
+"""The sweep's rules for late runs (testbed.sweeppolicy), one test per rule, pure."""
+
+import copy
+
+import pytest
+
+from testbed.sweeppolicy import (
+    CLEAN_RUNS_TO_SPEED_UP,
+    MIN_SCALE_FACTOR,
+    SLOWDOWN,
+    Outcome,
+    State,
+    decide,
+)
+
+
+def outcome(miss, ours=None, **kw):
+    return Outcome(robots=kw.pop("robots", 5), miss=miss,
+                   miss_outside_stalls=miss if ours is None else ours, **kw)  # fmt: skip
+
+
+def test_rule1_a_run_within_the_limit_changes_nothing():
+    state = State(jobs=1)
+    d = decide(outcome(0.009), state)
+    assert d.state == state and not d.redo and d.backoffs == () and d.words == ""
+
+
+def test_rule1_a_run_that_reported_nothing_changes_nothing():
+    d = decide(outcome(None), State(jobs=1))
+    assert d == decide(outcome(0.0), State(jobs=1))
+
+
+def test_rule2_misses_in_host_stalls_keep_the_scale_and_redo_only_a_bad_run():
+    state = State(jobs=1)
+    bad = decide(outcome(0.08, ours=0.004), state)
+    assert bad.state == state and bad.redo
+    assert bad.backoffs == ({"deadline_miss_fraction": 0.08, "in_host_stalls": True},)
+    assert bad.words == (", missed 8.0% of step deadlines (7.6% in host stalls); the host's "
+                         "stalls, time scale kept, redoing it")  # fmt: skip
+    assert not decide(outcome(0.08, ours=0.004, attempts=3), state).redo  # 3 attempts at most
+    mild = decide(outcome(0.03, ours=0.004), state)
+    assert mild.state == state and not mild.redo and mild.backoffs == ()
+    assert mild.words == ", missed 3.0% of step deadlines (2.6% in host stalls)"
+
+
+def test_rule3_a_shared_run_under_a_load_limit_lowers_it_to_80_percent_of_what_it_saw():
+    d = decide(outcome(0.02, shared=True, load_seen=40.0), State(jobs=4, load_limit=50.0))
+    assert d.state.load_limit == 32.0 and d.state.jobs == 4 and d.redo
+    assert d.backoffs == ({"deadline_miss_fraction": 0.02, "load_limit": 32.0},)
+    assert d.words.endswith("; load limit down to 32, redoing it")
+    assert not decide(outcome(0.02, shared=True, load_seen=40.0, attempts=2),
+                      State(jobs=4, load_limit=50.0)).redo  # fmt: skip
+    # Never up: a limit already below 80% of the load seen stays.
+    assert decide(outcome(0.02, shared=True, load_seen=40.0),
+                  State(jobs=4, load_limit=20.0)).state.load_limit == 20.0  # fmt: skip
+
+
+def test_rule4_without_a_load_limit_one_run_fewer_at_a_time():
+    d = decide(outcome(0.02, shared=True, jobs_at_start=3), State(jobs=3))
+    assert d.state.jobs == 2 and d.redo
+    assert d.backoffs == ({"deadline_miss_fraction": 0.02, "jobs": 2},)
+    assert d.words.endswith("; concurrency down to 2, redoing it")
+    # From the concurrency it started under, if that was lower than today's.
+    assert decide(outcome(0.02, jobs_at_start=2), State(jobs=4)).state.jobs == 1
+
+
+def test_rule5_alone_and_late_slows_its_team_size_down_and_redoes_only_a_bad_run():
+    state = State(jobs=1, scale_factors={3: 0.5})
+    d = decide(outcome(0.02, robots=5), state)
+    assert d.state.scale_factors == {3: 0.5, 5: SLOWDOWN} and d.state.clean_runs == {5: 0}
+    assert not d.redo  # 2% is kept: its result records what it missed
+    assert d.backoffs == (
+        {"deadline_miss_fraction": 0.02, "robots": 5, "time_scale_factor": SLOWDOWN},
+    )
+    assert d.words.endswith("; time scales of teams of 5 down to 85% of the file's")
+    bad = decide(outcome(0.06, robots=5), state)
+    assert bad.redo and bad.words.endswith(", redoing it")
+    assert not decide(outcome(0.06, robots=5, attempts=3), state).redo
+
+
+def test_rule5_stops_at_the_floor():
+    near = State(jobs=1, scale_factors={5: 0.27})
+    assert decide(outcome(0.02), near).state.scale_factors[5] == MIN_SCALE_FACTOR
+    floor = State(jobs=1, scale_factors={5: MIN_SCALE_FACTOR})
+    d = decide(outcome(0.06), floor)
+    assert d.state == floor and not d.redo and d.backoffs == ()
+
+
+def test_rule6_clean_runs_speed_a_slowed_size_up_a_notch_never_past_the_file():
+    state = State(jobs=1, scale_factors={5: SLOWDOWN})
+    for i in range(1, CLEAN_RUNS_TO_SPEED_UP):
+        d = decide(outcome(0.004), state)
+        assert d.state.clean_runs == {5: i} and d.state.scale_factors == {5: SLOWDOWN}
+        assert d.backoffs == () and d.words == ""
+        state = d.state
+    d = decide(outcome(0.004), state)
+    assert d.state.scale_factors == {5: pytest.approx(1.0)} and d.state.clean_runs == {5: 0}
+    assert d.backoffs == ({"robots": 5, "time_scale_factor": pytest.approx(1.0)},)
+    assert d.words == "; time scales of teams of 5 up to 100%"
+    # A size at the file's scale has nothing to speed up; a run over CLEAN_MISS is not clean.
+    assert decide(outcome(0.0), State(jobs=1)).state.clean_runs == {}
+    assert decide(outcome(0.006), State(jobs=1, scale_factors={5: 0.5})).state.clean_runs == {}
+
+
+def test_rule6_counts_a_clean_run_after_rule2_kept_the_scale():
+    state = State(jobs=1, scale_factors={5: 0.5})
+    d = decide(outcome(0.03, ours=0.001), state)  # all but 0.1% in host stalls
+    assert d.state.clean_runs == {5: 1}
+
+
+def test_decide_changes_nothing_it_is_given():
+    state = State(jobs=3, load_limit=None, scale_factors={5: 0.5}, clean_runs={5: 2})
+    before = copy.deepcopy(state)
+    for o in (outcome(0.06), outcome(0.004), outcome(0.02, jobs_at_start=3)):
+        decide(o, state)
+    assert state == before
