@@ -44,6 +44,7 @@ from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
 from node.grid import FREE, OCC, OccupancyGrid
+from node.timing import RobotTimings
 from testbed.world import body
 from testbed.world.rays import Laser
 
@@ -72,7 +73,7 @@ class RobotConfig:
     full_period: int = 500  # whole local map at least this often (and on reunions)
     reach_steps: int = 30
     goal_fresh_steps: int = 40
-    time_scale: float = 1.0
+    timing: RobotTimings = RobotTimings()  # every wall-clock duration (node.timing)
     planner_factor: int = 2
     phase: int = 0  # steps added to the first timer period (and map floods' offset)
 
@@ -174,8 +175,7 @@ class Robot:
         self.malformed = 0
         self.inbox_dropped = 0
         self.stuck = 0
-        # At most 1 ms, and at most a tenth of a step in wall time.
-        self.linger = min(0.001, 0.01 / cfg.time_scale)
+        self.linger = cfg.timing.flood_linger_s
         self.frames = 0
         self.skipped = 0
         self.last_full = -(10**9)

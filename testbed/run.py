@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from node.launch import NodeArgs
 from node.sched import deadline_priority
 from testbed.errors import TestbedError, UsageError
 from testbed.runconfig import STEP_S, RunConfig, add_arguments, config_from_args
@@ -282,31 +283,26 @@ class Run:
         self._wait_connected(CONNECT_TIMEOUT_S + 3.0 * self.n)
         self._phase("processes_ready")
 
-    def _common_argv(self) -> list[str]:
+    def _node_args(self, k: int, **role: object) -> NodeArgs:
+        """What robot k's process is told: the run's parameters plus its role's own."""
         cfg, truth = self.cfg, self.truth
-        return [
-            "--robots", str(self.n), "--body", self.server.path,
-            "--map-size", f"{truth.shape[0]}x{truth.shape[1]}", "--cell", str(truth.cell),
-            "--laser-range", str(cfg.laser_range), "--laser-rays", str(cfg.laser_rays),
-            "--speed", str(cfg.speed), "--radius", str(cfg.radius),
-            "--plan-period", str(cfg.plan_period), "--map-period", str(cfg.map_period),
-            "--time-scale", str(cfg.time_scale), "--flood", cfg.flood,
-        ]  # fmt: skip
+        return NodeArgs(
+            robot=k, robots=self.n, body=self.server.path, map_size=truth.shape,
+            cell=truth.cell, laser_range=cfg.laser_range, laser_rays=cfg.laser_rays,
+            speed=cfg.speed, radius=cfg.radius, plan_period=cfg.plan_period,
+            map_period=cfg.map_period, time_scale=cfg.time_scale, flood=cfg.flood, **role,
+        )  # fmt: skip
 
     def _node_argv(self, k: int) -> list[str]:
-        return self._common_argv() + [
-            "--robot", f"r{k}", "--timer-phase", str(self.phases[k - 1]),
-            "--events", self._path("robots", f"r{k}.events.jsonl"),
-        ]  # fmt: skip
+        events = self._path("robots", f"r{k}.events.jsonl")
+        return self._node_args(k, timer_phase=self.phases[k - 1], events=events).to_argv()
 
     def _display_argv(self) -> list[str]:
-        snaps = ",".join(str(s) for s in self.cfg.snapshots or DEFAULT_SNAPSHOTS)
-        return self._common_argv() + [
-            "--robot", f"r{self.display_k}", "--role", "display",
-            "--out-dir", self._path("display"),
-            "--events", self._path("display", "events.jsonl"),
-            "--snapshots", snaps,
-        ]  # fmt: skip
+        return self._node_args(
+            self.display_k, role="display", out_dir=self._path("display"),
+            events=self._path("display", "events.jsonl"),
+            snapshots=frozenset(self.cfg.snapshots or DEFAULT_SNAPSHOTS),
+        ).to_argv()  # fmt: skip
 
     def _start_node(self, k: int, role: str, argv: list[str], log_path: str):
         """`python -m node ARGV` in robot k's namespace, forked from the fork server (the

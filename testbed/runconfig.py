@@ -12,10 +12,10 @@ import re
 from dataclasses import asdict, dataclass
 
 from node.flood import MODES as FLOOD_MODES
+from node.timing import STEP_S
 from testbed.errors import UsageError
 from topology.argtypes import number
 
-STEP_S = 0.1  # emulated seconds per step
 ROUTINGS = ("babel", "aodv", "none")
 
 

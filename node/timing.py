@@ -1,0 +1,55 @@
+"""A robot's timings: every wall-clock duration the robot process uses, derived in one place.
+
+Theory of operation. The world's clock ticks once per step, STEP_S of emulated time (the
+paper's motion update, 100 ms). `--time-scale K` runs emulated time K times faster than the
+wall clock, so every duration that belongs to emulated time is divided by K, here and only
+here: the robot's parts take their durations from a `RobotTimings`, never from the time
+scale. Durations that are the machine's, not the emulated world's (a thread's switch
+interval, a poll's timeout while nothing happens), are not scaled and do not live here.
+The world's side of the same clock (testbed.run) imports STEP_S from this module.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+STEP_S = 0.1  # emulated seconds per step: the one definition of the project
+NEIGHBOUR_HOLD_MAP_PERIODS = 1.5  # a flood neighbour is forgotten after this many map periods
+GOAL_SEND_TIMEOUT_EMULATED_MS = 50  # half a step: a goal not sent by then is given up
+GOAL_SEND_TIMEOUT_MIN_MS = 2  # nng's send timeout in whole ms; below 2 it gives up at once
+FLOOD_LINGER_MAX_S = 0.001  # wait at most this long for more copies of a flood burst
+FLOOD_LINGER_EMULATED_S = 0.01  # ... and at most a tenth of a step
+
+
+@dataclass(frozen=True)
+class RobotTimings:
+    time_scale: float = 1.0
+    map_period: int = 10  # steps between a robot's map floods
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.time_scale) and self.time_scale > 0):
+            raise ValueError(f"time_scale must be a finite number > 0, not {self.time_scale}")
+        if self.map_period < 1:
+            raise ValueError(f"map_period must be >= 1, not {self.map_period}")
+
+    @property
+    def step_s(self) -> float:
+        """Wall seconds per step."""
+        return STEP_S / self.time_scale
+
+    @property
+    def neighbour_hold_s(self) -> float:
+        """Wall seconds after which a flood neighbour not heard from is forgotten (node.flood):
+        1.5 map periods, so one lost flood does not drop a neighbour."""
+        return NEIGHBOUR_HOLD_MAP_PERIODS * self.map_period * STEP_S / self.time_scale
+
+    @property
+    def goal_send_timeout_ms(self) -> int:
+        """How long sending a goal to an unreachable teammate may block (node.goalnet)."""
+        return max(GOAL_SEND_TIMEOUT_MIN_MS, round(GOAL_SEND_TIMEOUT_EMULATED_MS / self.time_scale))
+
+    @property
+    def flood_linger_s(self) -> float:
+        """How long the inbox waits for more copies of a flood burst before handing it on."""
+        return min(FLOOD_LINGER_MAX_S, FLOOD_LINGER_EMULATED_S / self.time_scale)
