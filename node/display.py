@@ -39,7 +39,7 @@ class Display:
         flooder: Flooder,
         events: EventLog,
         out_dir: str,
-        snapshots: set[int],
+        snapshots: frozenset[int],
         video_every: int = 10,
         scale: int = 2,
         map_period: int = 10,
