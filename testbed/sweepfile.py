@@ -150,6 +150,15 @@ def _positive(path, key: str, v) -> float:
     return float(v)
 
 
+def _count(path, key: str, v) -> int:
+    """A whole number of at least 1 (runs per point, a step cap)."""
+    if not _is_int(v):
+        raise _fail(path, key, f"expected an integer, got {v!r}")
+    if v < 1:
+        raise _fail(path, key, f"must be >= 1, got {v}")
+    return v
+
+
 def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
     """`time_scale = { 1 = 12.0, 2 = 10.0 }`: a time scale for each team size of the grid."""
     out = {}
@@ -194,12 +203,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
             path, "grid.delay_ms", grid["delay_ms"], integer=False, low=0, low_open=False
         )
     if "runs" in grid:
-        runs = grid["runs"]
-        if not _is_int(runs):
-            raise _fail(path, "grid.runs", f"expected an integer, got {runs!r}")
-        if runs < 1:
-            raise _fail(path, "grid.runs", f"must be >= 1, got {runs}")
-        kw["runs"] = runs
+        kw["runs"] = _count(path, "grid.runs", grid["runs"])
 
     if "time_scale" in run:
         ts = run["time_scale"]
@@ -217,12 +221,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
             )
         kw["routing"] = routing
     if "max_steps" in run:
-        ms = run["max_steps"]
-        if not _is_int(ms):
-            raise _fail(path, "run.max_steps", f"expected an integer, got {ms!r}")
-        if ms < 1:
-            raise _fail(path, "run.max_steps", f"must be >= 1, got {ms}")
-        kw["max_steps"] = ms
+        kw["max_steps"] = _count(path, "run.max_steps", run["max_steps"])
     if "capture" in run:
         if not isinstance(run["capture"], bool):
             raise _fail(path, "run.capture", f"expected true or false, got {run['capture']!r}")
