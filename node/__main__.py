@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
             robot=me, robots=args.robots, shape=args.map_size, cell=args.cell,
             laser_range=args.laser_range, laser_rays=args.laser_rays, speed=args.speed,
             radius=args.radius, plan_period=args.plan_period, map_period=args.map_period,
-            timing=timing, phase=max(0, args.timer_phase),
+            timing=timing, phase=max(0, args.timer_phase), coordination=args.coordination,
         )  # fmt: skip
         goals = GoalNet(
             me, args.bind or robot_addr(me), args.goal_port, robot_addr,

@@ -14,6 +14,7 @@ import re
 import sys
 from dataclasses import dataclass
 
+from node import coordination
 from node.flood import MODES
 from topology.argtypes import number
 
@@ -40,6 +41,7 @@ class NodeArgs:
     iface: str = "wlan0"  # '' to not bind floods to a device
     flood_port: int = 5100
     flood: str = "pruned"
+    coordination: str = coordination.DEFAULT  # how goals are agreed: "paper" or "ours"
     goal_port: int = 5101
     bind: str | None = None  # address for the goal socket (default: the robot's)
     out_dir: str | None = None  # display: where snapshots and the video go
@@ -131,6 +133,12 @@ def parser() -> argparse.ArgumentParser:
         choices=MODES,
         default="pruned",
         help="map flooding: self-pruning (default) or blind (every robot relays)",
+    )
+    p.add_argument(
+        "--coordination",
+        choices=coordination.MODES,
+        default=coordination.DEFAULT,
+        help="goal coordination: the paper's rules read literally, or ours (node.coordination)",
     )
     p.add_argument("--goal-port", type=number(int, "--goal-port", above=0), default=5101)
     p.add_argument("--bind", help="address for the goal socket (default: the robot's)")

@@ -52,7 +52,8 @@ class PlannerParams:
 
 @dataclass
 class Plan:
-    """A planning result. `status` is "ok", "fallback" (goal near a teammate's) or "done"."""
+    """A planning result. `status` is "ok", "fallback" (goal near a teammate's), "blocked"
+    (frontiers left, but all near teammates' goals: no goal) or "done" (no frontier left)."""
 
     status: str
     goal: tuple[float, float] | None = None
@@ -287,8 +288,11 @@ def plan(
     teammate_goals: list[tuple[float, float]],
     exclusion_radius: float,
     params: PlannerParams | None = None,
+    fallback: bool = True,
 ) -> Plan:
-    """The goal rule and a path to it, from a ternary map and the robot's (x, y)."""
+    """The goal rule and a path to it, from a ternary map and the robot's (x, y). When every
+    reachable frontier is within `exclusion_radius` of a teammate's goal, the nearest one is
+    the goal ("fallback") if `fallback`, else there is none ("blocked": node.coordination)."""
     prm = params or PlannerParams()
     p = pool(t, prm.factor)
     h, w = p.shape
@@ -311,6 +315,8 @@ def plan(
     dist, cell, kind = wavefront(passable, (sr, sc), goals & ~excluded, goals)
     if cell is None:
         return Plan("done")
+    if kind == "fallback" and not fallback:
+        return Plan("blocked")
     cells = smooth(trace_back(dist, cell), passable)
     waypoints = [((c + 0.5) * pc, (r + 0.5) * pc) for r, c in cells]
     return Plan(kind, waypoints[-1], waypoints, path_length(cells, pc))

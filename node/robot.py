@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from node import planner, sched, wire
+from node import coordination, planner, sched, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
@@ -74,6 +74,7 @@ class RobotConfig:
     reach_steps: int = 30
     goal_fresh_steps: int = 40
     timing: RobotTimings = RobotTimings()  # every wall-clock duration (node.timing)
+    coordination: str = coordination.DEFAULT  # how goals are agreed (node.coordination)
     planner_factor: int = 2
     phase: int = 0  # steps added to the first timer period (and map floods' offset)
 
@@ -381,7 +382,8 @@ class Robot:
                     and step - s.teammates[j].goal_step <= cfg.goal_fresh_steps
                 ]
             t0 = time.perf_counter()
-            p = planner.plan(t, pose, goals, cfg.laser_range, self.params)
+            p = planner.plan(t, pose, goals, cfg.laser_range, self.params,
+                             fallback=coordination.allows_fallback(cfg.coordination))  # fmt: skip
             ms = (time.perf_counter() - t0) * 1000
             self.busy["plan"] += ms / 1000
             self.plan_ms.append(ms)
@@ -405,6 +407,8 @@ class Robot:
                 self.events.write("finish", step)
                 log.info("finished at step %d: no reachable frontier left", step)
                 continue
+            if p.status == "blocked":
+                continue  # no goal selected, nothing to announce: it waits (coordination)
             data = wire.goal_msg(cfg.robot, step, p.goal, p.cost, p.status == "fallback")
             for j in reach:
                 self._send(j, "goal", data, step)
@@ -427,6 +431,7 @@ class Robot:
         last_map = -(10**9)
         seen_step = -1
         timer_fired = False
+        next_tick: int | None = None  # the timer's own schedule (coordination "paper")
         while not self.stopping.is_set():
             with self.tick:
                 self.tick.wait(0.5)
@@ -435,13 +440,20 @@ class Robot:
                 # The first timer period is longer by the robot's phase: robots booted in
                 # the same step would otherwise plan (and flood) in lock-step forever.
                 period = cfg.plan_period + (cfg.phase if not timer_fired else 0)
+                started = self.s.last_plan_step >= 0  # the first plan is motion control's
+                if started and next_tick is None:
+                    next_tick = self.s.last_plan_step + period
                 due = (
                     step >= 0
-                    and self.s.last_plan_step >= 0  # the first plan is motion control's "start"
+                    and started
                     and not self.s.finished
                     and not self.s.plan_pending
-                    and step - self.s.last_plan_step >= period
+                    and coordination.timer_due(
+                        cfg.coordination, step, self.s.last_plan_step, next_tick, period
+                    )
                 )
+                while next_tick is not None and next_tick <= step:
+                    next_tick += cfg.plan_period
             if step == seen_step:
                 continue
             seen_step = step
@@ -577,17 +589,14 @@ class Robot:
         self.received[m["k"]] += 1
         self.events.write("recv", step, kind=m["k"], frm=j, sent=m["step"],
                           t=round(time.monotonic(), 4))  # fmt: skip
+        mode = cfg.coordination
         if m["k"] == "goal":
-            if m["fallback"]:
-                return  # its robot had nowhere better to go: asking again would not help
-            decision = planner.resolve_conflict(
-                cfg.robot, mine, my_cost, j, m["goal"], m["cost"], cfg.laser_range
-            )
+            decision = coordination.on_goal(mode, cfg.robot, mine, my_cost, j, m["goal"],
+                                            m["cost"], m["fallback"], cfg.laser_range)  # fmt: skip
             if decision == "request":
                 self._send(j, "replan", wire.replan_msg(cfg.robot, step, mine), step)
         elif m["k"] == "replan":
-            # A request about a goal I no longer have (I re-planned since) is stale.
-            if mine is not None and planner.goals_conflict(mine, m["goal"], cfg.laser_range):
+            if coordination.on_request(mode, mine, m["goal"], cfg.laser_range):
                 self.request("request")
             else:
                 self.events.write("stale_request", step, frm=j)

@@ -204,7 +204,7 @@ class Run:
         cfg = self.cfg
         truth = load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
         rng = np.random.default_rng(cfg.seed)
-        starts = start_positions(truth, cfg.robots, rng, cfg.radius)
+        starts = start_positions(truth, cfg.robots, rng, cfg.radius, cfg.start)
         # Each robot's timer starts at its own phase (seeded), as robots booted one by one would.
         self.phases = [int(v) for v in rng.integers(0, cfg.plan_period, size=cfg.robots)]
         laser = Laser(cfg.laser_range, cfg.laser_rays, truth.cell)
@@ -290,7 +290,8 @@ class Run:
             robot=k, robots=self.n, body=self.server.path, map_size=truth.shape,
             cell=truth.cell, laser_range=cfg.laser_range, laser_rays=cfg.laser_rays,
             speed=cfg.speed, radius=cfg.radius, plan_period=cfg.plan_period,
-            map_period=cfg.map_period, time_scale=cfg.time_scale, flood=cfg.flood, **role,
+            map_period=cfg.map_period, time_scale=cfg.time_scale, flood=cfg.flood,
+            coordination=cfg.coordination, **role,
         )  # fmt: skip
 
     def _node_argv(self, k: int) -> list[str]:

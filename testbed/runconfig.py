@@ -11,9 +11,11 @@ import argparse
 import re
 from dataclasses import asdict, dataclass
 
+from node import coordination
 from node.flood import MODES as FLOOD_MODES
 from node.timing import STEP_S
 from testbed.errors import UsageError
+from testbed.world.worldmap import START_PLACEMENTS
 from topology.argtypes import number
 
 ROUTINGS = ("babel", "aodv", "none")
@@ -32,6 +34,8 @@ class RunConfig:
     delay_ms: float = 0.0
     capture: bool = False
     max_steps: int = 3000
+    coordination: str = coordination.DEFAULT  # node.coordination: "paper" or "ours"
+    start: str = "corner"  # start placement: "corner", "centre" or "spread" (worldmap)
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = 0.05
     laser_rays: int = 360
@@ -100,6 +104,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="pruned",
         help="map flooding: self-pruning (default) or blind (every robot relays every flood)",
     )
+    a("--coordination", choices=coordination.MODES, default=coordination.DEFAULT,
+      help="goal coordination: 'paper' reads the paper's rules literally, 'ours' (default) "
+           "departs where they stall a team; see README, 'Coordination'")  # fmt: skip
+    a("--start", choices=START_PLACEMENTS, default="corner",
+      help="start placement: clustered near a corner (default, as in the paper), clustered "
+           "at the centre, or spread over the map")  # fmt: skip
     a("--display-pos", type=_point, help="X,Y of the display (default: map centre)")
     a("--snapshots", type=_steps, default=(),
       help="display snapshot steps, e.g. 200,600 (default 100,250,500,1000,2000; always one "
@@ -123,6 +133,6 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
         max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
         speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
-        map_period=args.map_period, flood=args.flood,
-        kill=tuple(args.kill),
+        map_period=args.map_period, flood=args.flood, coordination=args.coordination,
+        start=args.start, kill=tuple(args.kill),
     )  # fmt: skip

@@ -32,7 +32,7 @@ RESULT_FORMAT = 1
 # The keys of config.json that result.json repeats under "config" (the contract's).
 RESULT_CONFIG_KEYS = (
     "robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map", "loss_pct",
-    "delay_ms", "capture", "max_steps",
+    "delay_ms", "capture", "max_steps", "coordination", "start",
 )  # fmt: skip
 # What each robot's summary line (its last event) says, copied into robots/rK.json.
 SUMMARY_KEYS = (

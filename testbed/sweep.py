@@ -82,6 +82,8 @@ _FLAGS = {
     "delay_ms": "--delay",
     "map": "--map",
     "capture": "--capture",
+    "coordination": "--coordination",
+    "start": "--start",
 }
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
 GRACE_INT = 30.0

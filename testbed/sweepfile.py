@@ -12,7 +12,9 @@ for every run of the sweep::
     laser_range = [2.0]           # metres (required)
     loss_pct = [0, 10, 30]        # optional, default [0]
     delay_ms = [0, 50]            # optional, default [0]; needs sch_netem when > 0
-    runs = 1                      # runs per point, default 1
+    coordination = ["paper", "ours"]   # optional, default ["ours"] (node.coordination)
+    start = ["corner", "spread"]  # optional, default ["corner"]: corner | centre | spread
+    runs = 1                      # runs per point (any number), default 1
 
     [run]
     time_scale = 5.0              # default 1.0; or per team size (every size in the grid):
@@ -43,13 +45,21 @@ import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from node.coordination import DEFAULT as DEFAULT_COORDINATION
+from node.coordination import MODES as COORDINATION_MODES
 from testbed.errors import UsageError
+from testbed.world.worldmap import START_PLACEMENTS
 
 ROUTINGS = ("aodv", "babel", "none")
 
 _TOP_KEYS = {"description", "grid", "run"}
 _GRID_LISTS = ("robots", "comm_range", "laser_range", "loss_pct", "delay_ms")
-_GRID_KEYS = set(_GRID_LISTS) | {"runs"}
+# Grid lists of names, with the names each allows and its default.
+_GRID_CHOICES = {
+    "coordination": (COORDINATION_MODES, DEFAULT_COORDINATION),
+    "start": (START_PLACEMENTS, "corner"),
+}
+_GRID_KEYS = set(_GRID_LISTS) | set(_GRID_CHOICES) | {"runs"}
 _RUN_KEYS = {"time_scale", "routing", "max_steps", "capture", "map", "seed", "load_limit"}
 
 
@@ -62,6 +72,8 @@ class SweepSpec:
     laser_range: tuple[float, ...]
     loss_pct: tuple[float, ...] = (0.0,)
     delay_ms: tuple[float, ...] = (0.0,)
+    coordination: tuple[str, ...] = (DEFAULT_COORDINATION,)
+    start: tuple[str, ...] = ("corner",)
     runs: int = 1
     time_scale: float = 1.0  # for team sizes without an entry in time_scale_by_robots
     time_scale_by_robots: tuple[tuple[int, float], ...] = ()
@@ -95,7 +107,8 @@ class PlannedRun:
     def point(self) -> tuple:
         """The grid point this run belongs to (what its repetitions share)."""
         c = self.config
-        return (c["robots"], c["comm_range"], c["laser_range"], c["loss_pct"], c["delay_ms"])
+        return (c["robots"], c["comm_range"], c["laser_range"], c["loss_pct"], c["delay_ms"],
+                c["coordination"], c["start"])  # fmt: skip
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
@@ -159,6 +172,18 @@ def _count(path, key: str, v) -> int:
     return v
 
 
+def _choice_list(path, key: str, value, allowed: tuple[str, ...]) -> tuple[str, ...]:
+    """A non-empty list of distinct names, each one of `allowed`."""
+    if not isinstance(value, list) or not value:
+        raise _fail(path, key, f"expected a non-empty list of names, got {value!r}")
+    for v in value:
+        if v not in allowed:
+            raise _fail(path, key, f"{v!r} is not one of {', '.join(allowed)}")
+    if len(set(value)) != len(value):
+        raise _fail(path, key, f"duplicate values in {value!r}")
+    return tuple(value)
+
+
 def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
     """`time_scale = { 1 = 12.0, 2 = 10.0 }`: a time scale for each team size of the grid."""
     out = {}
@@ -202,6 +227,9 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         kw["delay_ms"] = _number_list(
             path, "grid.delay_ms", grid["delay_ms"], integer=False, low=0, low_open=False
         )
+    for key, (allowed, _default) in _GRID_CHOICES.items():
+        if key in grid:
+            kw[key] = _choice_list(path, f"grid.{key}", grid[key], allowed)
     if "runs" in grid:
         kw["runs"] = _count(path, "grid.runs", grid["runs"])
 
@@ -261,14 +289,26 @@ def fmt(x: float) -> str:
 
 
 def run_id(
-    robots: int, comm_range: float, laser_range: float, loss_pct: float, delay_ms: float, index: int
+    robots: int,
+    comm_range: float,
+    laser_range: float,
+    loss_pct: float,
+    delay_ms: float,
+    index: int,
+    coordination: str = DEFAULT_COORDINATION,
+    start: str = "corner",
 ) -> str:
-    """Stable, readable id of one run; impairments appear only when non-zero."""
+    """Stable, readable id of one run; impairments appear only when non-zero, coordination
+    and start placement only when not the default (so ids of older sweeps stay valid)."""
     rid = f"n{robots:02d}-c{fmt(comm_range)}-l{fmt(laser_range)}"
     if loss_pct:
         rid += f"-p{fmt(loss_pct)}"
     if delay_ms:
         rid += f"-d{fmt(delay_ms)}"
+    if coordination != _GRID_CHOICES["coordination"][1]:
+        rid += f"-{coordination}"
+    if start != _GRID_CHOICES["start"][1]:
+        rid += f"-{start}"
     return f"{rid}-k{index}"
 
 
@@ -293,9 +333,13 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     """All runs of the sweep, run index first (see the module docstring)."""
     out = []
     for index in range(1, spec.runs + 1):
-        for robots, comm, laser, loss, delay in itertools.product(
-            spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct, spec.delay_ms
-        ):
+        for robots, comm, laser, loss, delay, coord, start in itertools.product(
+            spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct, spec.delay_ms,
+            spec.coordination, spec.start,
+        ):  # fmt: skip
+            # The seed leaves coordination and start out: the variants of a point share their
+            # random numbers (start positions within a placement, timer phases), so they are
+            # compared on the same draws.
             config = {
                 "robots": robots,
                 "comm_range": comm,
@@ -308,6 +352,9 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 "delay_ms": delay,
                 "capture": spec.capture,
                 "max_steps": spec.max_steps,
+                "coordination": coord,
+                "start": start,
             }
-            out.append(PlannedRun(run_id(robots, comm, laser, loss, delay, index), index, config))
+            rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
+            out.append(PlannedRun(rid, index, config))
     return out

@@ -112,47 +112,81 @@ def free_space(truth: GroundTruth, starts: list[tuple[float, float]]) -> np.ndar
     return np.isin(labels, sorted(keep)) & (free > 0)
 
 
+START_PLACEMENTS = ("corner", "centre", "spread")
+
+
 def start_positions(
     truth: GroundTruth,
     n: int,
     rng: np.random.Generator,
     radius: float,
-    corner: tuple[float, float] = (0.0, 0.0),
+    placement: str = "corner",
 ) -> list[tuple[float, float]]:
-    """`n` seeded positions clustered near `corner`, as a team dropped off together.
+    """`n` seeded start positions.
+
+    - corner: clustered near the map's (0, 0) corner, as a team dropped off together (the
+      paper's Figs. 3 and 5 show the team starting together near a corner);
+    - centre: clustered the same way around the map's centre;
+    - spread: anywhere in the free space, independently uniform.
 
     Each position keeps the robot's disc clear of obstacles (with a margin) and at least two
-    radii plus 10 cm from the others. The cluster's square grows until everyone fits.
+    radii plus 10 cm from the others. A cluster's square grows until everyone fits.
     """
+    if placement not in START_PLACEMENTS:
+        raise UsageError(f"start placement {placement!r}: one of {', '.join(START_PLACEMENTS)}")
     margin = radius + 0.1
-    # The free cell nearest the corner anchors the cluster.
+    w_m, h_m = truth.size_m
+    if placement == "spread":
+        return _scatter(truth, n, rng, radius, (0.0, 0.0), (w_m, h_m), grow=False)
+    target = (0.0, 0.0) if placement == "corner" else (w_m / 2, h_m / 2)
+    # The free cell nearest the target anchors the cluster.
     free_rows, free_cols = np.nonzero(~truth.occupied)
-    cx, cy = corner
+    cx, cy = target
     d2 = ((free_cols + 0.5) * truth.cell - cx) ** 2 + ((free_rows + 0.5) * truth.cell - cy) ** 2
     order = np.argsort(d2)
     anchor = None
     for i in order[:20000]:
         x, y = (free_cols[i] + 0.5) * truth.cell, (free_rows[i] + 0.5) * truth.cell
-        x, y = x + math.copysign(margin, truth.size_m[0] / 2 - x), y
-        y = y + math.copysign(margin, truth.size_m[1] / 2 - y)
+        if placement == "corner":  # step inwards, away from the corner's walls
+            x = x + math.copysign(margin, w_m / 2 - x)
+            y = y + math.copysign(margin, h_m / 2 - y)
         if truth.is_free_disc(x, y, margin):
             anchor = (x, y)
             break
     if anchor is None:
-        raise UsageError("the map has no room to place a robot near its corner")
-    sx = 1.0 if anchor[0] < truth.size_m[0] / 2 else -1.0
-    sy = 1.0 if anchor[1] < truth.size_m[1] / 2 else -1.0
+        raise UsageError(f"the map has no room to place a robot near its {placement}")
     side = max(1.0, 0.6 * math.sqrt(n))
+    if placement == "corner":  # the square grows from the anchor into the map
+        sx = 1.0 if anchor[0] < w_m / 2 else -1.0
+        sy = 1.0 if anchor[1] < h_m / 2 else -1.0
+        return _scatter(truth, n, rng, radius, anchor, (sx * side, sy * side), grow=True)
+    half = (anchor[0] - side / 2, anchor[1] - side / 2)  # centred on the anchor
+    return _scatter(truth, n, rng, radius, half, (side, side), grow=True)
+
+
+def _scatter(
+    truth: GroundTruth,
+    n: int,
+    rng: np.random.Generator,
+    radius: float,
+    origin: tuple[float, float],
+    extent: tuple[float, float],
+    grow: bool,
+) -> list[tuple[float, float]]:
+    """n positions uniform in the box origin + [0, 1) x extent, clear and apart; with `grow`
+    the box grows by half every 2000 tries (a cluster too tight for its team)."""
+    margin = radius + 0.1
     out: list[tuple[float, float]] = []
+    ex, ey = extent
     tries = 0
     while len(out) < n:
         tries += 1
-        if tries % 2000 == 0:
-            side *= 1.5
+        if grow and tries % 2000 == 0:
+            ex, ey = ex * 1.5, ey * 1.5
         if tries > 40000:
-            raise UsageError(f"could not place {n} robots near the map's corner")
-        x = anchor[0] + sx * rng.uniform(0, side)
-        y = anchor[1] + sy * rng.uniform(0, side)
+            raise UsageError(f"could not place {n} robots on the map")
+        x = origin[0] + ex * rng.uniform(0, 1)
+        y = origin[1] + ey * rng.uniform(0, 1)
         if not truth.is_free_disc(x, y, margin):
             continue
         if any(math.hypot(x - a, y - b) < 2 * radius + 0.1 for a, b in out):

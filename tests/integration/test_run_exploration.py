@@ -88,6 +88,26 @@ def test_three_robots_explore_over_aodv_and_hear_only_along_paths(tmp_path, tn_n
     assert all(os.path.exists(os.path.join(out, "aodv", f"r{k}.json")) for k in (1, 2, 3))
 
 
+@pytest.mark.parametrize(("coordination", "start"), [("paper", "spread"), ("paper", "corner")])
+def test_paper_coordination_explores_to_the_end(tmp_path, tn_name, coordination, start):
+    """The paper's rules read literally (node.coordination): robots with no admissible goal
+    wait instead of taking a fallback, and every request forces a re-plan. The team must
+    still finish by itself, and the run must record how it was coordinated and placed."""
+    out, result = explore(tmp_path, tn_name, 4, 20.0, coordination=coordination, start=start)
+    check_exploration(out, result, 4, 20.0)
+    assert (result["config"]["coordination"], result["config"]["start"]) == (coordination, start)
+    with open(os.path.join(out, "config.json")) as f:
+        cfg = json.load(f)
+    assert (cfg["coordination"], cfg["start"]) == (coordination, start)
+    for k in range(1, 5):  # the paper's rules never send a robot to a frontier near a goal
+        with open(os.path.join(out, "robots", f"r{k}.json")) as f:
+            statuses = {p["status"] for p in json.load(f)["plan_details"]}
+        assert "fallback" not in statuses and statuses <= {"ok", "blocked", "done"}
+    if start == "spread":  # spread over the map, not clustered: some pair starts far apart
+        xy = cfg["starts"]
+        assert max(abs(a[0] - b[0]) + abs(a[1] - b[1]) for a in xy for b in xy) > 5.0
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("comm_range", [20.0, 5.0])
 def test_ten_robots_explore_the_empty_terrain(tmp_path, tn_name, comm_range):

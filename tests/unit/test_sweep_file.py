@@ -145,8 +145,9 @@ def test_expansion_covers_every_point_once_before_repeating():
     first = runs[0].config
     assert set(first) == {
         "robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map",
-        "loss_pct", "delay_ms", "capture", "max_steps",
+        "loss_pct", "delay_ms", "capture", "max_steps", "coordination", "start",
     }  # fmt: skip
+    assert (first["coordination"], first["start"]) == ("ours", "corner")
 
 
 def test_cli_bad_file_one_line_exit_2(tmp_path):
@@ -172,3 +173,33 @@ def test_time_scale_per_team_size():
     scales = {(r.config["robots"], r.config["time_scale"]) for r in sweepfile.expand(spec)}
     assert scales == {(1, 12.5), (2, 6.0)}
     assert spec.to_dict()["time_scale_by_robots"] == {"1": 12.5, "2": 6.0}
+
+
+def test_coordination_and_start_are_grid_dimensions_sharing_their_seeds():
+    spec = parse(GOOD.replace("runs = 2", 'runs = 1\ncoordination = ["paper", "ours"]\n'
+                              'start = ["corner", "spread"]'))  # fmt: skip
+    runs = sweepfile.expand(spec)
+    assert len(runs) == 4 * 2 * 2
+    ids = {r.run_id: r.config for r in runs}
+    # Defaults leave the id as older sweeps wrote it; other values name themselves.
+    assert ids["n01-c5-l2-k1"]["coordination"] == "ours"
+    assert ids["n01-c5-l2-paper-spread-k1"]["start"] == "spread"
+    assert ids["n01-c5-l2-spread-k1"]["coordination"] == "ours"
+    # The variants of a point run on the same random numbers.
+    seeds = {c["seed"] for rid, c in ids.items() if rid.startswith("n01-c5-l2-")}
+    assert len(seeds) == 1
+    assert len({r.point for r in runs}) == len(runs)
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [
+        ('coordination = ["paper", "nobody"]', "grid.coordination: 'nobody' is not one of"),
+        ("start = []", "grid.start: expected a non-empty list"),
+        ('start = ["spread", "spread"]', "grid.start: duplicate values"),
+    ],
+)
+def test_bad_coordination_or_start_names_the_key(line, words):
+    with pytest.raises(UsageError) as e:
+        parse(GOOD.replace("runs = 2", "runs = 2\n" + line))
+    assert words in str(e.value)

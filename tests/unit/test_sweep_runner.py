@@ -27,6 +27,7 @@ for f in ("--robots", "--seed", "--max-steps"):
 for f in ("--comm-range", "--laser-range", "--time-scale", "--loss", "--delay"):
     p.add_argument(f, type=float, default=0.0)
 p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
+p.add_argument("--coordination"); p.add_argument("--start")
 p.add_argument("--capture", action="store_true"); p.add_argument("--quiet", action="store_true")
 a = p.parse_args()
 signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
@@ -42,7 +43,7 @@ os.makedirs(a.out)
 cfg = {"robots": a.robots, "comm_range": a.comm_range, "laser_range": a.laser_range,
        "seed": a.seed, "time_scale": a.time_scale, "routing": a.routing, "map": a.map,
        "loss_pct": a.loss, "delay_ms": a.delay, "capture": a.capture,
-       "max_steps": a.max_steps}
+       "max_steps": a.max_steps, "coordination": a.coordination, "start": a.start}
 with open(os.path.join(a.out, "config.json"), "w") as f:
     json.dump(cfg, f)
 time.sleep(float(os.environ.get("STANDIN_SLEEP", "0.05")))
