@@ -14,7 +14,8 @@ APT_PACKAGES := iproute2 nftables tcpdump tshark babeld nanomsg-utils iputils-pi
 
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
-.PHONY: setup apt venv test unit integration experiment experiment-short bench lint format vm-test clean
+.PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
+	experiment-paper-literal bench lint format vm-test clean
 
 setup: apt venv
 
@@ -55,6 +56,18 @@ experiment-short: setup
 	$(NEED_ROOT)
 	$(VENV)/bin/testbed sweep testbed/experiments/short.toml --out results/short --resume
 	$(VENV)/bin/testbed report results/short
+
+# Issue 11: coordination x start placement (600 runs, about two hours here).
+experiment-ablation: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/ablation.toml --out results/ablation --resume
+	$(VENV)/bin/testbed report results/ablation
+
+# The paper's grid under the paper's coordination read literally (240 runs, about an hour).
+experiment-paper-literal: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/paper-literal.toml --out results/paper-literal --resume
+	$(VENV)/bin/testbed report results/paper-literal
 
 bench: setup
 	$(NEED_ROOT)

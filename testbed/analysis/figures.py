@@ -13,8 +13,11 @@ failed are left out and counted by the report. The paper's figures use the unimp
 (loss 0, delay 0); the impairment figures exist when a sweep varies loss or delay.
 
 - Fig. 2(a)/(b): exploration steps of a run (mean over robots of finish_step) against team
-  size, one line per communication range; the point is the mean over runs, the error bar the
-  spread (min to max) over runs. (a) laser 2 m, (b) laser 1.5 m (or whatever lasers ran).
+  size, one line per communication range; the point is the mean over runs, the error bar its
+  95% confidence interval (testbed.analysis.stats: Student's t over the point's runs). (a)
+  laser 2 m, (b) laser 1.5 m (or whatever lasers ran). A sweep that varies coordination or
+  start placement (an ablation) has its Figs. 2 and 4 drawn for its main variant (`ours` and
+  `corner` where it ran, else the first that did); testbed.analysis.ablation shows them all.
 - Fig. 4(a)-(d): for teams of 1, 2, 5 and 10 (laser 2 m, range 20 m, first run of the point),
   each plan generation's interval since the same robot's previous one, against the step it
   happened at, by cause, with the 20-step timer as a reference line.
@@ -38,12 +41,15 @@ from pathlib import Path
 
 import matplotlib
 
+from testbed.analysis import stats
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 log = logging.getLogger(__name__)
 
 USABLE = ("complete", "step_cap")
+DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
 PLAN_TIMER_STEPS = 20
 FIG4_TEAMS = (1, 2, 5, 10)
 FIG4_LASER = 2.0
@@ -69,6 +75,16 @@ class Run:
     @property
     def usable(self) -> bool:
         return self.result.get("status") in USABLE
+
+    @property
+    def variant(self) -> tuple[str, str]:
+        """(coordination, start placement); runs from before these existed used the defaults."""
+        c = self.config
+        extra = c.get("extra") or {}
+        return (
+            c.get("coordination", extra.get("coordination", DEFAULT_VARIANT[0])),
+            c.get("start", extra.get("start", DEFAULT_VARIANT[1])),
+        )
 
     @property
     def unimpaired(self) -> bool:
@@ -129,20 +145,30 @@ def _robot_no(name: str) -> int:
 
 
 def _spread(values: list[float]) -> dict:
+    ci = stats.mean_ci(values)
     return {
         "n": len(values),
         "mean": statistics.fmean(values),
         "min": min(values),
         "max": max(values),
         "std": statistics.stdev(values) if len(values) > 1 else 0.0,
+        "ci_low": ci[1] if ci else None,
+        "ci_high": ci[2] if ci else None,
     }
+
+
+def main_variant(runs: list[Run]) -> tuple[str, str]:
+    """The variant the paper's figures are drawn for: the default where it ran."""
+    present = {r.variant for r in runs if r.usable}
+    return DEFAULT_VARIANT if DEFAULT_VARIANT in present or not present else min(present)
 
 
 # ---------------------------------------------------------------- the numbers behind figures
 
 
 def fig2_rows(runs: list[Run]) -> list[dict]:
-    """Exploration steps per (laser, range, team size) over the usable unimpaired runs."""
+    """Exploration steps per (variant, laser, range, team size) over the usable unimpaired
+    runs, with the 95% confidence interval of each point's mean."""
     groups: dict[tuple, list[tuple[str, float]]] = {}
     for run in runs:
         if not (run.usable and run.unimpaired):
@@ -151,13 +177,14 @@ def fig2_rows(runs: list[Run]) -> list[dict]:
         if steps is None:
             continue
         c = run.config
-        key = (c["laser_range"], c["comm_range"], c["robots"])
+        key = (*run.variant, c["laser_range"], c["comm_range"], c["robots"])
         groups.setdefault(key, []).append((run.run_id, steps))
     rows = []
-    for (laser, comm, robots), items in sorted(
-        groups.items(), key=lambda kv: (-kv[0][0], *kv[0][1:])
+    for (coord, start, laser, comm, robots), items in sorted(
+        groups.items(), key=lambda kv: (kv[0][:2], -kv[0][2], *kv[0][3:])
     ):
-        row = {"laser_range": laser, "comm_range": comm, "robots": robots}
+        row = {"coordination": coord, "start_placement": start, "laser_range": laser,
+               "comm_range": comm, "robots": robots}  # fmt: skip
         row.update(_spread([s for _, s in items]))
         row["steps_per_run"] = [s for _, s in items]
         row["runs"] = [rid for rid, _ in items]
@@ -169,7 +196,8 @@ def fig4_runs(runs: list[Run]) -> list[Run]:
     """The runs Fig. 4 shows: one per team size (first run of the point), laser 2 m and range
     20 m where present (else the largest laser and range), teams 1, 2, 5, 10 where present
     (else up to four team sizes that ran)."""
-    cands = [r for r in runs if r.usable and r.unimpaired]
+    main = main_variant(runs)
+    cands = [r for r in runs if r.usable and r.unimpaired and r.variant == main]
     if not cands:
         return []
     lasers = {r.config["laser_range"] for r in cands}
@@ -217,6 +245,8 @@ def plan_cause_rows(runs: list[Run]) -> list[dict]:
         rows.append(
             {
                 "run": run.run_id,
+                "coordination": run.variant[0],
+                "start_placement": run.variant[1],
                 "robots": c["robots"],
                 "comm_range": c["comm_range"],
                 "laser_range": c["laser_range"],
@@ -343,7 +373,11 @@ def plot_fig2(rows: list[dict], laser: float, stem: Path, label: str) -> list[Pa
         )
         x = [p["robots"] for p in pts]
         y = [p["mean"] for p in pts]
-        err = [[p["mean"] - p["min"] for p in pts], [p["max"] - p["mean"] for p in pts]]
+        # The 95% interval of the mean (none for a point of one run).
+        err = [
+            [p["mean"] - p["ci_low"] if p["ci_low"] is not None else 0.0 for p in pts],
+            [p["ci_high"] - p["mean"] if p["ci_high"] is not None else 0.0 for p in pts],
+        ]
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"range {_fmt(comm)} m")
     ax.set_xlabel("team size (robots)")
     ax.set_ylabel("exploration steps (mean over robots)")
@@ -467,7 +501,7 @@ def collect_paths(runs: list[Run], dest: Path) -> list[Path]:
 def make_all(sweep_dir: str | Path, metrics_of=None) -> dict:
     """Write every figure the sweep has data for into DIR/figures/; returns what was made:
     {"files": [...], "runs": [...], "tables": {name: rows}}."""
-    from testbed.analysis import pcapmetrics
+    from testbed.analysis import ablation, pcapmetrics
 
     if metrics_of is None:
 
@@ -485,9 +519,11 @@ def make_all(sweep_dir: str | Path, metrics_of=None) -> dict:
     files: list[Path] = []
     tables: dict[str, list[dict]] = {}
 
-    fig2 = fig2_rows(runs)
-    tables["fig2"] = fig2
-    write_table(fig2, figdir / "fig2")
+    fig2_all = fig2_rows(runs)
+    write_table(fig2_all, figdir / "fig2")
+    main = main_variant(runs)
+    fig2 = [r for r in fig2_all if (r["coordination"], r["start_placement"]) == main]
+    tables["fig2"], tables["fig2_all"] = fig2, fig2_all
     lasers = sorted({r["laser_range"] for r in fig2}, reverse=True)
     for laser, letter in zip(lasers, "abcdefgh", strict=False):
         files += plot_fig2(fig2, laser, figdir / f"fig2{letter}", letter)
@@ -497,8 +533,13 @@ def make_all(sweep_dir: str | Path, metrics_of=None) -> dict:
     write_table(fig4, figdir / "fig4")
     if fig4:
         files += plot_fig4(fig4, figdir / "fig4")
-    tables["plans"] = plan_cause_rows(runs)
-    write_table(tables["plans"], figdir / "plans")
+    plans = plan_cause_rows(runs)
+    write_table(plans, figdir / "plans")
+    tables["plans"] = [r for r in plans if (r["coordination"], r["start_placement"]) == main]
+    if len({r.variant for r in runs if r.usable}) > 1:
+        tables["ablation_thirds"] = ablation.request_thirds_rows(runs)
+        write_table(tables["ablation_thirds"], figdir / "ablation_thirds")
+        files += ablation.plot_fig4_variants(runs, figdir / "ablation_fig4")
 
     # tshark is the slow part: keep the cores busy with one run's captures each.
     with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:

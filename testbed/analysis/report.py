@@ -1,9 +1,9 @@
 """`testbed report DIR`: figures plus a Markdown report that checks the paper's claims.
 
-Theory of operation. `testbed.analysis.figures.make_all` draws the figures and returns the tables of
-numbers behind them; each claim of the paper's Section 5 is a pure function of those tables
-(`verdict_*`) that returns a `Verdict`: holds / partly / does not hold / not enough data, with
-the numbers it was decided on. `render` puts the verdicts, the figures and the sweep's
+Theory of operation. `testbed.analysis.figures.make_all` draws the figures and returns the
+tables of numbers behind them; each claim of the paper's Section 5 is a pure function of those
+tables (`verdict_*`) that returns a `Verdict`: holds / partly / does not hold / not enough
+data, with the numbers it was decided on. `render` puts the verdicts, the figures and the sweep's
 bookkeeping (runs done, excluded, skipped, achieved time scale, captures against the AODV
 daemons' own counters) into DIR/report.md, next to DIR/figures/.
 
@@ -13,9 +13,12 @@ one team size of a group; steps are the mean over runs of the exploration steps)
 - 5.1 team work beats one robot: in a group with a one-robot point, every larger team needs
   fewer steps than one robot.
 - 5.1 steps fall then rise with team size: in a group with at least three team sizes, the
-  fewest steps are at a team size strictly between the smallest and the largest.
+  fewest steps are at a team size strictly between the smallest and the largest, and the rise
+  from there to the largest team exceeds the run-to-run noise: the two points' 95% confidence
+  intervals (testbed.analysis.stats, Student's t) do not overlap.
 - 5.1 a smaller range needs more steps: for each team of two or more and laser range, the
-  smallest communication range needs more steps than the largest.
+  smallest communication range needs more steps than the largest, beyond the noise in the
+  same sense.
 - 5.1 a shorter laser needs more steps at the same steps-to-team ratio: for each range and
   team, the shorter laser needs more steps, and the ratio of the two lasers' steps is the same
   across team sizes (coefficient of variation at most RATIO_CV_MAX).
@@ -38,7 +41,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import figures
+from testbed.analysis import ablation, figures, stats
 from testbed.errors import UsageError
 from topology.jsonfile import read_json
 
@@ -55,9 +58,13 @@ RULES = (
     "team work beats one robot: in a group with a one-robot point, every larger team needs "
     "fewer steps than one robot;",
     "fall then rise: in a group with three or more team sizes, the fewest steps are at a team "
-    "size strictly between the smallest and the largest;",
+    "size strictly between the smallest and the largest, and the 95% intervals of that point "
+    "and of the largest team do not overlap (the rise exceeds the run-to-run spread);",
     "smaller range: for each team of two or more, the smallest range needs more steps than the "
-    "largest;",
+    "largest and their 95% intervals do not overlap;",
+    f"intervals: {stats.METHOD}, over a point's runs; the runs a point would need to resolve a "
+    "difference d with run-to-run standard deviation s (5% significance, 80% power): "
+    "2 ((1.96 + 0.84) s / d)^2;",
     "shorter laser: the shorter laser needs more steps at every (range, team), and the ratio of "
     f"the two lasers' steps varies across team sizes by at most {RATIO_CV_MAX:.0%} (CV);",
     f"timer: at least {TIMER_SHARE_MIN:.0%} of a lone robot's plan generations after its first "
@@ -97,6 +104,14 @@ def _points(fig2: list[dict]) -> dict[tuple, dict[int, float]]:
     return out
 
 
+def _rows(fig2: list[dict]) -> dict[tuple, dict[int, dict]]:
+    """(laser, range) -> {team size: fig2 row} (mean, interval, spread)."""
+    out: dict[tuple, dict[int, dict]] = {}
+    for r in fig2:
+        out.setdefault((r["laser_range"], r["comm_range"]), {})[r["robots"]] = r
+    return out
+
+
 def _group_name(laser, comm) -> str:
     return f"laser {_f(laser)} m, range {_f(comm)} m"
 
@@ -123,48 +138,60 @@ def verdict_team_beats_one(fig2: list[dict]) -> Verdict:
 
 
 def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
+    """Noise-aware: the rise from the fewest steps to the largest team must exceed the spread
+    of the runs (their 95% intervals do not overlap; testbed.analysis.ablation.rise)."""
     v = Verdict("5.1", "Exploration steps fall, then rise again as the team grows", NO_DATA)
     results = []
-    for (laser, comm), pts in sorted(_points(fig2).items()):
+    for (laser, comm), pts in sorted(_rows(fig2).items()):
         if len(pts) < 3:
             continue
-        best = min(pts, key=pts.get)
-        lo, hi = min(pts), max(pts)
-        ok = lo < best < hi
+        ok, why = ablation.rise(pts)
         results.append(ok)
         note = ""
-        if best == hi:
-            note = f" (no rise up to {hi} robots: the sweep may stop short of the turning point)"
-        v.evidence.append(
-            f"{_group_name(laser, comm)}: fewest steps {pts[best]:.0f} with {best} robots; "
-            f"{pts[lo]:.0f} with {lo}, {pts[hi]:.0f} with {hi} -> {'yes' if ok else 'no'}{note}"
-        )
+        if min(pts, key=lambda n: pts[n]["mean"]) == max(pts):
+            note = " (the sweep may stop short of the turning point)"
+        v.evidence.append(f"{_group_name(laser, comm)}: {why} -> {'yes' if ok else 'no'}{note}")
     v.verdict = _overall(results)
     return v
 
 
 def verdict_smaller_range(fig2: list[dict]) -> Verdict:
+    """Noise-aware: for each laser and team of two or more, the smallest range needs more
+    steps than the largest and their 95% intervals do not overlap."""
     v = Verdict("5.1", "A smaller communication range needs more steps", NO_DATA)
-    by: dict[tuple, dict[float, float]] = {}
+    by: dict[tuple, dict[float, dict]] = {}
     for r in fig2:
         if r["robots"] >= 2:
-            by.setdefault((r["laser_range"], r["robots"]), {})[r["comm_range"]] = r["mean"]
-    results = []
+            by.setdefault((r["laser_range"], r["robots"]), {})[r["comm_range"]] = r
+    results, within = [], []
     for (laser, robots), pts in sorted(by.items()):
         if len(pts) < 2:
             continue
-        small, large = min(pts), max(pts)
-        ok = pts[small] > pts[large]
+        small, large = pts[min(pts)], pts[max(pts)]
+        a, b = ablation._ci(small), ablation._ci(large)
+        ok = small["mean"] > large["mean"] and stats.separated(a, b)
         results.append(ok)
+        if small["mean"] > large["mean"] and not ok:
+            sd = ((small["std"] ** 2 + large["std"] ** 2) / 2) ** 0.5
+            within.append(stats.runs_to_resolve(small["mean"] - large["mean"], sd))
         v.evidence.append(
-            f"laser {_f(laser)} m, {robots} robots: range {_f(small)} m {pts[small]:.0f} steps, "
-            f"range {_f(large)} m {pts[large]:.0f} -> {'yes' if ok else 'no'}"
+            f"laser {_f(laser)} m, {robots} robots: range {_f(min(pts))} m "
+            f"{small['mean']:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
+            f"{large['mean']:.0f} {ablation._interval(b)} -> {'yes' if ok else 'no'}"
         )
     v.verdict = _overall(results)
     if results:
-        v.evidence.insert(
-            0, f"smaller range needs more steps in {sum(results)} of {len(results)} cases"
+        head = (
+            f"smaller range needs more steps, beyond the noise, in {sum(results)} of "
+            f"{len(results)} cases"
         )
+        if within:
+            need = sorted(n for n in within if n)
+            if need:
+                head += (f"; {len(within)} more in the same direction but within the noise "
+                         f"(resolving them would take {need[len(need) // 2]} runs per point, "
+                         "median)")  # fmt: skip
+        v.evidence.insert(0, head)
     return v
 
 
@@ -439,6 +466,7 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
         "",
     ]
     out += [f"- {rule}" for rule in RULES] + [""]
+    out += ablation.section(tables.get("fig2_all", []), tables.get("ablation_thirds", []))
     out += ["## Figures", ""]
     for name, data, caption in (
         ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),

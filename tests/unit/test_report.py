@@ -9,20 +9,25 @@ from pathlib import Path
 import pytest
 
 from testbed import sweepfile
-from testbed.analysis import report
+from testbed.analysis import figures, report
 from testbed.analysis.report import FAILS, HOLDS, NO_DATA, PARTLY
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 REPO = Path(__file__).resolve().parents[2]
 
 
-def rows(fn, robots=(1, 2, 3, 5, 8, 10), comms=(5.0, 20.0), lasers=(2.0, 1.5)):
-    return [
-        {"laser_range": la, "comm_range": c, "robots": n, "mean": fn(n, c, la)}
-        for la in lasers
-        for c in comms
-        for n in robots
-    ]
+def rows(fn, robots=(1, 2, 3, 5, 8, 10), comms=(5.0, 20.0), lasers=(2.0, 1.5), noise=0.01):
+    """fig2 rows as figures.fig2_rows makes them, each point three runs of mean fn(...) that
+    differ by +-`noise` of it."""
+    out = []
+    for la in lasers:
+        for c in comms:
+            for n in robots:
+                m = fn(n, c, la)
+                row = {"laser_range": la, "comm_range": c, "robots": n}
+                row.update(figures._spread([m * (1 - noise), m, m * (1 + noise)]))
+                out.append(row)
+    return out
 
 
 def paper(n, c, la):
@@ -49,6 +54,25 @@ def test_claims_fail_when_the_data_says_otherwise():
     assert report.verdict_fall_then_rise(fig2).verdict == FAILS
     assert report.verdict_smaller_range(fig2).verdict == FAILS
     assert report.verdict_shorter_laser(fig2).verdict == FAILS
+
+
+def test_a_rise_or_a_range_effect_within_the_noise_does_not_hold():
+    # The paper's shape, but runs that differ by +-30%: the rise at 8-10 robots and the
+    # range effect are smaller than the spread of three runs.
+    fig2 = rows(paper, noise=0.3)
+    rise = report.verdict_fall_then_rise(fig2)
+    assert rise.verdict == FAILS
+    assert all("within the noise" in e for e in rise.evidence)
+    assert any("runs per point would resolve it" in e for e in rise.evidence)
+    assert report.verdict_smaller_range(fig2).verdict == FAILS
+    assert "within the noise" in report.verdict_smaller_range(fig2).evidence[0]
+    # The same shape with tight runs holds.
+    assert report.verdict_fall_then_rise(rows(paper)).verdict == HOLDS
+
+
+def test_one_run_per_point_cannot_show_a_rise():
+    fig2 = [dict(r, ci_low=None, ci_high=None) for r in rows(paper)]
+    assert report.verdict_fall_then_rise(fig2).verdict == FAILS
 
 
 def test_partly_when_only_some_groups_agree():
@@ -100,8 +124,9 @@ def test_spearman():
 
 
 def test_report_end_to_end(tmp_path):
+    # Three runs a point (+-3 steps): the rise and the range effect stand out of the noise.
     spec = sweepfile.SweepSpec(
-        robots=(1, 2, 5, 10), comm_range=(5.0, 20.0), laser_range=(2.0, 1.5), runs=1
+        robots=(1, 2, 5, 10), comm_range=(5.0, 20.0), laser_range=(2.0, 1.5), runs=3
     )
     make_sweep(tmp_path, spec)
     path, vs = report.write_report(tmp_path, metrics_of=lambda run: None)
@@ -116,6 +141,43 @@ def test_report_end_to_end(tmp_path):
     assert all((tmp_path / f).is_file() for f in named)  # every file the report names exists
     saved = json.loads((tmp_path / "figures" / "verdicts.json").read_text())
     assert [v["verdict"] for v in saved] == [HOLDS] * 6
+    assert "## Ablation" not in text  # one variant: no ablation section
+    fig2 = (tmp_path / "figures" / "fig2.csv").read_text().splitlines()
+    assert fig2[0].startswith("coordination,start_placement,") and "ci_low" in fig2[0]
+
+
+def test_report_of_an_ablation_sweep(tmp_path):
+    # paper coordination rises at 10 robots; ours does not (a made-up answer to find).
+    spec = sweepfile.SweepSpec(robots=(1, 2, 5, 10), comm_range=(20.0,), laser_range=(2.0,),
+                               coordination=("paper", "ours"), runs=3)  # fmt: skip
+    for run in sweepfile.expand(spec):
+        c = run.config
+        n = c["robots"]
+        steps = 1200 / n + (40 * n if c["coordination"] == "paper" else 0) + (run.index - 2)
+        plans = {k: timer_plans(int(steps)) for k in range(1, n + 1)}
+        if n == 10:  # requests at the start and the end of the run, as in the paper's Fig. 4(d)
+            plans[1] = plans[1] + [{"step": 2, "cause": "request"},
+                                   {"step": int(steps) - 2, "cause": "request"}]  # fmt: skip
+        write_run(tmp_path, run, result_doc(c, [int(steps)] * n, int(steps), plans))
+    path, vs = report.write_report(tmp_path, metrics_of=lambda run: None)
+    text = path.read_text()
+    assert "## Ablation: what makes big teams slow" in text
+    assert "| paper, corner | " in text and "| ours, corner | " in text
+    assert "- coordination: paper, corner rises and ours, corner does not" in text
+    assert "- start placement: changes nothing alone" in text
+    thirds = (tmp_path / "figures" / "ablation_thirds.csv").read_text().splitlines()
+    assert thirds[0].split(",")[:7] == [
+        "coordination",
+        "start_placement",
+        "run",
+        "steps",
+        "request_start",
+        "request_middle",
+        "request_end",
+    ]
+    assert len(thirds) == 1 + 2 * 3  # both variants' three runs of 10 robots
+    assert all(line.split(",")[4:7] == ["1", "0", "1"] for line in thirds[1:])
+    assert (tmp_path / "figures" / "ablation_fig4.png").is_file()
 
 
 def test_report_counts_excluded_runs(tmp_path):
