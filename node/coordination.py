@@ -75,11 +75,12 @@ def on_goal(
     or "none" (no conflict, or I lose and wait for its request)."""
     if mode == "ours" and other_fallback:
         return "none"  # difference 4: its robot had nowhere better to go
-    # Both modes: the higher priority detects the conflict and sends the request.
-    decision = planner.resolve_conflict(
-        me, my_goal, my_cost, other, other_goal, other_cost, laser_range
-    )
-    return "request" if decision == "request" else "none"
+    if my_goal is None or not planner.goals_conflict(my_goal, other_goal, laser_range):
+        return "none"
+    # Both modes: the higher priority (planner.goal_priority: the smaller key) detects the
+    # conflict and sends the request; the lower waits for it, so a conflict costs one plan.
+    mine, theirs = planner.goal_priority(my_cost, me), planner.goal_priority(other_cost, other)
+    return "request" if mine < theirs else "none"
 
 
 def on_request(

@@ -330,24 +330,3 @@ def goal_priority(cost: float, robot: int) -> tuple[float, int]:
 def goals_conflict(a: tuple[float, float], b: tuple[float, float], laser_range: float) -> bool:
     """Two goals conflict when they are within laser range of each other."""
     return float(np.hypot(a[0] - b[0], a[1] - b[1])) <= laser_range
-
-
-def resolve_conflict(
-    me: int,
-    my_goal: tuple[float, float] | None,
-    my_cost: float,
-    other: int,
-    other_goal: tuple[float, float],
-    other_cost: float,
-    laser_range: float,
-) -> str:
-    """What robot `me` does on hearing `other`'s goal.
-
-    "none": no conflict; "request": I win, ask `other` to re-plan; "yield": I lose and wait
-    for `other`'s request (the loser re-plans on request only, so a conflict causes one plan).
-    """
-    if my_goal is None or not goals_conflict(my_goal, other_goal, laser_range):
-        return "none"
-    if goal_priority(my_cost, me) < goal_priority(other_cost, other):
-        return "request"
-    return "yield"

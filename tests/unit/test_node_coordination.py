@@ -87,3 +87,20 @@ def test_timer_paper_keeps_its_own_schedule_ours_counts_from_the_last_plan():
     assert not coordination.timer_due("ours", 40, last_plan_step=35, next_tick=40, period=20)
     assert coordination.timer_due("ours", 55, last_plan_step=35, next_tick=60, period=20)
     assert not coordination.timer_due("paper", 55, last_plan_step=35, next_tick=60, period=20)
+
+
+@pytest.mark.parametrize("mode", coordination.MODES)
+def test_conflict_resolution(mode):
+    g1, g2, far = (1.0, 1.0), (2.0, 1.0), (9.0, 9.0)
+
+    def on_goal(me, mine, cost, other, theirs, their_cost):
+        return coordination.on_goal(mode, me, mine, cost, other, theirs, their_cost, False, 2.0)
+
+    assert on_goal(1, g1, 3.0, 2, far, 1.0) == "none"
+    assert on_goal(1, None, 0.0, 2, g2, 1.0) == "none"
+    assert on_goal(1, g1, 1.0, 2, g2, 3.0) == "request"  # I am nearer: I win
+    assert on_goal(1, g1, 3.0, 2, g2, 1.0) == "none"  # I lose: I wait for its request
+    # Symmetric: exactly one of the two asks the other.
+    a = on_goal(1, g1, 2.0, 2, g2, 2.0)
+    b = on_goal(2, g2, 2.0, 1, g1, 2.0)
+    assert {a, b} == {"request", "none"}

@@ -10,7 +10,6 @@ from node.planner import (
     goal_priority,
     plan,
     pool,
-    resolve_conflict,
     trace_back,
     traversable,
     wavefront,
@@ -147,15 +146,3 @@ def test_wavefront_distances_and_trace():
 def test_priority_shorter_path_wins_then_lower_id():
     assert goal_priority(1.0, 5) < goal_priority(2.0, 1)
     assert goal_priority(1.0, 2) < goal_priority(1.0, 3)
-
-
-def test_conflict_resolution():
-    g1, g2, far = (1.0, 1.0), (2.0, 1.0), (9.0, 9.0)
-    assert resolve_conflict(1, g1, 3.0, 2, far, 1.0, 2.0) == "none"
-    assert resolve_conflict(1, None, 0.0, 2, g2, 1.0, 2.0) == "none"
-    assert resolve_conflict(1, g1, 1.0, 2, g2, 3.0, 2.0) == "request"  # I am nearer: I win
-    assert resolve_conflict(1, g1, 3.0, 2, g2, 1.0, 2.0) == "yield"
-    # Symmetric: exactly one of the two asks the other.
-    a = resolve_conflict(1, g1, 2.0, 2, g2, 2.0, 2.0)
-    b = resolve_conflict(2, g2, 2.0, 1, g1, 2.0, 2.0)
-    assert {a, b} == {"request", "yield"}
