@@ -106,7 +106,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     a("--coordination", choices=coordination.MODES, default=coordination.DEFAULT,
       help="goal coordination: 'paper' reads the paper's rules literally, 'ours' (default) "
-           "departs where they stall a team; see README, 'Coordination'")  # fmt: skip
+           "departs from them where the text is silent; see README, 'Coordination'")  # fmt: skip
     a("--start", choices=START_PLACEMENTS, default="corner",
       help="start placement: clustered near a corner (default, as in the paper), clustered "
            "at the centre, or spread over the map")  # fmt: skip
