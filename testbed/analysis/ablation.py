@@ -139,6 +139,8 @@ def rise(pts: dict[int, dict]) -> tuple[bool, str]:
              f"{pts[hi]['mean']:.0f} {_interval(b)} at {hi}: rise {size:.0f} steps")  # fmt: skip
     if stats.separated(a, b):
         return True, words + ", beyond the noise"
+    if a is None or b is None:
+        return False, words + ": one run at a point, so its noise is unknown"
     return False, words + (f", within the noise (about {need} runs per point would resolve it)"
                            if need else ", within the noise")  # fmt: skip
 

@@ -171,7 +171,7 @@ def verdict_smaller_range(fig2: list[dict]) -> Verdict:
         a, b = ablation._ci(small), ablation._ci(large)
         ok = small["mean"] > large["mean"] and stats.separated(a, b)
         results.append(ok)
-        if small["mean"] > large["mean"] and not ok:
+        if small["mean"] > large["mean"] and not ok and a is not None and b is not None:
             sd = ((small["std"] ** 2 + large["std"] ** 2) / 2) ** 0.5
             within.append(stats.runs_to_resolve(small["mean"] - large["mean"], sd))
         v.evidence.append(

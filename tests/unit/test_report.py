@@ -71,8 +71,10 @@ def test_a_rise_or_a_range_effect_within_the_noise_does_not_hold():
 
 
 def test_one_run_per_point_cannot_show_a_rise():
-    fig2 = [dict(r, ci_low=None, ci_high=None) for r in rows(paper)]
-    assert report.verdict_fall_then_rise(fig2).verdict == FAILS
+    fig2 = [dict(r, ci_low=None, ci_high=None, std=0.0, n=1) for r in rows(paper)]
+    v = report.verdict_fall_then_rise(fig2)
+    assert v.verdict == FAILS
+    assert all("one run at a point, so its noise is unknown" in e for e in v.evidence)
 
 
 def test_partly_when_only_some_groups_agree():
