@@ -133,8 +133,7 @@ def rise(pts: dict[int, dict]) -> tuple[bool, str]:
         return False, f"fewest steps at {best} robots: no rise"
     a, b = _ci(pts[best]), _ci(pts[hi])
     size = pts[hi]["mean"] - pts[best]["mean"]
-    sd = ((pts[best]["std"] ** 2 + pts[hi]["std"] ** 2) / 2) ** 0.5
-    need = stats.runs_to_resolve(size, sd)
+    need = runs_needed(pts[best], pts[hi])
     words = (f"fewest {pts[best]['mean']:.0f} {_interval(a)} at {best} robots, "
              f"{pts[hi]['mean']:.0f} {_interval(b)} at {hi}: rise {size:.0f} steps")  # fmt: skip
     if stats.separated(a, b):
@@ -143,6 +142,12 @@ def rise(pts: dict[int, dict]) -> tuple[bool, str]:
         return False, words + ": one run at a point, so its noise is unknown"
     return False, words + (f", within the noise (about {need} runs per point would resolve it)"
                            if need else ", within the noise")  # fmt: skip
+
+
+def runs_needed(a: dict, b: dict) -> int | None:
+    """Runs per point that would tell two fig2 rows' means apart (their sd pooled)."""
+    sd = ((a["std"] ** 2 + b["std"] ** 2) / 2) ** 0.5
+    return stats.runs_to_resolve(b["mean"] - a["mean"], sd)
 
 
 def _ci(row: dict) -> tuple[float, float, float] | None:

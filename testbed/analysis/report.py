@@ -172,8 +172,7 @@ def verdict_smaller_range(fig2: list[dict]) -> Verdict:
         ok = small["mean"] > large["mean"] and stats.separated(a, b)
         results.append(ok)
         if small["mean"] > large["mean"] and not ok and a is not None and b is not None:
-            sd = ((small["std"] ** 2 + large["std"] ** 2) / 2) ** 0.5
-            within.append(stats.runs_to_resolve(small["mean"] - large["mean"], sd))
+            within.append(ablation.runs_needed(large, small))
         v.evidence.append(
             f"laser {_f(laser)} m, {robots} robots: range {_f(min(pts))} m "
             f"{small['mean']:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
