@@ -37,19 +37,24 @@ The main ones, for a reader in a hurry:
 - RERR for a forwarded packet with no route and no known precursor: broadcast, TTL 1.
 - HELLOs only from nodes on an active route (set up by a reply or used by data), and at
   most HELLO_INTERVAL after the node's last broadcast.
-- Reboot rule (6.13): applied when the daemon finds routes of a dead predecessor in the
-  kernel; during the wait the node learns routes but sends no RREP and forwards no
-  control message; it may still originate RREQs.
-- RREQs over RREQ_RATELIMIT are delayed; RERRs over RERR_RATELIMIT are dropped.
-
-Local repair (RFC 6.12) is not implemented, so the N flag is never set, and a received
-RERR with N set changes nothing.
+- Reboot rule (6.13): applied whenever the daemon starts again in a running network (it
+  finds its predecessor's saved counters, or its routes in the kernel); for DELETE_PERIOD
+  the node learns routes but originates no RREQ (data waits), sends no RREP and forwards no
+  control message; its sequence number and RREQ ID resume above any it used before.
+- RREQs over RREQ_RATELIMIT are delayed; RERRs over RERR_RATELIMIT are dropped; forwarded
+  RREQs over `rreq_forward_ratelimit` are dropped (not an RFC limit: a flood guard).
+- Sequence numbers never go backwards (6.1): a RERR with an older number than the entry's
+  still invalidates the route (its sender cannot deliver) but leaves the number alone.
+- Local repair (6.12) on a link break of a route with precursors, one RREQ, as the RFC
+  describes it (Params.local_repair; off in the ns3 profile). RERRs with N set are passed on.
+- Every value read from a peer is bounded before it is used: hop counts of NET_DIAMETER or
+  more are dropped, lifetimes and Hello Intervals are clamped (counted in `dropped`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass
 
 from aodv import seqnum
@@ -71,6 +76,8 @@ UNICAST_TTL = 64
 # Decision (limited vs subnet broadcast): robots have /32 addresses and no subnet, so
 # every broadcast is the limited broadcast 255.255.255.255 on wlan0.
 LOCAL_TTL = 1
+# The longest Lifetime taken from a peer's RREP, in units of our MY_ROUTE_TIMEOUT.
+MAX_LIFETIME_FACTOR = 10
 
 
 # -- actions ---------------------------------------------------------------------------
@@ -119,6 +126,7 @@ class DiscoveryDone:
     ok: bool
     latency: float  # first RREQ to route (or to giving up)
     round_latency: float  # the last RREQ sent to route
+    repair: bool = False  # a local repair (RFC 6.12), not a discovery of our own
 
 
 Action = Unicast | Broadcast | InstallRoute | DeleteRoute | ReleasePackets | DropPackets
@@ -133,7 +141,8 @@ class _Discovery:
     deadline: float = 0.0
     round_started: float = 0.0
     retries: int = 0
-    rate_limited: bool = False
+    deferred: bool = False  # the RREQ waits (rate limit or reboot), it was not sent
+    repair_hops: int | None = None  # a local repair: the hop count of the broken route
 
 
 class _RateLimit:
@@ -160,27 +169,38 @@ class _RateLimit:
 
 
 class AodvCore:
-    def __init__(self, addr: str, params: Params, now: float, rebooted: bool = False) -> None:
+    def __init__(
+        self,
+        addr: str,
+        params: Params,
+        now: float,
+        rebooted: bool = False,
+        seq: int = 0,
+        rreq_id: int = 0,
+    ) -> None:
+        """`seq` and `rreq_id`: where a restarted node resumes (above all it used before)."""
         self.addr = addr
         self.p = params
-        self.seq = 0
-        self.rreq_id = 0
+        self.seq = seq
+        self.rreq_id = rreq_id
         self.table = RoutingTable()
-        self.rreq_cache = RreqCache()
-        self.neighbors = Neighbors()
+        self.rreq_cache = RreqCache(params.rreq_cache_limit)
+        self.neighbors = Neighbors(params.neighbor_limit)
         self.queue = RequestQueue(params.queue_len)
         self.discoveries: dict[str, _Discovery] = {}
         self.pending_acks: dict[str, float] = {}
         self.bidirectional: dict[str, float] = {}
         self._rreq_limit = _RateLimit(params.rreq_ratelimit, params.rate_window)
         self._rerr_limit = _RateLimit(params.rerr_ratelimit, params.rate_window)
+        self._fwd_limit = _RateLimit(params.rreq_forward_ratelimit, params.rate_window)
         self._installed: dict[str, tuple[str, int]] = {}
         self.next_hello = now + params.hello_interval
-        self.dropped_rerr = 0
+        # What the core refused or bounded, by reason (the daemon writes it in its stats).
+        self.dropped: Counter[str] = Counter()
         # RFC 6.13: "...after rebooting, a node MUST wait for DELETE_PERIOD before
         # transmitting any route discovery messages." Decision: the daemon says whether
-        # this start is a reboot (it found routes of a previous instance in the kernel);
-        # a first start in a fresh network has no stale sequence numbers to protect.
+        # this start is a reboot (a previous instance ran in this network: it left its
+        # counters or its routes); a first start has no stale sequence numbers to protect.
         self.reboot_until = now + params.delete_period if rebooted else None
 
     # == public events ====================================================================
@@ -191,6 +211,13 @@ class AodvCore:
             return out
         # RFC 6.10: any packet from a neighbour shows the link is alive.
         self.neighbors.heard(src, now)
+        # Decision: a RREQ or RREP that has travelled NET_DIAMETER hops or more describes
+        # no path this network can have ("NET_DIAMETER measures the maximum possible number
+        # of hops between two nodes in the network", section 10), and one more hop would
+        # not fit the one-byte field: drop it.
+        if isinstance(msg, (Rreq, Rrep)) and msg.hop_count >= self.p.net_diameter:
+            self.dropped["hop_count"] += 1
+            return self._finish(now, out)
         if isinstance(msg, Rreq):
             self._rreq(now, src, ttl, msg, out)
         elif isinstance(msg, Rrep):
@@ -215,7 +242,7 @@ class AodvCore:
         elif src == self.addr:
             self._originate(now, dst, packet, out)
         else:
-            self._forward_without_route(now, dst, out)
+            self._forward_without_route(now, dst, packet, out)
         return self._finish(now, out)
 
     def on_route_used(self, now: float, addr: str) -> list[Action]:
@@ -251,6 +278,9 @@ class AodvCore:
         self._expire_routes(now, out)
         self.rreq_cache.purge(now)
         self._expire_acks(now)
+        if len(self.bidirectional) > self.p.neighbor_limit:
+            old = now - self.p.delete_period
+            self.bidirectional = {a: t for a, t in self.bidirectional.items() if t >= old}
         for d in list(self.discoveries.values()):
             if d.deadline <= now:
                 self._discovery_timeout(now, d, out)
@@ -270,6 +300,32 @@ class AodvCore:
             t = min(t, *self.pending_acks.values())
         return t
 
+    # == values from peers ================================================================
+    def _peer_lifetime(self, lifetime_ms: int) -> float:
+        """A RREP's Lifetime, at most MAX_LIFETIME_FACTOR times our MY_ROUTE_TIMEOUT.
+
+        Decision: the RFC bounds no Lifetime, but no honest node gives more than its own
+        MY_ROUTE_TIMEOUT plus what data refreshes added; 2**32-1 ms would keep a route for
+        49 days whatever happened to the path."""
+        limit = MAX_LIFETIME_FACTOR * self.p.my_route_timeout
+        t = self.p.from_ms(lifetime_ms)
+        if t > limit:
+            self.dropped["lifetime_clamped"] += 1
+            return limit
+        return t
+
+    def _peer_hello_interval_ms(self, interval_ms: int) -> float:
+        """A neighbour's Hello Interval (RFC 9.1), within [ours / 4, ours * 16].
+
+        Decision: 0 would declare the link lost at once, 2**32-1 would keep a silent
+        neighbour for 99 days; a robot team runs one configuration, so a value far from
+        ours is an error or an attack."""
+        own = self.p.hello_interval_ms
+        clamped = min(max(interval_ms, own / 4), own * 16)
+        if clamped != interval_ms:
+            self.dropped["hello_interval_clamped"] += 1
+        return clamped
+
     # == RFC 6.5 RREQ =====================================================================
     def _rreq(self, now: float, src: str, ttl: int, m: Rreq, out: list[Action]) -> None:
         # RFC 6.8: "...a node ignores all RREQs received from any node in its blacklist
@@ -287,7 +343,7 @@ class AodvCore:
         # RREQ."
         if self.rreq_cache.seen(m.orig, m.rreq_id, now):
             return
-        self.rreq_cache.add(m.orig, m.rreq_id, now + self.p.path_discovery_time)
+        self.rreq_cache.add(m.orig, m.rreq_id, now + self.p.path_discovery_time, now)
         # RFC 6.5: "...first increments the hop count value in the RREQ by one..."
         hops = m.hop_count + 1
         rev = self._update_reverse_route(now, src, m, hops)
@@ -321,6 +377,11 @@ class AodvCore:
         # maintained by the node ... the forwarding node MUST NOT modify its maintained
         # value".
         if ttl <= 1:
+            return
+        # Not in RFC 3561 (it limits only originated RREQs): a flood guard. Legitimate
+        # load is at most RREQ_RATELIMIT per originator, each RREQ forwarded once.
+        if not self._fwd_limit.allow(now):
+            self.dropped["rreq_forward_ratelimit"] += 1
             return
         known = self.table.get(m.dest)
         dest_seq, unknown = m.dest_seq, m.unknown_seq
@@ -474,7 +535,7 @@ class AodvCore:
         # RREP message, and the destination sequence number is the Destination Sequence
         # Number in the RREP message."
         r.valid, r.valid_seq, r.next_hop, r.hops = True, True, src, hops
-        r.lifetime = now + self.p.from_ms(m.lifetime_ms)
+        r.lifetime = now + self._peer_lifetime(m.lifetime_ms)
         r.seq = m.dest_seq
         r.active_until = r.lifetime
         if m.orig == self.addr or self.reboot_until is not None:
@@ -537,11 +598,9 @@ class AodvCore:
         # route to the neighbor, if it exists, MUST subsequently contain the latest
         # Destination Sequence Number from the Hello message."
         # The neighbour's own HELLO_INTERVAL comes from its Hello Interval extension.
-        interval = (
-            self.p.from_ms(m.hello_interval_ms)
-            if m.hello_interval_ms is not None
-            else self.p.hello_interval
-        )
+        interval = self.p.hello_interval
+        if m.hello_interval_ms is not None:
+            interval = self.p.from_ms(self._peer_hello_interval_ms(m.hello_interval_ms))
         timeout = self.p.allowed_hello_loss * interval
         self.neighbors.hello(src, now, timeout)
         r = self.table.get(src)
@@ -578,6 +637,7 @@ class AodvCore:
         overflow = self.queue.push(dst, packet)
         if overflow is not None:
             out.append(DropPackets(dst, (overflow,)))
+        self._keep_invalid_entry(now, dst)
         if dst in self.discoveries:
             return
         # RFC 6.4: "...the originating node SHOULD use the expanding ring search technique
@@ -590,14 +650,33 @@ class AodvCore:
         d = self.discoveries[dst] = _Discovery(dst, ttl, now)
         self._send_rreq(now, d, out)
 
+    def _keep_invalid_entry(self, now: float, dst: str) -> None:
+        """Data for a destination whose entry is invalid keeps the entry (and so its
+        sequence number) for another DELETE_PERIOD.
+
+        RFC 6.3: "The Destination Sequence Number field in the RREQ message is the last
+        known destination sequence number for this destination"; 6.11: the invalid entry's
+        "Lifetime field is updated to current time plus DELETE_PERIOD. Before this time,
+        the entry SHOULD NOT be deleted." A discovery with its retries outlasts
+        DELETE_PERIOD (ring, then 2.8 + 5.6 + 11.2 s with the defaults): without this the
+        entry went while the discovery ran, and its last RREQs asked with U set."""
+        r = self.table.get(dst)
+        if r is not None and not r.valid:
+            r.lifetime = max(r.lifetime, now + self.p.delete_period)
+
     def _send_rreq(self, now: float, d: _Discovery, out: list[Action]) -> None:
+        # RFC 6.13: "...after rebooting, a node MUST wait for DELETE_PERIOD before
+        # transmitting any route discovery messages." The data waits in the queue.
+        if self.reboot_until is not None and now < self.reboot_until:
+            d.deferred, d.deadline = True, self.reboot_until
+            return
         # RFC 6.3: "A node SHOULD NOT originate more than RREQ_RATELIMIT RREQ messages per
         # second." Decision: a RREQ over the limit is delayed, not dropped.
         if not self._rreq_limit.allow(now):
-            d.rate_limited = True
-            d.deadline = self._rreq_limit.next_free(now)
+            d.deferred, d.deadline = True, self._rreq_limit.next_free(now)
             return
-        d.rate_limited = False
+        d.deferred = False
+        self._keep_invalid_entry(now, d.dest)
         # RFC 6.1: "Immediately before a node originates a route discovery, it MUST
         # increment its own sequence number." RFC 6.3: "...the RREQ ID field is
         # incremented by one from the last RREQ ID used by the current node."
@@ -622,7 +701,7 @@ class AodvCore:
         # RFC 6.3: "Before broadcasting the RREQ, the originating node buffers the RREQ ID
         # and the Originator IP address (its own address) of the RREQ for
         # PATH_DISCOVERY_TIME."
-        self.rreq_cache.add(self.addr, self.rreq_id, now + self.p.path_discovery_time)
+        self.rreq_cache.add(self.addr, self.rreq_id, now + self.p.path_discovery_time, now)
         self._broadcast(now, rreq, d.ttl, out)
         d.round_started = now
         # RFC 6.4: "The timeout for receiving a RREP is RING_TRAVERSAL_TIME" during the
@@ -635,8 +714,11 @@ class AodvCore:
             d.deadline = now + self.p.ring_traversal_time(d.ttl)
 
     def _discovery_timeout(self, now: float, d: _Discovery, out: list[Action]) -> None:
-        if d.rate_limited:
+        if d.deferred:
             self._send_rreq(now, d, out)
+            return
+        if d.repair_hops is not None:
+            self._repair_failed(now, d, out)
             return
         if d.ttl < self.p.net_diameter:
             # RFC 6.4: "...the TTL_VALUE is incremented by TTL_INCREMENT ... until TTL set
@@ -662,10 +744,50 @@ class AodvCore:
 
     def _complete_discoveries(self, now: float, out: list[Action]) -> None:
         for dest, d in list(self.discoveries.items()):
-            if self.table.valid(dest) is not None:
+            r = self.table.valid(dest)
+            if r is not None:
                 del self.discoveries[dest]
                 out.append(ReleasePackets(dest, tuple(self.queue.pop_all(dest))))
-                out.append(DiscoveryDone(dest, True, now - d.started, now - d.round_started))
+                repair = d.repair_hops is not None
+                out.append(
+                    DiscoveryDone(dest, True, now - d.started, now - d.round_started, repair)
+                )
+                # RFC 6.12: "If the hop count of the newly determined route to the
+                # destination is greater than the hop count of the previously known route
+                # the node SHOULD issue a RERR message for the destination, with the 'N'
+                # bit set."
+                if repair and r.hops > d.repair_hops and r.precursors:
+                    self._send_rerr(now, [r], out, fallback=False, no_delete=True)
+
+    # == RFC 6.12 local repair ============================================================
+    def _start_repair(self, now: float, r: Route, out: list[Action]) -> None:
+        # RFC 6.12: "To repair the link break, the node increments the sequence number for
+        # the destination and then broadcasts a RREQ for that destination. The TTL of the
+        # RREQ should initially be set to: max(MIN_REPAIR_TTL, 0.5 * #hops) +
+        # LOCAL_ADD_TTL, where #hops is the number of hops to the sender (originator) of
+        # the currently undeliverable packet." MIN_REPAIR_TTL "should be the last known hop
+        # count to the destination". Decision: the break is found by HELLO loss, with no
+        # undeliverable packet in hand; #hops is the longest route among the precursors'
+        # (the farthest upstream user we know of is at least one hop further away).
+        upstream = [self.table.valid(p) for p in r.precursors]
+        far = max((u.hops for u in upstream if u is not None), default=1) + 1
+        ttl = min(max(r.hops, far // 2) + self.p.local_add_ttl, self.p.net_diameter)
+        d = self.discoveries[r.dest] = _Discovery(r.dest, ttl, now, repair_hops=r.hops)
+        log.info("%s: repairing the route to %s locally (TTL %d)", self.addr, r.dest, ttl)
+        self._send_rreq(now, d, out)
+
+    def _repair_failed(self, now: float, d: _Discovery, out: list[Action]) -> None:
+        # RFC 6.12: "If, at the end of the discovery period, the repairing node has not
+        # received a RREP (or other control message creating or updating the route) for
+        # that destination, it proceeds in as described in Section 6.11 by transmitting a
+        # RERR message for that destination." Decision: the discovery period of a repair
+        # is one RING_TRAVERSAL_TIME of its TTL (RFC 6.4's wait for a RREQ of that TTL).
+        del self.discoveries[d.dest]
+        out.append(DropPackets(d.dest, tuple(self.queue.pop_all(d.dest))))
+        out.append(DiscoveryDone(d.dest, False, now - d.started, now - d.round_started, True))
+        r = self.table.get(d.dest)
+        if r is not None and r.precursors:
+            self._send_rerr(now, [r], out, fallback=False)
 
     # == RFC 6.11 RERR ====================================================================
     def _link_break(self, now: float, nbr: str, out: list[Action]) -> None:
@@ -681,52 +803,104 @@ class AodvCore:
             self._invalidate(r, now)
         if broken:
             log.info("%s: link to %s lost, %d routes invalid", self.addr, nbr, len(broken))
-        self._send_rerr(now, [r for r in broken if r.precursors], out, fallback=False)
+        report = []
+        for r in broken:
+            # RFC 6.12: "When a link break in an active route occurs, the node upstream of
+            # that break MAY choose to repair the link locally if the destination was no
+            # farther than MAX_REPAIR_TTL hops away." Decision: routes others use through
+            # us (with precursors) are repaired; for our own traffic the next packet
+            # starts an ordinary discovery.
+            if (
+                self.p.local_repair
+                and r.precursors
+                and r.hops <= self.p.max_repair_ttl
+                and r.dest not in self.discoveries
+                and self.reboot_until is None
+            ):
+                self._start_repair(now, r, out)
+            elif r.precursors:
+                report.append(r)
+        self._send_rerr(now, report, out, fallback=False)
 
-    def _forward_without_route(self, now: float, dst: str, out: list[Action]) -> None:
+    def _forward_without_route(self, now: float, dst: str, packet: bytes, out: list) -> None:
         # RFC 6.11 (ii): "...if it gets a data packet destined to a node for which it does
-        # not have an active route and is not repairing". RFC 6.13: a rebooted node
-        # "SHOULD broadcast a RERR ... and MUST reset the waiting timer to expire after
-        # current time plus DELETE_PERIOD."
+        # not have an active route and is not repairing (if using local repair)". RFC
+        # 6.12: "During local repair data packets SHOULD be buffered."
+        d = self.discoveries.get(dst)
+        if d is not None and d.repair_hops is not None:
+            overflow = self.queue.push(dst, packet)
+            if overflow is not None:
+                out.append(DropPackets(dst, (overflow,)))
+            return
+        # RFC 6.13: a rebooted node "SHOULD broadcast a RERR ... and MUST reset the waiting
+        # timer to expire after current time plus DELETE_PERIOD."
         if self.reboot_until is not None:
             self.reboot_until = now + self.p.delete_period
         r = self.table.get(dst)
         if r is None:
+            # Decision: with no entry the RERR carries sequence number 0, which a receiver
+            # never copies over a number it holds (`_rerr`: sequence numbers never go back).
             r = self.table.add(Route(dst, dst, 0, 0, False, now + self.p.delete_period, False))
+        elif r.valid_seq:
+            # RFC 6.11: "The destination sequence number of this routing entry, if it
+            # exists and is valid, is incremented for cases (i) and (ii)".
+            r.seq = seqnum.increment(r.seq)
+            r.lifetime = max(r.lifetime, now + self.p.delete_period)
         # Decision: with no precursor known for the destination (the packet's previous hop
         # is hidden from us), the RERR is broadcast with TTL 1; neighbours without a route
         # through us to `dst` ignore it (RFC 6.11 case iii only acts on such routes).
         self._send_rerr(now, [r], out, fallback=True)
 
     def _rerr(self, now: float, src: str, m: Rerr, out: list[Action]) -> None:
-        # RFC 6.11 (iii) / 6.12: a RERR with the N flag announces a local repair; the
-        # upstream node "MUST NOT delete the route".
-        if m.no_delete:
-            return
         # RFC 6.11: "...the list should consist of those destinations in the RERR for
         # which there exists a corresponding entry in the local routing table that has
-        # the transmitter of the received RERR as the next hop." The sequence number is
-        # "copied from the incoming RERR in case (iii)".
+        # the transmitter of the received RERR as the next hop."
         affected = []
         for dest, seq in m.unreachable:
             r = self.table.valid(dest)
-            if r is not None and r.next_hop == src:
-                r.seq, r.valid_seq = seq, True
-                self._invalidate(r, now)
-                affected.append(r)
+            if r is None or r.next_hop != src:
+                continue
+            affected.append(r)
+            if m.no_delete:
+                continue
+            # RFC 6.11: the sequence number is "copied from the incoming RERR in case
+            # (iii)"; RFC 6.1: a node changes a destination's sequence number only on "new
+            # information about the sequence number" ("information older than what is
+            # held is discarded"). Decision: the route is invalidated whatever the number
+            # (its next hop says it cannot deliver: keeping it would black-hole data), and
+            # the number only moves forward.
+            if not r.valid_seq or seqnum.newer(seq, r.seq):
+                r.seq = seq
+            r.valid_seq = True
+            self._invalidate(r, now)
         if self.reboot_until is not None:
+            return
+        if m.no_delete:
+            # RFC 6.12: "A node that receives a RERR message with the 'N' flag set MUST NOT
+            # delete the route to that destination. The only action taken should be the
+            # retransmission of the message, if the RERR arrived from the next hop along
+            # that route, and if there are one or more precursor nodes along that route."
+            # An originator (no precursors) keeps its route: it MAY re-discover; we do not.
+            self._send_rerr(now, [r for r in affected if r.precursors], out, False, True)
             return
         # RFC 6.11: "The RERR should contain those destinations that are part of the
         # created list of unreachable destinations and have a non-empty precursor list."
         self._send_rerr(now, [r for r in affected if r.precursors], out, fallback=False)
 
-    def _send_rerr(self, now: float, routes: list[Route], out: list, fallback: bool) -> None:
+    def _send_rerr(
+        self,
+        now: float,
+        routes: list[Route],
+        out: list,
+        fallback: bool,
+        no_delete: bool = False,
+    ) -> None:
         if not routes:
             return
         # RFC 6.11: "A node should not generate more than RERR_RATELIMIT RERR messages
         # per second." Decision: RERRs over the limit are dropped (and counted).
         if not self._rerr_limit.allow(now):
-            self.dropped_rerr += 1
+            self.dropped["rerr_ratelimit"] += 1
             return
         # RFC 6.11: "The neighboring node(s) that should receive the RERR are all those
         # that belong to a precursor list of at least one of the unreachable
@@ -736,7 +910,8 @@ class AodvCore:
         # 0xFFFFFFFF, TTL == 1)".
         targets = set().union(*(r.precursors for r in routes))
         for i in range(0, len(routes), 255):
-            rerr = Rerr(unreachable=tuple((r.dest, r.seq) for r in routes[i : i + 255]))
+            pairs = tuple((r.dest, r.seq) for r in routes[i : i + 255])
+            rerr = Rerr(unreachable=pairs, no_delete=no_delete)
             if len(targets) == 1:
                 out.append(Unicast(rerr, next(iter(targets)), LOCAL_TTL))
             elif targets or fallback:
@@ -781,6 +956,9 @@ class AodvCore:
     def _finish(self, now: float, out: list[Action]) -> list[Action]:
         if self.discoveries:
             self._complete_discoveries(now, out)
+        if len(self.table) > self.p.route_table_limit:
+            gone = self.table.shrink(self.p.route_table_limit, now, keep=self.discoveries)
+            self.dropped["route_evicted"] += gone
         routes = self._sync_routes()
         if not out:
             return routes

@@ -11,6 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# Decision: the neighbour list is bounded (forged IP sources would grow it); past the bound
+# the neighbours heard least recently are forgotten, down to 90% of it.
+DEFAULT_LIMIT = 256
+
 
 @dataclass
 class Neighbor:
@@ -22,16 +26,28 @@ class Neighbor:
 
 
 class Neighbors:
-    def __init__(self) -> None:
+    def __init__(self, limit: int = DEFAULT_LIMIT) -> None:
+        self.limit = limit
+        self.evicted = 0
         self._n: dict[str, Neighbor] = {}
         self._blacklist: dict[str, float] = {}
 
     def heard(self, addr: str, now: float) -> Neighbor:
         n = self._n.get(addr)
         if n is None:
+            if len(self._n) >= self.limit:
+                self._evict()
             n = self._n[addr] = Neighbor(addr)
         n.last_heard = now
         return n
+
+    def _evict(self) -> None:
+        by_age = sorted(self._n.values(), key=lambda n: n.last_heard)
+        for n in by_age[: len(by_age) - int(self.limit * 0.9)]:
+            del self._n[n.addr]
+            self.evicted += 1
+        if len(self._blacklist) >= self.limit:
+            self._blacklist.clear()
 
     def hello(self, addr: str, now: float, timeout: float) -> None:
         n = self.heard(addr, now)

@@ -22,7 +22,9 @@ appended after a message. Decision (HELLO extension type): the Hello Interval ex
 sent as type 1, which is what RFC 3561 section 9.1 and the IANA AODV registry assign.
 Wireshark's dissector still uses the type of earlier drafts (2, "AODV_EXT_INT") and shows
 our type 1 as a generic extension; on receipt we accept both 1 and 2. Unknown extension
-types are skipped; reserved bits are sent as 0 and ignored on receipt.
+types below 128 are skipped; section 9: "Extensions with types between 128 and 255 may NOT
+be skipped", so a message carrying one (we know none) is malformed. Reserved bits are sent
+as 0 and ignored on receipt.
 
 A HELLO is a RREP (RFC 3561 section 6.9) with Destination = Originator = the sender,
 Hop Count 0, sent to 255.255.255.255 with IP TTL 1; `is_hello()` recognises it.
@@ -44,6 +46,7 @@ RREP_ACK_TYPE = 4
 # RFC 3561 section 9.1 / IANA: Hello Interval extension is type 1. Wireshark uses 2.
 EXT_HELLO_INTERVAL = 1
 EXT_HELLO_INTERVAL_WIRESHARK = 2
+KNOWN_EXTENSIONS = frozenset({EXT_HELLO_INTERVAL, EXT_HELLO_INTERVAL_WIRESHARK})
 
 _RREQ = struct.Struct("!BBBBI4sI4sI")
 _RREP = struct.Struct("!BBBB4sI4sI")
@@ -218,6 +221,11 @@ def _extensions(data: bytes) -> dict[int, bytes]:
         etype, elen = data[i], data[i + 1]
         if etype == 0:
             raise MalformedPacket("extension type 0 is reserved")
+        if etype >= 128 and etype not in KNOWN_EXTENSIONS:
+            # RFC 3561 9: "Extensions with types between 128 and 255 may NOT be skipped."
+            raise MalformedPacket(
+                f"extension type {etype} (>= 128) is unknown and may not be skipped"
+            )
         body = data[i + 2 : i + 2 + elen]
         if len(body) != elen:
             raise MalformedPacket(f"extension type {etype} claims {elen} bytes, {len(body)} left")

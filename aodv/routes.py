@@ -3,11 +3,16 @@
 An entry is VALID (usable, installed in the kernel by the daemon) or INVALID (kept for
 DELETE_PERIOD so its sequence number survives, RFC 6.11). `lifetime` is the absolute time
 at which a valid entry becomes invalid, or at which an invalid entry is deleted.
+
+The table is bounded (`shrink`): RFC 3561 sets no bound, but a flood of RREQs from forged
+originators would otherwise give one reverse route each. Decision: past the bound, entries
+are evicted in this order: invalid ones, then valid ones no data used lately, then the rest,
+each soonest-to-expire first; entries named in `keep` (destinations being discovered) stay.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass, field
 
 
@@ -65,3 +70,19 @@ class RoutingTable:
 
     def next_deadline(self) -> float | None:
         return min((r.lifetime for r in self._routes.values()), default=None)
+
+    def shrink(self, limit: int, now: float, keep: Collection[str] = ()) -> int:
+        """Evict down to 90% of `limit` if above it (in batches: a flood adds one entry per
+        message); return how many entries went. The caller deletes their kernel routes."""
+        if len(self._routes) <= limit:
+            return 0
+        target = int(limit * 0.9)
+
+        def order(r: Route) -> tuple[int, float]:
+            return (2 if r.valid and r.active_until > now else 1 if r.valid else 0, r.lifetime)
+
+        victims = sorted((r for r in self._routes.values() if r.dest not in keep), key=order)
+        gone = victims[: len(self._routes) - target]
+        for r in gone:
+            del self._routes[r.dest]
+        return len(gone)

@@ -6,7 +6,7 @@ import pytest
 
 from aodv import seqnum
 from aodv.neighbors import Neighbors
-from aodv.params import Params
+from aodv.params import Params, profile
 from aodv.request_queue import RequestQueue
 from aodv.rreq_cache import RreqCache
 
@@ -26,9 +26,13 @@ def test_rfc_defaults():
     p = Params()
     assert p.net_traversal_time == pytest.approx(2.8)
     assert p.path_discovery_time == pytest.approx(5.6)
-    assert p.blacklist_timeout == pytest.approx(5.6)
+    # Section 10 note: {[(TTL_THRESHOLD - TTL_START)/TTL_INCREMENT] + 1 + RREQ_RETRIES}
+    # * NET_TRAVERSAL_TIME with the ring search: (2 + 1 + 2) * 2.8 s.
+    assert p.blacklist_timeout == pytest.approx(14.0)
     assert p.delete_period == pytest.approx(15.0)
-    assert p.my_route_timeout == pytest.approx(6.0)
+    # Section 10: MY_ROUTE_TIMEOUT "MUST be at least 2 * PATH_DISCOVERY_TIME".
+    assert p.my_route_timeout == pytest.approx(11.2)
+    assert p.ttl_start == 2  # "at least 2 if Hello messages are used"
     assert p.next_hop_wait == pytest.approx(0.05)
     assert p.neighbor_timeout == pytest.approx(2.0)
     assert p.ring_traversal_time(1) == pytest.approx(0.24)
@@ -47,7 +51,7 @@ def test_time_scale_divides_every_time():
     p1, p10 = Params(), Params(time_scale=10)
     for f in ("net_traversal_time", "delete_period", "hello_interval", "next_hop_wait"):
         assert getattr(p10, f) == pytest.approx(getattr(p1, f) / 10), f
-    assert p10.ms(p10.my_route_timeout) == 6000  # wire values stay in RFC ms
+    assert p10.ms(p10.my_route_timeout) == 11200  # wire values stay in RFC ms
     assert p10.from_ms(6000) == pytest.approx(0.6)
 
 
@@ -85,3 +89,28 @@ def test_request_queue_fifo_and_limit():
     assert q.push("d", b"1") is None and q.push("d", b"2") is None
     assert q.push("d", b"3") == b"1"
     assert q.pop_all("d") == [b"2", b"3"] and "d" not in q
+
+
+def test_section_10_constraints_are_checked():
+    assert Params().problems() == []
+    assert profile("ns3").problems() == []
+    bad = Params(my_route_timeout_ms=6000)  # the table's 2 * ACTIVE_ROUTE_TIMEOUT
+    assert any("MY_ROUTE_TIMEOUT" in p for p in bad.problems())
+    assert Params(ttl_start=9).problems()  # above TTL_THRESHOLD
+    assert Params(net_diameter=300, ttl_threshold=7).problems()
+    assert Params(hello_interval_ms=0).problems()
+
+
+def test_ns3_profile_matches_ns3_defaults():
+    p = profile("ns3")
+    assert p.my_route_timeout == pytest.approx(11.2)
+    assert p.blacklist_timeout == pytest.approx(5.6)
+    assert p.ttl_start == 1 and not p.local_repair
+    assert p.delete_period == pytest.approx(15.0) and p.next_hop_wait == pytest.approx(0.05)
+    assert profile("rfc", time_scale=2).my_route_timeout == pytest.approx(5.6)
+    with pytest.raises(ValueError, match="unknown AODV profile"):
+        profile("olsr")
+
+
+def test_lifetime_field_is_clamped_to_32_bits():
+    assert Params().ms(1e12) == 0xFFFFFFFF
