@@ -808,11 +808,14 @@ class AodvCore:
             # RFC 6.12: "When a link break in an active route occurs, the node upstream of
             # that break MAY choose to repair the link locally if the destination was no
             # farther than MAX_REPAIR_TTL hops away." Decision: routes others use through
-            # us (with precursors) are repaired; for our own traffic the next packet
+            # us (with precursors) and that carried data lately are repaired; an idle
+            # route is not (its neighbour fell silent because nothing used it, and a
+            # repair would keep it alive for nobody); for our own traffic the next packet
             # starts an ordinary discovery.
             if (
                 self.p.local_repair
                 and r.precursors
+                and r.active_until > now
                 and r.hops <= self.p.max_repair_ttl
                 and r.dest not in self.discoveries
                 and self.reboot_until is None
