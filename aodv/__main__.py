@@ -1,4 +1,5 @@
-"""`python -m aodv --robot r3 --iface wlan0 [--time-scale K] [--stats PATH] [--log-level L]`"""
+"""`python -m aodv --robot r3 --iface wlan0 [--time-scale K] [--profile rfc|ns3]
+[--no-local-repair] [--set NAME=VALUE ...] [--stats PATH] [--state PATH] [--log-level L]`"""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import ipaddress
 import logging
 import os
 import sys
+from dataclasses import fields, replace
 
+from aodv.params import PROFILES, Params, profile
 from topology.argtypes import number
 
 EXIT_USAGE = 2
@@ -52,7 +55,34 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         default=1.0,
         help="run every protocol timer K times faster (default 1)",
     )
+    p.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        default="rfc",
+        help="parameter set: rfc (RFC 3561 section 10 with its notes, default) or ns3 "
+        "(ns-3's AODV defaults, to compare with ns-3 studies)",
+    )
+    p.add_argument(
+        "--no-local-repair",
+        action="store_true",
+        help="turn local repair (RFC 3561 6.12) off; the ns3 profile has it off anyway",
+    )
+    p.add_argument(
+        "--set",
+        metavar="NAME=VALUE",
+        action="append",
+        default=[],
+        help="override one parameter of the profile (a field of aodv.params.Params, e.g. "
+        "my_route_timeout_ms=11200); the section 10 constraints are checked",
+    )
     p.add_argument("--stats", metavar="PATH", help="statistics JSON, rewritten every second")
+    p.add_argument(
+        "--state",
+        metavar="PATH",
+        help="counter file that survives a restart (RFC 6.13: sequence number and RREQ ID "
+        "resume above it, and its presence makes a start a reboot); without it only "
+        "routes left in the kernel tell a restart",
+    )
     p.add_argument(
         "--log-level",
         default="info",
@@ -68,8 +98,39 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def build_params(args: argparse.Namespace) -> Params:
+    """The profile, its overrides and --no-local-repair; ValueError says what is wrong."""
+    params = profile(args.profile, args.time_scale)
+    changes: dict = {"local_repair": False} if args.no_local_repair else {}
+    types = {f.name: f.type for f in fields(Params)}
+    for item in args.set:
+        name, sep, text = item.partition("=")
+        if not sep or name not in types or name == "time_scale":
+            raise ValueError(f"--set {item!r}: not NAME=VALUE with NAME a field of Params")
+        kind = types[name]
+        try:
+            if "bool" in kind:
+                if text not in ("true", "false"):
+                    raise ValueError
+                changes[name] = text == "true"
+            else:
+                changes[name] = (float if "float" in kind else int)(text)
+        except ValueError:
+            raise ValueError(f"--set {item!r}: {name} takes {kind.split()[0]}") from None
+    params = replace(params, **changes)
+    problems = params.problems()
+    if problems:
+        raise ValueError(f"parameters break RFC 3561: {'; '.join(problems)}")
+    return params
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    try:
+        params = build_params(args)
+    except ValueError as e:
+        print(f"aodv: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(RobotFormatter(args.robot))
     logging.basicConfig(level=args.log_level.upper(), handlers=[handler])
@@ -78,17 +139,14 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     from aodv.daemon import Daemon
     from aodv.kernel import KernelError
-    from aodv.params import Params
 
-    if args.stats:
-        parent = os.path.dirname(os.path.abspath(args.stats))
-        if not os.path.isdir(parent):
-            print(f"aodv: error: no directory for --stats: {parent}", file=sys.stderr)
+    for option, path in (("--stats", args.stats), ("--state", args.state)):
+        parent = os.path.dirname(os.path.abspath(path)) if path else None
+        if parent and not os.path.isdir(parent):
+            print(f"aodv: error: no directory for {option}: {parent}", file=sys.stderr)
             return EXIT_USAGE
     try:
-        return Daemon(
-            args.robot, args.iface, Params(time_scale=args.time_scale), args.stats, args.net
-        ).run()
+        return Daemon(args.robot, args.iface, params, args.stats, args.net, args.state).run()
     except KernelError as e:
         print(f"aodv: error: {e}", file=sys.stderr)
         return EXIT_USAGE if "no interface" in str(e) or "no IPv4" in str(e) else EXIT_FAILURE

@@ -20,11 +20,16 @@ hears our own broadcasts: a socket filter drops them by source address (`_on_udp
 again).
 
 Routes of the daemon carry protocol number RTPROT_AODV; they are flushed at start and at
-exit. Finding such routes at start means a previous instance died: the core then applies
-the RFC 6.13 reboot rule.
+exit. A start is a restart (RFC 6.13 reboot rule: DELETE_PERIOD without originating
+control messages) when the counter file of a previous instance exists (`--state`,
+aodv.persist: its sequence number and RREQ ID resume above what it used) or when such
+routes of a dead predecessor are in the kernel.
 
 Peer input is never trusted: a datagram that does not decode, or names addresses outside
-the ad hoc network, is counted in stats["dropped"] and logged (rate-limited), never raised.
+the ad hoc network, is counted in stats["dropped"] and logged (rate-limited), never raised;
+what the core bounds or refuses is counted in stats["protocol_dropped"]. An action that
+fails (a message that will not encode, a send the kernel refuses) is counted and the
+actions after it still run, so the kernel's routes always follow the core's table.
 """
 
 from __future__ import annotations
@@ -58,6 +63,7 @@ from aodv.kernel import (
     drop_own_datagrams,
 )
 from aodv.params import Params
+from aodv.persist import CounterStore
 from aodv.sim import warm_up
 from aodv.stats import Stats
 
@@ -136,8 +142,10 @@ class Daemon:
         params: Params,
         stats_path: str | None,
         net: str = "10.0.0.0/16",
+        state_path: str | None = None,
     ) -> None:
         self.robot = robot
+        self.store = CounterStore(state_path) if state_path else None
         self.iface = iface
         self.p = params
         self.stats_path = stats_path
@@ -159,9 +167,18 @@ class Daemon:
         self.addr = self.routes.address()
         self.stats = Stats(self.robot, self.addr)
         stale = self.routes.ours()
-        rebooted = bool(stale)
-        if rebooted:
+        resumed = self.store.load() if self.store else None
+        rebooted = bool(stale) or resumed is not None
+        if stale:
             log.warning("found %d routes of a previous run: reboot rule applies", len(stale))
+        if resumed is not None:
+            log.warning(
+                "restarted (counters of a previous instance found): waiting DELETE_PERIOD "
+                "(%.1f s), sequence number resumes at %d, RREQ ID at %d",
+                self.p.delete_period,
+                *resumed,
+            )
+        seq, rreq_id = resumed or (0, 0)
         self.routes.flush()
         self.tun = Tun()
         self.monitor = None
@@ -176,7 +193,11 @@ class Daemon:
             # Exercise the core and the codec before the first real message (sim.warm_up).
             warm_up(self.p)
             gc.collect()
-            self.core = AodvCore(self.addr, self.p, time.monotonic(), rebooted=rebooted)
+            self.core = AodvCore(
+                self.addr, self.p, time.monotonic(), rebooted=rebooted, seq=seq, rreq_id=rreq_id
+            )
+            if self.store:
+                self.store.cover(seq, rreq_id)  # a restart's own file says so from now on
             # What start-up allocated lives for good: keep it out of the collector's
             # full passes, which would otherwise walk it on some discovery's hot path.
             gc.freeze()
@@ -240,6 +261,7 @@ class Daemon:
             self.stats.routes = {
                 d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
             }
+            self.stats.protocol_dropped = self.core.dropped
             self.stats.write(self.stats_path)
 
     # -- the loop ------------------------------------------------------------------------
@@ -413,6 +435,9 @@ class Daemon:
 
     # -- actions -------------------------------------------------------------------------
     def _execute(self, actions: list, now: float) -> None:
+        if self.store:
+            # RFC 6.13: the numbers these messages carry are on disk before they leave.
+            self.store.cover(self.core.seq, self.core.rreq_id)
         routed = now  # when the last route change of this batch was in the kernel
         # In the core's order (AodvCore._finish): control messages, route changes,
         # releases, RREP-ACKs. Installs are rtnetlink writes whose acknowledgements the
@@ -446,6 +471,9 @@ class Daemon:
                     if pkt[12:16] == socket.inet_aton(self.addr):
                         self.tun.write(icmp_host_unreachable(self.addr, pkt))
                         self.stats.icmp_unreachable += 1
+            elif isinstance(a, DiscoveryDone) and a.repair:
+                self.stats.local_repairs["ok" if a.ok else "failed"] += 1
+                log.info("local repair of %s %s", a.dest, "succeeded" if a.ok else "failed")
             elif isinstance(a, DiscoveryDone):
                 # Both latencies end when the route is in the kernel (the core's run to
                 # `now`, the install took until `routed`). The round starts when the RREQ
@@ -471,7 +499,12 @@ class Daemon:
                 )
 
     def _send(self, msg: wire.Message, dst: str, ttl: int, flags: int) -> None:
-        data = wire.encode(msg)
+        try:
+            data = wire.encode(msg)
+        except ValueError as e:  # a core bug: count it, and let the route actions run
+            self.stats.dropped["encode_failed"] += 1
+            log.error("could not encode %s to %s: %s", msg.type_name, dst, e)
+            return
         if ttl != self._ttl:
             self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_TTL, ttl)
             self._ttl = ttl

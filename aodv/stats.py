@@ -31,6 +31,9 @@ class Stats:
         self.icmp_unreachable = 0
         self.route_uses = 0
         self.discoveries: list[dict] = []
+        self.local_repairs: Counter[str] = Counter()
+        # The core's own counters (aodv.core.AodvCore.dropped): what it bounded or refused.
+        self.protocol_dropped: Counter[str] = Counter()
         self.routes: dict[str, dict] = {}
 
     def as_dict(self) -> dict:
@@ -47,6 +50,8 @@ class Stats:
             "bytes_sent": self.bytes_sent,
             "bytes_received": self.bytes_received,
             "dropped": dict(self.dropped),
+            "protocol_dropped": dict(self.protocol_dropped),
+            "local_repairs": dict(self.local_repairs),
             "routes": self.routes,
             "route_installs": self.route_installs,
             "route_deletes": self.route_deletes,

@@ -16,6 +16,7 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from topology.argtypes import number
+from topology.spec import AODV_PROFILES
 
 log = logging.getLogger("testbed")
 
@@ -85,6 +86,8 @@ def _add_net(sub) -> None:
                     required=True)  # fmt: skip
     up.add_argument("--range-model", choices=("disc", "lossy"), default="disc")
     up.add_argument("--routing", choices=("none", "babel", "aodv"), default="none")
+    up.add_argument("--aodv-profile", choices=AODV_PROFILES, default="rfc",
+                    help="AODV parameters: rfc (default) or ns3 (ns-3's defaults)")  # fmt: skip
     up.add_argument("--loss", type=number(float, "loss", minimum=0), default=0.0, metavar="PCT")
     up.add_argument("--delay", type=number(float, "delay", minimum=0), default=0.0, metavar="MS")
     up.add_argument("--capture", metavar="DIR", help="write one pcap per robot here")
@@ -141,6 +144,7 @@ def _net_up(args) -> int:
             positions=tuple(positions),
             comm_range=args.comm_range,
             routing=args.routing,
+            aodv_profile=args.aodv_profile,
             impairment=Impairment(loss_pct=args.loss, delay_ms=args.delay),
             range_model=args.range_model,
             capture_dir=os.path.abspath(args.capture) if args.capture else None,

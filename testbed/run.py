@@ -218,6 +218,7 @@ class Run:
                 positions=tuple(starts) + (tuple(self.display_pos),),
                 comm_range=cfg.comm_range,
                 routing=cfg.routing,
+                aodv_profile=cfg.aodv_profile,
                 impairment=Impairment(loss_pct=cfg.loss_pct, delay_ms=cfg.delay_ms),
                 capture_dir=self._path("pcaps") if cfg.capture else None,
                 time_scale=cfg.time_scale,

@@ -17,6 +17,7 @@ from node.timing import STEP_S
 from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.argtypes import number
+from topology.spec import AODV_PROFILES
 
 ROUTINGS = ("babel", "aodv", "none")
 
@@ -29,6 +30,7 @@ class RunConfig:
     seed: int = 1
     time_scale: float = 1.0
     routing: str = "babel"
+    aodv_profile: str = "rfc"  # aodv.params.PROFILES: rfc or ns3 (routing aodv only)
     map: str | None = None
     loss_pct: float = 0.0
     delay_ms: float = 0.0
@@ -88,6 +90,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--out", required=True, help="run directory to write")
     a("--time-scale", type=number(float, "time scale", above=0), default=1.0)
     a("--routing", choices=ROUTINGS, default="babel")
+    a("--aodv-profile", choices=AODV_PROFILES, default="rfc",
+      help="AODV parameters: rfc (RFC 3561 section 10, default) or ns3 (ns-3's "
+           "defaults)")  # fmt: skip
     a("--map", help="PNG map (dark pixels are obstacles); default: empty 20 x 20 m")
     a("--map-cell", type=number(float, "map cell", above=0), default=0.05, help="m per pixel")
     a("--loss", type=number(float, "loss", minimum=0), default=0.0, help="percent, every link")
@@ -129,7 +134,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             raise UsageError(f"--kill names robot {k}, but the team is r1..r{args.robots}")
     return RunConfig(
         robots=args.robots, comm_range=args.comm_range, laser_range=args.laser_range,
-        seed=args.seed, time_scale=args.time_scale, routing=args.routing, map=args.map,
+        seed=args.seed, time_scale=args.time_scale, routing=args.routing,
+        aodv_profile=args.aodv_profile, map=args.map,
         loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
         max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
         speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,

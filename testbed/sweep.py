@@ -77,6 +77,7 @@ _FLAGS = {
     "seed": "--seed",
     "time_scale": "--time-scale",
     "routing": "--routing",
+    "aodv_profile": "--aodv-profile",
     "max_steps": "--max-steps",
     "loss_pct": "--loss",
     "delay_ms": "--delay",

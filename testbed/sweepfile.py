@@ -22,6 +22,7 @@ for every run of the sweep::
     load_limit = 60               # optional: runs share the machine while the sum of their
                                   # loads, (robots + 1) x time_scale, stays within this
     routing = "aodv"              # aodv | babel | none, default aodv
+    aodv_profile = "rfc"          # rfc | ns3 (AODV parameters), default rfc
     max_steps = 3000              # default 3000
     capture = true                # default false
     map = "maps/office.png"       # optional; relative paths are relative to the sweep file
@@ -49,6 +50,7 @@ from node.coordination import DEFAULT as DEFAULT_COORDINATION
 from node.coordination import MODES as COORDINATION_MODES
 from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
+from topology.spec import AODV_PROFILES
 
 ROUTINGS = ("aodv", "babel", "none")
 
@@ -60,7 +62,9 @@ _GRID_CHOICES = {
     "start": (START_PLACEMENTS, "corner"),
 }
 _GRID_KEYS = set(_GRID_LISTS) | set(_GRID_CHOICES) | {"runs"}
-_RUN_KEYS = {"time_scale", "routing", "max_steps", "capture", "map", "seed", "load_limit"}
+_RUN_KEYS = {
+    "time_scale", "routing", "aodv_profile", "max_steps", "capture", "map", "seed", "load_limit",
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,7 @@ class SweepSpec:
     time_scale_by_robots: tuple[tuple[int, float], ...] = ()
     load_limit: float | None = None
     routing: str = "aodv"
+    aodv_profile: str = "rfc"
     max_steps: int = 3000
     capture: bool = False
     map: str | None = None
@@ -248,6 +253,15 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
                 path, "run.routing", f"expected one of {', '.join(ROUTINGS)}, got {routing!r}"
             )
         kw["routing"] = routing
+    if "aodv_profile" in run:
+        prof = run["aodv_profile"]
+        if prof not in AODV_PROFILES:
+            raise _fail(
+                path,
+                "run.aodv_profile",
+                f"expected one of {', '.join(AODV_PROFILES)}, got {prof!r}",
+            )
+        kw["aodv_profile"] = prof
     if "max_steps" in run:
         kw["max_steps"] = _count(path, "run.max_steps", run["max_steps"])
     if "capture" in run:
@@ -355,6 +369,8 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 "coordination": coord,
                 "start": start,
             }
+            if spec.aodv_profile != "rfc":  # only when chosen: plans of older sweeps stay
+                config["aodv_profile"] = spec.aodv_profile
             rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
             out.append(PlannedRun(rid, index, config))
     return out

@@ -166,13 +166,13 @@ class Network:
         started = []
         forkable = routing.FORKABLE.get(self.spec.routing)
         for k in self.spec.robot_ids():
-            argv = routing.argv_for(self.spec.routing, k, self.state_dir, self.spec.time_scale)
+            argv = routing.argv_for(self.spec, k, self.state_dir)
             if argv is None:
                 continue
             logp = routing.log_file(self.spec.routing, k, self.state_dir)
             if self._routing_forks is not None:  # started in _build iff `forkable`
                 open(logp, "w").close()  # the child appends
-                args = forkable.args(k, self.state_dir, self.spec.time_scale)
+                args = forkable.args(k, self.state_dir, self.spec)
                 try:
                     proc = self._routing_forks.spawn(
                         self.robot_ns(k), forkable.module, args, logp,

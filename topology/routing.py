@@ -9,7 +9,9 @@ adding one function here.
 - babel: Debian's babeld (RFC 8966), proactive, on wlan0 declared *wireless*: that turns off
          split horizon, which would be wrong on a medium where neighbours of a robot need not
          hear each other, and uses ETX link costs. Hello interval scales with the time scale.
-- aodv:  this project's AODV daemon (python -m aodv), on demand.
+- aodv:  this project's AODV daemon (python -m aodv), on demand, with the parameter profile
+         the spec names (`aodv_profile`: rfc or ns3) and a counter file in the run dir that
+         makes a restarted daemon obey the RFC 6.13 reboot rule.
 
 A protocol written in Python (aodv) is also *forkable*: the Network starts its daemons from a
 fork server (topology.forkserver) that has imported the daemon and warmed it up once, instead
@@ -29,8 +31,8 @@ from topology import names
 BABEL_HELLO_S = 1.0  # babeld's wireless default is 4 s; 1 s converges a 5-hop chain in ~5 s
 
 
-def babel_argv(k: int, run_dir: str, time_scale: float) -> list[str]:
-    hello = max(0.05, BABEL_HELLO_S / time_scale)
+def babel_argv(k: int, run_dir: str, spec) -> list[str]:
+    hello = max(0.05, BABEL_HELLO_S / spec.time_scale)
     return [
         "babeld",
         "-I", f"{run_dir}/r{k}.babeld.pid",
@@ -52,20 +54,28 @@ def aodv_stats_file(k: int, run_dir: str) -> str:
     return os.path.join(run_dir, f"r{k}.aodv.json")
 
 
-def aodv_args(k: int, run_dir: str, time_scale: float) -> list[str]:
+def aodv_state_file(k: int, run_dir: str) -> str:
+    """Robot k's AODV counter file (aodv/persist.py): lives as long as the network."""
+    return os.path.join(run_dir, f"r{k}.aodv.state")
+
+
+def aodv_args(k: int, run_dir: str, spec) -> list[str]:
     return [
         "--robot", f"r{k}",
         "--iface", names.ROBOT_IFACE,
-        "--time-scale", repr(time_scale),
+        "--time-scale", repr(spec.time_scale),
+        "--profile", spec.aodv_profile,
         "--stats", aodv_stats_file(k, run_dir),
+        "--state", aodv_state_file(k, run_dir),
     ]  # fmt: skip
 
 
-def aodv_argv(k: int, run_dir: str, time_scale: float) -> list[str]:
-    return [sys.executable, "-m", "aodv", *aodv_args(k, run_dir, time_scale)]
+def aodv_argv(k: int, run_dir: str, spec) -> list[str]:
+    return [sys.executable, "-m", "aodv", *aodv_args(k, run_dir, spec)]
 
 
-ArgvBuilder = Callable[[int, str, float], list[str]]
+# (robot number, the testbed's run dir, the NetworkSpec) -> argv
+ArgvBuilder = Callable[[int, str, object], list[str]]
 
 
 @dataclass(frozen=True)
@@ -130,6 +140,7 @@ def keep_daemon_files(
             shutil.copy(stats(k, run_dir), os.path.join(stats_dir, f"r{k}.json"))
 
 
-def argv_for(routing: str, k: int, run_dir: str, time_scale: float) -> list[str] | None:
-    builder = PROTOCOLS[routing]
-    return builder(k, run_dir, time_scale) if builder else None
+def argv_for(spec, k: int, run_dir: str) -> list[str] | None:
+    """Robot k's daemon command line for the spec's routing, or None (no daemon)."""
+    builder = PROTOCOLS[spec.routing]
+    return builder(k, run_dir, spec) if builder else None

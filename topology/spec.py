@@ -12,6 +12,8 @@ from topology import names
 
 ROUTINGS = ("none", "babel", "aodv")
 RANGE_MODELS = ("disc", "lossy")
+# aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
+AODV_PROFILES = ("rfc", "ns3")
 LAYOUTS = ("chain", "grid", "random")
 
 
@@ -88,6 +90,7 @@ class NetworkSpec:
     range_model: str = "disc"
     capture_dir: str | None = None
     time_scale: float = 1.0
+    aodv_profile: str = "rfc"  # aodv.params.PROFILES; used only with routing "aodv"
 
     def __post_init__(self) -> None:
         names.check_name(self.name)
@@ -112,6 +115,11 @@ class NetworkSpec:
             )
         if not (self.time_scale > 0 and math.isfinite(self.time_scale)):
             raise ValueError(f"time scale must be a positive number, not {self.time_scale}")
+        if self.aodv_profile not in AODV_PROFILES:
+            raise ValueError(
+                f"unknown AODV profile {self.aodv_profile!r} "
+                f"(choose from {', '.join(AODV_PROFILES)})"
+            )
 
     @property
     def robots(self) -> int:

@@ -18,7 +18,7 @@ def run(*argv):
 def test_help():
     proc = run("--help")
     assert proc.returncode == 0
-    for flag in ("--robot", "--iface", "--time-scale", "--stats", "--log-level"):
+    for flag in ("--robot", "--iface", "--time-scale", "--profile", "--set", "--state"):
         assert flag in proc.stdout
 
 
@@ -31,6 +31,12 @@ def test_help():
         ["--robot", "r1", "--time-scale", "fast"],
         ["--robot", "r1", "--log-level", "loud"],
         ["--robot", "r1", "--net", "10.0.0.300/16"],
+        ["--robot", "r1", "--profile", "olsr"],
+        ["--robot", "r1", "--set", "my_route_timeout_ms=6000"],  # < 2 * PATH_DISCOVERY_TIME
+        ["--robot", "r1", "--set", "ttl_start=9"],  # above TTL_THRESHOLD
+        ["--robot", "r1", "--set", "nonsense=1"],
+        ["--robot", "r1", "--set", "ttl_start=two"],
+        ["--robot", "r1", "--set", "local_repair=maybe"],
     ],
 )
 def test_bad_cli_is_one_line_and_status_2(argv):

@@ -122,3 +122,22 @@ def test_no_topology_module_imports_testbed():
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
     assert len(mods) > 10
+
+
+def test_topology_knows_the_aodv_profiles_aodv_defines():
+    from aodv.params import PROFILES
+    from topology.spec import AODV_PROFILES
+
+    assert set(AODV_PROFILES) == set(PROFILES)
+
+
+def test_aodv_daemons_get_their_profile_and_a_counter_file():
+    from topology import routing
+    from topology.spec import NetworkSpec
+
+    spec = NetworkSpec("t1", ((0, 0), (5, 0)), 10, routing="aodv", aodv_profile="ns3")
+    argv = routing.argv_for(spec, 2, "/run/x")
+    assert argv[argv.index("--profile") + 1] == "ns3"
+    assert argv[argv.index("--state") + 1] == "/run/x/r2.aodv.state"
+    with pytest.raises(ValueError, match="unknown AODV profile"):
+        NetworkSpec("t1", ((0, 0),), 10, aodv_profile="olsr")

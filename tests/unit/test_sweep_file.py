@@ -203,3 +203,12 @@ def test_bad_coordination_or_start_names_the_key(line, words):
     with pytest.raises(UsageError) as e:
         parse(GOOD.replace("runs = 2", "runs = 2\n" + line))
     assert words in str(e.value)
+
+
+def test_aodv_profile_is_a_run_option_recorded_only_when_chosen():
+    default = sweepfile.expand(parse(GOOD))
+    assert all("aodv_profile" not in r.config for r in default)  # older plans unchanged
+    ns3 = sweepfile.expand(parse(GOOD.replace("capture = true", 'aodv_profile = "ns3"')))
+    assert {r.config["aodv_profile"] for r in ns3} == {"ns3"}
+    with pytest.raises(UsageError, match="run.aodv_profile: expected one of rfc, ns3"):
+        parse(GOOD.replace("capture = true", 'aodv_profile = "olsr"'))
