@@ -433,3 +433,153 @@ def test_a_reply_the_kernel_could_not_transmit_is_counted_as_such():
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         assert out.stdout.strip() == ""  # it never reached wlan0
+
+
+def test_clean_restart_waits_delete_period_and_resumes_its_numbers():
+    """RFC 6.13 after a clean exit: no routes are left in the kernel, but the counter file the
+    topology gives every daemon (--state) says this is a restart."""
+    with aodv_net(CHAIN5[:3], time_scale=10.0) as net:  # DELETE_PERIOD 1.5 s
+        assert " 0% packet loss" in ping(net, 1, "10.0.0.3", "-c", "2", "-W", "5")
+        state = f"{net.state_dir}/r1.aodv.state"
+        with open(state) as f:
+            marks_before = json.load(f)
+        old = daemon(net, 1)
+        old.terminate()
+        assert old.wait(timeout=10) == 0
+        assert routes(net, 1) == {}  # a clean exit: nothing for the old rule to find
+        os.remove(stats_path(net, 1))
+        new = net.spawn(
+            1, [PY, "-m", "aodv", "--robot", "r1", "--time-scale", "10",
+                "--stats", stats_path(net, 1), "--state", state],
+            role="aodv", cwd=REPO, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 20
+        line, restart_logged = "", False
+        while "AODV up" not in line and time.monotonic() < deadline:
+            line = new.stderr.readline()
+            restart_logged |= "restarted" in line
+        assert restart_logged
+        t_up = time.monotonic()
+        out = ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
+        t_reply = time.monotonic()
+        assert " 0% packet loss" in out, out
+        # No RREQ before DELETE_PERIOD: the reply cannot come earlier (0.1 s of slack).
+        assert t_reply >= t_up + 1.5 - 0.1, t_reply - t_up
+        s1 = stats(net, 1)
+        (done,) = [d for d in s1["discoveries"] if d["dest"] == "10.0.0.3"]
+        # The RREQ that went out after the wait was new to the neighbours (its ID above
+        # every one used before): answered at its first try.
+        assert done["ok"] and done["round_latency_s"] < 0.3, done
+        with open(state) as f:
+            marks_after = json.load(f)
+        assert marks_after["seq"] > marks_before["seq"]
+        assert marks_after["rreq_id"] > marks_before["rreq_id"]
+        new.terminate()
+        new.wait(timeout=10)
+
+
+HOSTILE = textwrap.dedent("""
+    # 100k datagrams at robot 2: half structurally valid AODV messages with extreme field
+    # values, RREQs from 10k forged originators among them; half malformed.
+    import random, socket, struct, sys, time
+    sys.path.insert(0, sys.argv[1])
+    from aodv import packet as wire
+    rng = random.Random(3561)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, b"wlan0")
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+    FORGED = [f"10.0.{1 + i // 250}.{1 + i % 250}" for i in range(10000)]
+    EXTREME32 = [0, 1, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFE, 0xFFFFFFFF]
+    HOPS = [0, 1, 34, 35, 254, 255]
+    def addr():
+        return rng.choice(["10.0.0.1", "10.0.0.2", "10.0.0.3", rng.choice(FORGED)])
+    def u32():
+        return rng.choice(EXTREME32) if rng.random() < 0.7 else rng.getrandbits(32)
+    def extension():
+        if rng.random() < 0.8:
+            return b""
+        body = rng.randbytes(rng.choice([0, 4, 9]))
+        return bytes((rng.randrange(1, 256), len(body))) + body
+    def valid():
+        k = rng.random()
+        if k < 0.45:
+            m = wire.Rreq(u32(), addr(), u32(), rng.choice(FORGED), u32(), rng.choice(HOPS),
+                          *(rng.random() < 0.5 for _ in range(5)))
+        elif k < 0.75:
+            hello = rng.random() < 0.3
+            a = "10.0.0.1" if hello else addr()
+            m = wire.Rrep(a, u32(), a if hello else addr(), u32(),
+                          0 if hello else rng.choice(HOPS), False, rng.random() < 0.5, 0,
+                          rng.choice([0, 1, 1000, 0xFFFFFFFF]) if hello else None)
+        elif k < 0.95:
+            dests = tuple((addr(), u32()) for _ in range(rng.choice([1, 2, 17, 255])))
+            m = wire.Rerr(dests, rng.random() < 0.5)
+        else:
+            m = wire.RrepAck()
+        return m.encode() + extension()
+    n = int(sys.argv[2])
+    for i in range(n):
+        if i % 2:
+            raw = valid()
+        else:
+            raw = valid()
+            if rng.random() < 0.5:
+                raw = raw[: rng.randrange(len(raw))]  # truncated
+            else:
+                raw = bytes([rng.choice([0, 5, 17])]) + raw[1:]  # unknown type
+        s.sendto(raw, ("255.255.255.255", 654))
+        if i % 500 == 0:
+            time.sleep(0.02)
+    print(n)
+""")
+
+
+def _rss_kb(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+
+
+RSS_BOUND_MB = 48  # the daemon's resident memory under the flood (17 MB idle, 19 MB peak here)
+
+
+def test_hostile_flood_keeps_the_daemon_up_bounded_and_in_step_with_the_kernel():
+    with aodv_net(CHAIN5[:3]) as net:
+        assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        proc = daemon(net, 2)
+        rss_idle = _rss_kb(proc.pid)
+        sender = net.spawn(1, [PY, "-c", HOSTILE, REPO, "100000"], role="test",
+                           stdout=subprocess.PIPE, text=True, cwd=REPO)  # fmt: skip
+        peak = rss_idle
+        while sender.poll() is None:
+            peak = max(peak, _rss_kb(proc.pid))
+            time.sleep(0.2)
+        assert sender.stdout.read().strip() == "100000"
+        # Let the daemon drain its socket, then check the kernel against its table: no
+        # route is added any more, only deleted, so kernel-before >= table >= kernel-after.
+        deadline = time.monotonic() + 60
+        received = -1
+        while time.monotonic() < deadline:
+            s2 = stats(net, 2)
+            total = sum(s2["messages_received"].values()) + sum(s2["dropped"].values())
+            if total == received:
+                break
+            received = total
+            peak = max(peak, _rss_kb(proc.pid))
+            time.sleep(0.5)
+        assert proc.poll() is None, "the daemon died"
+        kernel_before = set(routes(net, 2))
+        table = set(stats(net, 2)["routes"])
+        kernel_after = set(routes(net, 2))
+        assert kernel_after <= table <= kernel_before, (table ^ kernel_before, table ^ kernel_after)
+        s2 = stats(net, 2)
+        assert s2["dropped"].get("error", 0) == 0 and s2["dropped"].get("encode_failed", 0) == 0
+        assert s2["dropped"].get("malformed", 0) > 10000
+        pd = s2["protocol_dropped"]
+        assert pd.get("hop_count", 0) > 0 and pd.get("rreq_forward_ratelimit", 0) > 0, pd
+        assert len(table) <= 1024  # Params.route_table_limit
+        assert peak < RSS_BOUND_MB * 1024, f"peak RSS {peak / 1024:.0f} MB"
+        # Once the forged routes have expired, kernel and table are equal, and work.
+        time.sleep(7.0)
+        assert set(routes(net, 2)) == set(stats(net, 2)["routes"])
+        assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
+        print(f"RSS idle {rss_idle / 1024:.1f} MB, peak {peak / 1024:.1f} MB; {pd}")
