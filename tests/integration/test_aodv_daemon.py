@@ -172,10 +172,14 @@ def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
         first_long = min(s for s, t in replies if t == 61)
         assert first_long > last_short
         assert len([s for s, t in replies if t == 61]) > 30
-        # Node 2 lost its next hop 3 and told its precursor 1 with a RERR.
+        # Node 2 lost its next hop 3 and repaired the route locally (RFC 6.12) through 5;
+        # the new way is longer, so it told its precursor 1 with a RERR with the N flag,
+        # which leaves 1's route in place: 1 never had to discover 4 again.
         s2, s1 = stats(net, 2), stats(net, 1)
+        assert s2["local_repairs"].get("ok", 0) >= 1, s2["local_repairs"]
         assert s2["messages_sent"].get("RERR", 0) >= 1
         assert s1["messages_received"].get("RERR", 0) >= 1
+        assert [d["dest"] for d in s1["discoveries"]].count("10.0.0.4") == 1
 
 
 def test_unknown_destination_icmp_unreachable_others_unaffected():
