@@ -23,8 +23,9 @@ always follows the Install it needs), and RREP-ACKs last.
 Where the RFC leaves a choice, the decision is written next to the rule as "Decision:".
 The main ones, for a reader in a hurry:
 
-- MY_ROUTE_TIMEOUT = 2 * ACTIVE_ROUTE_TIMEOUT = 6 s (section 10 table; ns-3 uses 11.2 s),
-  DELETE_PERIOD = 5 * max(ACTIVE_ROUTE_TIMEOUT, HELLO_INTERVAL): see params.py.
+- Parameters: section 10 with its notes (MY_ROUTE_TIMEOUT 11.2 s, TTL_START 2,
+  BLACKLIST_TIMEOUT for the ring search, DELETE_PERIOD 5 * max(ACTIVE_ROUTE_TIMEOUT,
+  HELLO_INTERVAL)), or ns-3's defaults: see params.py and docs/aodv.md.
 - HELLO extension type 1 (RFC 9.1, IANA); Wireshark's 2 accepted on receipt: packet.py.
 - RREP IP TTL 64 (unicast to the next hop, which re-originates it); HELLO and multi-
   precursor RERR use IP TTL 1 to 255.255.255.255, the limited broadcast (robots have /32

@@ -8,7 +8,7 @@
     route being in the kernel (measured by the daemon, its stats "round_latency_s": from
     the RREQ's sendto() to the return of the route install's netlink send());
   * first packet: from the datagram's sendto() on robot 1 to its receipt on robot h+1,
-    with the default expanding ring search (TTL 1, 3, 5, 7, then NET_DIAMETER).
+    with the default expanding ring search (TTL 2, 4, 6, then NET_DIAMETER).
 - steady state: 10 robots in a chain, robot k pinging robot 11-k once a second; over
   STEADY_S seconds, each daemon's CPU (its own and its children's, i.e. the nft polls) as
   a fraction of one core, its resident memory, and the control packets per second sent by

@@ -5,7 +5,7 @@ run the middle robot moves out of range, at two thirds it comes back. Time scale
 6 s run is 30 s of protocol time. Expected on robot 1's radio: RREQ/RREP, echo traffic, a
 RERR for robot 5, RREQs while the chain is cut, and echo replies again at the end. The
 ping runs 4.5 s past the return: a rediscovery begun while the chain was cut may have to
-fail first (21.5 s of protocol time, 4.3 s here) before the next one succeeds.
+fail first (21 s of protocol time, 4.2 s here) before the next one succeeds.
 """
 
 import re
