@@ -16,7 +16,7 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from topology.argtypes import number
-from topology.spec import AODV_PROFILES
+from topology.spec import AODV_PROFILES, ROUTINGS
 
 log = logging.getLogger("testbed")
 
@@ -85,7 +85,7 @@ def _add_net(sub) -> None:
     up.add_argument("--comm-range", type=number(float, "communication range", above=0),
                     required=True)  # fmt: skip
     up.add_argument("--range-model", choices=("disc", "lossy"), default="disc")
-    up.add_argument("--routing", choices=("none", "babel", "aodv"), default="none")
+    up.add_argument("--routing", choices=ROUTINGS, default="none")
     up.add_argument("--aodv-profile", choices=AODV_PROFILES, default="rfc",
                     help="AODV parameters: rfc (default) or ns3 (ns-3's defaults)")  # fmt: skip
     up.add_argument("--loss", type=number(float, "loss", minimum=0), default=0.0, metavar="PCT")

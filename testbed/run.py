@@ -528,7 +528,7 @@ class Run:
         from topology.routing import keep_daemon_files
 
         routing = self.cfg.routing
-        if routing != "none":
+        if routing not in ("none", "oracle"):  # oracle: no daemon (topology.oracle)
             self.net.stop(routing)
             keep_daemon_files(routing, range(1, self.n + 2), self.net.state_dir,
                               self._path("routing"), self._path(routing))  # fmt: skip

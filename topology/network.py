@@ -32,7 +32,8 @@ from topology import capture, names, netns, processes, ranges, routing, state
 from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
-from topology.medium import Medium
+from topology.medium import WLAN_INDEX, Medium
+from topology.oracle import OracleRouter
 from topology.spec import NO_IMPAIRMENT, Impairment, NetworkSpec, Position
 
 log = logging.getLogger(__name__)
@@ -55,6 +56,7 @@ class Network:
         self.children: dict[int, subprocess.Popen] = {}
         self._owner = False
         self._routing_forks: ForkServer | None = None
+        self.oracle: OracleRouter | None = None  # routing "oracle": routes from here
 
     # -- names ------------------------------------------------------------------------------
 
@@ -131,6 +133,9 @@ class Network:
         self.medium.add_robot_ports(robots)
         self.medium.configure_robots(robots)
         self._apply_positions()
+        if self.spec.routing == "oracle":
+            self.oracle = OracleRouter(self.name, robots, WLAN_INDEX)
+            self.oracle.update(self.current)
         if self.spec.capture_dir:
             self._start_captures()
         self._start_routing()
@@ -280,6 +285,8 @@ class Network:
             self.medium.set_link_impairment(*p, wanted[p])
         self.medium.set_links(add, remove)
         self.current = wanted
+        if self.oracle is not None and (add or remove):
+            self.oracle.update(wanted)  # routes in place before the move returns
         return add, remove
 
     def move(self, k: int, xy: Position) -> tuple[list[Pair], list[Pair]]:
@@ -336,10 +343,18 @@ class Network:
         kernel = net.medium.kernel_links()
         wanted = net.wanted()
         net.current = {p: wanted.get(p, Impairment()) for p in kernel}
+        if net.spec.routing == "oracle":
+            net.oracle = OracleRouter(name, net.spec.robot_ids(), WLAN_INDEX, net.current)
         return net
+
+    def _close_oracle(self) -> None:
+        if self.oracle is not None:
+            self.oracle.close()
+            self.oracle = None
 
     def detach(self) -> None:
         """Let go of the testbed without tearing it down (its daemons run on)."""
+        self._close_oracle()
         self.medium.close()
         if self._routing_forks is not None:
             self._routing_forks.close()
@@ -347,6 +362,7 @@ class Network:
         self._owner = False
 
     def down(self) -> None:
+        self._close_oracle()
         self.medium.close()
         try:
             destroy(self.name, self.children)

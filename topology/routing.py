@@ -9,6 +9,9 @@ adding one function here.
 - babel: Debian's babeld (RFC 8966), proactive, on wlan0 declared *wireless*: that turns off
          split horizon, which would be wrong on a medium where neighbours of a robot need not
          hear each other, and uses ETX link costs. Hello interval scales with the time scale.
+- oracle: no daemon and no control packet: the topology controller installs shortest-path
+         routes in every robot the moment a link changes (topology.oracle), the baseline
+         the real protocols are measured against.
 - aodv:  this project's AODV daemon (python -m aodv), on demand, with the parameter profile
          the spec names (`aodv_profile`: rfc or ns3) and a counter file in the run dir that
          makes a restarted daemon obey the RFC 6.13 reboot rule.
@@ -101,9 +104,10 @@ PROTOCOLS: dict[str, ArgvBuilder | None] = {
     "none": None,
     "babel": babel_argv,
     "aodv": aodv_argv,
+    "oracle": None,  # routes come from the topology controller (topology.oracle)
 }
 
-REQUIRED_TOOLS = {"none": [], "babel": ["babeld"], "aodv": []}
+REQUIRED_TOOLS = {"none": [], "babel": ["babeld"], "aodv": [], "oracle": []}
 
 # A file whose appearance says the daemon is up. The AODV daemon first writes its statistics
 # once its socket, TUN device and routes are ready; babeld says nothing we can wait for.

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 from topology import names
 
-ROUTINGS = ("none", "babel", "aodv")
+ROUTINGS = ("none", "babel", "aodv", "oracle")
 RANGE_MODELS = ("disc", "lossy")
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")

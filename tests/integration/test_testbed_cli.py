@@ -60,6 +60,35 @@ def test_babel_chain_four_hops_break_and_restore(tb_name):
     assert state.read(tb_name) is None
 
 
+def test_oracle_routes_follow_every_move_with_no_control_traffic(tb_name):
+    """--routing oracle: the controller's routes are in the kernel when `net move` returns."""
+    up = tb("net", "up", tb_name, "--robots", "5", "--layout", "chain", "--spacing", "8",
+            "--comm-range", "10", "--routing", "oracle")  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        routes = tb("net", "exec", tb_name, "r1", "--", "ip", "route", "show", "proto", "102")
+        assert "10.0.0.5 via 10.0.0.2 dev wlan0 onlink" in routes.stdout, routes.stdout
+        assert ping_ttl(tb_name, 1, 5, wait=2) == 61  # at once: nothing to discover
+        # 3 leaves: the chain breaks, and the routes across it go at once.
+        assert tb("net", "move", tb_name, "r3", "16", "30").returncode == 0
+        r1 = tb("net", "exec", tb_name, "r1", "--", "ip", "route", "show", "proto", "102")
+        assert "10.0.0.5" not in r1.stdout and "10.0.0.2 dev wlan0" in r1.stdout, r1.stdout
+        assert (
+            tb("net", "move", tb_name, "r3", "16", "6").returncode == 0
+        )  # back, 10 m from 2 and 4
+        r5 = tb("net", "exec", tb_name, "r5", "--", "ip", "route", "show", "proto", "102")
+        assert "10.0.0.1 via 10.0.0.4 dev wlan0 onlink" in r5.stdout, r5.stdout
+        assert ping_ttl(tb_name, 5, 1, wait=2) == 61
+        # Nothing on the radio but the pings: the oracle sends no control packet.
+        counters = tb("net", "exec", tb_name, "r2", "--", "cat", "/proc/net/snmp").stdout
+        udp = [line.split() for line in counters.splitlines() if line.startswith("Udp:")]
+        assert int(udp[1][udp[0].index("OutDatagrams")]) == 0
+    finally:
+        down = tb("net", "down", tb_name)
+        assert down.returncode == 0, down.stderr
+    assert not [ns for ns in netns.list_names() if tb_name in ns]
+
+
 def test_exec_passes_exit_status_through(tb_name):
     assert tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10").returncode == 0
     try:
