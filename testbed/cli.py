@@ -16,7 +16,7 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from topology.argtypes import number
-from topology.spec import AODV_PROFILES, ROUTINGS
+from topology.spec import AODV_PROFILES, RANGE_MODELS, ROUTINGS
 
 log = logging.getLogger("testbed")
 
@@ -84,7 +84,27 @@ def _add_net(sub) -> None:
     up.add_argument("--positions", type=_positions, help='"X,Y X,Y ..." in metres')
     up.add_argument("--comm-range", type=number(float, "communication range", above=0),
                     required=True)  # fmt: skip
-    up.add_argument("--range-model", choices=("disc", "lossy"), default="disc")
+    up.add_argument("--range-model", choices=RANGE_MODELS, default="disc",
+                    help="disc (default), lossy, los (walls of --map block the radio), "
+                         "los-lossy")  # fmt: skip
+    up.add_argument(
+        "--map",
+        metavar="PNG",
+        help="walls for the los models (dark pixels); positions are metres on it",
+    )
+    up.add_argument(
+        "--map-cell",
+        type=number(float, "map cell", above=0),
+        default=0.05,
+        metavar="M",
+        help="metres per pixel of --map (default 0.05)",
+    )
+    up.add_argument(
+        "--wall-loss",
+        type=number(float, "wall loss", minimum=0),
+        metavar="PCT",
+        help="with los: each wall crossed costs PCT loss instead of blocking",
+    )
     up.add_argument("--routing", choices=ROUTINGS, default="none")
     up.add_argument("--aodv-profile", choices=AODV_PROFILES, default="rfc",
                     help="AODV parameters: rfc (default) or ns3 (ns-3's defaults)")  # fmt: skip
@@ -129,6 +149,13 @@ def _net_up(args) -> int:
 
     if args.positions is not None and args.layout is not None:
         raise UsageError("give either --layout or --positions, not both")
+    los = args.range_model.startswith("los")
+    if los and not args.map:
+        raise UsageError(f"--range-model {args.range_model} needs --map PNG (the walls)")
+    if args.map and not los:
+        raise UsageError("--map is for the los range models: add --range-model los")
+    if args.wall_loss is not None and not los:
+        raise UsageError("--wall-loss is for the los range models: add --range-model los")
     try:
         if args.positions is not None:
             if len(args.positions) != args.robots:
@@ -147,6 +174,9 @@ def _net_up(args) -> int:
             aodv_profile=args.aodv_profile,
             impairment=Impairment(loss_pct=args.loss, delay_ms=args.delay),
             range_model=args.range_model,
+            map_png=os.path.abspath(args.map) if args.map else None,
+            map_cell=args.map_cell,
+            wall_loss_pct=args.wall_loss,
             capture_dir=os.path.abspath(args.capture) if args.capture else None,
             time_scale=args.time_scale,
         )

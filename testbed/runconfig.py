@@ -17,7 +17,7 @@ from node.timing import STEP_S
 from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.argtypes import number
-from topology.spec import AODV_PROFILES
+from topology.spec import AODV_PROFILES, RANGE_MODELS
 
 ROUTINGS = ("babel", "aodv", "oracle", "none")
 
@@ -34,6 +34,8 @@ class RunConfig:
     map: str | None = None
     loss_pct: float = 0.0
     delay_ms: float = 0.0
+    range_model: str = "disc"  # topology.ranges: disc (the paper's), lossy, los, los-lossy
+    wall_loss_pct: float | None = None  # los: a wall costs this much loss (None: blocks)
     capture: bool = False
     max_steps: int = 3000
     coordination: str = coordination.DEFAULT  # node.coordination: "paper" or "ours"
@@ -97,6 +99,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--map-cell", type=number(float, "map cell", above=0), default=0.05, help="m per pixel")
     a("--loss", type=number(float, "loss", minimum=0), default=0.0, help="percent, every link")
     a("--delay", type=number(float, "delay", minimum=0), default=0.0, help="ms, every link")
+    a("--range-model", choices=RANGE_MODELS, default="disc",
+      help="radio: disc (default, the paper's), lossy, los (the map's walls block the "
+           "radio), los-lossy")  # fmt: skip
+    a("--wall-loss", type=number(float, "wall loss", minimum=0), metavar="PCT",
+      help="with los: each wall crossed costs PCT loss instead of blocking")  # fmt: skip
     a("--capture", action="store_true", help="write pcaps/rK.pcap")
     a("--max-steps", type=number(int, "max steps", minimum=1), default=3000)
     a("--laser-rays", type=number(int, "laser rays", minimum=4), default=360)
@@ -127,6 +134,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace) -> RunConfig:
     if args.loss > 100:
         raise UsageError(f"loss {args.loss}% is more than 100%")
+    if args.wall_loss is not None and not args.range_model.startswith("los"):
+        raise UsageError("--wall-loss is for the los range models: add --range-model los")
+    if args.wall_loss is not None and args.wall_loss > 100:
+        raise UsageError(f"wall loss {args.wall_loss}% is more than 100%")
     if args.robots > 50:
         raise UsageError(f"at most 50 robots ({args.robots} asked)")
     for k, _ in args.kill:
@@ -137,6 +148,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         seed=args.seed, time_scale=args.time_scale, routing=args.routing,
         aodv_profile=args.aodv_profile, map=args.map,
         loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
+        range_model=args.range_model, wall_loss_pct=args.wall_loss,
         max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
         speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
         map_period=args.map_period, flood=args.flood, coordination=args.coordination,

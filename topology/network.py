@@ -32,6 +32,7 @@ from topology import capture, names, netns, processes, ranges, routing, state
 from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
+from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX, Medium
 from topology.oracle import OracleRouter
 from topology.spec import NO_IMPAIRMENT, Impairment, NetworkSpec, Position
@@ -57,6 +58,12 @@ class Network:
         self._owner = False
         self._routing_forks: ForkServer | None = None
         self.oracle: OracleRouter | None = None  # routing "oracle": routes from here
+        self.walls: Walls | None = None  # the los range models' walls, from spec.map_png
+        if spec.map_png and spec.range_model.startswith("los"):
+            try:
+                self.walls = Walls.from_png(spec.map_png, spec.map_cell)
+            except MapError as exc:
+                raise UsageError(str(exc)) from None
 
     # -- names ------------------------------------------------------------------------------
 
@@ -249,7 +256,10 @@ class Network:
     # -- positions and links ----------------------------------------------------------------
 
     def wanted(self) -> dict[Pair, Impairment]:
-        links = ranges.wanted_links(self.positions, self.spec.comm_range, self.spec.range_model)
+        links = ranges.wanted_links(
+            self.positions, self.spec.comm_range, self.spec.range_model,
+            self.walls, self.spec.wall_loss_pct,
+        )  # fmt: skip
         base = self.spec.impairment
         if base.is_none and not self.link_impairments:
             return links  # the common case, once per world step: nothing to combine

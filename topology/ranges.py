@@ -9,10 +9,15 @@ Pure functions of positions (no kernel). `wanted_links` returns a dict from an o
   the range, then rising quadratically to MAX_EDGE_LOSS_PCT at the edge (a crude but common
   stand-in for fading near the edge of radio range). Loss is rounded to whole percent so that
   small moves do not churn the kernel.
+- los: as disc, and the straight line between the robots must cross no wall of the map
+  (topology.los); with `wall_loss_pct` a wall costs that much loss instead of blocking
+  (losses combine as independent drops: 1 - (1-a)(1-b); 100% or more is no link).
+- los-lossy: los, with the lossy model's edge loss on top.
 """
 
 import math
 
+from topology.los import Walls, crossings
 from topology.spec import NO_IMPAIRMENT, Impairment, Position
 
 MAX_EDGE_LOSS_PCT = 50.0
@@ -29,12 +34,46 @@ def _lossy(d: float, comm_range: float) -> Impairment:
     return Impairment(loss_pct=float(round(MAX_EDGE_LOSS_PCT * ((frac - 0.5) / 0.5) ** 2)))
 
 
-def wanted_links(
-    positions: list[Position] | tuple[Position, ...], comm_range: float, model: str = "disc"
+def _combined_loss(a: float, b: float) -> float:
+    return 100.0 * (1.0 - (1.0 - a / 100.0) * (1.0 - b / 100.0))
+
+
+def _through_walls(
+    links: dict[tuple[int, int], Impairment],
+    positions: list[Position] | tuple[Position, ...],
+    walls: Walls,
+    wall_loss_pct: float | None,
 ) -> dict[tuple[int, int], Impairment]:
-    """Links among robots 1..N (positions[k-1] is robot k) under the given model."""
-    if model not in ("disc", "lossy"):
+    """The links of a distance model, kept, weakened or cut by the walls between them."""
+    pairs = list(links)
+    counts = crossings(walls, [(positions[i - 1], positions[j - 1]) for i, j in pairs])
+    out: dict[tuple[int, int], Impairment] = {}
+    for pair, n in zip(pairs, counts, strict=True):
+        if n == 0:
+            out[pair] = links[pair]
+        elif wall_loss_pct is not None:
+            loss = links[pair].loss_pct
+            for _ in range(n):
+                loss = _combined_loss(loss, wall_loss_pct)
+            if loss < 99.5:
+                out[pair] = Impairment(loss_pct=float(round(loss)))
+    return out
+
+
+def wanted_links(
+    positions: list[Position] | tuple[Position, ...],
+    comm_range: float,
+    model: str = "disc",
+    walls: Walls | None = None,
+    wall_loss_pct: float | None = None,
+) -> dict[tuple[int, int], Impairment]:
+    """Links among robots 1..N (positions[k-1] is robot k) under the given model. The los
+    models need `walls` (no map: nothing blocks, as on the empty terrain)."""
+    if model not in ("disc", "lossy", "los", "los-lossy"):
         raise ValueError(f"unknown range model {model!r}")
+    if model.startswith("los"):
+        links = wanted_links(positions, comm_range, "lossy" if model == "los-lossy" else "disc")
+        return _through_walls(links, positions, walls, wall_loss_pct) if walls else links
     links: dict[tuple[int, int], Impairment] = {}
     n = len(positions)
     for i in range(n):

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from topology import names
 
 ROUTINGS = ("none", "babel", "aodv", "oracle")
-RANGE_MODELS = ("disc", "lossy")
+RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")
 LAYOUTS = ("chain", "grid", "random")
@@ -91,6 +91,11 @@ class NetworkSpec:
     capture_dir: str | None = None
     time_scale: float = 1.0
     aodv_profile: str = "rfc"  # aodv.params.PROFILES; used only with routing "aodv"
+    # The walls of the los range models (topology.los): a PNG, metres per pixel, and the
+    # loss a wall costs (None: a wall blocks).
+    map_png: str | None = None
+    map_cell: float = 0.05
+    wall_loss_pct: float | None = None
 
     def __post_init__(self) -> None:
         names.check_name(self.name)
@@ -115,6 +120,10 @@ class NetworkSpec:
             )
         if not (self.time_scale > 0 and math.isfinite(self.time_scale)):
             raise ValueError(f"time scale must be a positive number, not {self.time_scale}")
+        if not (self.map_cell > 0 and math.isfinite(self.map_cell)):
+            raise ValueError(f"map cell size must be a positive number, not {self.map_cell}")
+        if self.wall_loss_pct is not None and not 0 <= self.wall_loss_pct <= 100:
+            raise ValueError(f"wall loss {self.wall_loss_pct}% is not in 0..100")
         if self.aodv_profile not in AODV_PROFILES:
             raise ValueError(
                 f"unknown AODV profile {self.aodv_profile!r} "

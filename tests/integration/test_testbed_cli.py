@@ -89,6 +89,35 @@ def test_oracle_routes_follow_every_move_with_no_control_traffic(tb_name):
     assert not [ns for ns in netns.list_names() if tb_name in ns]
 
 
+def test_los_walls_of_the_office_map_block_the_radio_until_a_robot_walks_through_the_door(
+    tb_name,
+):
+    office = os.path.join(REPO, "testbed", "experiments", "maps", "office.png")
+    # Two rooms side by side, 5 m apart, range 8 m: the wall between them blocks the link.
+    up = tb("net", "up", tb_name, "--robots", "2", "--positions", "2.5,5 7.5,5",
+            "--comm-range", "8", "--range-model", "los", "--map", office)  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        assert tb("net", "links", tb_name).stdout == ""
+        # Robot 2 leaves its room by its door and walks the corridor to below robot 1's door.
+        for x, y in ((7.5, 10.0), (4.0, 10.0)):
+            assert tb("net", "move", tb_name, "r2", str(x), str(y)).returncode == 0
+            assert tb("net", "links", tb_name).stdout == "", (x, y)  # still behind walls
+        assert tb("net", "move", tb_name, "r2", "2.5", "10").returncode == 0
+        assert tb("net", "links", tb_name).stdout == "1 2\n"  # through robot 1's door
+    finally:
+        tb("net", "down", tb_name)
+    _one_line_error(
+        tb("net", "up", tb_name, "--robots", "2", "--comm-range", "8", "--range-model", "los"),
+        "needs --map",
+    )
+    _one_line_error(
+        tb("net", "up", tb_name, "--robots", "2", "--comm-range", "8", "--range-model", "los",
+           "--map", "/nonexistent.png"),
+        "does not exist",
+    )  # fmt: skip
+
+
 def test_exec_passes_exit_status_through(tb_name):
     assert tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10").returncode == 0
     try:
