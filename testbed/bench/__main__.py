@@ -11,7 +11,7 @@ import os
 import sys
 import traceback
 
-BENCHMARKS = ("medium", "aodv", "oracle", "node")
+BENCHMARKS = ("medium", "aodv", "oracle", "los", "node")
 
 
 def main(argv: list[str]) -> int:
