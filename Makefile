@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
 # Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
-APT_PACKAGES := iproute2 nftables tcpdump tshark babeld nanomsg-utils iputils-ping \
+APT_PACKAGES := iproute2 nftables tcpdump tshark babeld batmand nanomsg-utils iputils-ping \
 	iperf3 procps python3-venv
 # `make vm-test` (netem under Debian's stock kernel) installs its own: tests/vm/run-netem-tests.
 

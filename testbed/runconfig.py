@@ -19,7 +19,7 @@ from testbed.world.worldmap import START_PLACEMENTS
 from topology.argtypes import number
 from topology.spec import AODV_PROFILES, RANGE_MODELS
 
-ROUTINGS = ("babel", "aodv", "oracle", "none")
+ROUTINGS = ("babel", "batman", "aodv", "oracle", "none")
 
 
 @dataclass(frozen=True)

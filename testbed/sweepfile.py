@@ -21,7 +21,7 @@ for every run of the sweep::
     # time_scale = { 1 = 12.0, 2 = 10.0, 3 = 8.0 }
     load_limit = 60               # optional: runs share the machine while the sum of their
                                   # loads, (robots + 1) x time_scale, stays within this
-    routing = "aodv"              # aodv | babel | oracle | none, default aodv
+    routing = "aodv"              # aodv | babel | batman | oracle | none, default aodv
     aodv_profile = "rfc"          # rfc | ns3 (AODV parameters), default rfc
     max_steps = 3000              # default 3000
     capture = true                # default false
@@ -52,7 +52,7 @@ from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import AODV_PROFILES
 
-ROUTINGS = ("aodv", "babel", "oracle", "none")
+ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")
 
 _TOP_KEYS = {"description", "grid", "run"}
 _GRID_LISTS = ("robots", "comm_range", "laser_range", "loss_pct", "delay_ms")

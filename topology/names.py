@@ -13,6 +13,9 @@ NAME_PATTERN = re.compile(r"^[a-z][a-z0-9]{0,9}$")
 NAMESPACE_PATTERN = re.compile(rf"^{PREFIX}-(?P<name>[a-z][a-z0-9]{{0,9}})-(?P<role>m|r\d+)$")
 MAX_ROBOTS = 999
 
+# The ad hoc network every robot address is in (robot_addr).
+NETWORK = "10.0.0.0/16"
+
 # Inside a robot namespace.
 ROBOT_IFACE = "wlan0"
 

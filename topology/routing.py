@@ -9,6 +9,17 @@ adding one function here.
 - babel: Debian's babeld (RFC 8966), proactive, on wlan0 declared *wireless*: that turns off
          split horizon, which would be wrong on a medium where neighbours of a robot need not
          hear each other, and uses ETX link costs. Hello interval scales with the time scale.
+- batman: Debian's batmand (B.A.T.M.A.N. III, layer 3, proactive). Its originator interval
+         (-o, 1000 ms by default) is divided by the time scale; its other timers are fixed
+         in the program and cannot be scaled (originator timeout 200 s, the TQ windows count
+         packets). batmand is made for a mesh subnet: it sends its OGMs to the interface's
+         broadcast address and routes through policy rules for the interface's network
+         ("to NET lookup 66", "to NET lookup 67": unreachable). So a batman robot's wlan0
+         carries 10.0.0.K/16 instead of /32 (inside its namespace); the subnet route the
+         kernel adds to the main table is never reached, as batmand's rules come first and
+         end in "unreachable" for a robot it has no route to, as with the other protocols.
+         batmand has no option for its unix socket (/var/run/batmand.socket): each daemon
+         runs in a private mount namespace with its own /run, so ten of them do not collide.
 - oracle: no daemon and no control packet: the topology controller installs shortest-path
          routes in every robot the moment a link changes (topology.oracle), the baseline
          the real protocols are measured against.
@@ -45,6 +56,23 @@ def babel_argv(k: int, run_dir: str, spec) -> list[str]:
         "-C", "redistribute local deny",
         names.ROBOT_IFACE,
     ]  # fmt: skip
+
+
+BATMAN_OGM_MS = 1000  # batmand's default originator interval
+
+
+def batman_argv(k: int, run_dir: str, spec) -> list[str]:
+    ogm_ms = max(10, round(BATMAN_OGM_MS / spec.time_scale))
+    addr = names.robot_addr(k)
+    dev = names.ROBOT_IFACE
+    prefix = names.NETWORK.split("/")[1]
+    setup = (
+        f"mount -t tmpfs batman-run /run && "
+        f"ip addr del {addr}/32 dev {dev} && "
+        f"ip addr add {addr}/{prefix} broadcast + dev {dev} && "
+        f"exec batmand --no-detach -d 0 -o {ogm_ms} {dev}"
+    )
+    return ["unshare", "--mount", "--propagation", "private", "sh", "-c", setup]
 
 
 def log_file(routing: str, k: int, run_dir: str) -> str:
@@ -103,11 +131,14 @@ FORKABLE: dict[str, Forkable] = {
 PROTOCOLS: dict[str, ArgvBuilder | None] = {
     "none": None,
     "babel": babel_argv,
+    "batman": batman_argv,
     "aodv": aodv_argv,
     "oracle": None,  # routes come from the topology controller (topology.oracle)
 }
 
-REQUIRED_TOOLS = {"none": [], "babel": ["babeld"], "aodv": [], "oracle": []}
+REQUIRED_TOOLS = {
+    "none": [], "babel": ["babeld"], "batman": ["batmand", "unshare"], "aodv": [], "oracle": [],
+}  # fmt: skip
 
 # A file whose appearance says the daemon is up. The AODV daemon first writes its statistics
 # once its socket, TUN device and routes are ready; babeld says nothing we can wait for.

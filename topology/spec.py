@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 from topology import names
 
-ROUTINGS = ("none", "babel", "aodv", "oracle")
+ROUTINGS = ("none", "babel", "batman", "aodv", "oracle")
 RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")

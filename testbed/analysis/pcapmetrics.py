@@ -54,7 +54,7 @@ from topology.jsonfile import write_json_atomic
 log = logging.getLogger(__name__)
 
 # none and oracle send no control traffic: anything on the AODV port would be counted.
-CONTROL_PORTS = {"aodv": 654, "babel": 6696, "none": 654, "oracle": 654}
+CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracle": 654}
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"

@@ -60,6 +60,45 @@ def test_babel_chain_four_hops_break_and_restore(tb_name):
     assert state.read(tb_name) is None
 
 
+def ttl_becomes(name: str, src: int, dst: int, ttl: int, wait: float) -> bool:
+    """Ping until a reply comes with `ttl` (the route has that many hops) or `wait` passes."""
+    deadline = time.monotonic() + wait
+    while time.monotonic() < deadline:
+        if ping_ttl(name, src, dst, wait=1) == ttl:
+            return True
+        time.sleep(0.5)
+    return False
+
+
+@pytest.mark.slow
+def test_batman_chain_converges_and_diamond_reroutes_around_a_moved_robot(tb_name):
+    """--routing batman (batmand, proactive): a 5-robot chain converges to 4-hop routes, and
+    in a diamond the route leaves a next hop that walks away for the other side."""
+    up = tb("net", "up", tb_name, "--robots", "5", "--layout", "chain", "--spacing", "8",
+            "--comm-range", "10", "--routing", "batman", "--time-scale", "5")  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        assert ping_ttl(tb_name, 1, 5, wait=40) == 61
+        # No batmand socket file escaped to the host's /run (each daemon has its own /run).
+        assert not os.path.exists("/run/batmand.socket")
+        # Robots 2 and 4 step aside, robot 3 joins them: 1 - {2, 3} - 4 - 5 is a diamond.
+        for k, (x, y) in ((2, (6, 4)), (3, (6, -4)), (4, (12, 0)), (5, (20, 0))):
+            assert tb("net", "move", tb_name, f"r{k}", str(x), str(y)).returncode == 0
+        # batmand picks by link quality (TQ), which takes some OGMs to favour the new path.
+        assert ttl_becomes(tb_name, 1, 5, 62, wait=60)  # 3 hops through 2 or 3
+        route = tb("net", "exec", tb_name, "r1", "--", "ip", "route", "get", "10.0.0.5").stdout
+        via = int(re.search(r"via 10\.0\.0\.(\d)", route)[1])
+        other = 5 - via  # 2 <-> 3
+        assert tb("net", "move", tb_name, f"r{via}", "6", "40").returncode == 0
+        assert ttl_becomes(tb_name, 1, 5, 62, wait=60), "no route round the robot that left"
+        route = tb("net", "exec", tb_name, "r1", "--", "ip", "route", "get", "10.0.0.5").stdout
+        assert f"via 10.0.0.{other}" in route, route
+    finally:
+        down = tb("net", "down", tb_name)
+        assert down.returncode == 0, down.stderr
+    assert not [ns for ns in netns.list_names() if tb_name in ns]
+
+
 def test_oracle_routes_follow_every_move_with_no_control_traffic(tb_name):
     """--routing oracle: the controller's routes are in the kernel when `net move` returns."""
     up = tb("net", "up", tb_name, "--robots", "5", "--layout", "chain", "--spacing", "8",
