@@ -78,6 +78,8 @@ _FLAGS = {
     "time_scale": "--time-scale",
     "routing": "--routing",
     "aodv_profile": "--aodv-profile",
+    "range_model": "--range-model",
+    "wall_loss_pct": "--wall-loss",
     "max_steps": "--max-steps",
     "loss_pct": "--loss",
     "delay_ms": "--delay",

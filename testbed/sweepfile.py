@@ -14,6 +14,9 @@ for every run of the sweep::
     delay_ms = [0, 50]            # optional, default [0]; needs sch_netem when > 0
     coordination = ["paper", "ours"]   # optional, default ["ours"] (node.coordination)
     start = ["corner", "spread"]  # optional, default ["corner"]: corner | centre | spread
+    routing = ["aodv", "oracle"]  # optional: routing as a grid dimension (then not in [run])
+    map = ["empty", "maps/office.png"]  # optional: maps as a grid dimension ("empty": the
+                                  # paper's empty terrain; else as run.map)
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -26,13 +29,17 @@ for every run of the sweep::
     max_steps = 3000              # default 3000
     capture = true                # default false
     map = "maps/office.png"       # optional; relative paths are relative to the sweep file
+    range_model = "los"           # disc | lossy | los | los-lossy, default disc
+    wall_loss_pct = 30            # optional, with los: a wall costs this loss, not a block
     seed = 0                      # optional base mixed into every derived seed
 
 Validation is strict: an unknown key, a value of the wrong type or an empty grid list is a
 `UsageError` whose one-line message names the key (`grid.robots`, `run.time_scale`, ...).
 
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
-its parameters and run index only, so they are the same every time the file is expanded:
+its parameters and run index only, so they are the same every time the file is expanded
+(a routing or map grid names its value in every id, `-aodv`, `-moffice`; the variants of a
+point share their seeds, so protocols and maps are compared on the same draws):
 that is what lets an interrupted sweep resume without redoing a finished run. Runs are
 ordered run index first, so an interrupted sweep has covered every point once before it
 covers any point twice.
@@ -50,7 +57,7 @@ from node.coordination import DEFAULT as DEFAULT_COORDINATION
 from node.coordination import MODES as COORDINATION_MODES
 from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
-from topology.spec import AODV_PROFILES
+from topology.spec import AODV_PROFILES, RANGE_MODELS
 
 ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")
 
@@ -61,10 +68,12 @@ _GRID_CHOICES = {
     "coordination": (COORDINATION_MODES, DEFAULT_COORDINATION),
     "start": (START_PLACEMENTS, "corner"),
 }
-_GRID_KEYS = set(_GRID_LISTS) | set(_GRID_CHOICES) | {"runs"}
+_GRID_KEYS = set(_GRID_LISTS) | set(_GRID_CHOICES) | {"runs", "routing", "map"}
 _RUN_KEYS = {
     "time_scale", "routing", "aodv_profile", "max_steps", "capture", "map", "seed", "load_limit",
+    "range_model", "wall_loss_pct",
 }  # fmt: skip
+EMPTY_MAP = "empty"  # grid.map: the paper's empty terrain
 
 
 @dataclass(frozen=True)
@@ -87,6 +96,10 @@ class SweepSpec:
     max_steps: int = 3000
     capture: bool = False
     map: str | None = None
+    routings: tuple[str, ...] = ()  # grid.routing: routing as a dimension (overrides routing)
+    maps: tuple[str | None, ...] = ()  # grid.map: None is the empty terrain
+    range_model: str = "disc"
+    wall_loss_pct: float | None = None
     seed: int = 0
     description: str = ""
 
@@ -113,7 +126,7 @@ class PlannedRun:
         """The grid point this run belongs to (what its repetitions share)."""
         c = self.config
         return (c["robots"], c["comm_range"], c["laser_range"], c["loss_pct"], c["delay_ms"],
-                c["coordination"], c["start"])  # fmt: skip
+                c["coordination"], c["start"], c["routing"], c["map"])  # fmt: skip
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
@@ -237,6 +250,23 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
             kw[key] = _choice_list(path, f"grid.{key}", grid[key], allowed)
     if "runs" in grid:
         kw["runs"] = _count(path, "grid.runs", grid["runs"])
+    if "routing" in grid:
+        if "routing" in run:
+            raise _fail(path, "run.routing", "routing is already a grid dimension (grid.routing)")
+        kw["routings"] = _choice_list(path, "grid.routing", grid["routing"], ROUTINGS)
+    if "map" in grid:
+        if "map" in run:
+            raise _fail(path, "run.map", "the map is already a grid dimension (grid.map)")
+        value = grid["map"]
+        if (
+            not isinstance(value, list)
+            or not value
+            or not all(isinstance(m, str) and m for m in value)
+        ):
+            raise _fail(path, "grid.map", f"expected a non-empty list of paths, got {value!r}")
+        if len(set(value)) != len(value):
+            raise _fail(path, "grid.map", f"duplicate values in {value!r}")
+        kw["maps"] = tuple(None if m == EMPTY_MAP else _map_path(path, m) for m in value)
 
     if "time_scale" in run:
         ts = run["time_scale"]
@@ -272,15 +302,39 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         m = run["map"]
         if not isinstance(m, str) or not m:
             raise _fail(path, "run.map", f"expected a non-empty path string, got {m!r}")
-        mp = Path(m)
-        if not mp.is_absolute() and isinstance(path, Path):
-            mp = path.parent / mp
-        kw["map"] = str(mp)
+        kw["map"] = _map_path(path, m)
+    if "range_model" in run:
+        model = run["range_model"]
+        if model not in RANGE_MODELS:
+            raise _fail(
+                path, "run.range_model", f"expected one of {', '.join(RANGE_MODELS)}, got {model!r}"
+            )
+        kw["range_model"] = model
+    if "wall_loss_pct" in run:
+        v = run["wall_loss_pct"]
+        if not _is_number(v) or not 0 <= v <= 100:
+            raise _fail(path, "run.wall_loss_pct", f"expected a number in 0..100, got {v!r}")
+        if not kw.get("range_model", "disc").startswith("los"):
+            raise _fail(path, "run.wall_loss_pct", "needs range_model los or los-lossy")
+        kw["wall_loss_pct"] = float(v)
     if "seed" in run:
         if not _is_int(run["seed"]):
             raise _fail(path, "run.seed", f"expected an integer, got {run['seed']!r}")
         kw["seed"] = run["seed"]
     return SweepSpec(**kw)
+
+
+def _map_path(path, m: str) -> str:
+    """A map path as given, relative paths taken relative to the sweep file."""
+    mp = Path(m)
+    if not mp.is_absolute() and isinstance(path, Path):
+        mp = path.parent / mp
+    return str(mp)
+
+
+def map_label(m: str | None) -> str:
+    """The name a map has in run ids: `empty`, or the file's stem (letters and digits)."""
+    return EMPTY_MAP if m is None else "".join(ch for ch in Path(m).stem if ch.isalnum())
 
 
 def load(path: str | Path) -> SweepSpec:
@@ -346,10 +400,12 @@ def derive_seed(
 def expand(spec: SweepSpec) -> list[PlannedRun]:
     """All runs of the sweep, run index first (see the module docstring)."""
     out = []
+    routings = spec.routings or (spec.routing,)
+    maps = spec.maps or (spec.map,)
     for index in range(1, spec.runs + 1):
-        for robots, comm, laser, loss, delay, coord, start in itertools.product(
+        for robots, comm, laser, loss, delay, coord, start, routing, map_ in itertools.product(
             spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct, spec.delay_ms,
-            spec.coordination, spec.start,
+            spec.coordination, spec.start, routings, maps,
         ):  # fmt: skip
             # The seed leaves coordination and start out: the variants of a point share their
             # random numbers (start positions within a placement, timer phases), so they are
@@ -360,8 +416,8 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 "laser_range": laser,
                 "seed": derive_seed(spec.seed, robots, comm, laser, loss, delay, index),
                 "time_scale": spec.scale_for(robots),
-                "routing": spec.routing,
-                "map": spec.map,
+                "routing": routing,
+                "map": map_,
                 "loss_pct": loss,
                 "delay_ms": delay,
                 "capture": spec.capture,
@@ -369,8 +425,20 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 "coordination": coord,
                 "start": start,
             }
-            if spec.aodv_profile != "rfc":  # only when chosen: plans of older sweeps stay
+            # Only when chosen, so that the plans of older sweeps stay as they were.
+            if spec.aodv_profile != "rfc":
                 config["aodv_profile"] = spec.aodv_profile
+            if spec.range_model != "disc":
+                config["range_model"] = spec.range_model
+            if spec.wall_loss_pct is not None:
+                config["wall_loss_pct"] = spec.wall_loss_pct
             rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
+            if spec.routings or spec.maps:
+                base = rid[: -len(f"-k{index}")]
+                if spec.routings:
+                    base += f"-{routing}"
+                if spec.maps:
+                    base += f"-m{map_label(map_)}"
+                rid = f"{base}-k{index}"
             out.append(PlannedRun(rid, index, config))
     return out

@@ -212,3 +212,37 @@ def test_aodv_profile_is_a_run_option_recorded_only_when_chosen():
     assert {r.config["aodv_profile"] for r in ns3} == {"ns3"}
     with pytest.raises(UsageError, match="run.aodv_profile: expected one of rfc, ns3"):
         parse(GOOD.replace("capture = true", 'aodv_profile = "olsr"'))
+
+
+def test_routing_and_map_as_grid_dimensions_name_themselves_and_share_seeds(tmp_path):
+    (tmp_path / "maps").mkdir()
+    text = GOOD.replace("runs = 2", 'runs = 1\nrouting = ["aodv", "oracle"]\n'
+                        'map = ["empty", "maps/office.png"]').replace(
+        "capture = true", 'capture = true\nrange_model = "los"\nwall_loss_pct = 40')  # fmt: skip
+    spec = sweepfile.parse(tomllib.loads(text), tmp_path / "p.toml")
+    runs = sweepfile.expand(spec)
+    assert len(runs) == 4 * 2 * 2
+    ids = {r.run_id: r.config for r in runs}
+    c = ids["n02-c20-l2-oracle-moffice-k1"]
+    assert c["routing"] == "oracle" and c["map"] == str(tmp_path / "maps" / "office.png")
+    assert c["range_model"] == "los" and c["wall_loss_pct"] == 40.0
+    assert ids["n02-c20-l2-aodv-mempty-k1"]["map"] is None
+    assert len({c["seed"] for rid, c in ids.items() if rid.startswith("n02-c20-")}) == 1
+    assert len({r.point for r in runs}) == len(runs)
+
+
+@pytest.mark.parametrize(
+    ("grid", "run", "words"),
+    [
+        ('routing = ["aodv", "olsr"]', "", "grid.routing: 'olsr' is not one of"),
+        ('routing = ["aodv"]', 'routing = "babel"', "run.routing: routing is already a grid"),
+        ("map = []", "", "grid.map: expected a non-empty list of paths"),
+        ("", 'range_model = "fog"', "run.range_model: expected one of"),
+        ("", "wall_loss_pct = 20", "run.wall_loss_pct: needs range_model los"),
+    ],
+)
+def test_bad_routing_map_or_radio_names_the_key(grid, run, words):
+    text = GOOD.replace("runs = 2", "runs = 2\n" + grid).replace("capture = true", run)
+    with pytest.raises(UsageError) as e:
+        parse(text)
+    assert words in str(e.value)
