@@ -41,7 +41,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import ablation, figures, stats
+from testbed.analysis import ablation, figures, protocols, stats
 from testbed.errors import UsageError
 from topology.jsonfile import read_json
 
@@ -466,6 +466,7 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     ]
     out += [f"- {rule}" for rule in RULES] + [""]
     out += ablation.section(tables.get("fig2_all", []), tables.get("ablation_thirds", []))
+    out += protocols.section(tables.get("protocols", []))
     out += ["## Figures", ""]
     for name, data, caption in (
         ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),
