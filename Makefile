@@ -15,6 +15,7 @@ APT_PACKAGES := iproute2 nftables tcpdump tshark babeld batmand nanomsg-utils ip
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
+	experiment-protocols \
 	experiment-paper-literal bench lint format vm-test clean
 
 setup: apt venv
@@ -58,6 +59,11 @@ experiment-short: setup
 	$(VENV)/bin/testbed report results/short
 
 # Issue 11: coordination x start placement (600 runs, about two hours here).
+experiment-protocols: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/protocols.toml --out results/protocols --resume
+	$(VENV)/bin/testbed report results/protocols
+
 experiment-ablation: setup
 	$(NEED_ROOT)
 	$(VENV)/bin/testbed sweep testbed/experiments/ablation.toml --out results/ablation --resume

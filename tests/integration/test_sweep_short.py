@@ -184,3 +184,37 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
     # finished runs were not redone
     for rid, mtime in done_before.items():
         assert (out / "runs" / rid / "result.json").stat().st_mtime_ns == mtime
+
+
+PROTOCOLS_SHORT = REPO / "testbed" / "experiments" / "protocols-short.toml"
+
+
+def test_protocols_short_sweep_fills_the_protocols_section(tmp_path):
+    """AODV, babel, batman and the oracle on the same seeds, on the empty and the office map
+    (line of sight): the report compares them, and each protocol's control traffic in the
+    captures is what it should be (AODV's equals its daemons' counts; the oracle sends none)."""
+    out = tmp_path / "protocols"
+    r = run_testbed("sweep", PROTOCOLS_SHORT, "--out", out)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = run_testbed("report", out, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = results(out)
+    assert len(res) == 8 and all(d["status"] in ("complete", "step_cap") for d in res.values())
+    rows = json.loads((out / "figures" / "protocols.json").read_text())
+    by = {(row["map"], row["routing"]): row for row in rows}
+    assert set(by) == {(m, p) for m in ("empty", "office") for p in
+                       ("aodv", "babel", "batman", "oracle")}  # fmt: skip
+    for m in ("empty", "office"):
+        assert by[(m, "oracle")]["control_pkts_per_robot_s"] == 0
+        for p in ("aodv", "babel", "batman"):
+            assert by[(m, p)]["control_pkts_per_robot_s"] > 0, (m, p)
+            assert by[(m, p)]["steps"] > 0 and by[(m, p)]["pdf"] > 0.5, (m, p)
+        assert by[(m, "aodv")]["discovery_ms"] is not None
+        assert by[(m, "babel")]["discovery_ms"] is None  # proactive: no discoveries
+    text = (out / "report.md").read_text()
+    assert "## Routing protocols against the oracle" in text
+    assert "Does the paper's choice hold?" in text
+    assert "batman" in text and "cannot be checked" in text
+    per_run = json.loads((out / "figures" / "routing_runs.json").read_text())
+    aodv = [row for row in per_run if row["daemon_relative_difference"] is not None]
+    assert aodv and all(row["daemon_relative_difference"] <= 0.01 for row in aodv)

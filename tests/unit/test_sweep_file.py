@@ -100,7 +100,13 @@ def test_relative_map_path_is_relative_to_the_file(tmp_path):
 
 @pytest.mark.parametrize(
     "name, n_runs",
-    [("paper", 10 * 4 * 2 * 3), ("short", 6), ("impairments", 2 * 3 * 2 * 3)],
+    [
+        ("paper", 10 * 4 * 2 * 3),
+        ("short", 6),
+        ("impairments", 2 * 3 * 2 * 3),
+        ("protocols", 3 * 3 * 4 * 2 * 3),
+        ("protocols-short", 4 * 2),
+    ],  # fmt: skip
 )
 def test_profiles_load(name, n_runs):
     spec = sweepfile.load(EXPERIMENTS / f"{name}.toml")
