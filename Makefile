@@ -16,7 +16,7 @@ NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespac
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
 	experiment-protocols \
-	experiment-paper-literal bench lint format vm-test clean
+	experiment-paper-literal bench lint format vm-test slurm-test clean
 
 setup: apt venv
 
@@ -78,6 +78,23 @@ experiment-paper-literal: setup
 bench: setup
 	$(NEED_ROOT)
 	$(PY) -m testbed.bench
+
+# A one-node Slurm cluster on this machine, all its state in a temporary directory, for the
+# --slurm sweep tests (tests/slurm). Debian's packages enable their services on install;
+# they are disabled again here: the tests start their own daemons and stop them by pid.
+SLURM_PACKAGES := slurm-wlm munge
+
+slurm-test: setup
+	$(NEED_ROOT)
+	@missing=$$(for p in $(SLURM_PACKAGES); do \
+		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing && \
+		if command -v systemctl >/dev/null; then \
+			systemctl disable --now slurmctld slurmd munge >/dev/null 2>&1 || true; fi; \
+	fi
+	$(PY) -m pytest -q tests/slurm
 
 lint: venv
 	$(VENV)/bin/ruff format --check .

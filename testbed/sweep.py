@@ -621,9 +621,10 @@ def _wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "file", metavar="FILE", help="sweep file (TOML), e.g. testbed/experiments/paper.toml"
-    )
-    parser.add_argument("--out", required=True, metavar="DIR", help="sweep directory")
+        "file", metavar="FILE", nargs="?",
+        help="sweep file (TOML), e.g. testbed/experiments/paper.toml",
+    )  # fmt: skip
+    parser.add_argument("--out", metavar="DIR", help="sweep directory")
     parser.add_argument(
         "--jobs",
         type=number(int, "--jobs", minimum=1),
@@ -637,9 +638,82 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="continue a sweep in DIR: skip finished runs, redo partial ones",
     )
+    parser.add_argument(
+        "--slurm",
+        action="store_true",
+        help="submit the runs to do as Slurm job arrays (one per team size) instead of "
+        "running them here; DIR must be on a filesystem the nodes share",
+    )
+    parser.add_argument("--partition", metavar="P", help="with --slurm: sbatch --partition")
+    parser.add_argument("--account", metavar="A", help="with --slurm: sbatch --account")
+    parser.add_argument(
+        "--sbatch-arg", action="append", default=[], metavar="ARG",
+        help="with --slurm: one more sbatch argument (repeatable), e.g. --sbatch-arg=--qos=long",
+    )  # fmt: skip
+    parser.add_argument(
+        "--status",
+        metavar="DIR",
+        help="show each run of the sweep in DIR: done, running, pending (Slurm), failed, "
+        "not submitted; no FILE needed",
+    )
+
+
+def _print_status(out: Path) -> int:
+    from testbed import slurm
+
+    state = read_json(out / "sweep.json")
+    if state is None:
+        raise UsageError(f"--status {out}: no sweep.json: not a sweep directory")
+    planned = state.get("runs", [])
+    if slurm.submitted(out):
+        rows = slurm.status(out, planned)
+    else:
+        rows = [(e["id"], "done" if is_done(out, e["id"]) else e.get("status", "?"))
+                for e in planned]  # fmt: skip
+    for rid, st in rows:
+        print(f"{rid}\t{st}")
+    counts: dict[str, int] = {}
+    for _, st in rows:
+        counts[st] = counts.get(st, 0) + 1
+    print(", ".join(f"{n} {st}" for st, n in sorted(counts.items())), file=sys.stderr)
+    return 0
+
+
+def _submit(args, spec, runs: list[PlannedRun], out: Path, p: Plan) -> int:
+    from testbed import slurm
+
+    in_queue = slurm.queued(out) if args.resume else {}
+    todo = [r for r in p.todo if r.run_id not in in_queue]
+    for r in todo:
+        if run_dir(out, r.run_id).exists():
+            shutil.rmtree(run_dir(out, r.run_id))  # partial: its task died
+    sweep = Sweep(spec, runs, out, 1, False, sweep_file=str(args.file))
+    for r in p.done:
+        sweep.status[r.run_id] = {"status": "done"}
+    for rid, reason in p.skipped.items():
+        sweep.status[rid] = {"status": "skipped", "reason": reason}
+    for r in p.todo:
+        sweep.status[r.run_id] = {"status": "slurm"}
+    sweep._write_state()
+    before = len(slurm.submitted(out))
+    jobs = slurm.submit(out, todo, args.partition, args.account, args.sbatch_arg) if todo else []
+    new = jobs[before:]
+    print(
+        f"sweep {args.file}: {len(runs)} runs, {len(p.done)} done, {len(in_queue)} still "
+        f"queued, {len(todo)} submitted to Slurm"
+        + (f" as job(s) {', '.join(str(j['job']) for j in new)}" if todo else ""),
+        file=sys.stderr,
+    )
+    return 0
 
 
 def main(args: argparse.Namespace) -> int:
+    if args.status:
+        return _print_status(Path(args.status))
+    if not args.file or not args.out:
+        raise UsageError("testbed sweep needs FILE and --out DIR (or --status DIR)")
+    if not args.slurm and (args.partition or args.account or args.sbatch_arg):
+        raise UsageError("--partition, --account and --sbatch-arg go with --slurm")
     spec = sweepfile.load(args.file)
     jobs = args.jobs or default_jobs()
     out = Path(args.out)
@@ -657,7 +731,7 @@ def main(args: argparse.Namespace) -> int:
             f"--out {out}: holds runs of an earlier sweep; pass --resume to continue it "
             "or choose another directory"
         )
-    if args.resume:
+    if args.resume and not args.slurm:
         _wait_for_orphans(out)
     netem = kernel_has_netem() if any(d > 0 for d in spec.delay_ms) else False
     p = plan(runs, out, netem)
@@ -670,6 +744,8 @@ def main(args: argparse.Namespace) -> int:
             )
     if p.skipped:
         log.warning("skipping %d run(s): %s", len(p.skipped), next(iter(p.skipped.values())))
+    if args.slurm:
+        return _submit(args, spec, runs, out, p)
     print(
         f"sweep {args.file}: {len(runs)} runs, {len(p.done)} done, {len(p.todo)} to do"
         + (f" ({len(p.partial)} partial, redone)" if p.partial else "")

@@ -1,0 +1,98 @@
+"""Sweeps on a real Slurm cluster (tests/slurm/cluster.py: one node, this machine).
+
+The sweep goes to Slurm with --slurm, its tasks run `testbed run` on the node, and what lands
+in the sweep directory is what a local sweep of the same file writes: the same runs, the same
+report. A task cancelled mid-run is redone by --resume, and nothing else is."""
+
+import json
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+TINY = REPO / "tests" / "slurm" / "tiny.toml"
+SLOW = REPO / "tests" / "slurm" / "slow.toml"
+
+
+def run_testbed(*args, timeout=1800):
+    argv = [sys.executable, "-c", "import sys; from testbed.cli import main; sys.exit(main())"]
+    return subprocess.run([*argv, *map(str, args)], cwd=REPO, capture_output=True, text=True,
+                          timeout=timeout)  # fmt: skip
+
+
+def status(out: Path) -> dict[str, str]:
+    r = run_testbed("sweep", "--status", out)
+    assert r.returncode == 0, r.stderr
+    return dict(line.split("\t") for line in r.stdout.splitlines())
+
+
+def wait_until(pred, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = pred()
+        if value:
+            return value
+        time.sleep(1.0)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def headings(report: Path) -> list[str]:
+    """The report's section headings, less the first (it names the sweep directory)."""
+    return [line for line in report.read_text().splitlines() if line.startswith("#")][1:]
+
+
+def test_slurm_sweep_lands_like_a_local_one_and_reports(cluster, tmp_path):
+    out = tmp_path / "slurm"
+    r = run_testbed("sweep", TINY, "--out", out, "--slurm", "--partition", "tb")
+    assert r.returncode == 0, r.stderr
+    jobs = json.loads((out / "slurm" / "jobs.json").read_text())["jobs"]
+    assert [j["robots"] for j in jobs] == [1, 2]  # one array per team size
+    assert all(j["cpus"] >= 1 and j["minutes"] >= 1 for j in jobs)
+    wait_until(lambda: set(status(out).values()) == {"done"}, 600, "both runs done")
+    assert run_testbed("report", out).returncode == 0
+
+    local = tmp_path / "local"
+    r = run_testbed("sweep", TINY, "--out", local)
+    assert r.returncode == 0, r.stderr
+    assert run_testbed("report", local).returncode == 0
+    runs = sorted(p.name for p in (out / "runs").iterdir())
+    assert runs == sorted(p.name for p in (local / "runs").iterdir())
+    for rid in runs:
+        a = json.loads((out / "runs" / rid / "result.json").read_text())
+        b = json.loads((local / "runs" / rid / "result.json").read_text())
+        for doc in (a, b):
+            doc["config"]["extra"].pop("name")  # the testbed's random name
+        assert a["config"] == b["config"] and set(a) == set(b)
+    assert headings(out / "report.md") == headings(local / "report.md")
+    figs = {p.name for p in (out / "figures").iterdir()}
+    assert figs == {p.name for p in (local / "figures").iterdir()}
+
+
+def test_a_cancelled_task_is_redone_by_resume_and_nothing_else(cluster, tmp_path):
+    out = tmp_path / "cancel"
+    r = run_testbed("sweep", SLOW, "--out", out, "--slurm")
+    assert r.returncode == 0, r.stderr
+    (job,) = json.loads((out / "slurm" / "jobs.json").read_text())["jobs"]
+    victim, other = job["runs"]
+    # Cancel the first task once its run is under way (its config.json is written).
+    wait_until(lambda: (out / "runs" / victim / "config.json").exists(), 300, "run 1 to start")
+    subprocess.run(["scancel", f"{job['job']}_1"], check=True)
+    wait_until(lambda: status(out).get(victim) == "failed", 120, "the cancelled task to end")
+    assert not (out / "runs" / victim / "result.json").exists() or (
+        json.loads((out / "runs" / victim / "result.json").read_text())["status"] == "interrupted"
+    )
+    wait_until(lambda: status(out).get(other) == "done", 600, "the other run")
+    done_at = (out / "runs" / other / "result.json").stat().st_mtime_ns
+
+    r = run_testbed("sweep", SLOW, "--out", out, "--slurm", "--resume")
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"1 submitted", r.stderr), r.stderr
+    jobs = json.loads((out / "slurm" / "jobs.json").read_text())["jobs"]
+    assert jobs[-1]["runs"] == [victim]  # exactly the cancelled run
+    wait_until(lambda: set(status(out).values()) == {"done"}, 600, "the redone run")
+    assert (out / "runs" / other / "result.json").stat().st_mtime_ns == done_at
+    assert json.loads((out / "runs" / victim / "result.json").read_text())["status"] in (
+        "complete", "step_cap",
+    )  # fmt: skip

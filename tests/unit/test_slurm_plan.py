@@ -1,0 +1,31 @@
+"""What a --slurm sweep asks of the cluster per run, and the batch script it submits."""
+
+from pathlib import Path
+
+from testbed import slurm
+
+
+def test_resources_grow_with_team_and_time_scale_and_fit_a_node():
+    small = slurm.resources({"robots": 1, "time_scale": 15, "max_steps": 6000})
+    big = slurm.resources({"robots": 10, "time_scale": 3.75, "max_steps": 6000})
+    fast_big = slurm.resources({"robots": 10, "time_scale": 15, "max_steps": 6000})
+    assert small[0] >= 1 and big[0] >= 2 and fast_big[0] > big[0]
+    # The time limit covers the step cap at the run's pace, with margin and start-up.
+    assert big[1] >= 6000 * 0.1 / 3.75 * 3 / 60
+    assert small[1] < big[1]
+    assert slurm.resources({"robots": 50, "time_scale": 15, "max_steps": 10}, 8)[0] == 8
+
+
+def test_batch_script_runs_one_task_of_the_list_with_this_python(tmp_path):
+    text = slurm.batch_script(tmp_path / "out dir", tmp_path / "tasks-1.txt")
+    assert text.startswith("#!/bin/sh\n")
+    assert "-m testbed.slurm task" in text and '"$SLURM_ARRAY_TASK_ID"' in text
+    assert "'" + str(tmp_path / "out dir") + "'" in text  # quoted: paths may hold spaces
+    assert str(Path(slurm.__file__).resolve().parents[1]) in text
+
+
+def test_a_task_index_outside_its_list_is_refused(tmp_path):
+    tasks = tmp_path / "tasks.txt"
+    tasks.write_text("n01-c5-l2-k1\n")
+    assert slurm.task_main(tmp_path, tasks, 2) == 2
+    assert slurm.task_main(tmp_path, tasks, 1) == 2  # no sweep.json: not planned
