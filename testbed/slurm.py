@@ -111,8 +111,10 @@ def queued(out: Path) -> dict[str, str]:
     return state
 
 
-def batch_script(out: Path, task_list: Path) -> str:
-    python = shlex.quote(sys.executable)
+def batch_script(out: Path, task_list: Path, sudo: bool = False) -> str:
+    """The array task's script; with `sudo`, it runs the task through `sudo -n` (for sites
+    whose jobs run as the user, with sudo allowed for this command)."""
+    python = ("sudo -n " if sudo else "") + shlex.quote(sys.executable)
     repo = shlex.quote(str(Path(__file__).resolve().parents[1]))
     return (
         "#!/bin/sh\n"
@@ -130,6 +132,7 @@ def submit(
     partition: str | None = None,
     account: str | None = None,
     sbatch_args: list[str] | None = None,
+    sudo: bool = False,
 ) -> list[dict]:
     """Submit one job array per team size for `todo`; returns the jobs (also recorded)."""
     sbatch = _tool("sbatch")
@@ -147,7 +150,7 @@ def submit(
         task_list = slurm_dir / f"tasks-{n}.txt"
         task_list.write_text("".join(f"{r.run_id}\n" for r in runs))
         script = slurm_dir / f"job-{n}.sh"
-        script.write_text(batch_script(out, task_list))
+        script.write_text(batch_script(out, task_list, sudo))
         script.chmod(0o755)
         argv = [
             sbatch, "--parsable", f"--array=1-{len(runs)}", f"--cpus-per-task={cpus}",

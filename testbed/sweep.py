@@ -647,6 +647,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--partition", metavar="P", help="with --slurm: sbatch --partition")
     parser.add_argument("--account", metavar="A", help="with --slurm: sbatch --account")
     parser.add_argument(
+        "--sudo", action="store_true",
+        help="with --slurm: tasks run `testbed run` through `sudo -n` (jobs that do not run "
+        "as root)",
+    )  # fmt: skip
+    parser.add_argument(
         "--sbatch-arg", action="append", default=[], metavar="ARG",
         help="with --slurm: one more sbatch argument (repeatable), e.g. --sbatch-arg=--qos=long",
     )  # fmt: skip
@@ -696,7 +701,11 @@ def _submit(args, spec, runs: list[PlannedRun], out: Path, p: Plan) -> int:
         sweep.status[r.run_id] = {"status": "slurm"}
     sweep._write_state()
     before = len(slurm.submitted(out))
-    jobs = slurm.submit(out, todo, args.partition, args.account, args.sbatch_arg) if todo else []
+    jobs = (
+        slurm.submit(out, todo, args.partition, args.account, args.sbatch_arg, args.sudo)
+        if todo
+        else []
+    )
     new = jobs[before:]
     print(
         f"sweep {args.file}: {len(runs)} runs, {len(p.done)} done, {len(in_queue)} still "
@@ -712,8 +721,8 @@ def main(args: argparse.Namespace) -> int:
         return _print_status(Path(args.status))
     if not args.file or not args.out:
         raise UsageError("testbed sweep needs FILE and --out DIR (or --status DIR)")
-    if not args.slurm and (args.partition or args.account or args.sbatch_arg):
-        raise UsageError("--partition, --account and --sbatch-arg go with --slurm")
+    if not args.slurm and (args.partition or args.account or args.sbatch_arg or args.sudo):
+        raise UsageError("--partition, --account, --sbatch-arg and --sudo go with --slurm")
     spec = sweepfile.load(args.file)
     jobs = args.jobs or default_jobs()
     out = Path(args.out)
