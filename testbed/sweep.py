@@ -91,6 +91,7 @@ _FLAGS = {
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
 GRACE_INT = 30.0
 GRACE_TERM = 10.0
+CALIBRATION_STEPS = 300  # steps of each --calibrate trial (30 s of robot time)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -153,6 +154,23 @@ def config_mismatch(out: Path, run: PlannedRun) -> str | None:
         if key in recorded and recorded[key] != want:
             return f"{key} is {recorded[key]!r} there, {want!r} in the sweep file"
     return None
+
+
+def auto_jobs(runs: list[PlannedRun], cores: int | None = None) -> int:
+    """--jobs auto: the cores divided by the CPUs the sweep's most demanding run needs
+    (testbed.slurm.resources: its robots' CPU per step at its time scale, and a core for the
+    world), at least 1. On the 2-core development machine: 1."""
+    from testbed.slurm import resources
+
+    cores = cores or os.cpu_count() or 1
+    need = max((resources(r.config)[0] for r in runs), default=1)
+    return max(1, cores // need)
+
+
+def _jobs(text: str) -> int | str:
+    if text == "auto":
+        return text
+    return number(int, "--jobs", minimum=1)(text)
 
 
 def default_jobs(cores: int | None = None) -> int:
@@ -323,6 +341,7 @@ class Sweep:
         sweep_file: str = "",
         command: list[str] | None = None,
         progress_stream=None,
+        calibrate: bool = False,
     ):
         self.spec = spec
         self.runs = runs
@@ -335,6 +354,11 @@ class Sweep:
         # runs short of CPU says nothing about a lone robot, which is bound by latency.
         self.scale_factors: dict[int, float] = {}
         self.clean_runs: dict[int, int] = {}
+        # --calibrate: per team size, the factor its trials found (also its ceiling), and
+        # the trials themselves [(factor, miss outside stalls), ...] for sweep.json.
+        self.calibrate = calibrate
+        self.ceilings: dict[int, float] = {}
+        self.calibration: dict[int, list[tuple[float, float]]] = {}
         self.netem = netem
         self.sweep_file = sweep_file
         self.command = command or run_command()
@@ -359,6 +383,10 @@ class Sweep:
                 str(n): round(f, 3) for n, f in sorted(self.scale_factors.items())
             },
             "netem": self.netem,
+            "calibration": {
+                str(n): {"factor": self.ceilings.get(n), "trials": trials}
+                for n, trials in sorted(self.calibration.items())
+            },
             "backoffs": self.backoffs,
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "runs": [
@@ -397,7 +425,7 @@ class Sweep:
         log_file = open(self.out / "logs" / f"{run.run_id}.log", "wb")  # noqa: SIM115
         config = run.config
         factor = self._factor(config["robots"])
-        if factor < 1.0:
+        if factor != 1.0:
             config = dict(config, time_scale=round(config["time_scale"] * factor, 3))
         if self.forker is not None:
             args = run_argv([], config, rdir)
@@ -462,6 +490,7 @@ class Sweep:
             load_limit=self.load_limit,
             scale_factors=dict(self.scale_factors),
             clean_runs=dict(self.clean_runs),
+            ceilings=dict(self.ceilings),
         )
 
     def _apply(self, d: sweeppolicy.Decision, run: PlannedRun, st: dict, queue: deque) -> None:
@@ -475,6 +504,52 @@ class Sweep:
 
     def _factor(self, robots: int) -> float:
         return self.scale_factors.get(robots, 1.0)
+
+    def _calibrate(self, todo: list[PlannedRun]) -> None:
+        """Find each team size's time scale on this machine before its first run: short
+        runs alone (CALIBRATION_STEPS steps) at the file's scale times a factor, up while
+        they run clean, down while they miss (sweeppolicy.calibration_next)."""
+        firsts: dict[int, PlannedRun] = {}
+        for run in todo:
+            firsts.setdefault(run.config["robots"], run)
+        for robots, run in sorted(firsts.items()):
+            trials: list[tuple[float, float]] = []
+            factor = sweeppolicy.calibration_next(trials)
+            while factor is not None and self.stop_signal is None:
+                miss = self._trial(run, factor, len(trials) + 1)
+                trials.append((round(factor, 3), miss))
+                factor = sweeppolicy.calibration_next(trials)
+            found = sweeppolicy.calibrated(trials)
+            self.calibration[robots], self.ceilings[robots] = trials, found
+            self.scale_factors[robots] = found
+            scale = run.config["time_scale"] * found
+            self.progress.update(0, 0, 0, None, f"calibrated teams of {robots}: time scale "
+                                 f"{scale:.3g} ({found:.0%} of the file's), {len(trials)} "
+                                 "trial(s)")  # fmt: skip
+
+    def _trial(self, run: PlannedRun, factor: float, k: int) -> float:
+        """One calibration run; the fraction of its step deadlines missed outside stalls."""
+        c = run.config
+        config = dict(c, max_steps=CALIBRATION_STEPS,
+                      time_scale=round(c["time_scale"] * factor, 3))  # fmt: skip
+        rdir = self.out / "calibration" / f"n{c['robots']:02d}-{k}"
+        if rdir.exists():
+            shutil.rmtree(rdir)
+        rdir.parent.mkdir(parents=True, exist_ok=True)
+        log_path = self.out / "calibration" / f"n{c['robots']:02d}-{k}.log"
+        if self.forker is not None:
+            proc = self.forker.start(run_argv([], config, rdir), log_path, f"calibrate {k}")
+        else:
+            with open(log_path, "wb") as f:
+                proc = subprocess.Popen(run_argv(self.command, config, rdir),
+                                        stdin=subprocess.DEVNULL, stdout=f,
+                                        stderr=subprocess.STDOUT)  # fmt: skip
+        proc.wait()
+        res = read_json(rdir / "result.json") or {}
+        miss = res.get("deadline_miss_fraction_outside_stalls")
+        if miss is None:
+            miss = res.get("deadline_miss_fraction")
+        return float(miss) if isinstance(miss, int | float) else 1.0
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
         for child in children.values():
@@ -531,6 +606,8 @@ class Sweep:
         if self.command is None and queue:
             self.forker = RunForker(label=str(self.out.resolve()))
         try:
+            if self.calibrate:
+                self._calibrate(list(queue))
             self._write_state()
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
@@ -627,11 +704,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="DIR", help="sweep directory")
     parser.add_argument(
         "--jobs",
-        type=number(int, "--jobs", minimum=1),
+        type=_jobs,
         default=None,
         metavar="J",
-        help=f"runs at once (default {default_jobs()} on this machine; "
-        "lowered automatically when runs miss step deadlines)",
+        help=f"runs at once, or 'auto' (from the cores and the CPU the sweep's largest run "
+        f"needs); default {default_jobs()} on this machine; lowered automatically when runs "
+        "miss step deadlines",
+    )
+    parser.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="before each team size's first run, find the time scale this machine sustains "
+        "with short runs (up to 4x the file's, or down); for hardware the file was not made for",
     )
     parser.add_argument(
         "--resume",
@@ -724,9 +808,9 @@ def main(args: argparse.Namespace) -> int:
     if not args.slurm and (args.partition or args.account or args.sbatch_arg or args.sudo):
         raise UsageError("--partition, --account, --sbatch-arg and --sudo go with --slurm")
     spec = sweepfile.load(args.file)
-    jobs = args.jobs or default_jobs()
     out = Path(args.out)
     runs = sweepfile.expand(spec)
+    jobs = auto_jobs(runs) if args.jobs == "auto" else args.jobs or default_jobs()
     out.mkdir(parents=True, exist_ok=True)
     (out / "runs").mkdir(exist_ok=True)
     lock = open(out / ".sweep.lock", "w")  # noqa: SIM115 (held for the process lifetime)
@@ -762,7 +846,8 @@ def main(args: argparse.Namespace) -> int:
         + f", {jobs} at a time",
         file=sys.stderr,
     )
-    sweep = Sweep(spec, runs, out, jobs, netem, sweep_file=str(args.file))
+    sweep = Sweep(spec, runs, out, jobs, netem, sweep_file=str(args.file),
+                  calibrate=args.calibrate)  # fmt: skip
     return sweep.run(p.todo, p.done, p.skipped)
 
 

@@ -25,9 +25,17 @@ The rules, in the order they are tried (each is cited at its branch below):
    so one says little about the other; each finds its own scale.
 6. A run of a slowed-down team size that missed at most CLEAN_MISS outside stalls counts
    as clean; after CLEAN_RUNS_TO_SPEED_UP clean runs since the last change the factor goes
-   back up a notch (divided by SLOWDOWN, never past the file's scale). Before stalls were
-   told apart, a ratchet that needed 6 runs under 0.3% to speed up again took the paper
-   sweep's team sizes down to 0.44-0.72 of the file's scales (2026-11-22).
+   back up a notch (divided by SLOWDOWN, never past the team size's ceiling: the file's
+   scale, or what calibration found). Before stalls were told apart, a ratchet that needed
+   6 runs under 0.3% to speed up again took the paper sweep's team sizes down to 0.44-0.72
+   of the file's scales (2026-11-22).
+
+Calibration (`testbed sweep --calibrate`, for a machine the file's scales were not made
+for): before a team size's first run, short runs alone at the file's scale times a factor;
+`calibration_next` says which factor to try next from the trials so far, and
+`calibrated` which one to keep: up by 1/SLOWDOWN per trial while runs stay clean (up to
+MAX_SCALE_FACTOR), down by SLOWDOWN while they miss over the limit; the team's factor and
+ceiling become the last clean factor.
 """
 
 from __future__ import annotations
@@ -41,6 +49,7 @@ REDO_MISS = 0.05  # a run alone that missed more than this is redone (slower); l
 CLEAN_MISS = 0.005  # a run this clean counts towards speeding up again
 CLEAN_RUNS_TO_SPEED_UP = 3
 LOAD_BACKOFF = 0.8  # rule 3: the new load limit, as a share of the load the late run saw
+MAX_SCALE_FACTOR = 4.0  # calibration may take a team size up to 4 times the file's scale
 
 
 @dataclass(frozen=True)
@@ -62,11 +71,15 @@ class State:
 
     jobs: int
     load_limit: float | None = None
-    scale_factors: dict[int, float] = field(default_factory=dict)  # robots -> factor (< 1)
+    scale_factors: dict[int, float] = field(default_factory=dict)  # robots -> factor
     clean_runs: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
+    ceilings: dict[int, float] = field(default_factory=dict)  # robots -> highest factor
 
     def factor(self, robots: int) -> float:
         return self.scale_factors.get(robots, 1.0)
+
+    def ceiling(self, robots: int) -> float:
+        return self.ceilings.get(robots, 1.0)
 
 
 @dataclass(frozen=True)
@@ -127,12 +140,12 @@ def decide(o: Outcome, state: State) -> Decision:
             )  # fmt: skip
         d = replace(d, words=words + d.words)
     s = d.state
-    if _number(ours) and ours <= CLEAN_MISS and s.factor(n) < 1.0:
+    if _number(ours) and ours <= CLEAN_MISS and s.factor(n) < s.ceiling(n):
         # Rule 6: a clean run of a slowed-down size; enough of them speed it up a notch.
         clean = s.clean_runs.get(n, 0) + 1
         if clean < CLEAN_RUNS_TO_SPEED_UP:
             return replace(d, state=replace(s, clean_runs={**s.clean_runs, n: clean}))
-        up = min(1.0, s.factor(n) / SLOWDOWN)
+        up = min(s.ceiling(n), s.factor(n) / SLOWDOWN)
         faster = replace(
             s, scale_factors={**s.scale_factors, n: up}, clean_runs={**s.clean_runs, n: 0}
         )
@@ -143,3 +156,31 @@ def decide(o: Outcome, state: State) -> Decision:
             words=d.words + f"; time scales of teams of {n} up to {up:.0%}",
         )
     return d
+
+
+def calibration_next(trials: list[tuple[float, float]]) -> float | None:
+    """The next factor to try, from the (factor, miss outside stalls) trials so far (in the
+    order they ran), or None when calibration is over."""
+    if not trials:
+        return 1.0
+    first_clean = trials[0][1] <= CLEAN_MISS
+    factor, miss = trials[-1]
+    if first_clean:  # going up: until a trial misses, or the top
+        if miss > CLEAN_MISS or factor >= MAX_SCALE_FACTOR:
+            return None
+        return min(MAX_SCALE_FACTOR, factor / SLOWDOWN)
+    if trials[0][1] <= DEADLINE_MISS_LIMIT:
+        return None  # within the limit at the file's scale: keep it
+    if miss <= CLEAN_MISS or factor <= MIN_SCALE_FACTOR:  # going down: until clean
+        return None
+    return max(MIN_SCALE_FACTOR, factor * SLOWDOWN)
+
+
+def calibrated(trials: list[tuple[float, float]]) -> float:
+    """The factor calibration keeps: the highest that ran clean; if none did, the file's
+    scale when it stayed within the limit, else the lowest tried."""
+    clean = [f for f, miss in trials if miss <= CLEAN_MISS]
+    if clean:
+        return max(clean)
+    within = [f for f, miss in trials if miss <= DEADLINE_MISS_LIMIT]
+    return max(within) if within else min((f for f, _ in trials), default=1.0)

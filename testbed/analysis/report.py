@@ -421,6 +421,7 @@ def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:
             f"time scale avoids; outside them, up to {max(ours):.1%} of steps "
             f"({sum(m > 0.01 for m in ours)} run(s) above 1%)."
         )
+    lines += _scale_lines(runs, state)
     backoffs = state.get("backoffs") or []
     concurrency = [b for b in backoffs if "jobs" in b or "load_limit" in b]
     if concurrency:
@@ -437,6 +438,36 @@ def _sweep_section(sweep_dir: Path, runs: list[figures.Run]) -> list[str]:
             "time scale: "
             + (", ".join(f"{v:g} for {k}" for k, v in factors.items()) or "none")
             + "."
+        )
+    return lines
+
+
+def _scale_lines(runs: list[figures.Run], state: dict) -> list[str]:
+    """Which time scales each team size ran at (a sweep may move them), and what calibration
+    found where it ran."""
+    by_team: dict[int, dict[float, int]] = {}
+    for r in runs:
+        ts = r.result.get("time_scale_requested") or r.config.get("time_scale")
+        if ts:
+            scales = by_team.setdefault(r.config["robots"], {})
+            scales[ts] = scales.get(ts, 0) + 1
+    lines = []
+    if by_team:
+        parts = [
+            f"{n}: " + ", ".join(f"{ts:g} ({k} run{'s' if k > 1 else ''})"
+                                 for ts, k in sorted(sc.items(), reverse=True))
+            for n, sc in sorted(by_team.items())
+        ]  # fmt: skip
+        lines.append("Time scales the runs ran at, per team size: " + "; ".join(parts) + ".")
+    cal = state.get("calibration") or {}
+    if cal:
+        found = [
+            f"{n} robots x{c['factor']:g} of the file's scale after {len(c['trials'])} trial(s)"
+            for n, c in sorted(cal.items(), key=lambda kv: int(kv[0]))
+        ]
+        lines.append(
+            "Calibrated on this machine (--calibrate: short runs alone, up while clean, down "
+            "while late): " + "; ".join(found) + "."
         )
     return lines
 

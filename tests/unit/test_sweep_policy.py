@@ -114,3 +114,30 @@ def test_decide_changes_nothing_it_is_given():
     for o in (outcome(0.06), outcome(0.004), outcome(0.02, jobs_at_start=3)):
         decide(o, state)
     assert state == before
+
+
+def test_calibration_goes_up_while_clean_and_down_while_late():
+    from testbed.sweeppolicy import MAX_SCALE_FACTOR, calibrated, calibration_next
+
+    assert calibration_next([]) == 1.0
+    up = [(1.0, 0.0)]
+    assert calibration_next(up) > 1.0
+    up += [(calibration_next(up), 0.02)]  # the second trial misses: stop, keep the first
+    assert calibration_next(up) is None and calibrated(up) == 1.0
+    assert calibration_next([(1.0, 0.008)]) is None  # within the limit: the file's scale
+    assert calibrated([(1.0, 0.008)]) == 1.0
+    down = [(1.0, 0.05)]
+    assert calibration_next(down) == 0.85
+    down += [(0.85, 0.002)]
+    assert calibration_next(down) is None and calibrated(down) == 0.85
+    top = [(MAX_SCALE_FACTOR, 0.0)]
+    assert calibration_next([(1.0, 0.0), *top]) is None
+
+
+def test_a_calibrated_ceiling_above_the_file_lets_a_slowed_team_climb_back_to_it():
+    from testbed.sweeppolicy import Outcome, State, decide
+
+    s = State(jobs=1, scale_factors={3: 1.5}, ceilings={3: 2.0})
+    for _ in range(3):
+        s = decide(Outcome(robots=3, miss=0.0, miss_outside_stalls=0.0), s).state
+    assert 1.5 < s.factor(3) <= 2.0

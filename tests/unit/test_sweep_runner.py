@@ -322,3 +322,41 @@ def test_misses_in_host_stalls_do_not_slow_the_sweep_down(env):
     attempts = {x["id"]: x["attempts"] for x in state["runs"]}
     assert attempts["n02-c5-l2-k1"] == 3 and attempts["n01-c5-l2-k1"] == 1
     assert {res["config"]["time_scale"] for res in results(out).values()} == {5}
+
+
+def test_calibrate_finds_each_team_sizes_scale_and_runs_there(env, tmp_path):
+    out = tmp_path / "cal"
+    # Team 1's third trial misses 2%: its factor stops at the second (1/0.85 of the file's);
+    # team 2 misses at the file's scale and goes down until clean; team 3 is clean up to 4x.
+    r = run_sweep(env, out, "--calibrate", STANDIN_MISS="0.02",
+                  STANDIN_MISS_IDS="n01-3,n02-1,n02-2")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    cal = json.loads((out / "sweep.json").read_text())["calibration"]
+    assert [f for f, _ in cal["1"]["trials"]] == [1.0, 1.176, 1.384]
+    assert cal["1"]["factor"] == 1.176
+    assert [f for f, _ in cal["2"]["trials"]] == [1.0, 0.85, 0.722]
+    assert cal["2"]["factor"] == 0.722
+    assert cal["3"]["factor"] == 4.0
+    scales = {d["config"]["robots"]: d["config"]["time_scale"] for d in results(out).values()}
+    assert scales == {1: round(5 * 1.176, 3), 2: round(5 * 0.722, 3), 3: 20.0}
+    assert all(p.name.startswith("n0") for p in (out / "calibration").iterdir())
+
+
+def test_jobs_auto_is_one_at_a_time_on_two_cores_and_more_on_big_machines():
+    from testbed import sweep, sweepfile
+
+    runs = sweepfile.expand(sweepfile.load(REPO / "testbed" / "experiments" / "paper.toml"))
+    assert sweep.auto_jobs(runs, cores=2) == 1
+    assert sweep.auto_jobs(runs, cores=64) >= 12
+
+
+def test_report_says_which_scales_each_team_ran_at(env, tmp_path):
+    from testbed.analysis import report
+
+    out = tmp_path / "cal2"
+    r = run_sweep(env, out, "--calibrate", STANDIN_MISS="0.02", STANDIN_MISS_IDS="n01-2")
+    assert r.returncode == 0, r.stderr
+    path, _ = report.write_report(out, metrics_of=lambda run: None)
+    text = path.read_text()
+    assert "Time scales the runs ran at, per team size: 1: 5 (2 runs)" in text
+    assert "Calibrated on this machine" in text and "1 robots x1 of the file's scale" in text
