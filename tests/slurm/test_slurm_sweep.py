@@ -83,6 +83,9 @@ def test_a_cancelled_task_is_redone_by_resume_and_nothing_else(cluster, tmp_path
     assert not (out / "runs" / victim / "result.json").exists() or (
         json.loads((out / "runs" / victim / "result.json").read_text())["status"] == "interrupted"
     )
+    # The report works while a task still runs, on what has finished (nothing, or one run).
+    r = run_testbed("report", out)
+    assert r.returncode == 0, r.stderr[-2000:]
     wait_until(lambda: status(out).get(other) == "done", 600, "the other run")
     done_at = (out / "runs" / other / "result.json").stat().st_mtime_ns
 
