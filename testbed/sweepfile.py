@@ -276,22 +276,15 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
             kw["time_scale"] = _positive(path, "run.time_scale", ts)
     if "load_limit" in run:
         kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
-    if "routing" in run:
-        routing = run["routing"]
-        if routing not in ROUTINGS:
-            raise _fail(
-                path, "run.routing", f"expected one of {', '.join(ROUTINGS)}, got {routing!r}"
-            )
-        kw["routing"] = routing
-    if "aodv_profile" in run:
-        prof = run["aodv_profile"]
-        if prof not in AODV_PROFILES:
-            raise _fail(
-                path,
-                "run.aodv_profile",
-                f"expected one of {', '.join(AODV_PROFILES)}, got {prof!r}",
-            )
-        kw["aodv_profile"] = prof
+    for key, allowed in (
+        ("routing", ROUTINGS), ("aodv_profile", AODV_PROFILES), ("range_model", RANGE_MODELS),
+    ):  # fmt: skip
+        if key in run:
+            if run[key] not in allowed:
+                raise _fail(
+                    path, f"run.{key}", f"expected one of {', '.join(allowed)}, got {run[key]!r}"
+                )
+            kw[key] = run[key]
     if "max_steps" in run:
         kw["max_steps"] = _count(path, "run.max_steps", run["max_steps"])
     if "capture" in run:
@@ -303,13 +296,6 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         if not isinstance(m, str) or not m:
             raise _fail(path, "run.map", f"expected a non-empty path string, got {m!r}")
         kw["map"] = _map_path(path, m)
-    if "range_model" in run:
-        model = run["range_model"]
-        if model not in RANGE_MODELS:
-            raise _fail(
-                path, "run.range_model", f"expected one of {', '.join(RANGE_MODELS)}, got {model!r}"
-            )
-        kw["range_model"] = model
     if "wall_loss_pct" in run:
         v = run["wall_loss_pct"]
         if not _is_number(v) or not 0 <= v <= 100:

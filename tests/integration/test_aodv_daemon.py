@@ -357,6 +357,23 @@ def test_forwarded_packet_without_route_draws_rerr_and_rediscovery():
         assert "ttl=63" in out, out
 
 
+def restart_daemon(net, k, words, *extra):
+    """Start robot k's daemon again (time scale 10) and read its log until it is up; returns
+    the process and whether a line said `words` on the way."""
+    os.remove(stats_path(net, k))
+    new = net.spawn(
+        k, [PY, "-m", "aodv", "--robot", f"r{k}", "--time-scale", "10",
+            "--stats", stats_path(net, k), *extra],
+        role="aodv", cwd=REPO, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 20
+    line, logged = "", False
+    while "AODV up" not in line and time.monotonic() < deadline:
+        line = new.stderr.readline()
+        logged |= words in line
+    return new, logged
+
+
 def test_restart_after_crash_applies_the_reboot_rule():
     # Time scale 10: DELETE_PERIOD is 1.5 s.
     with aodv_net(CHAIN5[:2], time_scale=10.0) as net:
@@ -365,19 +382,8 @@ def test_restart_after_crash_applies_the_reboot_rule():
         old.kill()  # no teardown: its routes stay in the kernel
         old.wait(timeout=5)
         assert routes(net, 2)
-        os.remove(stats_path(net, 2))
-        new = net.spawn(
-            2, [PY, "-m", "aodv", "--robot", "r2", "--time-scale", "10",
-                "--stats", stats_path(net, 2)],
-            role="aodv", cwd=REPO, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
-        deadline = time.monotonic() + 20
-        line, reboot_logged = "", False
-        while "AODV up" not in line and time.monotonic() < deadline:
-            line = new.stderr.readline()
-            if "reboot rule" in line:
-                reboot_logged = True
-        assert reboot_logged
+        new, logged = restart_daemon(net, 2, "reboot rule")
+        assert logged
         t_up = time.monotonic()
         deadline = t_up + 10
         while "10.0.0.2" in routes(net, 1) and time.monotonic() < deadline:
@@ -456,18 +462,8 @@ def test_clean_restart_waits_delete_period_and_resumes_its_numbers():
         old.terminate()
         assert old.wait(timeout=10) == 0
         assert routes(net, 1) == {}  # a clean exit: nothing for the old rule to find
-        os.remove(stats_path(net, 1))
-        new = net.spawn(
-            1, [PY, "-m", "aodv", "--robot", "r1", "--time-scale", "10",
-                "--stats", stats_path(net, 1), "--state", state],
-            role="aodv", cwd=REPO, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
-        deadline = time.monotonic() + 20
-        line, restart_logged = "", False
-        while "AODV up" not in line and time.monotonic() < deadline:
-            line = new.stderr.readline()
-            restart_logged |= "restarted" in line
-        assert restart_logged
+        new, logged = restart_daemon(net, 1, "restarted", "--state", state)
+        assert logged
         t_up = time.monotonic()
         out = ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
         t_reply = time.monotonic()

@@ -11,23 +11,9 @@ from aodv.packet import MalformedPacket, Rerr, Rrep, Rreq, decode
 from aodv.params import Params
 from aodv.persist import CounterStore
 from aodv.routes import Route
-from aodv.sim import Medium
+from tests.unit.test_aodv_core import A, chain, flow
 
-A = [f"10.0.0.{i}" for i in range(1, 11)]
 N1, N2, N3, N4, N5, N6, N7 = A[:7]
-
-
-def chain(n=5, **kw):
-    m = Medium(Params(**kw))
-    m.chain(A[:n])
-    return m
-
-
-def flow(m, src, dst, start, end, every=0.25):
-    t = start
-    while t < end:
-        m.at(t, lambda: m.send_data(src, dst))
-        t += every
 
 
 def sends(actions):
