@@ -16,7 +16,7 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from topology.argtypes import number
-from topology.spec import AODV_PROFILES, RANGE_MODELS, ROUTINGS
+from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS, ROUTINGS
 
 log = logging.getLogger("testbed")
 
@@ -149,7 +149,7 @@ def _net_up(args) -> int:
 
     if args.positions is not None and args.layout is not None:
         raise UsageError("give either --layout or --positions, not both")
-    los = args.range_model.startswith("los")
+    los = args.range_model in LOS_MODELS
     if los and not args.map:
         raise UsageError(f"--range-model {args.range_model} needs --map PNG (the walls)")
     if args.map and not los:

@@ -17,7 +17,7 @@ from node.timing import STEP_S
 from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.argtypes import number
-from topology.spec import AODV_PROFILES, RANGE_MODELS
+from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS
 
 ROUTINGS = ("babel", "batman", "aodv", "oracle", "none")
 
@@ -134,7 +134,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace) -> RunConfig:
     if args.loss > 100:
         raise UsageError(f"loss {args.loss}% is more than 100%")
-    if args.wall_loss is not None and not args.range_model.startswith("los"):
+    if args.wall_loss is not None and args.range_model not in LOS_MODELS:
         raise UsageError("--wall-loss is for the los range models: add --range-model los")
     if args.wall_loss is not None and args.wall_loss > 100:
         raise UsageError(f"wall loss {args.wall_loss}% is more than 100%")

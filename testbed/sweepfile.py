@@ -57,7 +57,7 @@ from node.coordination import DEFAULT as DEFAULT_COORDINATION
 from node.coordination import MODES as COORDINATION_MODES
 from testbed.errors import UsageError
 from testbed.world.worldmap import START_PLACEMENTS
-from topology.spec import AODV_PROFILES, RANGE_MODELS
+from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS
 
 ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")
 
@@ -300,7 +300,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         v = run["wall_loss_pct"]
         if not _is_number(v) or not 0 <= v <= 100:
             raise _fail(path, "run.wall_loss_pct", f"expected a number in 0..100, got {v!r}")
-        if not kw.get("range_model", "disc").startswith("los"):
+        if kw.get("range_model", "disc") not in LOS_MODELS:
             raise _fail(path, "run.wall_loss_pct", "needs range_model los or los-lossy")
         kw["wall_loss_pct"] = float(v)
     if "seed" in run:

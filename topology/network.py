@@ -35,7 +35,7 @@ from topology.impair import MissingKernelFeature
 from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX, Medium
 from topology.oracle import OracleRouter
-from topology.spec import NO_IMPAIRMENT, Impairment, NetworkSpec, Position
+from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, NetworkSpec, Position
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +59,7 @@ class Network:
         self._routing_forks: ForkServer | None = None
         self.oracle: OracleRouter | None = None  # routing "oracle": routes from here
         self.walls: Walls | None = None  # the los range models' walls, from spec.map_png
-        if spec.map_png and spec.range_model.startswith("los"):
+        if spec.map_png and spec.range_model in LOS_MODELS:
             try:
                 self.walls = Walls.from_png(spec.map_png, spec.map_cell)
             except MapError as exc:

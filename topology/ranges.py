@@ -18,7 +18,7 @@ Pure functions of positions (no kernel). `wanted_links` returns a dict from an o
 import math
 
 from topology.los import Walls, crossings
-from topology.spec import NO_IMPAIRMENT, Impairment, Position
+from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, Position
 
 MAX_EDGE_LOSS_PCT = 50.0
 
@@ -71,7 +71,7 @@ def wanted_links(
     models need `walls` (no map: nothing blocks, as on the empty terrain)."""
     if model not in ("disc", "lossy", "los", "los-lossy"):
         raise ValueError(f"unknown range model {model!r}")
-    if model.startswith("los"):
+    if model in LOS_MODELS:
         links = wanted_links(positions, comm_range, "lossy" if model == "los-lossy" else "disc")
         return _through_walls(links, positions, walls, wall_loss_pct) if walls else links
     links: dict[tuple[int, int], Impairment] = {}

@@ -12,6 +12,7 @@ from topology import names
 
 ROUTINGS = ("none", "babel", "batman", "aodv", "oracle")
 RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
+LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.los)
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")
 LAYOUTS = ("chain", "grid", "random")

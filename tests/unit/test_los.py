@@ -57,3 +57,11 @@ def test_bad_map_is_a_clear_error(tmp_path):
     (tmp_path / "x.png").write_text("not a picture")
     with pytest.raises(MapError, match="not an image"):
         Walls.from_png(str(tmp_path / "x.png"), 0.05)
+
+
+def test_lossy_is_not_a_line_of_sight_model():
+    # "lossy" begins with "los": the models are named, not matched by prefix.
+    w = walls_with(3.0)
+    pos = [(1.0, 5.0), (8.0, 5.0)]
+    assert wanted_links(pos, 10, "lossy", w)[(1, 2)].loss_pct > 0  # fades, walls ignored
+    assert (1, 2) not in wanted_links(pos, 10, "los-lossy", w)
