@@ -363,7 +363,14 @@ def dispatch(args) -> int:
     return importlib.import_module(DELEGATED[args.cmd][0]).main(args)
 
 
+# Set once SIGTERM arrived (a batch system cancelling the job, a time limit): whatever the
+# run then ended with, it did not end on its own (testbed.slurm marks it interrupted).
+terminated = False
+
+
 def _stop_on_sigterm(signum, frame) -> None:
+    global terminated
+    terminated = True
     raise KeyboardInterrupt  # unwinds like Ctrl-C: every testbed is torn down on the way out
 
 

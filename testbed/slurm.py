@@ -195,6 +195,7 @@ def status(out: Path, plan_runs: list[dict]) -> list[tuple[str, str]]:
 
 def task_main(out: Path, task_list: Path, index: int) -> int:
     """One array task: run the `index`-th run of `task_list` (1-based) into its directory."""
+    from testbed import cli
     from testbed.cli import main as cli_main
     from testbed.sweep import is_done, run_argv, run_dir
     from topology.cleanup import clean
@@ -216,7 +217,27 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
     if rdir.exists():
         shutil.rmtree(rdir)  # a partial run of an earlier attempt
     print(f"{rid}: on {os.uname().nodename}", file=sys.stderr, flush=True)
-    return cli_main(["run", *run_argv([], plan[rid]["config"], rdir)])
+    status = cli_main(["run", *run_argv([], plan[rid]["config"], rdir)])
+    if cli.terminated:
+        _mark_interrupted(rdir)
+    return status
+
+
+def _mark_interrupted(rdir: Path) -> None:
+    """A task cancelled or out of time gets SIGTERM, and so do its run's helper processes
+    (Slurm signals the whole step): the run may end with an error of its own ("the fork
+    server died") rather than as interrupted. It did not end on its own, so it is recorded
+    as interrupted, which `--resume` redoes (testbed.sweep.is_done)."""
+    path = rdir / "result.json"
+    result = read_json(path)
+    if result is None or result.get("status") == "interrupted":
+        return
+    result["status_detail"] = (
+        f"cancelled (SIGTERM from the batch system); it ended as {result.get('status')}: "
+        f"{result.get('status_detail', '')}"
+    )
+    result["status"] = "interrupted"
+    write_json_atomic(path, result)
 
 
 if __name__ == "__main__":

@@ -30,3 +30,15 @@ def test_a_task_index_outside_its_list_is_refused(tmp_path):
     tasks.write_text("n01-c5-l2-k1\n")
     assert slurm.task_main(tmp_path, tasks, 2) == 2
     assert slurm.task_main(tmp_path, tasks, 1) == 2  # no sweep.json: not planned
+
+
+def test_a_cancelled_run_is_recorded_as_interrupted_whatever_it_ended_with(tmp_path):
+    import json
+
+    (tmp_path / "result.json").write_text(
+        json.dumps({"status": "error", "status_detail": "the fork server died"})
+    )
+    slurm._mark_interrupted(tmp_path)
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert doc["status"] == "interrupted" and "SIGTERM" in doc["status_detail"]
+    assert "the fork server died" in doc["status_detail"]
