@@ -41,7 +41,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import ablation, figures, protocols, stats
+from testbed.analysis import ablation, figures, htmlreport, protocols, stats
 from testbed.errors import UsageError
 from topology.jsonfile import read_json
 
@@ -552,7 +552,9 @@ def write_report(sweep_dir: str | Path, metrics_of=None) -> tuple[Path, list[Ver
     made = figures.make_all(sweep_dir, metrics_of=metrics_of)
     vs = verdicts(made["tables"])
     path = sweep_dir / "report.md"
-    path.write_text(render(sweep_dir, made, vs) + "\n")
+    text = render(sweep_dir, made, vs) + "\n"
+    path.write_text(text)
+    htmlreport.write_html(sweep_dir, text)  # the same report as one page, figures inlined
     (sweep_dir / "figures" / "verdicts.json").write_text(
         json.dumps([v.__dict__ for v in vs], indent=1) + "\n"
     )
