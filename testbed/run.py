@@ -259,7 +259,10 @@ class Run:
 
         self.links_f = self._stack.enter_context(open(self._path("links.csv"), "w", newline=""))
         self.cov_f = self._stack.enter_context(open(self._path("coverage.csv"), "w", newline=""))
+        self.pos_f = self._stack.enter_context(open(self._path("positions.csv"), "w", newline=""))
         self.links_w, self.cov_w = csv.writer(self.links_f), csv.writer(self.cov_f)
+        self.pos_w = csv.writer(self.pos_f)
+        self.pos_w.writerow(["step"] + [f"{a}{k}" for k in range(1, self.n + 1) for a in "xy"])
         self.links_w.writerow(["step", "event", "i", "j"])
         self.cov_w.writerow(["step", "coverage"])
         self._stack.callback(self._write_clock)
@@ -357,6 +360,7 @@ class Run:
         self._last_print = 0.0
         self.scans = [self.world.scan(i) for i in range(self.n)]
         self.cov_w.writerow([0, f"{self.world.coverage():.5f}"])
+        self.pos_w.writerow([0] + [f"{v:.3f}" for p in self.world.positions() for v in p])
         self.status, self.detail = "step_cap", f"the step cap ({self.cfg.max_steps}) was reached"
         self._t0 = time.monotonic()
         self.anchor = self._t0  # step k's deadline is anchor + (k + 1) * period
@@ -415,7 +419,8 @@ class Run:
     def _update_links(self) -> None:
         """The new positions to the topology controller; links.csv gets what changed."""
         tn = time.monotonic()
-        added, removed = self.net.set_positions(self.world.positions() + [self.display_pos])
+        positions = self.world.positions()
+        added, removed = self.net.set_positions(positions + [self.display_pos])
         spent = time.monotonic() - tn
         self.timing.net_s += spent
         self.timing.net_max_s = max(self.timing.net_max_s, spent)
@@ -423,6 +428,7 @@ class Run:
             self.links_w.writerow([self.step_no, "remove", i, j])
         for i, j in sorted(added):
             self.links_w.writerow([self.step_no, "add", i, j])
+        self.pos_w.writerow([self.step_no] + [f"{v:.3f}" for p in positions for v in p])
 
     def _inject_kills(self) -> None:
         for k in self.kills.get(self.step_no, []):

@@ -6,6 +6,7 @@ the free space covered, writes the run-results contract, and no robot ever recei
 goal from a robot it had no (time-respecting, multi-hop) path to; with 20 m every robot hears
 every other."""
 
+import csv
 import json
 import os
 import uuid
@@ -24,7 +25,9 @@ def tn_name():
     destroy(name)
 
 
-CONTRACT_FILES = ["result.json", "config.json", "links.csv", "coverage.csv", "paths.png"]
+CONTRACT_FILES = [
+    "result.json", "config.json", "links.csv", "coverage.csv", "positions.csv", "paths.png",
+]  # fmt: skip
 
 
 def check_contract(out: str, result: dict, robots: int) -> None:
@@ -43,6 +46,10 @@ def check_contract(out: str, result: dict, robots: int) -> None:
         k: v for k, v in result["config"].items() if k != "extra"
     }
     assert result["format"] == 1
+    with open(os.path.join(out, "positions.csv")) as f:
+        rows = list(csv.reader(f))
+    assert len(rows[0]) == 1 + 2 * robots and rows[1][0] == "0"
+    assert int(rows[-1][0]) == result["steps"] and len(rows) == result["steps"] + 2
     for r in result["robots"].values():
         assert r["plans"][0]["cause"] == "start"
         assert {p["cause"] for p in r["plans"]} <= {"start", "timer", "request"}
