@@ -333,6 +333,7 @@ DELEGATED = {
     "run": ("testbed.run", "run one exploration experiment"),
     "sweep": ("testbed.sweep", "run a sweep of experiments from a TOML file"),
     "report": ("testbed.analysis.report", "figures and a report from a sweep's results"),
+    "view": ("testbed.view.server", "replay a finished run in the browser"),
 }
 
 

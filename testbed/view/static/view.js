@@ -1,0 +1,102 @@
+// The replay page: draws one step of a finished run from /api/run (testbed/view/replay.py):
+// the map faint, each robot with its path so far and its communication range, the links
+// of that step. No framework and no build step: this file is what the browser runs.
+"use strict";
+const canvas = document.getElementById("map");
+const ctx = canvas.getContext("2d");
+const slider = document.getElementById("slider");
+const COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+                "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"];
+let run = null, mapImg = null, linkSets = [], playing = null;
+
+function linksAt(step) {
+  // links.csv holds changes; the set at a step is replayed from step 0 (cached per step).
+  return linkSets[Math.min(step, linkSets.length - 1)] || new Set();
+}
+
+function buildLinkSets() {
+  const byStep = new Map();
+  for (const [s, added, i, j] of run.links) {
+    if (!byStep.has(s)) byStep.set(s, []);
+    byStep.get(s).push([added, i, j]);
+  }
+  let cur = new Set();
+  linkSets = [];
+  for (let s = 0; s <= run.steps; s++) {
+    for (const [added, i, j] of byStep.get(s) || []) {
+      const key = i + "-" + j;
+      if (added) cur.add(key); else cur.delete(key);
+    }
+    linkSets.push(new Set(cur));
+  }
+}
+
+function draw(step) {
+  const [wm, hm] = run.map_m;
+  const k = canvas.width / Math.max(wm, hm);
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (mapImg) {
+    ctx.globalAlpha = 0.3;
+    ctx.drawImage(mapImg, 0, 0, wm * k, hm * k);
+    ctx.globalAlpha = 1;
+  }
+  ctx.strokeStyle = "#999";
+  ctx.strokeRect(0, 0, wm * k, hm * k);
+  const pos = run.positions[step];
+  const at = (r) => [pos[2 * r] * k, pos[2 * r + 1] * k];
+  for (const key of linksAt(step)) {
+    const [i, j] = key.split("-").map(Number);
+    if (i > run.robots || j > run.robots) continue;  // the display's links
+    const [x1, y1] = at(i - 1), [x2, y2] = at(j - 1);
+    ctx.strokeStyle = "#2a2";
+    ctx.lineWidth = 2;
+    ctx.beginPath(); ctx.moveTo(x1, y1); ctx.lineTo(x2, y2); ctx.stroke();
+  }
+  ctx.lineWidth = 1;
+  for (let r = 0; r < run.robots; r++) {
+    const c = COLORS[r % COLORS.length];
+    ctx.strokeStyle = c;
+    ctx.beginPath();
+    for (let s = 0; s <= step; s += Math.max(1, Math.floor(step / 400))) {
+      const p = run.positions[s];
+      if (s === 0) ctx.moveTo(p[2 * r] * k, p[2 * r + 1] * k);
+      else ctx.lineTo(p[2 * r] * k, p[2 * r + 1] * k);
+    }
+    ctx.stroke();
+    const [x, y] = at(r);
+    ctx.globalAlpha = 0.08;
+    ctx.fillStyle = c;
+    ctx.beginPath(); ctx.arc(x, y, run.comm_range * k, 0, 2 * Math.PI); ctx.fill();
+    ctx.globalAlpha = 1;
+    ctx.beginPath(); ctx.arc(x, y, 5, 0, 2 * Math.PI); ctx.fill();
+    ctx.fillText("r" + (r + 1), x + 6, y - 6);
+  }
+  const cov = run.coverage[step];
+  document.getElementById("step").textContent = "step " + step;
+  document.getElementById("counters").textContent =
+    run.robots + " robots, " + run.comm_range + " m range, " + linksAt(step).size +
+    " links, coverage " + (cov === undefined ? "?" : (100 * cov).toFixed(1) + "%") +
+    ", status " + run.status;
+}
+
+async function main() {
+  run = await (await fetch("/api/run")).json();
+  document.getElementById("title").textContent = "replay: " + run.run;
+  slider.max = run.steps;
+  buildLinkSets();
+  const img = new Image();
+  img.onload = () => { mapImg = img; draw(Number(slider.value)); };
+  img.src = "/map.png";
+  slider.addEventListener("input", () => draw(Number(slider.value)));
+  document.getElementById("play").addEventListener("click", () => {
+    if (playing) { clearInterval(playing); playing = null; return; }
+    playing = setInterval(() => {
+      const s = Number(slider.value) + 5;
+      if (s > run.steps) { clearInterval(playing); playing = null; return; }
+      slider.value = s; draw(s);
+    }, 50);
+  });
+  draw(0);
+  document.body.dataset.ready = "1";
+}
+main();
