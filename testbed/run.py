@@ -139,6 +139,8 @@ class Run:
         self.name = name
         self.progress = progress
         self.n = cfg.robots
+        self.live = None  # --view: testbed.view.live.LiveServer
+        self._positions: list = []
         self.display_k = cfg.robots + 1
         self.robots = {k: RobotRecord(k) for k in range(1, cfg.robots + 1)}
         self.status, self.detail = "error", "the run did not start"
@@ -290,6 +292,27 @@ class Run:
         )
         self._wait_connected(CONNECT_TIMEOUT_S + 3.0 * self.n)
         self._phase("processes_ready")
+        if self.cfg.view:
+            self._start_view()
+
+    def _start_view(self) -> None:
+        """--view: the live page (testbed.view.live), fed from the step loop's own records."""
+        from testbed.view.live import LiveFeed, LiveServer
+
+        meta = {
+            "run": os.path.basename(os.path.abspath(self.out)), "robots": self.n,
+            "comm_range": self.cfg.comm_range, "map_m": list(self.truth.size_m),
+            "display": list(self.display_pos), "status": "running", "steps": 0,
+            "positions": [], "links": [], "coverage": [],
+        }  # fmt: skip
+        try:
+            self.live = LiveServer(LiveFeed(meta), self.cfg.view, self.cfg.map)
+        except OSError as e:
+            raise TestbedError(
+                f"--view {self.cfg.view}: cannot listen there: {e.strerror}"
+            ) from None
+        self._stack.callback(self.live.stop)
+        print(f"live view: http://{self.live.host}:{self.live.port}/", file=sys.stderr)
 
     def _node_args(self, k: int, **role: object) -> NodeArgs:
         """What robot k's process is told: the run's parameters plus its role's own."""
@@ -383,6 +406,10 @@ class Run:
         ]
         cov = self.world.coverage()
         self.cov_w.writerow([step, f"{cov:.5f}"])
+        if self.live is not None:
+            missed = sum(r.missed for r in self.robots.values())
+            self.live.feed.publish(step, self._positions, self.net.current, cov, missed,
+                                   self.cfg.time_scale)  # fmt: skip
         tf = time.monotonic()
         t.scan_s += tf - ts
         self._send_frames()
@@ -419,7 +446,7 @@ class Run:
     def _update_links(self) -> None:
         """The new positions to the topology controller; links.csv gets what changed."""
         tn = time.monotonic()
-        positions = self.world.positions()
+        positions = self._positions = self.world.positions()
         added, removed = self.net.set_positions(positions + [self.display_pos])
         spent = time.monotonic() - tn
         self.timing.net_s += spent

@@ -51,6 +51,7 @@ class RunConfig:
     display_pos: tuple[float, float] | None = None  # default: the map's centre
     snapshots: tuple[int, ...] = ()
     kill: tuple[tuple[int, int], ...] = ()  # (robot, step): fault injection, SIGKILL
+    view: str | None = None  # --view [HOST:]PORT: the live page (testbed.view.live)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -128,7 +129,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
            "at the end)")  # fmt: skip
     a("--kill", type=_kill, action="append", default=[], help="ROBOT:STEP, SIGKILL (testing)")
     a("--name", help="testbed name (default: random 'run' + 4 hex digits)")
+    a("--view", metavar="[HOST:]PORT",
+      help="serve a live view of the run (127.0.0.1 unless a host is given)")  # fmt: skip
     a("--quiet", action="store_true", help="no progress line")
+
+
+def _view(text: str | None) -> str | None:
+    if text is None:
+        return None
+    from testbed.view.server import parse_bind
+
+    try:
+        parse_bind(text)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    return text
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
@@ -152,5 +167,5 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
         speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
         map_period=args.map_period, flood=args.flood, coordination=args.coordination,
-        start=args.start, kill=tuple(args.kill),
+        start=args.start, kill=tuple(args.kill), view=_view(args.view),
     )  # fmt: skip

@@ -9,6 +9,7 @@ every other."""
 import csv
 import json
 import os
+import time
 import uuid
 
 import pytest
@@ -153,3 +154,41 @@ def test_png_map_with_walls_and_a_door(tmp_path, tn_name):
     assert result["coverage_final"] >= 0.99
     with open(os.path.join(out, "config.json")) as f:
         assert json.load(f)["map_size"] == [200, 300]
+
+
+def test_live_view_streams_the_run_as_it_happens(tmp_path, tn_name):
+    """--view: a browser's stream gets the robots and the link changes while the run goes on,
+    and the run ends as it would have without it."""
+    import socket
+    import threading
+    import urllib.request
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = str(tmp_path / "live")
+    cfg = RunConfig(robots=3, comm_range=5.0, laser_range=2.0, seed=5, time_scale=10.0,
+                    routing="oracle", max_steps=1500, view=f"127.0.0.1:{port}")  # fmt: skip
+    box = {}
+    worker = threading.Thread(target=lambda: box.update(r=run(cfg, out, tn_name, progress=False)))
+    worker.start()
+    frames = []
+    deadline = time.monotonic() + 60
+    while not frames and time.monotonic() < deadline:
+        try:
+            stream = urllib.request.urlopen(f"http://127.0.0.1:{port}/api/live", timeout=10)
+        except OSError:
+            time.sleep(0.2)
+            continue
+        for line in stream:
+            if line.startswith(b"data: "):
+                frames.append(json.loads(line[6:]))
+            if frames and frames[-1]["ended"]:
+                break
+    worker.join(timeout=120)
+    result = box["r"]
+    assert len(frames) > 10
+    assert all(len(f["positions"]) == 6 for f in frames)
+    assert len({tuple(map(tuple, f["links"])) for f in frames}) > 1  # links switched
+    assert frames[-1]["ended"]
+    assert result["status"] == "complete", result["status_detail"]

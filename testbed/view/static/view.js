@@ -32,6 +32,7 @@ function buildLinkSets() {
 }
 
 function draw(step) {
+  if (!run.positions.length) return;
   const [wm, hm] = run.map_m;
   const k = canvas.width / Math.max(wm, hm);
   ctx.clearRect(0, 0, canvas.width, canvas.height);
@@ -76,14 +77,39 @@ function draw(step) {
   document.getElementById("counters").textContent =
     run.robots + " robots, " + run.comm_range + " m range, " + linksAt(step).size +
     " links, coverage " + (cov === undefined ? "?" : (100 * cov).toFixed(1) + "%") +
-    ", status " + run.status;
+    ", status " + run.status + liveInfo;
+}
+
+let liveInfo = "";
+
+function follow(frame) {
+  // Live: each frame the run streams (server-sent events, at most 10 a second) is appended;
+  // the slider follows the newest unless the user moved it back.
+  const atEnd = Number(slider.value) >= run.steps;
+  run.positions.push(frame.positions);
+  linkSets.push(new Set(frame.links.map(([i, j]) => i + "-" + j)));
+  run.coverage.push(frame.coverage);
+  run.steps = run.positions.length - 1;
+  slider.max = run.steps;
+  liveInfo = ", step " + frame.step + ", deadlines missed " + frame.missed +
+             ", time scale " + frame.scale + (frame.ended ? " (run over)" : "");
+  run.status = frame.ended ? "ended" : "running";
+  if (atEnd) { slider.value = run.steps; }
+  draw(Number(slider.value));
+  document.body.dataset.frames = String(run.positions.length);
+  document.body.dataset.links = String(linksAt(run.steps).size);
 }
 
 async function main() {
   run = await (await fetch("/api/run")).json();
-  document.getElementById("title").textContent = "replay: " + run.run;
+  document.getElementById("title").textContent = (run.live ? "live: " : "replay: ") + run.run;
   slider.max = run.steps;
   buildLinkSets();
+  if (run.live) {
+    linkSets = [];
+    const events = new EventSource("/api/live");
+    events.onmessage = (e) => follow(JSON.parse(e.data));
+  }
   const img = new Image();
   img.onload = () => { mapImg = img; draw(Number(slider.value)); };
   img.src = "/map.png";
@@ -96,7 +122,7 @@ async function main() {
       slider.value = s; draw(s);
     }, 50);
   });
-  draw(0);
+  if (run.positions.length) draw(0);
   document.body.dataset.ready = "1";
 }
 main();
