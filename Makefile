@@ -16,7 +16,7 @@ NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespac
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
 	experiment-protocols \
-	experiment-paper-literal bench lint format vm-test slurm-test clean
+	experiment-paper-literal bench lint format vm-test slurm-test browser-test clean
 
 setup: apt venv
 
@@ -95,6 +95,20 @@ slurm-test: setup
 			systemctl disable --now slurmctld slurmd munge >/dev/null 2>&1 || true; fi; \
 	fi
 	$(PY) -m pytest -q tests/slurm
+
+# The live view in a real headless Chromium (tests/browser); Debian's chromium and
+# chromium-driver are installed for this test only.
+BROWSER_PACKAGES := chromium chromium-driver
+
+browser-test: setup
+	$(NEED_ROOT)
+	@missing=$$(for p in $(BROWSER_PACKAGES); do \
+		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing; \
+	fi
+	$(PY) -m pytest -q tests/browser
 
 lint: venv
 	$(VENV)/bin/ruff format --check .

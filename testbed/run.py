@@ -297,7 +297,7 @@ class Run:
 
     def _start_view(self) -> None:
         """--view: the live page (testbed.view.live), fed from the step loop's own records."""
-        from testbed.view.live import LiveFeed, LiveServer
+        from testbed.view.live import KernelRoutes, LiveFeed, LiveServer
 
         meta = {
             "run": os.path.basename(os.path.abspath(self.out)), "robots": self.n,
@@ -305,8 +305,10 @@ class Run:
             "display": list(self.display_pos), "status": "running", "steps": 0,
             "positions": [], "links": [], "coverage": [],
         }  # fmt: skip
+        routes = KernelRoutes(self.net.name, self.n)
+        self._stack.callback(routes.close)
         try:
-            self.live = LiveServer(LiveFeed(meta), self.cfg.view, self.cfg.map)
+            self.live = LiveServer(LiveFeed(meta, routes), self.cfg.view, self.cfg.map)
         except OSError as e:
             raise TestbedError(
                 f"--view {self.cfg.view}: cannot listen there: {e.strerror}"

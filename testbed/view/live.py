@@ -20,14 +20,18 @@ from pathlib import Path
 from aiohttp import web
 
 from testbed.view import server
+from topology.medium import WLAN_INDEX
 
 FRAME_S = 0.1  # 10 frames a second at most
 SEND_TIMEOUT_S = 1.0  # a browser that takes longer to accept a frame is dropped
 
 
 class LiveFeed:
-    def __init__(self, meta: dict) -> None:
+    def __init__(self, meta: dict, routes=None) -> None:
+        """`routes(dest)`: {robot: next hop or None} from the robots' kernel tables (see
+        KernelRoutes), or None where the view has no network to ask."""
         self.meta = meta
+        self.routes = routes
         self.latest: tuple | None = None
         self.ended = False
 
@@ -88,6 +92,13 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
             pass  # the browser went away or is too slow: its stream ends, nothing else
         return resp
 
+    async def routes(request):
+        to = request.query.get("to", "")
+        if feed.routes is None or not to.isdigit():
+            raise web.HTTPNotFound()
+        hops = await asyncio.get_running_loop().run_in_executor(None, feed.routes, int(to))
+        return web.json_response({str(k): nh for k, nh in hops.items()})
+
     async def map_image(_request):
         if map_png and Path(map_png).is_file():
             return web.Response(body=Path(map_png).read_bytes(), content_type="image/png")
@@ -96,7 +107,8 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
     app = web.Application()
     app.add_routes([
         web.get("/", index), web.get("/static/{name}", static), web.get("/api/run", run),
-        web.get("/api/live", live), web.get("/map.png", map_image),
+        web.get("/api/live", live), web.get("/api/routes", routes),
+        web.get("/map.png", map_image),
     ])  # fmt: skip
     return app
 
@@ -130,3 +142,68 @@ class LiveServer:
     async def _close(self) -> None:
         await asyncio.sleep(3 * FRAME_S)
         await self.runner.cleanup()
+
+
+class KernelRoutes:
+    """Where each robot's kernel would send a packet for robot `dest` now: an RTM_GETROUTE
+    lookup through a netlink socket opened once in each robot's namespace (read only; no
+    packet is sent). Used by the view when a robot is clicked."""
+
+    def __init__(self, testbed: str, robots: int) -> None:
+        self.testbed, self.robots = testbed, robots
+        self._socks: dict = {}
+        self._lock = threading.Lock()  # one lookup at a time on the shared sockets
+
+    def _sock(self, k: int):
+        if k not in self._socks:
+            from topology import names, netns, rtnl
+
+            self._socks[k] = netns.run_in(names.robot_ns(self.testbed, k), rtnl.open_socket)
+        return self._socks[k]
+
+    def __call__(self, dest: int) -> dict[int, int | None]:
+        from topology import names
+
+        out: dict[int, int | None] = {}
+        with self._lock:
+            for k in range(1, self.robots + 1):
+                if k != dest:
+                    out[k] = next_hop(self._sock(k), names.robot_addr(dest))
+        return out
+
+    def close(self) -> None:
+        for s in self._socks.values():
+            s.close()
+        self._socks.clear()
+
+
+def next_hop(sock, dest: str) -> int | None:
+    """The robot the kernel of `sock`'s namespace forwards to for `dest` on wlan0 (itself
+    when the route is direct), or None without a route there (AODV's catch-all route to its
+    TUN device means: no route yet)."""
+    import socket
+    import struct
+
+    from topology import names
+
+    hdr, rtmsg = struct.Struct("=LHHLL"), struct.Struct("=BBBBBBBBI")
+    body = rtmsg.pack(socket.AF_INET, 32, 0, 0, 0, 0, 0, 0, 0)
+    body += struct.pack("=HH", 8, 1) + socket.inet_aton(dest)  # RTA_DST
+    sock.send(hdr.pack(hdr.size + len(body), 26, 1, 1, 0) + body)  # RTM_GETROUTE, REQUEST
+    data = sock.recv(1 << 16)
+    if hdr.unpack_from(data)[1] != 24:  # not RTM_NEWROUTE: no route
+        return None
+    off = hdr.size + rtmsg.size
+    gateway, oif = None, None
+    while off + 4 <= len(data):
+        alen, atype = struct.unpack_from("=HH", data, off)
+        if alen < 4:
+            break
+        if atype == 5 and alen == 8:  # RTA_GATEWAY
+            gateway = socket.inet_ntoa(data[off + 4 : off + 8])
+        elif atype == 4 and alen == 8:  # RTA_OIF
+            oif = struct.unpack_from("=I", data, off + 4)[0]
+        off += (alen + 3) & ~3
+    if oif != WLAN_INDEX:
+        return None
+    return names.robot_of_addr(gateway or dest)

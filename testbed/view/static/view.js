@@ -8,6 +8,7 @@ const slider = document.getElementById("slider");
 const COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
                 "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"];
 let run = null, mapImg = null, linkSets = [], playing = null;
+let selected = null, hops = {};  // live: the clicked robot, and each robot's next hop to it
 
 function linksAt(step) {
   // links.csv holds changes; the set at a step is replayed from step 0 (cached per step).
@@ -53,6 +54,17 @@ function draw(step) {
     ctx.lineWidth = 2;
     ctx.beginPath(); ctx.moveTo(x1, y1); ctx.lineTo(x2, y2); ctx.stroke();
   }
+  if (selected !== null) {
+    // The route each robot's kernel holds to the selected robot: an arrow to its next hop.
+    ctx.strokeStyle = "#c00";
+    ctx.lineWidth = 3;
+    for (const [k, nh] of Object.entries(hops)) {
+      if (nh === null || nh > run.robots) continue;
+      const [x1, y1] = at(Number(k) - 1), [x2, y2] = at(nh - 1);
+      ctx.beginPath(); ctx.moveTo(x1, y1); ctx.lineTo(x1 + 0.8 * (x2 - x1), y1 + 0.8 * (y2 - y1));
+      ctx.stroke();
+    }
+  }
   ctx.lineWidth = 1;
   for (let r = 0; r < run.robots; r++) {
     const c = COLORS[r % COLORS.length];
@@ -91,7 +103,8 @@ function follow(frame) {
   run.coverage.push(frame.coverage);
   run.steps = run.positions.length - 1;
   slider.max = run.steps;
-  liveInfo = ", step " + frame.step + ", deadlines missed " + frame.missed +
+  liveInfo = (selected === null ? "" : ", routes to r" + selected + " in red") +
+             ", step " + frame.step + ", deadlines missed " + frame.missed +
              ", time scale " + frame.scale + (frame.ended ? " (run over)" : "");
   run.status = frame.ended ? "ended" : "running";
   if (atEnd) { slider.value = run.steps; }
@@ -105,6 +118,25 @@ async function main() {
   document.getElementById("title").textContent = (run.live ? "live: " : "replay: ") + run.run;
   slider.max = run.steps;
   buildLinkSets();
+  canvas.addEventListener("click", (ev) => {
+    if (!run.live || !run.positions.length) return;
+    const [wm, hm] = run.map_m;
+    const k = canvas.width / Math.max(wm, hm);
+    const pos = run.positions[Number(slider.value)];
+    let best = null, bestD = 20;
+    for (let r = 0; r < run.robots; r++) {
+      const d = Math.hypot(pos[2 * r] * k - ev.offsetX, pos[2 * r + 1] * k - ev.offsetY);
+      if (d < bestD) { best = r + 1; bestD = d; }
+    }
+    selected = best;
+    hops = {};
+    document.body.dataset.selected = String(selected);
+  });
+  setInterval(async () => {
+    if (!run.live || selected === null) return;
+    hops = await (await fetch("/api/routes?to=" + selected)).json();
+    document.body.dataset.hops = JSON.stringify(hops);
+  }, 1000);
   if (run.live) {
     linkSets = [];
     const events = new EventSource("/api/live");
