@@ -80,6 +80,7 @@ _FLAGS = {
     "aodv_profile": "--aodv-profile",
     "range_model": "--range-model",
     "wall_loss_pct": "--wall-loss",
+    "view": "--view",
     "max_steps": "--max-steps",
     "loss_pct": "--loss",
     "delay_ms": "--delay",
@@ -342,6 +343,7 @@ class Sweep:
         command: list[str] | None = None,
         progress_stream=None,
         calibrate: bool = False,
+        view: str | None = None,
     ):
         self.spec = spec
         self.runs = runs
@@ -357,6 +359,9 @@ class Sweep:
         # --calibrate: per team size, the factor its trials found (also its ceiling), and
         # the trials themselves [(factor, miss outside stalls), ...] for sweep.json.
         self.calibrate = calibrate
+        # --view: the run in progress serves the live page (one run at a time holds it).
+        self.view = view
+        self.view_owner: str | None = None
         self.ceilings: dict[int, float] = {}
         self.calibration: dict[int, list[tuple[float, float]]] = {}
         self.netem = netem
@@ -427,6 +432,9 @@ class Sweep:
         factor = self._factor(config["robots"])
         if factor != 1.0:
             config = dict(config, time_scale=round(config["time_scale"] * factor, 3))
+        if self.view and self.view_owner is None:
+            config = dict(config, view=self.view)
+            self.view_owner = run.run_id
         if self.forker is not None:
             args = run_argv([], config, rdir)
             proc = self.forker.start(args, self.out / "logs" / f"{run.run_id}.log", run.run_id)
@@ -451,6 +459,8 @@ class Sweep:
     def _finish(self, child: _Child, queue: deque) -> str:
         """Record a child that exited; returns the event line for the progress display."""
         child.log_file.close()
+        if self.view_owner == child.run.run_id:
+            self.view_owner = None
         run = child.run
         wall = time.monotonic() - child.started
         st = self.status[run.run_id]
@@ -712,6 +722,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "miss step deadlines",
     )
     parser.add_argument(
+        "--view",
+        metavar="[HOST:]PORT",
+        help="the run in progress serves its live view there (one run at a time)",
+    )
+    parser.add_argument(
         "--calibrate",
         action="store_true",
         help="before each team size's first run, find the time scale this machine sustains "
@@ -807,6 +822,13 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError("testbed sweep needs FILE and --out DIR (or --status DIR)")
     if not args.slurm and (args.partition or args.account or args.sbatch_arg or args.sudo):
         raise UsageError("--partition, --account, --sbatch-arg and --sudo go with --slurm")
+    if args.view:
+        from testbed.view.server import parse_bind
+
+        try:
+            parse_bind(args.view)
+        except ValueError as e:
+            raise UsageError(str(e)) from None
     spec = sweepfile.load(args.file)
     out = Path(args.out)
     runs = sweepfile.expand(spec)
@@ -847,7 +869,7 @@ def main(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     sweep = Sweep(spec, runs, out, jobs, netem, sweep_file=str(args.file),
-                  calibrate=args.calibrate)  # fmt: skip
+                  calibrate=args.calibrate, view=args.view)  # fmt: skip
     return sweep.run(p.todo, p.done, p.skipped)
 
 

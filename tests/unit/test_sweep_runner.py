@@ -29,6 +29,7 @@ for f in ("--comm-range", "--laser-range", "--time-scale", "--loss", "--delay"):
 p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
 p.add_argument("--coordination"); p.add_argument("--start")
 p.add_argument("--capture", action="store_true"); p.add_argument("--quiet", action="store_true")
+p.add_argument("--view")
 a = p.parse_args()
 signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 t_start = time.monotonic()
@@ -46,6 +47,9 @@ cfg = {"robots": a.robots, "comm_range": a.comm_range, "laser_range": a.laser_ra
        "max_steps": a.max_steps, "coordination": a.coordination, "start": a.start}
 with open(os.path.join(a.out, "config.json"), "w") as f:
     json.dump(cfg, f)
+if a.view:
+    with open(os.path.join(a.out, "view.txt"), "w") as f:
+        f.write(f"{a.view} {time.monotonic()}")
 time.sleep(float(os.environ.get("STANDIN_SLEEP", "0.05")))
 miss = float(os.environ.get("STANDIN_MISS", "0")) if str(a.robots) in os.environ.get(
     "STANDIN_MISS_ROBOTS", "").split(",") or os.path.basename(a.out) in os.environ.get(
@@ -360,3 +364,23 @@ def test_report_says_which_scales_each_team_ran_at(env, tmp_path):
     text = path.read_text()
     assert "Time scales the runs ran at, per team size: 1: 5 (2 runs)" in text
     assert "Calibrated on this machine" in text and "1 robots x1 of the file's scale" in text
+
+
+def test_view_goes_to_one_run_at_a_time(env, tmp_path):
+    out = tmp_path / "view"
+    times = tmp_path / "times"
+    times.mkdir()
+    r = run_sweep(env, out, "--jobs", "2", "--view", "127.0.0.1:9999", STANDIN_SLEEP="0.3",
+                  STANDIN_TIMES=str(times))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    viewed = sorted(p.parent.name for p in out.glob("runs/*/view.txt"))
+    assert viewed and all((out / "runs" / v / "view.txt").read_text().startswith("127.0.0.1:9999")
+                          for v in viewed)  # fmt: skip
+    spans = {}
+    for f in times.iterdir():
+        t0, t1, robots, _ = f.read_text().split()
+        spans[f.name] = (float(t0), float(t1))
+    # Runs ran two at a time, yet the view was never handed to two at once: count overlaps.
+    view_starts = sorted(float((out / "runs" / v / "view.txt").read_text().split()[1])
+                         for v in viewed)  # fmt: skip
+    assert len(view_starts) < len(spans)  # not every run got it (the other one was running)
