@@ -308,7 +308,13 @@ class Run:
         routes = KernelRoutes(self.net.name, self.n)
         self._stack.callback(routes.close)
         try:
-            self.live = LiveServer(LiveFeed(meta, routes), self.cfg.view, self.cfg.map)
+            stats = []
+            if self.cfg.routing == "aodv":
+                from topology.routing import aodv_stats_file
+
+                stats = [aodv_stats_file(k, self.net.state_dir) for k in range(1, self.n + 2)]
+            feed = LiveFeed(meta, routes, self.out, stats)
+            self.live = LiveServer(feed, self.cfg.view, self.cfg.map)
         except OSError as e:
             raise TestbedError(
                 f"--view {self.cfg.view}: cannot listen there: {e.strerror}"
@@ -410,8 +416,9 @@ class Run:
         self.cov_w.writerow([step, f"{cov:.5f}"])
         if self.live is not None:
             missed = sum(r.missed for r in self.robots.values())
+            achieved = round(step * STEP_S / max(1e-9, time.monotonic() - self._t0), 2)
             self.live.feed.publish(step, self._positions, self.net.current, cov, missed,
-                                   self.cfg.time_scale)  # fmt: skip
+                                   achieved)  # fmt: skip
         tf = time.monotonic()
         t.scan_s += tf - ts
         self._send_frames()

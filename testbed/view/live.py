@@ -15,11 +15,14 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+import time
 from pathlib import Path
 
 from aiohttp import web
 
 from testbed.view import server
+from testbed.view.replay import snapshot_path, snapshot_steps
+from topology.jsonfile import read_json
 from topology.medium import WLAN_INDEX
 
 FRAME_S = 0.1  # 10 frames a second at most
@@ -27,16 +30,39 @@ SEND_TIMEOUT_S = 1.0  # a browser that takes longer to accept a frame is dropped
 
 
 class LiveFeed:
-    def __init__(self, meta: dict, routes=None) -> None:
+    def __init__(self, meta: dict, routes=None, run_dir=None, stats_files=()) -> None:
         """`routes(dest)`: {robot: next hop or None} from the robots' kernel tables (see
-        KernelRoutes), or None where the view has no network to ask."""
+        KernelRoutes), or None where the view has no network to ask. `run_dir`: where the
+        display's snapshots appear; `stats_files`: the AODV daemons' statistics, for the
+        routing packets per second."""
         self.meta = meta
         self.routes = routes
+        self.run_dir = run_dir
+        self.stats_files = list(stats_files)
+        self._rate = (0.0, 0, None)  # (when, packets sent, rate)
         self.latest: tuple | None = None
         self.ended = False
 
     def publish(self, step: int, positions, links, coverage: float, missed: int, scale) -> None:
         self.latest = (step, positions, links, coverage, missed, scale)
+
+    def routing_rate(self) -> float | None:
+        """Routing packets sent per second by all daemons, from their statistics files
+        (rewritten by the daemons every second), read at most once a second."""
+        if not self.stats_files:
+            return None
+        now = time.monotonic()
+        when, sent, rate = self._rate
+        if now - when < 1.0:
+            return rate
+        total = 0
+        for f in self.stats_files:
+            doc = read_json(f) or {}
+            total += sum((doc.get("messages_sent") or {}).values())
+        if when:
+            rate = round((total - sent) / (now - when), 1)
+        self._rate = (now, total, rate)
+        return rate
 
     def frame(self) -> dict | None:
         latest = self.latest
@@ -50,6 +76,8 @@ class LiveFeed:
             "coverage": coverage,
             "missed": missed,
             "scale": scale,
+            "routing_pps": self.routing_rate(),
+            "snapshots": snapshot_steps(self.run_dir) if self.run_dir else [],
             "ended": self.ended,
         }
 
@@ -99,6 +127,13 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
         hops = await asyncio.get_running_loop().run_in_executor(None, feed.routes, int(to))
         return web.json_response({str(k): nh for k, nh in hops.items()})
 
+    async def display_png(request):
+        step = request.query.get("step", "")
+        path = snapshot_path(feed.run_dir, int(step)) if step.isdigit() and feed.run_dir else None
+        if path is None:
+            raise web.HTTPNotFound()
+        return web.Response(body=path.read_bytes(), content_type="image/png")
+
     async def map_image(_request):
         if map_png and Path(map_png).is_file():
             return web.Response(body=Path(map_png).read_bytes(), content_type="image/png")
@@ -108,7 +143,7 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
     app.add_routes([
         web.get("/", index), web.get("/static/{name}", static), web.get("/api/run", run),
         web.get("/api/live", live), web.get("/api/routes", routes),
-        web.get("/map.png", map_image),
+        web.get("/map.png", map_image), web.get("/display.png", display_png),
     ])  # fmt: skip
     return app
 

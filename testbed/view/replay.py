@@ -23,6 +23,24 @@ def _rows(path: Path) -> list[list[str]]:
         return list(csv.reader(f))[1:]
 
 
+def snapshot_steps(run_dir: Path) -> list[int]:
+    """The steps at which the display robot saved its merged map (display/step-NNNNN.png)."""
+    steps = []
+    for p in (Path(run_dir) / "display").glob("step-*.png"):
+        digits = p.stem.removeprefix("step-")
+        if digits.isdigit():
+            steps.append(int(digits))
+    return sorted(steps)
+
+
+def snapshot_path(run_dir: Path, step: int) -> Path | None:
+    """The display's snapshot of `step`, if the run saved one (looked up, never built from
+    what a request says)."""
+    if step not in snapshot_steps(run_dir):
+        return None
+    return Path(run_dir) / "display" / f"step-{step:05d}.png"
+
+
 def load(run_dir: str | Path) -> dict:
     d = Path(run_dir)
     config = read_json(d / "config.json")
@@ -49,4 +67,5 @@ def load(run_dir: str | Path) -> dict:
         "positions": positions,  # per step: x1, y1, x2, y2, ...
         "links": links,  # [step, added?, i, j]
         "coverage": coverage,
+        "snapshots": snapshot_steps(d),
     }

@@ -38,6 +38,13 @@ def make_app(run_dir: str | Path) -> web.Application:
     async def run(_request: web.Request) -> web.Response:
         return web.json_response(data)
 
+    async def display_png(request: web.Request) -> web.Response:
+        step = request.query.get("step", "")
+        path = replay.snapshot_path(run_dir, int(step)) if step.isdigit() else None
+        if path is None:
+            raise web.HTTPNotFound()
+        return web.Response(body=path.read_bytes(), content_type="image/png")
+
     async def map_png(_request: web.Request) -> web.Response:
         config = read_json(run_dir / "config.json") or {}
         src = config.get("map")
@@ -48,7 +55,7 @@ def make_app(run_dir: str | Path) -> web.Application:
     app = web.Application()
     app.add_routes([
         web.get("/", index), web.get("/static/{name}", static), web.get("/api/run", run),
-        web.get("/map.png", map_png),
+        web.get("/map.png", map_png), web.get("/display.png", display_png),
     ])  # fmt: skip
     return app
 

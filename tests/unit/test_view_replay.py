@@ -22,6 +22,8 @@ def write_run(d, steps=3):
     (d / "links.csv").write_text("step,event,i,j\n0,add,1,2\n2,remove,1,2\n")
     (d / "coverage.csv").write_text("step,coverage\n0,0.1\n1,0.2\n2,0.3\n3,0.4\n")
     (d / "result.json").write_text('{"status": "complete"}')
+    (d / "display").mkdir()
+    (d / "display" / "step-00002.png").write_bytes(b"\x89PNG not really")
 
 
 def test_load_reads_what_the_run_wrote(tmp_path):
@@ -50,6 +52,10 @@ def test_server_serves_the_page_and_the_run_and_no_other_path(tmp_path):
                         "/runs/r/config.json", "/etc/passwd"):  # fmt: skip
                 assert (await client.get(bad)).status == 404, bad
             assert (await client.get("/map.png")).status == 404  # empty terrain: no picture
+            assert data["snapshots"] == [2]
+            assert (await client.get("/display.png?step=2")).status == 200
+            for bad in ("3", "..%2Fconfig.json", "-1", ""):
+                assert (await client.get("/display.png?step=" + bad)).status == 404, bad
 
     asyncio.run(go())
 

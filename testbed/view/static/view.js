@@ -9,6 +9,26 @@ const COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"
                 "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"];
 let run = null, mapImg = null, linkSets = [], playing = null;
 let selected = null, hops = {};  // live: the clicked robot, and each robot's next hop to it
+let stepNos = [];  // live: the run's step of each frame received (replay: the index is the step)
+const snaps = new Map();  // the display robot's merged-map snapshots, by step, once loaded
+
+function stepOf(i) { return run.live ? stepNos[i] : i; }
+
+function snapshotFor(i) {
+  // The newest display snapshot at or before the step shown, loaded on first use.
+  const step = stepOf(i);
+  let best = null;
+  for (const s of run.snapshots || []) if (s <= step && (best === null || s > best)) best = s;
+  if (best === null) return null;
+  if (!snaps.has(best)) {
+    const img = new Image();
+    img.onload = () => draw(Number(slider.value));
+    img.src = "/display.png?step=" + best;
+    snaps.set(best, img);
+  }
+  const img = snaps.get(best);
+  return img.complete && img.naturalWidth ? img : null;
+}
 
 function linksAt(step) {
   // links.csv holds changes; the set at a step is replayed from step 0 (cached per step).
@@ -37,9 +57,15 @@ function draw(step) {
   const [wm, hm] = run.map_m;
   const k = canvas.width / Math.max(wm, hm);
   ctx.clearRect(0, 0, canvas.width, canvas.height);
-  if (mapImg) {
+  if (mapImg) {  // the ground truth, faint
     ctx.globalAlpha = 0.3;
     ctx.drawImage(mapImg, 0, 0, wm * k, hm * k);
+    ctx.globalAlpha = 1;
+  }
+  const snap = snapshotFor(step);
+  if (snap) {  // the display robot's merged map over it (its newest snapshot)
+    ctx.globalAlpha = 0.35;
+    ctx.drawImage(snap, 0, 0, wm * k, hm * k);
     ctx.globalAlpha = 1;
   }
   ctx.strokeStyle = "#999";
@@ -85,7 +111,7 @@ function draw(step) {
     ctx.fillText("r" + (r + 1), x + 6, y - 6);
   }
   const cov = run.coverage[step];
-  document.getElementById("step").textContent = "step " + step;
+  document.getElementById("step").textContent = "step " + stepOf(step);
   document.getElementById("counters").textContent =
     run.robots + " robots, " + run.comm_range + " m range, " + linksAt(step).size +
     " links, coverage " + (cov === undefined ? "?" : (100 * cov).toFixed(1) + "%") +
@@ -101,11 +127,14 @@ function follow(frame) {
   run.positions.push(frame.positions);
   linkSets.push(new Set(frame.links.map(([i, j]) => i + "-" + j)));
   run.coverage.push(frame.coverage);
+  stepNos.push(frame.step);
+  run.snapshots = frame.snapshots;
   run.steps = run.positions.length - 1;
   slider.max = run.steps;
   liveInfo = (selected === null ? "" : ", routes to r" + selected + " in red") +
-             ", step " + frame.step + ", deadlines missed " + frame.missed +
-             ", time scale " + frame.scale + (frame.ended ? " (run over)" : "");
+             ", deadlines missed " + frame.missed + ", time scale achieved " + frame.scale +
+             (frame.routing_pps === null ? "" : ", routing packets " + frame.routing_pps + "/s") +
+             (frame.ended ? " (run over)" : "");
   run.status = frame.ended ? "ended" : "running";
   if (atEnd) { slider.value = run.steps; }
   draw(Number(slider.value));
