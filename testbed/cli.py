@@ -113,6 +113,11 @@ def _add_net(sub) -> None:
     up.add_argument("--capture", metavar="DIR", help="write one pcap per robot here")
     up.add_argument("--seed", type=int, default=None)
     up.add_argument("--time-scale", type=number(float, "time scale", above=0), default=1.0)
+    up.add_argument(
+        "--view",
+        metavar="[HOST:]PORT",
+        help="serve a live view of the network (127.0.0.1 unless a host is given)",
+    )
 
     ex = nsub.add_parser("exec", help="run a command in a robot's namespace")
     ex.add_argument("name", type=_name)
@@ -141,6 +146,20 @@ def _add_net(sub) -> None:
     dn.add_argument("name", type=_name)
 
     nsub.add_parser("list", help="list the testbeds that are up")
+
+
+def _start_net_view(net, bind: str) -> None:
+    """The view of a `net up` network: a process of its own (testbed.view.netview), recorded
+    with the testbed so that `net down` stops it."""
+    import subprocess
+
+    log = open(os.path.join(net.state_dir, "view.log"), "w")  # noqa: SIM115 (the child's)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "testbed.view.netview", net.name, bind],
+        stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+    )  # fmt: skip
+    net.adopt_host_process(proc, "view")
+    print(f"  live view: http://{bind if ':' in bind else '127.0.0.1:' + bind}/")
 
 
 def _net_up(args) -> int:
@@ -182,9 +201,18 @@ def _net_up(args) -> int:
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if args.view:
+        from testbed.view.server import parse_bind
+
+        try:
+            parse_bind(args.view)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     net = Network(spec, persistent=True)
     net.up()
     links = net.links()
+    if args.view:
+        _start_net_view(net, args.view)
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "

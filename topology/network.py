@@ -233,6 +233,15 @@ class Network:
             self.state.processes.append(processes.record(proc, k, role))
             state.write(self.name, self.state)
 
+    def adopt_host_process(self, proc, role: str) -> None:
+        """Record a helper that runs in the host namespace for this testbed (the view of a
+        `net up`): teardown stops it by its pid like the robots' processes (robot 0)."""
+        self.children[proc.pid] = proc
+        with state.locked(self.name):
+            self.state = state.read(self.name) or self.state
+            self.state.processes.append(processes.record(proc, 0, role))
+            state.write(self.name, self.state)
+
     def process(self, k: int, role: str):
         """The newest live process of `role` (e.g. "aodv", the routing daemon) that this
         Network started in robot k, by spawn or adopt; None if there is none."""

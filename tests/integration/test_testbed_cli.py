@@ -157,6 +157,46 @@ def test_los_walls_of_the_office_map_block_the_radio_until_a_robot_walks_through
     )  # fmt: skip
 
 
+def test_net_up_view_follows_moves_and_goes_down_with_the_network(tb_name):
+    import json
+    import socket
+    import urllib.request
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+
+    def frame():
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/live", timeout=5) as stream:
+            for line in stream:
+                if line.startswith(b"data: "):
+                    return json.loads(line[6:])
+
+    up = tb("net", "up", tb_name, "--robots", "3", "--layout", "chain", "--spacing", "8",
+            "--comm-range", "10", "--routing", "oracle", "--view", str(port))  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        deadline = time.monotonic() + 10
+        first = None
+        while first is None and time.monotonic() < deadline:
+            try:
+                first = frame()
+            except OSError:
+                time.sleep(0.2)
+        assert first["links"] == [[1, 2], [2, 3]] and first["positions"][4] == 16.0
+        assert tb("net", "move", tb_name, "r3", "16", "40").returncode == 0
+        time.sleep(0.6)
+        moved = frame()
+        assert moved["links"] == [[1, 2]] and moved["positions"][5] == 40.0
+        routes = json.loads(urllib.request.urlopen(
+            f"http://127.0.0.1:{port}/api/routes?to=1", timeout=5).read())  # fmt: skip
+        assert routes == {"2": 1, "3": None}
+    finally:
+        assert tb("net", "down", tb_name).returncode == 0
+    with pytest.raises(OSError):
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/api/run", timeout=2)
+
+
 def test_exec_passes_exit_status_through(tb_name):
     assert tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10").returncode == 0
     try:

@@ -114,7 +114,7 @@ function draw(step) {
   document.getElementById("step").textContent = "step " + stepOf(step);
   document.getElementById("counters").textContent =
     run.robots + " robots, " + run.comm_range + " m range, " + linksAt(step).size +
-    " links, coverage " + (cov === undefined ? "?" : (100 * cov).toFixed(1) + "%") +
+    " links, coverage " + (cov === undefined || cov === null ? "?" : (100 * cov).toFixed(1) + "%") +
     ", status " + run.status + liveInfo;
 }
 
