@@ -297,7 +297,7 @@ class Run:
 
     def _start_view(self) -> None:
         """--view: the live page (testbed.view.live), fed from the step loop's own records."""
-        from testbed.view.live import KernelRoutes, LiveFeed, LiveServer
+        from testbed.view.live import KernelRoutes, LiveFeed, LiveServer, RobotEvents
 
         meta = {
             "run": os.path.basename(os.path.abspath(self.out)), "robots": self.n,
@@ -313,7 +313,10 @@ class Run:
                 from topology.routing import aodv_stats_file
 
                 stats = [aodv_stats_file(k, self.net.state_dir) for k in range(1, self.n + 2)]
-            feed = LiveFeed(meta, routes, self.out, stats)
+            events = RobotEvents(
+                {k: self._path("robots", f"r{k}.events.jsonl") for k in range(1, self.n + 1)}
+            )
+            feed = LiveFeed(meta, routes, self.out, stats, events)
             self.live = LiveServer(feed, self.cfg.view, self.cfg.map)
         except OSError as e:
             raise TestbedError(

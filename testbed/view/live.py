@@ -30,7 +30,7 @@ SEND_TIMEOUT_S = 1.0  # a browser that takes longer to accept a frame is dropped
 
 
 class LiveFeed:
-    def __init__(self, meta: dict, routes=None, run_dir=None, stats_files=()) -> None:
+    def __init__(self, meta: dict, routes=None, run_dir=None, stats_files=(), events=None) -> None:
         """`routes(dest)`: {robot: next hop or None} from the robots' kernel tables (see
         KernelRoutes), or None where the view has no network to ask. `run_dir`: where the
         display's snapshots appear; `stats_files`: the AODV daemons' statistics, for the
@@ -39,12 +39,20 @@ class LiveFeed:
         self.routes = routes
         self.run_dir = run_dir
         self.stats_files = list(stats_files)
+        self.events = events  # RobotEvents: goals and messages per second, or None
         self._rate = (0.0, 0, None)  # (when, packets sent, rate)
         self.latest: tuple | None = None
         self.ended = False
 
     def publish(self, step: int, positions, links, coverage: float, missed: int, scale) -> None:
         self.latest = (step, positions, links, coverage, missed, scale)
+
+    def _robot_events(self) -> dict:
+        if self.events is None:
+            return {"goals": {}, "messages_ps": None}
+        self.events.poll()
+        return {"goals": {str(k): g for k, g in self.events.goals.items()},
+                "messages_ps": self.events.rate}  # fmt: skip
 
     def routing_rate(self) -> float | None:
         """Routing packets sent per second by all daemons, from their statistics files
@@ -77,6 +85,7 @@ class LiveFeed:
             "missed": missed,
             "scale": scale,
             "routing_pps": self.routing_rate(),
+            **self._robot_events(),
             "snapshots": snapshot_steps(self.run_dir) if self.run_dir else [],
             "ended": self.ended,
         }
@@ -242,3 +251,41 @@ def next_hop(sock, dest: str) -> int | None:
     if oif != WLAN_INDEX:
         return None
     return names.robot_of_addr(gateway or dest)
+
+
+class RobotEvents:
+    """The robots' own event logs (robots/rK.events.jsonl, written by the robot processes as
+    they run), followed like `tail -f`: each robot's newest goal (its plan events) and the
+    messages the team sent per second (its send events). Read at most once a second."""
+
+    def __init__(self, paths: dict[int, str]) -> None:
+        self.paths = paths
+        self.offsets = dict.fromkeys(paths, 0)
+        self.goals: dict[int, list[float]] = {}
+        self.rate: float | None = None
+        self._last = 0.0
+
+    def poll(self) -> None:
+        now = time.monotonic()
+        if now - self._last < 1.0:
+            return
+        sent = 0
+        for k, path in self.paths.items():
+            try:
+                with open(path, "rb") as f:
+                    f.seek(self.offsets[k])
+                    chunk = f.read()
+            except OSError:
+                continue
+            end = chunk.rfind(b"\n") + 1  # whole lines only; the rest next time
+            self.offsets[k] += end
+            for line in chunk[:end].splitlines():
+                if line.startswith(b'{"e":"send"'):
+                    sent += 1
+                elif line.startswith(b'{"e":"plan"'):
+                    goal = json.loads(line).get("goal")
+                    if goal:
+                        self.goals[k] = goal
+        if self._last:
+            self.rate = round(sent / (now - self._last), 1)
+        self._last = now

@@ -42,3 +42,24 @@ def test_published_frames_stream_to_a_client_and_the_server_stops():
     with socket.socket() as s:  # nobody listens there any more
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.bind(("127.0.0.1", srv.port))
+
+
+def test_robot_events_give_goals_and_message_rates(tmp_path):
+    from testbed.view.live import RobotEvents
+
+    log = tmp_path / "r1.events.jsonl"
+    log.write_text(
+        '{"e":"plan","step":0,"cause":"start","goal":[2.5,0.5]}\n'
+        '{"e":"send","step":2,"kind":"map"}\n{"e":"rec'
+    )  # a line being written
+    ev = RobotEvents({1: str(log)})
+    ev.poll()
+    assert ev.goals == {1: [2.5, 0.5]} and ev.rate is None
+    with open(log, "a") as f:
+        f.write(
+            'v","step":3}\n{"e":"send","step":4,"kind":"goal"}\n'
+            '{"e":"plan","step":20,"cause":"timer","goal":[4.0,1.0]}\n'
+        )
+    ev._last -= 1.0  # a second later
+    ev.poll()
+    assert ev.goals == {1: [4.0, 1.0]} and 0.5 < ev.rate < 1.5  # one send in about a second

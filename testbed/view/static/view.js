@@ -9,6 +9,7 @@ const COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"
                 "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"];
 let run = null, mapImg = null, linkSets = [], playing = null;
 let selected = null, hops = {};  // live: the clicked robot, and each robot's next hop to it
+let goals = {};  // live: each robot's newest goal
 let stepNos = [];  // live: the run's step of each frame received (replay: the index is the step)
 const snaps = new Map();  // the display robot's merged-map snapshots, by step, once loaded
 
@@ -92,6 +93,16 @@ function draw(step) {
     }
   }
   ctx.lineWidth = 1;
+  for (const [r, g] of Object.entries(run.live ? goals : {})) {
+    // Each robot's current goal (its newest plan), a cross joined to the robot.
+    const [x, y] = at(Number(r) - 1), gx = g[0] * k, gy = g[1] * k;
+    ctx.strokeStyle = COLORS[(Number(r) - 1) % COLORS.length];
+    ctx.setLineDash([3, 3]);
+    ctx.beginPath(); ctx.moveTo(x, y); ctx.lineTo(gx, gy); ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.beginPath(); ctx.moveTo(gx - 5, gy - 5); ctx.lineTo(gx + 5, gy + 5);
+    ctx.moveTo(gx - 5, gy + 5); ctx.lineTo(gx + 5, gy - 5); ctx.stroke();
+  }
   for (let r = 0; r < run.robots; r++) {
     const c = COLORS[r % COLORS.length];
     ctx.strokeStyle = c;
@@ -128,12 +139,14 @@ function follow(frame) {
   linkSets.push(new Set(frame.links.map(([i, j]) => i + "-" + j)));
   run.coverage.push(frame.coverage);
   stepNos.push(frame.step);
+  goals = frame.goals || {};
   run.snapshots = frame.snapshots;
   run.steps = run.positions.length - 1;
   slider.max = run.steps;
   liveInfo = (selected === null ? "" : ", routes to r" + selected + " in red") +
              ", deadlines missed " + frame.missed + ", time scale achieved " + frame.scale +
-             (frame.routing_pps === null ? "" : ", routing packets " + frame.routing_pps + "/s") +
+             (frame.messages_ps == null ? "" : ", messages " + frame.messages_ps + "/s") +
+             (frame.routing_pps == null ? "" : ", routing packets " + frame.routing_pps + "/s") +
              (frame.ended ? " (run over)" : "");
   run.status = frame.ended ? "ended" : "running";
   if (atEnd) { slider.value = run.steps; }
