@@ -107,10 +107,12 @@ def _runs_table(sweep_dir: Path) -> str:
         links = [f'<a href="runs/{r.name}/result.json">result</a>']
         if (r / "paths.png").is_file():
             links.append(f'<a href="runs/{r.name}/paths.png">paths</a>')
-        rows.append(f"<tr><td>{html.escape(r.name)}</td><td>{' '.join(links)}</td></tr>")
-    return "\n".join(
-        ["<h2>Runs</h2>", "<table>", "<tr><th>run</th><th>files</th></tr>", *rows, "</table>"]
-    )
+        replay = f"<code>testbed view {html.escape(str(r))}</code>"
+        rows.append(
+            f"<tr><td>{html.escape(r.name)}</td><td>{' '.join(links)}</td><td>{replay}</td></tr>"
+        )
+    head = "<tr><th>run</th><th>files</th><th>replay in the browser</th></tr>"
+    return "\n".join(["<h2>Runs</h2>", "<table>", head, *rows, "</table>"])
 
 
 def write_html(sweep_dir: Path, markdown: str) -> Path:
