@@ -1,7 +1,8 @@
 """Benchmark of the live view's cost to a run: the same 3-robot run (seed, time scale 10)
 REPEATS times with `--view` and a client reading the stream as a browser would, and
-REPEATS times without; the median fraction of step deadlines missed of each. Target
-(issue 15): with the view within 0.5 percentage points of without.
+REPEATS times without, alternating; the median fraction of step deadlines missed outside
+host stalls of each. Target (issue 15): with the view within 0.5 percentage points of
+without.
 """
 
 import os
@@ -18,7 +19,7 @@ from testbed.run import RunConfig
 from testbed.run import run as run_once
 from topology.network import destroy
 
-REPEATS = 3
+REPEATS = 5
 
 
 def _free_port() -> int:
@@ -57,7 +58,12 @@ def one(view: bool) -> tuple[float, int]:
     finally:
         stop.set()
         destroy(name)
-    return result.get("deadline_miss_fraction") or 0.0, len(frames)
+    # Outside host stalls: the machine stopping (testbed.stalls) is not the view's doing, and
+    # on this shared host it dominated the misses of some runs either way.
+    miss = result.get("deadline_miss_fraction_outside_stalls")
+    if miss is None:
+        miss = result.get("deadline_miss_fraction") or 0.0
+    return miss, len(frames)
 
 
 def run_bench() -> dict:
