@@ -634,10 +634,14 @@ class AodvCore:
             self.next_hello = now + self.p.hello_interval
 
     # == RFC 6.3 / 6.4 route discovery ====================================================
-    def _originate(self, now: float, dst: str, packet: bytes, out: list[Action]) -> None:
+    def _buffer(self, dst: str, packet: bytes, out: list[Action]) -> None:
+        """Queue a packet for `dst` (RFC 6.3); a full queue drops its oldest."""
         overflow = self.queue.push(dst, packet)
         if overflow is not None:
             out.append(DropPackets(dst, (overflow,)))
+
+    def _originate(self, now: float, dst: str, packet: bytes, out: list[Action]) -> None:
+        self._buffer(dst, packet, out)
         self._keep_invalid_entry(now, dst)
         if dst in self.discoveries:
             return
@@ -832,9 +836,7 @@ class AodvCore:
         # 6.12: "During local repair data packets SHOULD be buffered."
         d = self.discoveries.get(dst)
         if d is not None and d.repair_hops is not None:
-            overflow = self.queue.push(dst, packet)
-            if overflow is not None:
-                out.append(DropPackets(dst, (overflow,)))
+            self._buffer(dst, packet, out)
             return
         # RFC 6.13: a rebooted node "SHOULD broadcast a RERR ... and MUST reset the waiting
         # timer to expire after current time plus DELETE_PERIOD."
@@ -879,17 +881,16 @@ class AodvCore:
             self._invalidate(r, now)
         if self.reboot_until is not None:
             return
-        if m.no_delete:
-            # RFC 6.12: "A node that receives a RERR message with the 'N' flag set MUST NOT
-            # delete the route to that destination. The only action taken should be the
-            # retransmission of the message, if the RERR arrived from the next hop along
-            # that route, and if there are one or more precursor nodes along that route."
-            # An originator (no precursors) keeps its route: it MAY re-discover; we do not.
-            self._send_rerr(now, [r for r in affected if r.precursors], out, False, True)
-            return
         # RFC 6.11: "The RERR should contain those destinations that are part of the
         # created list of unreachable destinations and have a non-empty precursor list."
-        self._send_rerr(now, [r for r in affected if r.precursors], out, fallback=False)
+        # RFC 6.12, for a RERR with N: "A node that receives a RERR message with the 'N'
+        # flag set MUST NOT delete the route to that destination. The only action taken
+        # should be the retransmission of the message, if the RERR arrived from the next
+        # hop along that route, and if there are one or more precursor nodes along that
+        # route." An originator (no precursors) keeps its route: it MAY re-discover; we
+        # do not. So both pass on the same list, with the RERR's own N flag.
+        routes = [r for r in affected if r.precursors]
+        self._send_rerr(now, routes, out, fallback=False, no_delete=m.no_delete)
 
     def _send_rerr(
         self,
