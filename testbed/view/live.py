@@ -16,12 +16,11 @@ import asyncio
 import json
 import threading
 import time
-from pathlib import Path
 
 from aiohttp import web
 
 from testbed.view import server
-from testbed.view.replay import snapshot_path, snapshot_steps
+from testbed.view.replay import snapshot_steps
 from topology.jsonfile import read_json
 from topology.medium import WLAN_INDEX
 
@@ -92,17 +91,6 @@ class LiveFeed:
 
 
 def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
-    async def index(_request):
-        return web.Response(text=(server.STATIC / "index.html").read_text(),
-                            content_type="text/html")  # fmt: skip
-
-    async def static(request):
-        name = request.match_info["name"]
-        if name not in server.STATIC_FILES:
-            raise web.HTTPNotFound()
-        return web.Response(text=(server.STATIC / name).read_text(),
-                            content_type=server.STATIC_FILES[name])  # fmt: skip
-
     async def run(_request):
         return web.json_response({**feed.meta, "live": True})
 
@@ -110,19 +98,20 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream",
                                            "Cache-Control": "no-cache"})  # fmt: skip
         await resp.prepare(request)
+
+        async def send() -> None:
+            event = f"data: {json.dumps(feed.frame())}\n\n".encode()
+            await asyncio.wait_for(resp.write(event), SEND_TIMEOUT_S)
+
         sent = None
         try:
             while True:
                 latest = feed.latest
                 if latest is not None and latest is not sent:
                     sent = latest
-                    data = json.dumps(feed.frame())
-                    await asyncio.wait_for(resp.write(f"data: {data}\n\n".encode()),
-                                           SEND_TIMEOUT_S)  # fmt: skip
+                    await send()
                 if feed.ended and latest is sent:
-                    data = json.dumps(feed.frame())  # the last frame, saying the run is over
-                    await asyncio.wait_for(resp.write(f"data: {data}\n\n".encode()),
-                                           SEND_TIMEOUT_S)  # fmt: skip
+                    await send()  # the last frame, saying the run is over
                     break
                 await asyncio.sleep(FRAME_S)
         except (TimeoutError, ConnectionResetError, RuntimeError):
@@ -136,23 +125,10 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
         hops = await asyncio.get_running_loop().run_in_executor(None, feed.routes, int(to))
         return web.json_response({str(k): nh for k, nh in hops.items()})
 
-    async def display_png(request):
-        step = request.query.get("step", "")
-        path = snapshot_path(feed.run_dir, int(step)) if step.isdigit() and feed.run_dir else None
-        if path is None:
-            raise web.HTTPNotFound()
-        return web.Response(body=path.read_bytes(), content_type="image/png")
-
-    async def map_image(_request):
-        if map_png and Path(map_png).is_file():
-            return web.Response(body=Path(map_png).read_bytes(), content_type="image/png")
-        raise web.HTTPNotFound()
-
     app = web.Application()
     app.add_routes([
-        web.get("/", index), web.get("/static/{name}", static), web.get("/api/run", run),
+        *server.page_routes(feed.run_dir, map_png), web.get("/api/run", run),
         web.get("/api/live", live), web.get("/api/routes", routes),
-        web.get("/map.png", map_image), web.get("/display.png", display_png),
     ])  # fmt: skip
     return app
 

@@ -2,9 +2,10 @@
 
 Theory of operation: an aiohttp application (aiohttp: a well-kept asyncio HTTP server that
 streams to many clients at once, WebSocket and server-sent events included, which the
-standard library's http.server does not) with four routes and nothing else: the page, its
+standard library's http.server does not) with five routes and nothing else: the page, its
 two static files (looked up by exact name, so no path from a request ever reaches the file
-system), the run as JSON (testbed.view.replay) and the map picture. The page is plain HTML
+system), the run as JSON (testbed.view.replay), the map picture and the display's
+snapshots. The page is plain HTML
 and JavaScript shipped in the package (testbed/view/static), no build step. It binds only
 where told (127.0.0.1 unless a host is given).
 """
@@ -22,9 +23,16 @@ STATIC = Path(__file__).parent / "static"
 STATIC_FILES = {"view.js": "application/javascript", "view.css": "text/css"}
 
 
-def make_app(run_dir: str | Path) -> web.Application:
-    run_dir = Path(run_dir).resolve()
-    data = replay.load(run_dir)  # raises NotARun before anything listens
+def png(path) -> web.Response:
+    """A PNG file the view knows about (never a path a request names), or 404."""
+    if path and Path(path).is_file():
+        return web.Response(body=Path(path).read_bytes(), content_type="image/png")
+    raise web.HTTPNotFound()
+
+
+def page_routes(run_dir: Path | None, map_png: str | None) -> list:
+    """What the replay and the live view serve alike: the page, its static files (by exact
+    name), the map picture and the display's snapshots (only steps the run saved)."""
 
     async def index(_request: web.Request) -> web.Response:
         return web.Response(text=(STATIC / "index.html").read_text(), content_type="text/html")
@@ -35,28 +43,30 @@ def make_app(run_dir: str | Path) -> web.Application:
             raise web.HTTPNotFound()
         return web.Response(text=(STATIC / name).read_text(), content_type=STATIC_FILES[name])
 
+    async def display_png(request: web.Request) -> web.Response:
+        step = request.query.get("step", "")
+        ok = step.isdigit() and run_dir is not None
+        return png(replay.snapshot_path(run_dir, int(step)) if ok else None)
+
+    async def map_image(_request: web.Request) -> web.Response:
+        return png(map_png)  # none on the empty terrain: the page draws its walls itself
+
+    return [
+        web.get("/", index), web.get("/static/{name}", static),
+        web.get("/display.png", display_png), web.get("/map.png", map_image),
+    ]  # fmt: skip
+
+
+def make_app(run_dir: str | Path) -> web.Application:
+    run_dir = Path(run_dir).resolve()
+    data = replay.load(run_dir)  # raises NotARun before anything listens
+    map_png = (read_json(run_dir / "config.json") or {}).get("map")
+
     async def run(_request: web.Request) -> web.Response:
         return web.json_response(data)
 
-    async def display_png(request: web.Request) -> web.Response:
-        step = request.query.get("step", "")
-        path = replay.snapshot_path(run_dir, int(step)) if step.isdigit() else None
-        if path is None:
-            raise web.HTTPNotFound()
-        return web.Response(body=path.read_bytes(), content_type="image/png")
-
-    async def map_png(_request: web.Request) -> web.Response:
-        config = read_json(run_dir / "config.json") or {}
-        src = config.get("map")
-        if src and Path(src).is_file():
-            return web.Response(body=Path(src).read_bytes(), content_type="image/png")
-        raise web.HTTPNotFound()  # the empty terrain: the page draws its walls itself
-
     app = web.Application()
-    app.add_routes([
-        web.get("/", index), web.get("/static/{name}", static), web.get("/api/run", run),
-        web.get("/map.png", map_png), web.get("/display.png", display_png),
-    ])  # fmt: skip
+    app.add_routes([*page_routes(run_dir, map_png), web.get("/api/run", run)])
     return app
 
 
