@@ -13,11 +13,11 @@
 
 import random
 import socket
-import struct
 import time
 import uuid
 
 from testbed.bench.common import median, write
+from testbed.view.live import next_hop
 from topology import names, netns, rtnl
 from topology.network import Network
 from topology.spec import NetworkSpec
@@ -27,25 +27,14 @@ STEPS = 1500
 TIME_SCALE = 15.0
 STEP_S = 0.1
 
-_RTM_GETROUTE, _RTM_NEWROUTE, _NLMSG_ERROR = 26, 24, 2
-_NLMSGHDR = struct.Struct("=LHHLL")
-_RTMSG = struct.Struct("=BBBBBBBBI")
-
 
 def _name() -> str:
     return "bo" + uuid.uuid4().hex[:6]
 
 
 def has_route(sock: socket.socket, dest: str) -> bool:
-    """Does the namespace of `sock` hold a route to `dest`? (an RTM_GETROUTE lookup)"""
-    body = _RTMSG.pack(socket.AF_INET, 32, 0, 0, 0, 0, 0, 0, 0)
-    body += struct.pack("=HH", 8, 1) + socket.inet_aton(dest)  # RTA_DST
-    sock.send(_NLMSGHDR.pack(_NLMSGHDR.size + len(body), _RTM_GETROUTE, 1, 1, 0) + body)
-    data = sock.recv(1 << 16)
-    _, mtype, _, _, _ = _NLMSGHDR.unpack_from(data)
-    # NLMSG_ERROR: no route (ENETUNREACH). A lookup's answer does not carry the route's
-    # protocol, but in an oracle testbed every route to a robot is the oracle's.
-    return mtype == _RTM_NEWROUTE
+    """Does the namespace of `sock` hold a route to `dest` on wlan0 (the view's lookup)?"""
+    return next_hop(sock, dest) is not None
 
 
 def reroute() -> dict:
