@@ -79,6 +79,18 @@ bench: setup
 	$(NEED_ROOT)
 	$(PY) -m testbed.bench
 
+# $(call test_packages,PACKAGES,AFTER): install those of the Debian PACKAGES a test target
+# needs that are missing (no recommends), then run the shell command AFTER (may be empty).
+define test_packages
+	@missing=$$(for p in $(1); do \
+		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing && \
+		{ true; $(2) }; \
+	fi
+endef
+
 # A one-node Slurm cluster on this machine, all its state in a temporary directory, for the
 # --slurm sweep tests (tests/slurm). Debian's packages enable their services on install;
 # they are disabled again here: the tests start their own daemons and stop them by pid.
@@ -86,14 +98,8 @@ SLURM_PACKAGES := slurm-wlm munge
 
 slurm-test: setup
 	$(NEED_ROOT)
-	@missing=$$(for p in $(SLURM_PACKAGES); do \
-		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
-	if [ -n "$$missing" ]; then \
-		apt-get update -qq && \
-		DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing && \
-		if command -v systemctl >/dev/null; then \
-			systemctl disable --now slurmctld slurmd munge >/dev/null 2>&1 || true; fi; \
-	fi
+	$(call test_packages,$(SLURM_PACKAGES),if command -v systemctl >/dev/null; then \
+		systemctl disable --now slurmctld slurmd munge >/dev/null 2>&1 || true; fi;)
 	$(PY) -m pytest -q tests/slurm
 
 # The live view in a real headless Chromium (tests/browser); Debian's chromium and
@@ -102,12 +108,7 @@ BROWSER_PACKAGES := chromium chromium-driver
 
 browser-test: setup
 	$(NEED_ROOT)
-	@missing=$$(for p in $(BROWSER_PACKAGES); do \
-		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
-	if [ -n "$$missing" ]; then \
-		apt-get update -qq && \
-		DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends $$missing; \
-	fi
+	$(call test_packages,$(BROWSER_PACKAGES),)
 	$(PY) -m pytest -q tests/browser
 
 lint: venv
