@@ -422,22 +422,16 @@ class Sweep:
 
     # -- one child
 
-    def _start(self, run: PlannedRun) -> _Child:
-        rdir = run_dir(self.out, run.run_id)
+    def _spawn(self, config: dict, rdir: Path, log_path: Path, title: str):
+        """Start one `testbed run` of `config` into `rdir` (removed first if there): from
+        the run server, or the stand-in command with the death signal towards the sweep.
+        Returns (process, its open log file, which the caller closes)."""
         if rdir.exists():
             shutil.rmtree(rdir)
-        (self.out / "logs").mkdir(exist_ok=True)
-        log_file = open(self.out / "logs" / f"{run.run_id}.log", "wb")  # noqa: SIM115
-        config = run.config
-        factor = self._factor(config["robots"])
-        if factor != 1.0:
-            config = dict(config, time_scale=round(config["time_scale"] * factor, 3))
-        if self.view and self.view_owner is None:
-            config = dict(config, view=self.view)
-            self.view_owner = run.run_id
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+        log_file = open(log_path, "wb")  # noqa: SIM115 (the caller closes it)
         if self.forker is not None:
-            args = run_argv([], config, rdir)
-            proc = self.forker.start(args, self.out / "logs" / f"{run.run_id}.log", run.run_id)
+            proc = self.forker.start(run_argv([], config, rdir), log_path, title)
         else:
             proc = subprocess.Popen(
                 run_argv(self.command, config, rdir),
@@ -446,6 +440,20 @@ class Sweep:
                 stderr=subprocess.STDOUT,
                 preexec_fn=functools.partial(_child_setup, os.getpid()),
             )
+        return proc, log_file
+
+    def _start(self, run: PlannedRun) -> _Child:
+        config = run.config
+        factor = self._factor(config["robots"])
+        if factor != 1.0:
+            config = dict(config, time_scale=round(config["time_scale"] * factor, 3))
+        if self.view and self.view_owner is None:
+            config = dict(config, view=self.view)
+            self.view_owner = run.run_id
+        proc, log_file = self._spawn(
+            config, run_dir(self.out, run.run_id), self.out / "logs" / f"{run.run_id}.log",
+            run.run_id,
+        )  # fmt: skip
         self.status[run.run_id] = {
             "status": "running",
             "pid": proc.pid,
@@ -543,18 +551,9 @@ class Sweep:
         config = dict(c, max_steps=CALIBRATION_STEPS,
                       time_scale=round(c["time_scale"] * factor, 3))  # fmt: skip
         rdir = self.out / "calibration" / f"n{c['robots']:02d}-{k}"
-        if rdir.exists():
-            shutil.rmtree(rdir)
-        rdir.parent.mkdir(parents=True, exist_ok=True)
-        log_path = self.out / "calibration" / f"n{c['robots']:02d}-{k}.log"
-        if self.forker is not None:
-            proc = self.forker.start(run_argv([], config, rdir), log_path, f"calibrate {k}")
-        else:
-            with open(log_path, "wb") as f:
-                proc = subprocess.Popen(run_argv(self.command, config, rdir),
-                                        stdin=subprocess.DEVNULL, stdout=f,
-                                        stderr=subprocess.STDOUT)  # fmt: skip
+        proc, log_file = self._spawn(config, rdir, rdir.with_suffix(".log"), f"calibrate {k}")
         proc.wait()
+        log_file.close()
         res = read_json(rdir / "result.json") or {}
         miss = res.get("deadline_miss_fraction_outside_stalls")
         if miss is None:
