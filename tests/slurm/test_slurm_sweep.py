@@ -10,11 +10,15 @@ import re
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = REPO / "testbed" / "experiments" / "short.toml"
 SLOW = REPO / "tests" / "slurm" / "slow.toml"
+FILE_SCALE = {
+    int(n): float(v) for n, v in tomllib.loads(SHORT.read_text())["run"]["time_scale"].items()
+}
 
 
 def run_testbed(*args, timeout=1800):
@@ -67,6 +71,11 @@ def test_slurm_sweep_lands_like_a_local_one_and_reports(cluster, tmp_path):
         b = json.loads((local / "runs" / rid / "result.json").read_text())
         for doc in (a, b):
             doc["config"]["extra"].pop("name")  # the testbed's random name
+        # A Slurm task runs at the file's time scale; a local sweep backs a team size off
+        # below it when its runs miss deadlines on the shared cores (sweep.json "backoffs").
+        file_scale = FILE_SCALE[a["config"]["robots"]]
+        assert a["config"].pop("time_scale") == file_scale
+        assert 0 < b["config"].pop("time_scale") <= file_scale
         assert a["config"] == b["config"] and set(a) == set(b)
     assert headings(out / "report.md") == headings(local / "report.md")
     figs = {p.name for p in (out / "figures").iterdir()}
