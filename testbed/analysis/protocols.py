@@ -151,6 +151,33 @@ def choice_holds(point: dict[str, dict]) -> tuple[bool | None, str]:
     return True, "fewer control packets, steps within noise"
 
 
+# Other measures than the rule's, counted beside it (not part of the verdict): (metric,
+# whether AODV must be below (-1) or above (+1) each proactive protocol, what it says).
+BESIDE_THE_RULE = (
+    ("control_bytes_per_robot_s", -1, "sends fewer control bytes per robot per second"),
+    ("pdf", +1, "delivers a larger share of the robots' TCP packets"),
+)
+
+
+def beside_the_rule(points: list[dict[str, dict]]) -> list[str]:
+    """At how many points AODV beats every proactive protocol on each BESIDE_THE_RULE
+    measure (points where AODV or no proactive protocol ran, or a value is missing, are not
+    counted)."""
+    out = []
+    for key, sign, says in BESIDE_THE_RULE:
+        wins = total = 0
+        for by in points:
+            a, rivals = by.get("aodv"), [by[p] for p in PROACTIVE if p in by]
+            values = [r.get(key) for r in rivals] + [a.get(key) if a else None]
+            if not rivals or any(v is None for v in values):
+                continue
+            total += 1
+            wins += all(sign * (a[key] - r[key]) > 0 for r in rivals)
+        if total:
+            out.append(f"- AODV {says} than each proactive protocol at {wins} of {total} points.")
+    return out
+
+
 def _control_check(rows: list[dict]) -> list[str]:
     """Is each protocol's captured control traffic what its daemons sent?"""
     lines = []
@@ -260,5 +287,8 @@ def section(rows: list[dict]) -> list[str]:
     for (mp, comm, robots), ok, why in judged:
         if not ok:
             out.append(f"- {mp} map, {comm:g} m, {robots} robots: {why}.")
+    beside = beside_the_rule(list(points.values()))
+    if beside:
+        out += ["", "Beside the rule (other measures, not part of the verdict):", "", *beside]
     out.append("")
     return out

@@ -56,6 +56,24 @@ def test_choice_holds_against_babel_but_batman_rule_is_applied_too(tmp_path):
     assert "At 1 of 1 points (all)." in text and "(1.05x)" in text  # 410 / 390
 
 
+def test_bytes_and_delivery_are_counted_beside_the_rule(tmp_path):
+    made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path))
+    by = {r["routing"]: r for r in made["tables"]["protocols"]}
+    # Every protocol's captures carry 1000 bytes and PDF 0.9: AODV beats none on either.
+    assert protocols.beside_the_rule([by]) == [
+        "- AODV sends fewer control bytes per robot per second than each proactive protocol "
+        "at 0 of 1 points.",
+        "- AODV delivers a larger share of the robots' TCP packets than each proactive "
+        "protocol at 0 of 1 points.",
+    ]
+    better = dict(by["aodv"], control_bytes_per_robot_s=0.001, pdf=0.95)
+    worse_than_batman = {**by, "aodv": dict(better, pdf=0.5)}
+    lines = protocols.beside_the_rule([{**by, "aodv": better}, worse_than_batman, {"aodv": better}])
+    assert "at 2 of 2 points" in lines[0] and "at 1 of 2 points" in lines[1]
+    text = "\n".join(protocols.section(made["tables"]["protocols"]))
+    assert "Beside the rule (other measures, not part of the verdict):" in text
+
+
 def test_report_has_the_section_only_for_a_protocols_sweep(tmp_path):
     path, _ = report.write_report(tmp_path, metrics_of=sweep(tmp_path))
     assert "## Routing protocols against the oracle" in path.read_text()
