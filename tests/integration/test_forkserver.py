@@ -35,6 +35,12 @@ def test_children_run_in_their_namespace_and_report_exit(tmp_path, tb_name):
             assert int(ino) == want and own_session == "True"
             assert "probe ran" in open(log).read()
             assert p2.poll() is None
+            # The server answers with the pid as soon as it has forked; the child names
+            # itself before it runs the program, so once the probe has run the name is set.
+            for _ in range(2000):
+                if os.path.exists(log2) and "probe ran" in open(log2).read():
+                    break
+                time.sleep(0.01)
             assert open(f"/proc/{p2.pid}/comm").read().strip() == "r2 probe"
             p2.send_signal(signal.SIGKILL)
             for _ in range(200):  # poll() alone (no wait) sees the exit: a run's step loop does
