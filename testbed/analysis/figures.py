@@ -439,7 +439,10 @@ def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
         ax.set_xlabel("team size (robots)")
         ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        else:  # no run measured this (e.g. no routing packets to count): say so on the panel
+            ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
     fig.suptitle("Routing metrics from the captures (Section 2.4)")
     fig.tight_layout()
     return _save(fig, stem)
