@@ -439,13 +439,19 @@ def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
         ax.set_xlabel("team size (robots)")
         ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-        else:  # no run measured this (e.g. no routing packets to count): say so on the panel
-            ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
+        _legend_or_no_data(ax)
     fig.suptitle("Routing metrics from the captures (Section 2.4)")
     fig.tight_layout()
     return _save(fig, stem)
+
+
+def _legend_or_no_data(ax) -> None:
+    """A panel's legend, or "no data" on it when no run measured its metric (e.g. no
+    routing packets to count): an empty legend says nothing and matplotlib warns."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
 
 
 def _spread_line(ax, pts: list[dict], x: str, key: str, label: str) -> None:
@@ -483,7 +489,7 @@ def plot_impairments(rows: list[dict], stem: Path) -> list[Path]:
         ax.set_xlabel("link loss (%)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        _legend_or_no_data(ax)
     fig.tight_layout()
     return _save(fig, stem)
 
