@@ -1,8 +1,15 @@
 """Impairments on one direction of one link: netem where the kernel has it, nftables where not.
 
 A link end `lixj` in the medium namespace carries frames from robot i to robot j, so its
-egress qdisc shapes exactly that direction. The builder is pure (`plan`), and an end is only
-touched when its wanted impairment differs from what it has (STYLE.md example 6).
+egress qdisc shapes exactly that direction.
+
+Describe, then apply the difference (docs/architecture.md, "describe first, build second"):
+`wanted_qdiscs` and `nft_commands` are pure functions from an impairment to the qdisc tree
+and the nftables commands a link end should have; `plan` compares what an end has with what
+it should have and returns only the requests that close the gap, as CORE's tc_cmd does. An
+unchanged end costs nothing, a changed rate or loss on a tree of the same shape is changed in
+place (`tc qdisc replace`), and only a change of shape (a rate added or dropped) rebuilds the
+tree. `Impairer` is the thin loop that sends a plan's requests and records what each end has.
 
 - With sch_netem: a netem root qdisc (loss, delay, jitter), and a tbf child for a rate limit.
 - Without sch_netem (this project's development kernel): loss becomes an nftables rule in the
@@ -10,13 +17,16 @@ touched when its wanted impairment differs from what it has (STYLE.md example 6)
   link end, reached through a verdict map keyed by output interface; rate becomes a root tbf;
   delay and jitter are refused with an error that names the missing module.
 
-Delays scale with the run's time scale like every other timer (Impairment.scaled).
+Delays scale with the run's time scale like every other timer (Impairment.scaled), and rates
+with it (a link K times faster in emulated time carries K times the bits per wall second).
 """
 
 import errno
 import functools
 import logging
+import math
 import subprocess
+from dataclasses import dataclass
 
 from pyroute2.netlink.exceptions import NetlinkError
 
@@ -100,6 +110,124 @@ NFT_SETUP = (
 )
 
 
+# -- the builders: pure ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Qdisc:
+    """One qdisc of a link end's egress tree, as pyroute2's `tc` takes it."""
+
+    kind: str  # "netem" or "tbf"
+    handle: str
+    parent: str | None  # None: the root
+    params: tuple[tuple[str, int | float | str], ...]
+
+    def kwargs(self) -> dict:
+        kw = dict(self.params, handle=self.handle)
+        if self.parent is not None:
+            kw["parent"] = self.parent
+        return kw
+
+
+def tc_rate(rate_kbit: float) -> str:
+    """A rate as pyroute2's tc parser takes it: a whole number of bits per second and the
+    unit. (It splits the number from the unit at the first non-digit, so "100.0kbit" reads as
+    100 of the unit ".0kbit".) Never 0: a tbf of rate 0 would carry nothing."""
+    if not (rate_kbit > 0 and math.isfinite(rate_kbit)):
+        raise ValueError(f"rate {rate_kbit} kbit/s must be a finite number > 0")
+    return f"{max(1, round(rate_kbit * 1000))}bit"
+
+
+def _tbf(handle: str, parent: str | None, rate_kbit: float) -> Qdisc:
+    params = (("rate", tc_rate(rate_kbit)), ("burst", TBF_BURST), ("latency", TBF_LATENCY_US))
+    return Qdisc("tbf", handle, parent, params)
+
+
+def wanted_qdiscs(imp: Impairment, netem: bool) -> tuple[Qdisc, ...]:
+    """The egress qdisc tree, root first, that gives a link end `imp` (already scaled)."""
+    if not netem:
+        return (_tbf("1:", None, imp.rate_kbit),) if imp.rate_kbit > 0 else ()
+    if imp.is_none:
+        return ()
+    root = Qdisc(
+        "netem",
+        "1:",
+        None,
+        (
+            ("delay", int(imp.delay_ms * 1000)),
+            ("jitter", int(imp.jitter_ms * 1000)),
+            ("loss", imp.loss_pct),
+        ),
+    )
+    return (root, _tbf("10:", "1:1", imp.rate_kbit)) if imp.rate_kbit > 0 else (root,)
+
+
+def nft_commands(ifname: str, have: Impairment, want: Impairment, netem: bool) -> str:
+    """nft commands that take a link end's loss rule from `have` to `want`; "" when they
+    agree. With netem, loss is netem's and nftables is not used."""
+    if netem:
+        return ""
+    old = nft_loss_rules(ifname, have.loss_pct) if have.loss_pct > 0 else ""
+    new = nft_loss_rules(ifname, want.loss_pct) if want.loss_pct > 0 else ""
+    if new == old:
+        return ""
+    return new or nft_unloss_rules(ifname)
+
+
+@dataclass(frozen=True)
+class TcRequest:
+    command: str  # "del" (the whole root tree), "add" or "replace"
+    qdisc: Qdisc | None  # None with "del"
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What to send to one link end: tc requests in order, then nft commands."""
+
+    tc: tuple[TcRequest, ...]
+    nft: str
+
+    @property
+    def empty(self) -> bool:
+        return not self.tc and not self.nft
+
+
+CLEAR = TcRequest("del", None)
+
+
+def tc_diff(have: tuple[Qdisc, ...], want: tuple[Qdisc, ...]) -> tuple[TcRequest, ...]:
+    """The tc requests that turn the tree `have` into `want`.
+
+    Same tree: nothing. No tree wanted: delete the root. Same shape (kinds, handles,
+    parents): replace the qdiscs whose parameters changed, in place, so frames never pass
+    unshaped meanwhile. Otherwise delete the root (tolerated when there is none) and add the
+    wanted tree root first."""
+    if have == want:
+        return ()
+    if not want:
+        return (CLEAR,)
+
+    def shape(tree):
+        return [(q.kind, q.handle, q.parent) for q in tree]
+
+    if shape(have) == shape(want):
+        return tuple(TcRequest("replace", q) for q, h in zip(want, have, strict=True) if q != h)
+    return (CLEAR, *(TcRequest("add", q) for q in want))
+
+
+def plan(ifname: str, have: Impairment, want: Impairment, netem: bool, time_scale: float) -> Plan:
+    """The requests that take link end `ifname` from impairment `have` to `want` (both in
+    emulated time: scaled here)."""
+    h, w = have.scaled(time_scale), want.scaled(time_scale)
+    return Plan(
+        tc_diff(wanted_qdiscs(h, netem), wanted_qdiscs(w, netem)),
+        nft_commands(ifname, h, w, netem),
+    )
+
+
+# -- the loop that applies them -------------------------------------------------------------
+
+
 class Impairer:
     """Keeps each link end's qdiscs and nft rules in step with its wanted Impairment."""
 
@@ -131,15 +259,12 @@ class Impairer:
         if old == imp:
             return
         self.check(imp)
-        real = imp.scaled(self.time_scale)
-        if self.netem:
-            self.worker.call(lambda ipr: self._tc_netem(ipr, ifname, real))
-        else:
-            self.worker.call(lambda ipr: self._tc_rate_only(ipr, ifname, real))
-            if real.loss_pct > 0:
-                self._nft(nft_loss_rules(ifname, real.loss_pct))
-            elif old.loss_pct > 0:
-                self._nft(nft_unloss_rules(ifname))
+        p = plan(ifname, old, imp, self.netem, self.time_scale)
+        if p.tc:
+            want = wanted_qdiscs(imp.scaled(self.time_scale), self.netem)
+            self.worker.call(lambda ipr: _send(ipr, ifname, p.tc, want))
+        if p.nft:
+            self._nft(p.nft)
         if imp.is_none:
             self.have.pop(ifname, None)
         else:
@@ -157,56 +282,6 @@ class Impairer:
     def close(self) -> None:
         self.have.clear()
 
-    # -- builders ---------------------------------------------------------------------------
-
-    @staticmethod
-    def _clear_root(ipr, idx: int) -> None:
-        try:
-            ipr.tc("del", index=idx, handle="0:", parent=0xFFFFFFFF)
-        except NetlinkError as exc:
-            if exc.code not in (errno.ENOENT, errno.EINVAL):
-                raise
-
-    def _tc_netem(self, ipr, ifname: str, imp: Impairment) -> None:
-        idx = ipr.link_lookup(ifname=ifname)[0]
-        self._clear_root(ipr, idx)
-        if imp.is_none:
-            return
-        ipr.tc(
-            "add",
-            "netem",
-            index=idx,
-            handle="1:",
-            delay=int(imp.delay_ms * 1000),
-            jitter=int(imp.jitter_ms * 1000),
-            loss=imp.loss_pct,
-        )
-        if imp.rate_kbit > 0:
-            ipr.tc(
-                "add",
-                "tbf",
-                index=idx,
-                parent="1:1",
-                handle="10:",
-                rate=f"{imp.rate_kbit}kbit",
-                burst=TBF_BURST,
-                latency=TBF_LATENCY_US,
-            )
-
-    def _tc_rate_only(self, ipr, ifname: str, imp: Impairment) -> None:
-        idx = ipr.link_lookup(ifname=ifname)[0]
-        self._clear_root(ipr, idx)
-        if imp.rate_kbit > 0:
-            ipr.tc(
-                "add",
-                "tbf",
-                index=idx,
-                handle="1:",
-                rate=f"{imp.rate_kbit}kbit",
-                burst=TBF_BURST,
-                latency=TBF_LATENCY_US,
-            )
-
     def _nft(self, commands: str) -> None:
         if not self._nft_ready:
             commands = NFT_SETUP + commands
@@ -220,3 +295,29 @@ class Impairer:
         if proc.returncode != 0:
             first = (proc.stderr.strip().splitlines() or ["?"])[0]
             raise TestbedError(f"nft in {self.ns} failed: {first}")
+
+
+def _clear_root(ipr, idx: int) -> None:
+    try:
+        ipr.tc("del", index=idx, handle="0:", parent=0xFFFFFFFF)
+    except NetlinkError as exc:
+        if exc.code not in (errno.ENOENT, errno.EINVAL):
+            raise
+
+
+def _send(ipr, ifname: str, requests: tuple[TcRequest, ...], want: tuple[Qdisc, ...]) -> None:
+    """Send a plan's tc requests. An in-place replace that the kernel refuses (the tree is
+    not what was recorded, e.g. the link end was made anew) falls back to a rebuild."""
+    idx = ipr.link_lookup(ifname=ifname)[0]
+    try:
+        for r in requests:
+            if r.qdisc is None:
+                _clear_root(ipr, idx)
+            else:
+                ipr.tc(r.command, r.qdisc.kind, index=idx, **r.qdisc.kwargs())
+    except NetlinkError:
+        if all(r.command != "replace" for r in requests):
+            raise
+        _clear_root(ipr, idx)
+        for q in want:
+            ipr.tc("add", q.kind, index=idx, **q.kwargs())

@@ -4,12 +4,13 @@
 import os
 import re
 import statistics
+import subprocess
 import sys
 import time
 
 import pytest
 
-from topology import netns
+from topology import names, netns
 from topology.impair import kernel_has_netem
 from topology.network import Network
 from topology.spec import Impairment, NetworkSpec
@@ -117,3 +118,31 @@ def test_per_link_loss_changes_follow_the_range_model(tb_name):
         assert net.current == want
         net.move(3, (5, 0))
         assert net.current == net.wanted() and net.current[(1, 3)].loss_pct == 0
+
+
+def _tc_qdiscs(name: str, ifname: str) -> str:
+    argv = netns.popen_argv(names.medium_ns(name), ["tc", "qdisc", "show", "dev", ifname])
+    return subprocess.run(argv, capture_output=True, text=True, check=True).stdout
+
+
+def test_net_impair_rate_shapes_both_directions_and_clears(tb_name):
+    """`testbed net impair NAME r1 r2 --rate 100`, as a user types it (it once ended in a
+    traceback: the rate went to tc as '100.0kbit')."""
+    tb = [sys.executable, "-m", "testbed.cli", "net"]
+    run = dict(capture_output=True, text=True, cwd=REPO)
+    up = subprocess.run(tb + ["up", tb_name, "--robots", "2", "--comm-range", "10"], **run)
+    assert up.returncode == 0, up.stderr
+    try:
+        r = subprocess.run(tb + ["impair", tb_name, "r1", "r2", "--rate", "100"], **run)
+        assert r.returncode == 0 and r.stderr == "", r.stderr
+        for end in (names.link_end(1, 2), names.link_end(2, 1)):
+            assert re.search(r"qdisc tbf .* rate 100Kbit", _tc_qdiscs(tb_name, end)), end
+        r = subprocess.run(tb + ["impair", tb_name, "r1", "r2", "--rate", "250.4"], **run)
+        assert r.returncode == 0, r.stderr
+        assert re.search(r"qdisc tbf .* rate 250400bit", _tc_qdiscs(tb_name, "l2x1"))
+        r = subprocess.run(tb + ["impair", tb_name, "r1", "r2", "--rate", "0"], **run)
+        assert r.returncode == 0, r.stderr
+        assert "tbf" not in _tc_qdiscs(tb_name, names.link_end(1, 2))
+    finally:
+        down = subprocess.run(tb + ["down", tb_name], **run)
+        assert down.returncode == 0, down.stderr
