@@ -9,11 +9,11 @@ import logging
 import signal
 import sys
 
+from node import body
 from node.events import EventLog
 from node.flood import Flooder
 from node.launch import NodeArgs
 from node.timing import RobotTimings
-from testbed.world import body
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -5,7 +5,7 @@ network, with no body: its body link only carries the world's clock). Its inbox 
 floods and relays them like any robot; message processing merges them into the display's map
 and records each robot's position from its floods; every `map_period` steps it floods a small
 beacon so that robots notice when it comes back into reach (and send it their whole maps).
-Visualization renders the merged map with the robots' paths (testbed.world.render): a video
+Visualization renders the merged map with the robots' paths (node.render): a video
 frame every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
 """
 
@@ -20,11 +20,10 @@ from collections import Counter
 import cv2
 import numpy as np
 
-from node import wire
+from node import body, render, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.grid import FREE, OccupancyGrid
-from testbed.world import body, render
 
 log = logging.getLogger(__name__)
 

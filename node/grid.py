@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from testbed.world.rays import Laser
+from node.rays import Laser
 
 UNKNOWN = np.uint8(0)
 FREE = np.uint8(1)
@@ -41,7 +41,7 @@ class OccupancyGrid:
     """A log-odds grid of shape (rows, cols) with square cells of `cell` metres.
 
     `L` is the map; it is a view into `Lp`, the same map with `pad` unknown cells on every side
-    so that laser rays need no bounds checks (see testbed.world.rays). Flat cell indices are
+    so that laser rays need no bounds checks (see node.rays). Flat cell indices are
     into `Lp`.
     """
 

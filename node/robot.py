@@ -39,14 +39,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from node import coordination, planner, sched, wire
+from node import body, coordination, planner, sched, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
 from node.grid import FREE, OCC, OccupancyGrid
+from node.rays import Laser
 from node.timing import RobotTimings
-from testbed.world import body
-from testbed.world.rays import Laser
 
 log = logging.getLogger(__name__)
 

@@ -50,14 +50,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from node import body
 from node.launch import NodeArgs
+from node.rays import Laser
 from node.sched import deadline_priority
 from testbed.errors import TestbedError, UsageError
 from testbed.runconfig import STEP_S, RunConfig, add_arguments, config_from_args
 from testbed.stalls import StallTracker
-from testbed.world import body
 from testbed.world.bodylink import BodyServer
-from testbed.world.rays import Laser
 from testbed.world.world import World
 from testbed.world.worldmap import empty_terrain, free_space, load_png, start_positions
 from topology.forkserver import ForkServer, ForkServerError, python_env
@@ -273,7 +273,7 @@ class Run:
         # Started first, so that its imports overlap the network's bring-up.
         laser = [self.cfg.laser_range, self.cfg.laser_rays, self.truth.cell]
         self.forks = ForkServer(NODE_PRELOAD, env=env, label=self.out,
-                                warm=[["testbed.world.rays", "warm", laser]])  # fmt: skip
+                                warm=[["node.rays", "warm", laser]])  # fmt: skip
         self._stack.callback(self.forks.close)
         self.net = self._stack.enter_context(Network(self.spec))
         # Runs before the network goes down: the daemons' last words are kept.

@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from node import render
 from testbed.runconfig import STEP_S
-from testbed.world import render
 from testbed.world.world import World
 from topology.jsonfile import write_json_atomic
 

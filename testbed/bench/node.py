@@ -30,8 +30,8 @@ import numpy as np
 
 from node.grid import OccupancyGrid
 from node.planner import PlannerParams, plan
+from node.rays import Laser
 from testbed.bench.common import median, write
-from testbed.world.rays import Laser
 from testbed.world.world import World
 from testbed.world.worldmap import empty_terrain, free_space, start_positions
 

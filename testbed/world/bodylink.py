@@ -1,4 +1,4 @@
-"""The world's side of the robots' body links (protocol in testbed.world.body).
+"""The world's side of the robots' body links (protocol in node.body).
 
 One Unix SOCK_SEQPACKET listening socket; each robot process (and the display) connects and
 says HELLO with its number and role. Sends never block the world's step loop: a robot whose
@@ -14,7 +14,7 @@ import selectors
 import socket
 import time
 
-from testbed.world import body
+from node import body
 
 log = logging.getLogger(__name__)
 

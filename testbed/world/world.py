@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from testbed.world.rays import _BIAS, Laser, pad
+from node.rays import _BIAS, Laser, pad
 from testbed.world.worldmap import GroundTruth
 
 

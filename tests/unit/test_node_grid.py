@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from node.grid import FREE, OCC, UNKNOWN, LogOdds, OccupancyGrid, decode_ternary, encode_ternary
-from testbed.world.rays import Laser, pad
+from node.rays import Laser, pad
 
 
 def test_log_odds_update_and_clamp():

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from testbed.world.rays import Laser, pad
+from node.rays import Laser, pad
 
 
 def _box(n=40, wall_col=None):

@@ -3,10 +3,9 @@
 import numpy as np
 import pytest
 
-from node import wire
+from node import body, wire
 from node.flood import WINDOW, DuplicateCache
 from node.grid import FREE, OCC
-from testbed.world import body
 
 
 def test_flood_header_round_trip_and_relay_rewrite():

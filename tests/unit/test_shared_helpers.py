@@ -1,22 +1,15 @@
 """The one-per-idea helpers every package uses: number arguments, atomic JSON files, the
-routing daemons' files, and topology's independence from testbed."""
+routing daemons' files (the packages' independence: test_layers.py)."""
 
 import argparse
 import json
 import os
-import pkgutil
-import subprocess
-import sys
 
 import pytest
 
-import topology
 from topology import jsonfile
 from topology.argtypes import number
 from topology.routing import keep_daemon_files
-
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
 
 # -- number arguments -------------------------------------------------------------------------
 
@@ -104,24 +97,6 @@ def test_a_protocol_without_statistics_makes_no_statistics_folder(tmp_path):
                       str(tmp_path / "babel"))  # fmt: skip
     assert os.listdir(tmp_path / "routing") == ["r1.babel.log"]
     assert not (tmp_path / "babel").exists()
-
-
-# -- layering ---------------------------------------------------------------------------------
-
-
-def test_no_topology_module_imports_testbed():
-    mods = [f"topology.{m.name}" for m in pkgutil.iter_modules(topology.__path__)]
-    code = (
-        "import importlib, sys\n"
-        f"for m in {mods!r}: importlib.import_module(m)\n"
-        "print([m for m in sys.modules if m == 'testbed' or m.startswith('testbed.')])\n"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60
-    )
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "[]"
-    assert len(mods) > 10
 
 
 def test_topology_knows_the_aodv_profiles_aodv_defines():

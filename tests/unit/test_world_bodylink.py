@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from testbed.world import body
+from node import body
 from testbed.world.bodylink import BodyServer
 
 

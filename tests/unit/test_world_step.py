@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from testbed.world.rays import Laser
+from node.rays import Laser
 from testbed.world.world import World
 from testbed.world.worldmap import GroundTruth, empty_terrain, free_space
 
@@ -65,7 +65,7 @@ def test_scan_and_coverage():
 
 def walled_world():
     """One robot in an 8 x 8 m terrain with an inner wall: (world, padded obstacle grid)."""
-    from testbed.world.rays import pad
+    from node.rays import pad
 
     t = empty_terrain(8, 8)
     occ = t.occupied.copy()
@@ -126,7 +126,7 @@ def test_world_marks_seen_as_the_flat_cast_does():
 def test_world_scan_and_seen_equal_the_reference_on_random_poses(max_range):
     """The world's shortcuts (open space, skipped near samples, window tables) change nothing:
     ranges as Laser.cast, seen cells as the flat per-sample marking, on a cluttered map."""
-    from testbed.world.rays import pad
+    from node.rays import pad
 
     t = empty_terrain(12, 12)
     occ = t.occupied.copy()

@@ -1,9 +1,10 @@
 """The robot's link to its body: a local IPC channel to the world, as a driver to hardware.
 
-The world (testbed.world.bodylink) listens on a Unix SOCK_SEQPACKET socket in the testbed's state
-directory. A Unix socket lives in the filesystem, so a robot process inside its network
-namespace reaches it without crossing the emulated network. Messages (one datagram each,
-network byte order):
+Both sides' protocol lives here, with the robot program, which imports nothing of the harness;
+the world's body-link server (testbed.world.bodylink) implements the other side with these
+encoders. It listens on a Unix SOCK_SEQPACKET socket in the testbed's state directory. A Unix
+socket lives in the filesystem, so a robot process inside its network namespace reaches it
+without crossing the emulated network. Messages (one datagram each, network byte order):
 
     robot -> world  HELLO  'H' u16 robot u8 role (0 robot, 1 display)
     world -> robot  FRAME  'F' u32 step f32 x f32 y f32 theta f64 sent u16 n, then n float32

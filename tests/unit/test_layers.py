@@ -1,0 +1,117 @@
+"""Which package may use which (docs/architecture.md, "The packages"): the robot program
+(node/) does not use the harness (testbed/); the kernel layer (topology/) and the routing
+daemon (aodv/) use neither. Checked on the source of every module with ast, so an import
+inside a function counts as much as one at the top, and so does a module named in a string
+for another process to run (`python -m testbed...`, a fork server's module, import_module).
+"""
+
+import ast
+import os
+import re
+
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+FORBIDDEN = {
+    "node": {"testbed"},
+    "topology": {"testbed", "node"},
+    "aodv": {"testbed", "node"},
+}
+# A string that names a module of a package: "testbed.world.rays", "node.__main__".
+MODULE_STRING = re.compile(r"(testbed|node|topology|aodv)(\.\w+)+")
+PACKAGE_NAMES = {"testbed", "node", "topology", "aodv"}
+
+
+def modules(package: str) -> list[str]:
+    out = []
+    for root, dirs, files in os.walk(os.path.join(REPO, package)):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        out += [os.path.join(root, f) for f in files if f.endswith(".py")]
+    return sorted(out)
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    """ids of the docstring nodes: prose may name any module."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
+def used_packages(path: str, package: str) -> set[tuple[str, int, str]]:
+    """(top-level package, line, what) for everything `path` imports or names as a module."""
+    tree = ast.parse(open(path).read(), path)
+    docs = _docstrings(tree)
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found |= {(a.name.split(".")[0], node.lineno, a.name) for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: within the package itself
+                found.add((package, node.lineno, "." * node.level + (node.module or "")))
+            else:
+                found.add((node.module.split(".")[0], node.lineno, node.module))
+        elif isinstance(node, (ast.List, ast.Tuple)):  # argv: [..., "-m", "testbed.cli"]
+            elts = node.elts
+            for flag, arg in zip(elts, elts[1:], strict=False):
+                if (
+                    isinstance(flag, ast.Constant)
+                    and flag.value == "-m"
+                    and isinstance(arg, ast.Constant)
+                    and isinstance(arg.value, str)
+                    and arg.value.split(".")[0] in PACKAGE_NAMES
+                ):
+                    found.add((arg.value.split(".")[0], arg.lineno, f"-m {arg.value}"))
+        elif (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and id(node) not in docs
+            and MODULE_STRING.fullmatch(node.value)
+        ):
+            found.add((node.value.split(".")[0], node.lineno, repr(node.value)))
+    return found
+
+
+@pytest.mark.parametrize("package", sorted(FORBIDDEN))
+def test_package_uses_nothing_above_it(package):
+    paths = modules(package)
+    assert len(paths) > 5, f"found only {paths} in {package}/"
+    bad = [
+        f"{os.path.relpath(p, REPO)}:{line}: {what}"
+        for p in paths
+        for top, line, what in sorted(used_packages(p, package))
+        if top in FORBIDDEN[package]
+    ]
+    assert not bad, f"{package}/ must not use {sorted(FORBIDDEN[package])}:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize(
+    "source, found",
+    [
+        ("import testbed.run\n", "testbed"),
+        ("def f():\n    from testbed.world import body\n", "testbed"),
+        ("argv = [sys.executable, '-m', 'testbed.cli', 'net']\n", "testbed"),
+        ("argv = ('python3', '-m', 'node')\n", "node"),
+        ("importlib.import_module('testbed.world.rays')\n", "testbed"),
+        ("warm = [['node.rays', 'warm', 1]]\n", "node"),
+    ],
+)
+def test_the_check_sees_every_kind_of_use(tmp_path, source, found):
+    p = tmp_path / "m.py"
+    p.write_text(source)
+    assert found in {top for top, _, _ in used_packages(str(p), "x")}
+
+
+def test_prose_and_other_strings_are_not_uses(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text(
+        '"""Started by testbed.run; see node.rays."""\n'
+        "def f():\n"
+        '    """As testbed.world.bodylink does."""\n'
+        'TABLE = "testbed"\n'
+    )
+    assert used_packages(str(p), "x") == set()
