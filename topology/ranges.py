@@ -2,7 +2,7 @@
 
 Pure functions of positions (no kernel). `wanted_links` returns a dict from an ordered pair
 (i, j), i < j, to the Impairment of that link; the medium diffs it against what it has
-(STYLE.md example 6), so a step in which nothing changes costs nothing.
+(docs/architecture.md, "The radio medium"), so a step in which nothing changes costs nothing.
 
 - disc (the paper's model): linked iff distance <= comm range; links are perfect.
 - lossy: linked iff distance <= comm range, with loss growing with distance: none up to half

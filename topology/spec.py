@@ -1,6 +1,6 @@
 """A testbed described as plain data: robots, positions, range model, impairments, routing.
 
-Nothing here touches the kernel (STYLE.md example 5: describe first, build second). The
+Nothing here touches the kernel (docs/architecture.md: describe first, build second). The
 `layout_positions` helpers turn the CLI's `--layout` into positions.
 """
 

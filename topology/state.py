@@ -3,8 +3,9 @@
 One JSON file per testbed in STATE_DIR (/run/testbed, a tmpfs that a reboot empties, like the
 namespaces themselves), written atomically and before any kernel object exists. It holds the
 spec, the current positions, who owns the testbed and every process started in it, each as a
-(pid, start time) pair so that a recycled pid is never mistaken for ours (STYLE.md example 7:
-processes are stopped by the pids recorded, never by name).
+(pid, start time) pair so that a recycled pid is never mistaken for ours (docs/architecture.md:
+names are a contract with clean-up; processes are stopped by the pids recorded, never by
+name).
 
 Ownership: a testbed built inside a `with Network(...)` block is owned by that process; when
 the owner dies without tearing down, the testbed is abandoned and `testbed clean` removes it.

@@ -115,3 +115,16 @@ def test_prose_and_other_strings_are_not_uses(tmp_path):
         'TABLE = "testbed"\n'
     )
     assert used_packages(str(p), "x") == set()
+
+
+def test_no_code_cites_documents_users_do_not_have():
+    """The design notes that are not shipped: code cites docs/ instead."""
+    gone = ("DESIGN" + ".md", "STYLE" + ".md")
+    cites = [
+        f"{os.path.relpath(p, REPO)}: {name}"
+        for package in ("node", "topology", "aodv", "testbed", "tests")
+        for p in modules(package)
+        for name in gone
+        if name in open(p).read()
+    ]
+    assert not cites, cites
