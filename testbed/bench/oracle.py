@@ -17,8 +17,7 @@ import time
 import uuid
 
 from testbed.bench.common import median, write
-from testbed.view.live import next_hop
-from topology import names, netns, rtnl
+from topology import names, netns, routequery, rtnl
 from topology.network import Network
 from topology.spec import NetworkSpec
 
@@ -34,7 +33,7 @@ def _name() -> str:
 
 def has_route(sock: socket.socket, dest: str) -> bool:
     """Does the namespace of `sock` hold a route to `dest` on wlan0 (the view's lookup)?"""
-    return next_hop(sock, dest) is not None
+    return routequery.next_hop(sock, dest) is not None
 
 
 def reroute() -> dict:

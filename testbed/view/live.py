@@ -22,7 +22,6 @@ from aiohttp import web
 from testbed.view import server
 from testbed.view.replay import snapshot_steps
 from topology.jsonfile import read_json
-from topology.medium import WLAN_INDEX
 
 FRAME_S = 0.1  # 10 frames a second at most
 SEND_TIMEOUT_S = 1.0  # a browser that takes longer to accept a frame is dropped
@@ -166,8 +165,8 @@ class LiveServer:
 
 class KernelRoutes:
     """Where each robot's kernel would send a packet for robot `dest` now: an RTM_GETROUTE
-    lookup through a netlink socket opened once in each robot's namespace (read only; no
-    packet is sent). Used by the view when a robot is clicked."""
+    lookup (topology.routequery) through a netlink socket opened once in each robot's
+    namespace (read only; no packet is sent). Used by the view when a robot is clicked."""
 
     def __init__(self, testbed: str, robots: int) -> None:
         self.testbed, self.robots = testbed, robots
@@ -182,51 +181,19 @@ class KernelRoutes:
         return self._socks[k]
 
     def __call__(self, dest: int) -> dict[int, int | None]:
-        from topology import names
+        from topology import names, routequery
 
         out: dict[int, int | None] = {}
         with self._lock:
             for k in range(1, self.robots + 1):
                 if k != dest:
-                    out[k] = next_hop(self._sock(k), names.robot_addr(dest))
+                    out[k] = routequery.next_hop(self._sock(k), names.robot_addr(dest))
         return out
 
     def close(self) -> None:
         for s in self._socks.values():
             s.close()
         self._socks.clear()
-
-
-def next_hop(sock, dest: str) -> int | None:
-    """The robot the kernel of `sock`'s namespace forwards to for `dest` on wlan0 (itself
-    when the route is direct), or None without a route there (AODV's catch-all route to its
-    TUN device means: no route yet)."""
-    import socket
-    import struct
-
-    from topology import names
-
-    hdr, rtmsg = struct.Struct("=LHHLL"), struct.Struct("=BBBBBBBBI")
-    body = rtmsg.pack(socket.AF_INET, 32, 0, 0, 0, 0, 0, 0, 0)
-    body += struct.pack("=HH", 8, 1) + socket.inet_aton(dest)  # RTA_DST
-    sock.send(hdr.pack(hdr.size + len(body), 26, 1, 1, 0) + body)  # RTM_GETROUTE, REQUEST
-    data = sock.recv(1 << 16)
-    if hdr.unpack_from(data)[1] != 24:  # not RTM_NEWROUTE: no route
-        return None
-    off = hdr.size + rtmsg.size
-    gateway, oif = None, None
-    while off + 4 <= len(data):
-        alen, atype = struct.unpack_from("=HH", data, off)
-        if alen < 4:
-            break
-        if atype == 5 and alen == 8:  # RTA_GATEWAY
-            gateway = socket.inet_ntoa(data[off + 4 : off + 8])
-        elif atype == 4 and alen == 8:  # RTA_OIF
-            oif = struct.unpack_from("=I", data, off + 4)[0]
-        off += (alen + 3) & ~3
-    if oif != WLAN_INDEX:
-        return None
-    return names.robot_of_addr(gateway or dest)
 
 
 class RobotEvents:

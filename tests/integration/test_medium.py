@@ -172,3 +172,26 @@ def test_robot_namespace_settings(tb_name):
         assert json.loads(routes.stdout) == [], "no subnet route: routes belong to routing"
         lo = net.exec(1, ["ip", "-j", "link", "show", "lo"], capture_output=True, text=True)
         assert "UP" in json.loads(lo.stdout)[0]["flags"]
+
+
+def test_route_query_reads_each_kernels_next_hop(tb_name):
+    """topology.routequery (the view's click, the oracle bench): one RTM_GETROUTE per ask,
+    answered from the kernel's routes that the oracle wrote."""
+    from topology import netns, routequery, rtnl
+
+    spec = NetworkSpec(name=tb_name, positions=((0, 0), (8, 0), (16, 0)), comm_range=10.0,
+                       routing="oracle")  # fmt: skip
+    with Network(spec) as net:
+        socks = {k: netns.run_in(names.robot_ns(tb_name, k), rtnl.open_socket) for k in (1, 3)}
+        try:
+            assert routequery.next_hop(socks[1], names.robot_addr(3)) == 2
+            assert routequery.next_hop(socks[1], names.robot_addr(2)) == 2
+            assert routequery.next_hop(socks[3], names.robot_addr(1)) == 2
+            route = routequery.lookup(socks[1], names.robot_addr(3))
+            assert route is not None and route.gateway == names.robot_addr(2)
+            net.move(3, (60, 0))
+            assert routequery.next_hop(socks[1], names.robot_addr(3)) is None
+            assert routequery.next_hop(socks[3], names.robot_addr(1)) is None
+        finally:
+            for s in socks.values():
+                s.close()
