@@ -34,6 +34,7 @@ actions after it still run, so the kernel's routes always follow the core's tabl
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import ipaddress
 import logging
@@ -134,6 +135,14 @@ def quoted_datagram(icmp_packet: bytes, own: str) -> tuple[int, bytes] | None:
     return length, icmp_packet[inner + ihl + 8 : inner + ihl + length]
 
 
+def _quietly(what: str, fn, *args) -> None:
+    """Run one step of the teardown: a failure is logged and the teardown goes on."""
+    try:
+        fn(*args)
+    except Exception as e:
+        log.warning("teardown: %s: %s", what, e)
+
+
 class Daemon:
     def __init__(
         self,
@@ -160,12 +169,41 @@ class Daemon:
         self._poll_started = 0.0
         # When the newest RREQ of our own for each destination went to sendto().
         self._rreq_sent: dict[str, float] = {}
+        # Made by run(), in this order, and undone in the reverse order by its ExitStack.
+        self.routes: KernelRoutes | None = None  # rtnetlink: our kernel routes
+        self.addr: str | None = None  # our address on `iface`
+        self.stats: Stats | None = None
+        self.tun: Tun | None = None  # packets that found no kernel route
+        self.monitor: UseMonitor | None = None  # nftables set of route uses
+        self.reader: SetReader | None = None  # reads that set over NETLINK_NETFILTER
+        self.sock: socket.socket | None = None  # UDP 654, control messages
+        self._ttl: int | None = None  # the IP TTL `sock` sends with now
+        self.raw: socket.socket | None = None  # re-sends buffered packets
+        self.icmp: socket.socket | None = None  # ICMP errors about our datagrams
+        self._wake_r: socket.socket | None = None  # signal wake-up (set_wakeup_fd)
+        self._wake_w: socket.socket | None = None
+        self.core: AodvCore | None = None
 
     # -- lifecycle -----------------------------------------------------------------------
     def run(self) -> int:
+        with contextlib.ExitStack() as undo:
+            undo.callback(log.info, "AODV down")
+            self._start(undo)
+            self._loop()
+        return 0
+
+    def _start(self, undo: contextlib.ExitStack) -> None:
+        """Make the daemon's kernel objects and sockets, each followed by what undoes it.
+
+        `undo` runs those in reverse order when the daemon stops, however it stops; each
+        one's failure is logged and the rest still run. So: the sockets go first (after
+        draining what the kernel reported meanwhile), then the route-use reader and the
+        nftables set, the TUN device, our routes, the last statistics, rtnetlink."""
         self.routes = KernelRoutes(self.iface)
+        undo.callback(_quietly, "close rtnetlink", self.routes.close)
         self.addr = self.routes.address()
         self.stats = Stats(self.robot, self.addr)
+        undo.callback(_quietly, "write statistics", self._write_stats)
         stale = self.routes.ours()
         resumed = self.store.load() if self.store else None
         rebooted = bool(stale) or resumed is not None
@@ -180,38 +218,33 @@ class Daemon:
             )
         seq, rreq_id = resumed or (0, 0)
         self.routes.flush()
+        undo.callback(_quietly, "flush routes", self.routes.flush)
         self.tun = Tun()
-        self.monitor = None
-        self.reader = None
-        self.sock = None
-        self.icmp = None
-        try:
-            self.routes.catch_all(self.tun.ifindex, str(self.net), self.addr)
-            self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
-            self.reader = SetReader()
-            self._open_sockets()
-            # Exercise the core and the codec before the first real message (sim.warm_up).
-            warm_up(self.p)
-            gc.collect()
-            self.core = AodvCore(
-                self.addr, self.p, time.monotonic(), rebooted=rebooted, seq=seq, rreq_id=rreq_id
-            )
-            if self.store:
-                self.store.cover(seq, rreq_id)  # a restart's own file says so from now on
-            # What start-up allocated lives for good: keep it out of the collector's
-            # full passes, which would otherwise walk it on some discovery's hot path.
-            gc.freeze()
-            log.info("AODV up on %s (%s), time scale %g", self.iface, self.addr, self.p.time_scale)
-            self._loop()
-        finally:
-            self._teardown()
-        return 0
+        undo.callback(_quietly, "close the TUN device", self.tun.close)
+        self.routes.catch_all(self.tun.ifindex, str(self.net), self.addr)
+        self.monitor = UseMonitor(self.iface, str(self.net), self._poll_period())
+        undo.callback(_quietly, "remove the route-use set", self.monitor.remove)
+        self.reader = SetReader()
+        undo.callback(_quietly, "close the route-use reader", self.reader.close)
+        self._open_sockets(undo)
+        # Exercise the core and the codec before the first real message (sim.warm_up).
+        warm_up(self.p)
+        gc.collect()
+        self.core = AodvCore(
+            self.addr, self.p, time.monotonic(), rebooted=rebooted, seq=seq, rreq_id=rreq_id
+        )
+        if self.store:
+            self.store.cover(seq, rreq_id)  # a restart's own file says so from now on
+        # What start-up allocated lives for good: keep it out of the collector's
+        # full passes, which would otherwise walk it on some discovery's hot path.
+        gc.freeze()
+        log.info("AODV up on %s (%s), time scale %g", self.iface, self.addr, self.p.time_scale)
 
     def _poll_period(self) -> float:
         return self.p.active_route_timeout / 3
 
-    def _open_sockets(self) -> None:
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    def _open_sockets(self, undo: contextlib.ExitStack) -> None:
+        s = undo.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, self.iface.encode())
         s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
@@ -221,14 +254,22 @@ class Daemon:
         drop_own_datagrams(s, self.addr)
         s.setblocking(False)
         self.sock = s
-        self._ttl = None
-        self.raw = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
-        self.icmp = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_ICMP)
+        self.raw = undo.enter_context(
+            socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
+        )
+        self.icmp = undo.enter_context(
+            socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_ICMP)
+        )
         self.icmp.setblocking(False)
+        # Closed after the others, so what the kernel reported meanwhile is counted.
+        undo.callback(_quietly, "read the last ICMP errors", self._on_icmp)
         self._wake_r, self._wake_w = socket.socketpair()
+        undo.enter_context(self._wake_r)
+        undo.enter_context(self._wake_w)
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
         signal.set_wakeup_fd(self._wake_w.fileno(), warn_on_full_buffer=False)
+        undo.callback(signal.set_wakeup_fd, -1)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, self._on_stop)
         signal.signal(signal.SIGUSR1, self._on_dump)
@@ -239,34 +280,21 @@ class Daemon:
     def _on_dump(self, *_a) -> None:
         self._dump = True
 
-    def _teardown(self) -> None:
-        for step in (
-            lambda: self.reader and self.reader.close(),
-            lambda: self.routes.flush(),
-            lambda: self.monitor and self.monitor.remove(),
-            lambda: self.tun.close(),
-            lambda: self.icmp and self._on_icmp(),  # what the kernel reported meanwhile
-            lambda: self.sock and self.sock.close(),
-            lambda: self._write_stats(),
-            lambda: self.routes.close(),
-        ):
-            try:
-                step()
-            except Exception as e:  # teardown goes on whatever failed
-                log.warning("teardown: %s", e)
-        log.info("AODV down")
-
     def _write_stats(self) -> None:
         if self.stats_path:
-            self.stats.routes = {
-                d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
-            }
-            self.stats.protocol_dropped = self.core.dropped
+            if self.core is not None:  # None when start-up failed
+                self.stats.routes = {
+                    d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
+                }
+                self.stats.protocol_dropped = self.core.dropped
             self.stats.write(self.stats_path)
 
     # -- the loop ------------------------------------------------------------------------
     def _loop(self) -> None:
-        sel = self._sel = selectors.DefaultSelector()
+        with selectors.DefaultSelector() as sel:
+            self._serve(sel)
+
+    def _serve(self, sel: selectors.BaseSelector) -> None:
         sel.register(self.sock, selectors.EVENT_READ, self._on_udp)
         sel.register(self.tun.fd, selectors.EVENT_READ, self._on_tun)
         sel.register(self._wake_r, selectors.EVENT_READ, self._on_wake)

@@ -70,3 +70,30 @@ def test_quoted_datagram_finds_our_untransmitted_messages_only():
     full = kernel_unreachable(ours)
     for cut in (0, 1, 10, 20, 28, 40, 50):
         assert quoted_datagram(full[:cut], "10.0.0.2") is None
+
+
+def test_every_daemon_attribute_is_declared_in_init():
+    """A reader of Daemon.__init__ sees every attribute the daemon will ever have."""
+    import ast
+
+    import aodv.daemon
+
+    tree = ast.parse(open(aodv.daemon.__file__).read())
+    (cls,) = [n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Daemon"]
+    assigned: dict[str, set[str]] = {}
+    for f in cls.body:
+        if isinstance(f, ast.FunctionDef):
+            for n in ast.walk(f):
+                if isinstance(n, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
+                    targets = n.targets if isinstance(n, ast.Assign) else [n.target]
+                    for t in targets:
+                        for e in ast.walk(t):
+                            if (
+                                isinstance(e, ast.Attribute)
+                                and getattr(e.value, "id", "") == "self"
+                            ):
+                                assigned.setdefault(f.name, set()).add(e.attr)
+    declared = assigned.pop("__init__")
+    late = {f"{fn}: self.{a}" for fn, attrs in assigned.items() for a in attrs - declared}
+    assert not late, sorted(late)
+    assert {"routes", "tun", "sock", "core"} <= declared
