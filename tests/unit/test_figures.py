@@ -7,7 +7,8 @@ import statistics
 import pytest
 
 from testbed import sweepfile
-from testbed.analysis import figures
+from testbed.analysis import figures, tables
+from testbed.analysis.runs import load_runs
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 
@@ -95,7 +96,7 @@ def test_only_usable_unimpaired_runs_count(tmp_path):
     # a step-capped run: the unfinished robot counts the final step
     capped = result_doc(runs[2].config, [100, None], 3000, status="step_cap")
     write_run(tmp_path, runs[2], capped)
-    rows = figures.fig2_rows(figures.load_runs(tmp_path))
+    rows = tables.fig2_rows(load_runs(tmp_path))
     assert len(rows) == 1
     assert rows[0]["runs"] == [runs[0].run_id, runs[2].run_id]
     assert rows[0]["steps_per_run"][1] == (100 + 3000) / 2
@@ -107,14 +108,14 @@ def test_unreadable_results_are_skipped(tmp_path):
     bad = tmp_path / "runs" / runs[1].run_id
     bad.mkdir(parents=True)
     (bad / "result.json").write_text("{not json")
-    assert [r.run_id for r in figures.load_runs(tmp_path)] == [runs[0].run_id]
+    assert [r.run_id for r in load_runs(tmp_path)] == [runs[0].run_id]
 
 
 def test_plan_causes_are_counted(tmp_path):
     run = sweepfile.expand(small_spec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,)))[0]
     plans = {1: timer_plans(100, requests=3), 2: timer_plans(100)}
     write_run(tmp_path, run, result_doc(run.config, [90, 95], 100, plans))
-    (row,) = figures.plan_cause_rows(figures.load_runs(tmp_path))
+    (row,) = tables.plan_cause_rows(load_runs(tmp_path))
     assert row["start"] == 2 and row["request"] == 3 and row["timer"] == 2 * 4
 
 
