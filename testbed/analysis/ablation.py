@@ -140,7 +140,10 @@ def rise(pts: dict[int, dict]) -> tuple[bool, str]:
 
 
 def runs_needed(a: dict, b: dict) -> int | None:
-    """Runs per point that would tell two fig2 rows' means apart (their sd pooled)."""
+    """Runs per point that would tell two fig2 rows' means apart (their sd pooled); None
+    when a point has one run (no sd)."""
+    if a["std"] is None or b["std"] is None:
+        return None
     sd = ((a["std"] ** 2 + b["std"] ** 2) / 2) ** 0.5
     return stats.runs_to_resolve(b["mean"] - a["mean"], sd)
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+from matplotlib.ticker import MaxNLocator
 
 from testbed.analysis.tables import ROUTING_METRICS
 
@@ -32,28 +33,60 @@ def _fmt(x: float) -> str:
     return f"{x:g}"
 
 
-def plot_fig2(rows: list[dict], laser: float, stem: Path, label: str) -> list[Path]:
+def fig2_figure(rows: list[dict], laser: float, label: str):
+    """Fig. 2 for one laser range: each range's line of means, its 95% intervals where a
+    point has them, and each point's number of runs."""
     fig, ax = plt.subplots(figsize=(6, 4))
+    bars = False
     for comm in sorted({r["comm_range"] for r in rows if r["laser_range"] == laser}):
         pts = sorted(
             (r for r in rows if r["laser_range"] == laser and r["comm_range"] == comm),
             key=lambda r: r["robots"],
         )
-        x = [p["robots"] for p in pts]
-        y = [p["mean"] for p in pts]
-        # The 95% interval of the mean (none for a point of one run).
-        err = [
-            [p["mean"] - p["ci_low"] if p["ci_low"] is not None else 0.0 for p in pts],
-            [p["ci_high"] - p["mean"] if p["ci_high"] is not None else 0.0 for p in pts],
-        ]
-        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"range {_fmt(comm)} m")
+        bars |= _line(ax, pts, "robots", "mean", ("ci_low", "ci_high"), f"range {_fmt(comm)} m")
     ax.set_xlabel("team size (robots)")
     ax.set_ylabel("exploration steps (mean over robots)")
     ax.set_title(f"Fig. 2({label}): laser range {_fmt(laser)} m")
+    _team_axis(ax)
     ax.grid(alpha=0.3)
     ax.legend()
+    _note(ax, "bars: 95% interval of the mean; n: runs" if bars
+          else "n: runs; one run per point, so no interval")  # fmt: skip
     fig.tight_layout()
-    return save(fig, stem)
+    return fig
+
+
+def plot_fig2(rows: list[dict], laser: float, stem: Path, label: str) -> list[Path]:
+    return save(fig2_figure(rows, laser, label), stem)
+
+
+def _team_axis(ax) -> None:
+    """Team sizes are whole robots: integer ticks only (no 1.25 or 1.5)."""
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+
+
+def _note(ax, text: str) -> None:
+    ax.text(0.99, 0.01, text, transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+            color="0.35")  # fmt: skip
+
+
+def _line(ax, pts: list[dict], x: str, y: str, bounds: tuple[str, str], label: str) -> bool:
+    """One line of `y` against `x` with error bars from bounds (low, high) where a point has
+    them and they span something, each point labelled with its n. The legend shows the line
+    alone: bars that are not drawn get no entry. True when a bar was drawn."""
+    xs, ys = [p[x] for p in pts], [p[y] for p in pts]
+    (line,) = ax.plot(xs, ys, marker="o", label=label)
+    lo, hi = bounds
+    barred = [p for p in pts if p[lo] is not None and p[hi] is not None and p[hi] > p[lo]]
+    if barred:
+        err = [[p[y] - p[lo] for p in barred], [p[hi] - p[y] for p in barred]]
+        ax.errorbar([p[x] for p in barred], [p[y] for p in barred], yerr=err, fmt="none",
+                    ecolor=line.get_color(), capsize=3)  # fmt: skip
+    ax.margins(x=0.08, y=0.12)  # room for the n labels inside the frame
+    for p in pts:
+        ax.annotate(f"n={p['n']}", (p[x], p[y]), textcoords="offset points", xytext=(4, 4),
+                    fontsize=7, color=line.get_color())  # fmt: skip
+    return bool(barred)
 
 
 def plot_fig4(rows: list[dict], stem: Path) -> list[Path]:
@@ -84,7 +117,7 @@ def plot_fig4(rows: list[dict], stem: Path) -> list[Path]:
     return save(fig, stem)
 
 
-def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
+def routing_figure(rows: list[dict]):
     fig, axes = plt.subplots(2, 2, figsize=(9, 6.5))
     for ax, (key, label) in zip(axes.flat, ROUTING_METRICS, strict=True):
         for comm in sorted({r["comm_range"] for r in rows}):
@@ -97,11 +130,17 @@ def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
             _spread_line(ax, pts, "robots", key, f"range {_fmt(comm)} m")
         ax.set_xlabel("team size (robots)")
         ax.set_ylabel(label, fontsize=8)
+        _team_axis(ax)
         ax.grid(alpha=0.3)
         _legend_or_no_data(ax)
-    fig.suptitle("Routing metrics from the captures (Section 2.4)")
+    fig.suptitle("Routing metrics from the captures (Section 2.4); bars: min to max over "
+                 "the runs; n: runs")  # fmt: skip
     fig.tight_layout()
-    return save(fig, stem)
+    return fig
+
+
+def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
+    return save(routing_figure(rows), stem)
 
 
 def _legend_or_no_data(ax) -> None:
@@ -115,12 +154,7 @@ def _legend_or_no_data(ax) -> None:
 
 def _spread_line(ax, pts: list[dict], x: str, key: str, label: str) -> None:
     """One line of means against `x`, with error bars from each point's min to max."""
-    err = [
-        [p[f"{key}_mean"] - p[f"{key}_min"] for p in pts],
-        [p[f"{key}_max"] - p[f"{key}_mean"] for p in pts],
-    ]
-    ax.errorbar([p[x] for p in pts], [p[f"{key}_mean"] for p in pts], yerr=err, marker="o",
-                capsize=3, label=label)  # fmt: skip
+    _line(ax, pts, x, f"{key}_mean", (f"{key}_min", f"{key}_max"), label)
 
 
 def plot_impairments(rows: list[dict], stem: Path) -> list[Path]:

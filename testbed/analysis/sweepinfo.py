@@ -17,6 +17,12 @@ from testbed.analysis.runs import RunRecord
 from topology.jsonfile import read_json
 
 
+def seconds(x: float) -> str:
+    """Seconds to two significant digits below 10 s (0.076, 1.2), whole seconds above: a
+    short stall is not "0 s"."""
+    return f"{x:.2g}" if abs(x) < 10 else f"{x:.0f}"
+
+
 def lines(sweep_dir: Path, runs: list[RunRecord]) -> list[str]:
     """The section's sentences (Markdown paragraphs)."""
     state = read_json(sweep_dir / "sweep.json") or {}
@@ -92,7 +98,7 @@ def _timing_lines(runs: list[RunRecord]) -> list[str]:
         stalled = sum(r.host_stalls.stalled_s for r in runs)
         out.append(
             f"{in_stalls / missed:.0%} of the missed deadlines fell in host stalls (the world, "
-            f"at real-time priority, woke over 2 ms late: {stalled:.0f} s in all), which no "
+            f"at real-time priority, woke over 2 ms late: {seconds(stalled)} s in all), which no "
             f"time scale avoids; outside them, up to {max(ours):.1%} of steps "
             f"({sum(m > 0.01 for m in ours)} run(s) above 1%)."
         )

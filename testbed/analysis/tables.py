@@ -7,7 +7,8 @@ decided on the same tables. Which runs count is the caller's choice of runs plus
 `RunRecord.usable` and `.unimpaired` (testbed.analysis.runs).
 
 - `fig2_rows`: exploration steps per (variant, laser, range, team size) with each point's
-  spread and the 95% interval of its mean (testbed.analysis.stats).
+  spread and the 95% interval of its mean (testbed.analysis.stats). A point of one run has
+  no spread: its std and interval are empty (None), not 0.
 - `fig4_runs` / `fig4_rows`: the plan intervals of one run per team size (teams 1, 2, 5 and
   10 at laser 2 m and range 20 m where they ran).
 - `plan_cause_rows`: plan generations by cause, per run.
@@ -57,14 +58,15 @@ def plan_intervals(run: RunRecord) -> list[dict]:
 
 
 def spread(values: list[float]) -> dict:
-    """n, mean, min, max, std and the 95% interval of the mean (None for one value)."""
+    """n, mean, min, max, std and the 95% interval of the mean; std and the interval are
+    None (an empty cell in the CSV) for one value: one run says nothing about the noise."""
     ci = stats.mean_ci(values)
     return {
         "n": len(values),
         "mean": statistics.fmean(values),
         "min": min(values),
         "max": max(values),
-        "std": statistics.stdev(values) if len(values) > 1 else 0.0,
+        "std": statistics.stdev(values) if len(values) > 1 else None,
         "ci_low": ci[1] if ci else None,
         "ci_high": ci[2] if ci else None,
     }

@@ -25,7 +25,11 @@ one team size of a group; steps are the mean over runs of the exploration steps)
   team size and the mean number of on-request generations per run is at least RHO_MIN.
 
 A claim holds when it holds in every group that has the data, partly when in some, and does
-not hold when in none.
+not hold when in none. The two claims tested against the run-to-run noise (fall then rise, a
+smaller range) cannot be decided in a group where a point has one run: its noise is unknown,
+so neither a rise nor its absence is shown. Such a group counts as undecided, and a claim
+with no decided group is "too few runs to decide", not "does not hold". The claims decided
+on the means alone say so in their evidence when a point rests on one run.
 """
 
 from __future__ import annotations
@@ -36,6 +40,8 @@ from dataclasses import dataclass, field
 from testbed.analysis import ablation, stats
 
 HOLDS, PARTLY, FAILS, NO_DATA = "holds", "partly holds", "does not hold", "not enough data"
+TOO_FEW = "too few runs to decide"
+MIN_RUNS = 2  # runs a point needs before its noise (and so a noise-aware test) is known
 RATIO_CV_MAX = 0.15
 TIMER_SHARE_MIN = 0.95
 RHO_MIN = 0.8
@@ -59,7 +65,10 @@ RULES = (
     "on request: the mean number of on-request plan generations per run rises with team size "
     f"(Spearman rank correlation at least {RHO_MIN});",
     "a claim holds when it holds in every group with the data, partly when in some, and does "
-    "not hold when in none.",
+    "not hold when in none;",
+    f"a noise-aware claim (fall then rise, smaller range) is undecided in a group where a point "
+    f"has fewer than {MIN_RUNS} runs (its noise is unknown); with no decided group it is "
+    f"'{TOO_FEW}'.",
 )
 
 
@@ -75,12 +84,36 @@ def _f(x: float) -> str:
     return f"{x:g}"
 
 
-def _overall(results: list[bool]) -> str:
+def _overall(results: list[bool | None]) -> str:
+    """The claim over its groups' results (None: undecided, too few runs)."""
     if not results:
         return NO_DATA
-    if all(results):
+    decided = [r for r in results if r is not None]
+    if not decided:
+        return TOO_FEW
+    if all(decided):
         return HOLDS
-    return PARTLY if any(results) else FAILS
+    return PARTLY if any(decided) else FAILS
+
+
+def _few(rows) -> list[int]:
+    """The team sizes among fig2 `rows` whose point has fewer than MIN_RUNS runs."""
+    return sorted(r["robots"] for r in rows if r["n"] < MIN_RUNS)
+
+
+def _yes_no(ok: bool | None) -> str:
+    return "too few runs" if ok is None else "yes" if ok else "no"
+
+
+def _single_run_note(rows: list[dict]) -> list[str]:
+    """For the claims decided on means alone: say when they compare single runs."""
+    few = [r for r in rows if r["n"] < MIN_RUNS]
+    if not few:
+        return []
+    return [
+        f"{len(few)} of {len(rows)} points rest on one run: this compares single runs, whose "
+        "run-to-run noise is unknown"
+    ]
 
 
 def _points(fig2: list[dict]) -> dict[tuple, dict[int, float]]:
@@ -121,6 +154,8 @@ def verdict_team_beats_one(fig2: list[dict]) -> Verdict:
             f"(most steps: {worst} robots) -> {'yes' if ok else 'no'}"
         )
     v.verdict = _overall(results)
+    if results:
+        v.evidence += _single_run_note(fig2)
     return v
 
 
@@ -132,12 +167,16 @@ def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
     for (laser, comm), pts in sorted(_rows(fig2).items()):
         if len(pts) < 3:
             continue
+        few = _few(pts.values())
         ok, why = ablation.rise(pts)
-        results.append(ok)
         note = ""
-        if min(pts, key=lambda n: pts[n]["mean"]) == max(pts):
+        if few:
+            ok = None
+            why = f"one run at {', '.join(map(str, few))} robots, so the noise is unknown"
+        elif min(pts, key=lambda n: pts[n]["mean"]) == max(pts):
             note = " (the sweep may stop short of the turning point)"
-        v.evidence.append(f"{_group_name(laser, comm)}: {why} -> {'yes' if ok else 'no'}{note}")
+        results.append(ok)
+        v.evidence.append(f"{_group_name(laser, comm)}: {why} -> {_yes_no(ok)}{note}")
     v.verdict = _overall(results)
     return v
 
@@ -157,20 +196,25 @@ def verdict_smaller_range(fig2: list[dict]) -> Verdict:
         small, large = pts[min(pts)], pts[max(pts)]
         a, b = ablation._ci(small), ablation._ci(large)
         ok = small["mean"] > large["mean"] and stats.separated(a, b)
+        if _few([small, large]):
+            ok = None
         results.append(ok)
         if small["mean"] > large["mean"] and not ok and a is not None and b is not None:
             within.append(ablation.runs_needed(large, small))
         v.evidence.append(
             f"laser {_f(laser)} m, {robots} robots: range {_f(min(pts))} m "
             f"{small['mean']:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
-            f"{large['mean']:.0f} {ablation._interval(b)} -> {'yes' if ok else 'no'}"
+            f"{large['mean']:.0f} {ablation._interval(b)} -> {_yes_no(ok)}"
         )
     v.verdict = _overall(results)
-    if results:
+    decided = [r for r in results if r is not None]
+    if decided:
         head = (
-            f"smaller range needs more steps, beyond the noise, in {sum(results)} of "
-            f"{len(results)} cases"
+            f"smaller range needs more steps, beyond the noise, in {sum(decided)} of "
+            f"{len(decided)} cases"
         )
+        if len(decided) < len(results):
+            head += f" ({len(results) - len(decided)} more undecided: one run at a point)"
         if within:
             need = sorted(n for n in within if n)
             if need:
@@ -225,6 +269,7 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     else:
         v.verdict = PARTLY
         v.evidence.append(f"more steps: {parts[0]}; same ratio across team sizes: {parts[1]}")
+    v.evidence += _single_run_note(fig2)
     return v
 
 

@@ -5,9 +5,10 @@ import json
 import statistics
 
 import pytest
+from matplotlib.container import ErrorbarContainer
 
 from testbed import sweepfile
-from testbed.analysis import figures, tables
+from testbed.analysis import figures, plots, tables
 from testbed.analysis.runs import load_runs
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
@@ -162,3 +163,49 @@ def test_path_pictures_are_collected(tmp_path):
     assert got == ["n01-c5-l2-k1.png", "n02-c5-l2-k1.png"]  # first run of each point
     assert (tmp_path / "figures" / "paths" / got[0]).read_bytes().endswith(b"n01-c5-l2-k1")
     assert len([f for f in made["files"] if f.parent.name == "paths"]) == 2
+
+
+def _fig2_one_run_per_point():
+    return [
+        {"laser_range": 2.0, "comm_range": comm, "robots": n, "n": 1, "mean": 2000.0 / n,
+         "ci_low": None, "ci_high": None}
+        for comm in (5.0, 20.0) for n in (1, 2, 3)
+    ]  # fmt: skip
+
+
+def test_fig2_has_whole_team_sizes_and_n_per_point():
+    fig = plots.fig2_figure(_fig2_one_run_per_point(), 2.0, "a")
+    ax = fig.axes[0]
+    ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+    assert ticks and all(float(t).is_integer() for t in ticks)  # no 1.25, 1.5 robots
+    texts = [t.get_text() for t in ax.texts]
+    assert texts.count("n=1") == 6
+    assert any("no interval" in t for t in texts)
+    plots.plt.close(fig)
+
+
+def test_no_legend_entry_for_error_bars_that_are_not_drawn():
+    fig = plots.fig2_figure(_fig2_one_run_per_point(), 2.0, "a")
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    assert labels == ["range 5 m", "range 20 m"]
+    assert not any(isinstance(h, ErrorbarContainer) for h in handles)
+    assert not fig.axes[0].containers  # nothing to draw: no bars at all
+    plots.plt.close(fig)
+    # with intervals, the bars are drawn, and still no legend entry of their own
+    rows = [dict(r, n=3, ci_low=r["mean"] - 50, ci_high=r["mean"] + 50)
+            for r in _fig2_one_run_per_point()]  # fmt: skip
+    fig = plots.fig2_figure(rows, 2.0, "a")
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    assert labels == ["range 5 m", "range 20 m"] and len(fig.axes[0].containers) == 2
+    plots.plt.close(fig)
+
+
+def test_routing_panels_have_whole_team_sizes():
+    values = {f"{k}_{s}": 0.5 for k, _ in tables.ROUTING_METRICS for s in ("mean", "min", "max")}
+    rows = [{"comm_range": 5.0, "robots": n, "n": 1, **values} for n in (1, 2, 3)]
+    fig = plots.routing_figure(rows)
+    for ax in fig.axes:
+        ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+        assert all(float(t).is_integer() for t in ticks)
+        assert not ax.containers  # min == max: no bar, no legend entry for one
+    plots.plt.close(fig)

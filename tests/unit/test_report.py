@@ -1,5 +1,6 @@
 """Report verdicts on synthetic data whose answer is known, and the report end to end."""
 
+import csv
 import json
 import re
 import subprocess
@@ -10,7 +11,8 @@ import pytest
 
 from testbed import sweepfile
 from testbed.analysis import report, sweepinfo, tables, verdicts
-from testbed.analysis.verdicts import FAILS, HOLDS, NO_DATA, PARTLY
+from testbed.analysis.runs import load_runs
+from testbed.analysis.verdicts import FAILS, HOLDS, NO_DATA, PARTLY, TOO_FEW
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 REPO = Path(__file__).resolve().parents[2]
@@ -70,11 +72,39 @@ def test_a_rise_or_a_range_effect_within_the_noise_does_not_hold():
     assert verdicts.verdict_fall_then_rise(rows(paper)).verdict == HOLDS
 
 
-def test_one_run_per_point_cannot_show_a_rise():
-    fig2 = [dict(r, ci_low=None, ci_high=None, std=0.0, n=1) for r in rows(paper)]
-    v = verdicts.verdict_fall_then_rise(fig2)
-    assert v.verdict == FAILS
-    assert all("one run at a point, so its noise is unknown" in e for e in v.evidence)
+def test_one_run_per_point_is_too_few_runs_to_decide_not_a_failure():
+    # The short sweep's case: one run per point. Whatever the means say, the noise-aware
+    # claims cannot be decided, and the report must not say they do not hold.
+    for shape in (paper, lambda n, c, la: 100.0 * n):
+        fig2 = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(shape)]
+        v = verdicts.verdict_fall_then_rise(fig2)
+        assert v.verdict == TOO_FEW
+        assert all("so the noise is unknown -> too few runs" in e for e in v.evidence)
+        v = verdicts.verdict_smaller_range(fig2)
+        assert v.verdict == TOO_FEW
+        assert all(e.endswith("-> too few runs") for e in v.evidence)
+    # the claims decided on means say that they compare single runs
+    v = verdicts.verdict_team_beats_one(fig2)
+    assert any("rest on one run" in e for e in v.evidence)
+
+
+def test_a_group_with_one_run_points_is_left_undecided_beside_decided_ones():
+    fig2 = rows(paper)
+    one = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(paper, comms=(7.0,))]
+    v = verdicts.verdict_fall_then_rise(fig2 + one)
+    assert v.verdict == HOLDS  # decided where it can be
+    assert sum("too few runs" in e for e in v.evidence) == 2  # the two lasers at 7 m
+
+
+def test_fig2_csv_leaves_the_spread_of_a_one_run_point_empty(tmp_path):
+    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    make_sweep(tmp_path, spec)
+    report.write_report(tmp_path, metrics_of=lambda run: None)
+    with (tmp_path / "figures" / "fig2.csv").open() as f:
+        rows_ = list(csv.DictReader(f))
+    assert [(r["n"], r["std"], r["ci_low"], r["ci_high"]) for r in rows_] == [("1", "", "", "")] * 2
+    saved = json.loads((tmp_path / "figures" / "fig2.json").read_text())
+    assert all(r["std"] is None for r in saved)
 
 
 def test_partly_when_only_some_groups_agree():
@@ -232,3 +262,18 @@ def test_sweep_section_tells_time_scale_changes_from_concurrency_changes(tmp_pat
     assert "lowered its concurrency 1 time(s)" in text and "now 1 job(s) at most" in text
     assert "changed a team size's time scale 1 time(s)" in text
     assert "0.85 for 1, 0.72 for 10" in text
+
+
+def test_sweep_section_gives_short_stalls_in_their_own_precision(tmp_path):
+    # 0.076 s of host stalls was reported as "0 s in all"
+    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    run = sweepfile.expand(spec)[0]
+    doc = result_doc(run.config, [90, 95], 100)
+    doc.update(deadlines_missed=3, host_stalls={"events": 2, "stalled_s": 0.076,
+                                                "deadlines_missed": 3})  # fmt: skip
+    write_run(tmp_path, run, doc)
+    text = " ".join(sweepinfo.lines(tmp_path, load_runs(tmp_path)))
+    assert "0.076 s in all" in text
+    assert [sweepinfo.seconds(x) for x in (0.0, 0.076, 1.234, 9.94, 12.6, 130.2)] == [
+        "0", "0.076", "1.2", "9.9", "13", "130",
+    ]  # fmt: skip
