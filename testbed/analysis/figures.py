@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 def capture_metrics(run: RunRecord) -> dict | None:
     """The run's routing metrics from its captures (None without captures or tshark)."""
     try:
-        return pcapmetrics.run_metrics(run.path, routing=run.config.routing)
+        return pcapmetrics.run_metrics(run.path, run=run)
     except OSError as e:  # tshark missing or a capture unreadable
         log.warning("%s: no routing metrics: %s", run.run_id, e)
         return None

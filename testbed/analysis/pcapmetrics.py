@@ -27,9 +27,10 @@ were *transmitted* by the robot (its own traffic and what it forwards); the rest
 - throughput: delivered TCP payload bytes over the span of the captures, in bit/s.
 
 Times are host wall-clock: with a time scale K, emulated time runs K times faster, so delays
-and throughput are those the kernel saw, not emulated ones. `run_metrics` applies this to a
-run directory, compares the AODV counts with the daemons' own counters (aodv/rK.json, where
-present) and caches the result in the run directory as routing.json.
+and throughput are those the kernel saw. `run_metrics` applies this to a run directory,
+compares the AODV counts with the daemons' own counters (aodv/rK.json, where present), adds
+the delays and throughput in emulated time and what each number means
+(testbed.analysis.routingnotes) and caches the result in the run directory as routing.json.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import runs
+from testbed.analysis import routingnotes, runs
 from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
@@ -59,7 +60,7 @@ CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracl
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3  # 3: "emulated" and "about"
 
 _FIELDS = (
     "frame.time_epoch",
@@ -494,10 +495,11 @@ def _pcaps(run_dir: Path) -> dict[int, Path]:
 
 
 def run_metrics(
-    run_dir: str | Path, use_cache: bool = True, routing: str | None = None
+    run_dir: str | Path, use_cache: bool = True, run: runs.RunRecord | None = None
 ) -> dict | None:
-    """Routing metrics of one run directory (None if it has no captures), cached. `routing`
-    (whose control port to count) is the run's own when not given."""
+    """Routing metrics of one run directory (None if it has no captures), cached in its
+    routing.json. `run` (its routing says whose control port to count, its time scale turns
+    delays into emulated time) is read from the directory when not given."""
     run_dir = Path(run_dir)
     pcaps = _pcaps(run_dir)
     if not pcaps:
@@ -511,11 +513,12 @@ def run_metrics(
                 return doc
         except (OSError, ValueError):
             pass
-    if routing is None:
+    if run is None:
         try:
-            routing = runs.load_run(run_dir).config.routing
-        except runs.ResultError:
-            routing = runs.DEFAULT_ROUTING
+            run = runs.load_run(run_dir)
+        except runs.ResultError as e:
+            log.warning("%s; counting AODV's port, wall-clock time only", e)
+    routing = run.config.routing if run else runs.DEFAULT_ROUTING
     captures = read_pcaps(pcaps)
     metrics = compute(
         captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
@@ -524,6 +527,9 @@ def run_metrics(
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
+    scale = run and (run.time_scale_achieved or run.time_scale_requested or run.config.time_scale)
+    metrics["emulated"] = routingnotes.emulated(metrics, scale)
+    metrics["about"] = routingnotes.ABOUT
     try:
         write_json_atomic(cache, metrics)
     except OSError as e:

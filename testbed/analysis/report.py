@@ -1,5 +1,8 @@
 """`testbed report DIR`: figures plus a Markdown report that checks the paper's claims.
 
+(For one run's directory, `testbed report RUN_DIR` writes that run's metrics instead:
+testbed.analysis.runreport.)
+
 Theory of operation. `testbed.analysis.figures.make_all` draws the figures and returns the
 tables of numbers behind them; testbed.analysis.verdicts decides each claim of the paper's
 Section 5 on those tables. `render` puts the verdicts, the figures and the sweep's
@@ -16,7 +19,16 @@ import logging
 import sys
 from pathlib import Path
 
-from testbed.analysis import ablation, figures, htmlreport, protocols, sweepinfo
+from testbed.analysis import (
+    ablation,
+    figures,
+    htmlreport,
+    pcapmetrics,
+    protocols,
+    runreport,
+    sweepinfo,
+)
+from testbed.analysis.runs import ResultError, load_run
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
 from testbed.errors import UsageError
 
@@ -101,30 +113,36 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     if paths:
         out += [f"Path pictures (Figs. 3 and 5): {len(paths)} in `figures/paths/`, e.g.", ""]
         out += [f"![{p.stem}](figures/paths/{p.name})" for p in paths[:4]] + [""]
-    out += ["## Routing (Section 2.4)", ""]
-    if tables["routing"]:
-        out += [
-            "| range (m) | robots | runs | overhead (pkts) | PDF | delay median (ms) | "
-            "throughput (kbit/s) |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        for r in tables["routing"]:
-            out.append(
-                f"| {_f(r['comm_range'])} | {r['robots']} | {r['n']} | "
-                f"{_num(r['overhead_packets_mean'], '.3f')} | {_num(r['pdf_mean'], '.3f')} | "
-                f"{_num(r['delay_ms_median_mean'], '.2f')} | "
-                f"{_num(r['throughput_bps_mean'] and r['throughput_bps_mean'] / 1000, '.1f')} |"
-            )
-        out.append("")
-        out += _daemon_section(tables["routing_runs"]) + [""]
-        out += [
-            "Delays and throughput are host wall-clock: with time scale K, emulated time runs "
-            "K times faster than these numbers' clock.",
-            "",
-        ]
-    else:
-        out += ["No run has packet captures (sweep file: `capture = true`).", ""]
+    out += _routing_section(tables)
     return "\n".join(out)
+
+
+def _routing_section(tables: dict) -> list[str]:
+    out = ["## Routing (Section 2.4)", ""]
+    if not tables["routing"]:
+        return out + ["No run has packet captures (sweep file: `capture = true`).", ""]
+    out += [
+        "| range (m) | robots | runs | overhead (pkts) | PDF | delay median (ms, wall) | "
+        "delay median (ms, emulated) | throughput (kbit/s, wall) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in tables["routing"]:
+        out.append(
+            f"| {_f(r['comm_range'])} | {r['robots']} | {r['n']} | "
+            f"{_num(r['overhead_packets_mean'], '.3f')} | {_num(r['pdf_mean'], '.3f')} | "
+            f"{_num(r['delay_ms_median_mean'], '.3f')} | "
+            f"{_num(r['delay_ms_median_emulated_mean'], '.3f')} | "
+            f"{_num(r['throughput_bps_mean'] and r['throughput_bps_mean'] / 1000, '.1f')} |"
+        )
+    out += [""] + _daemon_section(tables["routing_runs"]) + [""]
+    out += [
+        "Delays and throughput are host wall-clock, as the captures are stamped; with time "
+        "scale K, emulated time runs K times faster, so an emulated delay is the wall delay "
+        "x K (each run's `routing.json` has both, and says what PDF, segment delivery and the "
+        "mean and median delay mean; `testbed report RUN_DIR` sums one run up).",
+        "",
+    ]
+    return out
 
 
 def _num(x, spec: str) -> str:
@@ -149,19 +167,46 @@ def write_report(sweep_dir: str | Path, metrics_of=None) -> tuple[Path, list[Ver
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dir", metavar="DIR", help="a sweep directory (testbed sweep --out DIR)")
+    parser.add_argument(
+        "dir",
+        metavar="DIR",
+        help="a sweep directory (testbed sweep --out DIR): figures, report.md and "
+        "report.html; or one run's directory (testbed run --out DIR): its routing.json "
+        "(from the captures) and summary.md",
+    )
 
 
-def main(args: argparse.Namespace) -> int:
-    sweep_dir = Path(args.dir)
-    if not (sweep_dir / "runs").is_dir():
-        raise UsageError(f"DIR {sweep_dir}: not a sweep directory (no runs/ in it)")
+def _sweep_main(sweep_dir: Path) -> int:
     path, vs = write_report(sweep_dir)
     held = sum(v.verdict == HOLDS for v in vs)
     print(f"{path}: {held} of {len(vs)} claims hold", file=sys.stderr)
     for v in vs:
         print(f"  {v.section} {v.claim}: {v.verdict}", file=sys.stderr)
     return 0
+
+
+def _run_main(run_dir: Path) -> int:
+    try:
+        run = load_run(run_dir)
+    except ResultError as e:
+        raise UsageError(f"DIR {e}") from None
+    path, metrics = runreport.write(run)
+    sys.stdout.write(path.read_text())
+    made = [str(path)] + ([str(run_dir / pcapmetrics.CACHE_NAME)] if metrics else [])
+    print(f"wrote {', '.join(made)}", file=sys.stderr)
+    return 0
+
+
+def main(args: argparse.Namespace) -> int:
+    d = Path(args.dir)
+    if (d / "runs").is_dir():
+        return _sweep_main(d)
+    if (d / "result.json").is_file():
+        return _run_main(d)
+    raise UsageError(
+        f"DIR {d}: neither a sweep directory (no runs/ in it) nor a finished run's directory "
+        "(no result.json)"
+    )
 
 
 if __name__ == "__main__":  # `python -m testbed.analysis.report` is `testbed report`

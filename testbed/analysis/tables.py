@@ -196,6 +196,7 @@ def routing_per_run(runs: list[RunRecord], metrics_of: MetricsOf) -> list[dict]:
         }
         for key, _ in ROUTING_METRICS:
             row[key] = m.get(key)
+        row["delay_ms_median_emulated"] = (m.get("emulated") or {}).get("delay_ms_median")
         row["control_tx_packets"] = m.get("control_tx_packets")
         row["tx_packets"] = m.get("tx_packets")
         cmp = m.get("daemon_comparison") or {}
@@ -229,7 +230,8 @@ def aggregate(rows: list[dict], keys: tuple[str, ...], metrics: list[str]) -> li
 def routing_rows(per_run: list[dict]) -> list[dict]:
     """Routing metrics per (range, team size) over the unimpaired runs, lasers pooled."""
     base = [r for r in per_run if not r["loss_pct"] and not r["delay_ms"]]
-    return aggregate(base, ("comm_range", "robots"), [k for k, _ in ROUTING_METRICS])
+    metrics = [k for k, _ in ROUTING_METRICS] + ["delay_ms_median_emulated"]
+    return aggregate(base, ("comm_range", "robots"), metrics)
 
 
 def impairment_rows(runs: list[RunRecord], per_run: list[dict]) -> list[dict]:
