@@ -22,7 +22,8 @@ a sweep varies loss or delay.
 - Fig. 4(a)-(d): for teams of 1, 2, 5 and 10 (laser 2 m, range 20 m, first run of the point),
   each plan generation's interval since the same robot's previous one, against the step it
   happened at, by cause, with the 20-step timer as a reference line.
-- Figs. 3 and 5: the runs' own path pictures (paths.png), collected under figures/paths/.
+- Figs. 3 and 5: each point's first run's paths over the display's map (testbed.analysis.
+  pathsfig), under figures/paths/.
 - Routing: overhead, packet delivery fraction, end-to-end delay and throughput from the pcaps
   (testbed.analysis.pcapmetrics) against team size, one line per range (all laser ranges pooled).
 - Impairments: exploration steps and packet delivery fraction against link loss.
@@ -36,7 +37,7 @@ import shutil
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from testbed.analysis import ablation, pcapmetrics, plots, protocols, tables
+from testbed.analysis import ablation, pathsfig, pcapmetrics, plots, protocols, tables
 from testbed.analysis.runs import RunRecord, load_runs
 from testbed.analysis.tables import MetricsOf, write_table
 
@@ -53,18 +54,24 @@ def capture_metrics(run: RunRecord) -> dict | None:
 
 
 def collect_paths(runs: list[RunRecord], dest: Path) -> list[Path]:
-    """Copy the path pictures (Figs. 3 and 5) of each point's first usable run."""
+    """The path pictures (Figs. 3 and 5) of each point's first usable run: drawn from its
+    positions (testbed.analysis.pathsfig: start markers, a scale bar, names inside the
+    frame), or its own paths.png copied where it recorded no positions."""
     dest.mkdir(parents=True, exist_ok=True)
     seen, out = set(), []
     for run in sorted(runs, key=lambda r: r.run_id):
         c = run.config
         point = (c.robots, c.comm_range, c.laser_range, c.loss_pct, c.delay_ms)
         src = run.path / "paths.png"
-        if not run.usable or point in seen or not src.is_file():
+        if not run.usable or point in seen:
             continue
-        seen.add(point)
-        shutil.copyfile(src, dest / f"{run.run_id}.png")
-        out.append(dest / f"{run.run_id}.png")
+        png = pathsfig.write_paths(run, dest / run.run_id)
+        if png is None and src.is_file():
+            png = dest / f"{run.run_id}.png"
+            shutil.copyfile(src, png)
+        if png is not None:
+            seen.add(point)
+            out.append(png)
     return out
 
 

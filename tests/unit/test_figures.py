@@ -4,11 +4,13 @@ import csv
 import json
 import statistics
 
+import numpy as np
 import pytest
 from matplotlib.container import ErrorbarContainer
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from testbed import sweepfile
-from testbed.analysis import figures, plots, tables
+from testbed.analysis import figures, pathsfig, plots, tables
 from testbed.analysis.runs import load_runs
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
@@ -209,3 +211,33 @@ def test_routing_panels_have_whole_team_sizes():
         assert all(float(t).is_integer() for t in ticks)
         assert not ax.containers  # min == max: no bar, no legend entry for one
     plots.plt.close(fig)
+
+
+def test_path_pictures_have_start_markers_a_scale_bar_and_names_inside_the_frame(tmp_path):
+    run = sweepfile.expand(small_spec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,)))[0]
+    d = write_run(tmp_path, run)
+    # robot 1 ends in the map's bottom-right corner, robot 2 at its top-left edge
+    rows = ["step,x1,y1,x2,y2"] + [f"{s},{1 + s},{1 + s},{5 - s * 0.2},{3 - s * 0.15}"
+                                   for s in range(20)]  # fmt: skip
+    (d / "positions.csv").write_text("\n".join(rows) + "\n")
+    (d / "display").mkdir()
+    np.save(d / "display" / "map.npy", np.ones((400, 400), dtype=np.uint8))  # 20 m x 20 m
+    rec = load_runs(tmp_path)[0]
+    paths = pathsfig.read_positions(d)
+    assert paths[1][0] == (1.0, 1.0) and paths[2][-1] == pytest.approx((1.2, 0.15))
+    fig = pathsfig.paths_figure(rec, paths)
+    ax = fig.axes[0]
+    starts = [ln for ln in ax.lines if ln.get_marker() == "s" and len(ln.get_xdata()) == 1]
+    assert [(ln.get_xdata()[0], ln.get_ydata()[0]) for ln in starts] == [(1.0, 1.0), (5.0, 3.0)]
+    assert any(isinstance(a, AnchoredSizeBar) for a in ax.artists)
+    fig.canvas.draw()
+    frame = ax.get_window_extent()
+    names = [t for t in ax.texts if t.get_text() in ("r1", "r2")]
+    assert len(names) == 2
+    for t in names:  # each name drawn wholly inside the axes, even at the map's edge
+        box = t.get_window_extent()
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1
+        assert frame.y0 <= box.y0 and box.y1 <= frame.y1
+    pathsfig.plt.close(fig)
+    figures.collect_paths([rec], tmp_path / "out")
+    assert (tmp_path / "out" / f"{run.run_id}.png").read_bytes()[:4] == b"\x89PNG"
