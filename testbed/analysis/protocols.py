@@ -241,6 +241,14 @@ def section(rows: list[dict]) -> list[str]:
     points: dict[tuple, dict[str, dict]] = {}
     for r in rows:
         points.setdefault((r["map"], r["comm_range"], r["robots"]), {})[r["routing"]] = r
+    out += _table_rows(points)
+    out += [""] + _control_check(rows) + ["", f"**Rule.** {CHOICE_RULE}", ""]
+    return out + _choice_lines(points)
+
+
+def _table_rows(points: dict[tuple, dict[str, dict]]) -> list[str]:
+    """One table row per (point, protocol), each beside the oracle at the same point."""
+    out = []
     for (mp, comm, robots), by in points.items():
         o = by.get("oracle", {})
         for r in by.values():
@@ -257,7 +265,12 @@ def section(rows: list[dict]) -> list[str]:
                 f"{'' if base else _vs(r['map_delivery'], o.get('map_delivery'), False)} | "
                 f"{_fmt(r['discovery_ms'], '.1f')} |"
             )
-    out += [""] + _control_check(rows) + ["", f"**Rule.** {CHOICE_RULE}", ""]
+    return out
+
+
+def _choice_lines(points: dict[tuple, dict[str, dict]]) -> list[str]:
+    """Whether the paper's choice holds, point by point, and the measures beside the rule."""
+    out = []
     verdicts = [(key, *choice_holds(by)) for key, by in points.items()]
     judged = [(k, ok, why) for k, ok, why in verdicts if ok is not None]
     held = sum(ok for _, ok, _ in judged)
