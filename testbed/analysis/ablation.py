@@ -21,9 +21,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 from testbed.analysis import stats
+from testbed.analysis.plots import plt, save
+from testbed.analysis.runs import RunRecord
+from testbed.analysis.tables import plan_intervals
 
 THIRDS = ("start", "middle", "end")
 FIG4_ROBOTS = 10
@@ -39,18 +40,18 @@ def _name(variant: tuple[str, str]) -> str:
     return f"{variant[0]}, {variant[1]}"
 
 
-def request_thirds(result: dict) -> list[int]:
+def request_thirds(run: RunRecord) -> list[int]:
     """On-request plan generations of all robots in each third of the run's steps."""
-    steps = max(1, result.get("steps") or 1)
+    steps = max(1, run.steps or 1)
     counts = [0, 0, 0]
-    for r in (result.get("robots") or {}).values():
-        for p in r.get("plans") or []:
-            if p.get("cause") == "request":
-                counts[min(2, 3 * p["step"] // steps)] += 1
+    for robot in run.robots:
+        for p in robot.plans:
+            if p.cause == "request":
+                counts[min(2, 3 * p.step // steps)] += 1
     return counts
 
 
-def _fig4_point(runs: list, variant: tuple[str, str]) -> list:
+def _fig4_point(runs: list[RunRecord], variant: tuple[str, str]) -> list[RunRecord]:
     return sorted(
         (
             r
@@ -58,40 +59,34 @@ def _fig4_point(runs: list, variant: tuple[str, str]) -> list:
             if r.usable
             and r.unimpaired
             and r.variant == variant
-            and r.config["robots"] == FIG4_ROBOTS
-            and r.config["comm_range"] == FIG4_RANGE
-            and r.config["laser_range"] == FIG4_LASER
+            and r.config.robots == FIG4_ROBOTS
+            and r.config.comm_range == FIG4_RANGE
+            and r.config.laser_range == FIG4_LASER
         ),
         key=lambda r: r.run_id,
     )
 
 
-def request_thirds_rows(runs: list) -> list[dict]:
+def request_thirds_rows(runs: list[RunRecord]) -> list[dict]:
     """Per variant, per run of 10 robots at 20 m (laser 2 m): on-request generations per third,
     and the plans on the timer, for the report and ablation_thirds.csv."""
     rows = []
     for variant in sorted({r.variant for r in runs if r.usable}):
         for run in _fig4_point(runs, variant):
-            thirds = request_thirds(run.result)
-            timer = sum(
-                p.get("cause") == "timer"
-                for rob in (run.result.get("robots") or {}).values()
-                for p in rob.get("plans") or []
-            )
+            thirds = request_thirds(run)
+            timer = sum(p.cause == "timer" for rob in run.robots for p in rob.plans)
             rows.append({
                 "coordination": variant[0], "start_placement": variant[1], "run": run.run_id,
-                "steps": run.result.get("steps"),
+                "steps": run.steps,
                 **{f"request_{t}": n for t, n in zip(THIRDS, thirds, strict=True)},
                 "timer": timer,
             })  # fmt: skip
     return rows
 
 
-def plot_fig4_variants(runs: list, stem: Path) -> list[Path]:
+def plot_fig4_variants(runs: list[RunRecord], stem: Path) -> list[Path]:
     """One panel per variant: the first run of 10 robots at 20 m, plan intervals against the
     step, by cause, with the thirds marked and their on-request counts written in."""
-    from testbed.analysis.figures import _save, plan_intervals
-
     variants = [v for v in sorted({r.variant for r in runs if r.usable}) if _fig4_point(runs, v)]
     if not variants:
         return []
@@ -99,15 +94,15 @@ def plot_fig4_variants(runs: list, stem: Path) -> list[Path]:
     colors = {"timer": "tab:blue", "request": "tab:red"}
     for ax, variant in zip(axes[:, 0], variants, strict=True):
         run = _fig4_point(runs, variant)[0]
-        pts = plan_intervals(run.result)
+        pts = plan_intervals(run)
         for cause in sorted({p["cause"] for p in pts}, key=str):
             sel = [p for p in pts if p["cause"] == cause]
             ax.scatter([p["step"] for p in sel], [p["interval"] for p in sel], s=8,
                        color=colors.get(cause, "tab:gray"), label=str(cause))  # fmt: skip
-        steps = run.result.get("steps") or 1
+        steps = run.steps or 1
         for k in (1, 2):
             ax.axvline(k * steps / 3, color="gray", lw=0.8, ls=":")
-        thirds = request_thirds(run.result)
+        thirds = request_thirds(run)
         ax.set_title(f"{_name(variant)} ({run.run_id}): on request per third "
                      f"{thirds[0]} / {thirds[1]} / {thirds[2]}", fontsize=9)  # fmt: skip
         ax.axhline(20, color="k", ls="--", lw=1)
@@ -116,7 +111,7 @@ def plot_fig4_variants(runs: list, stem: Path) -> list[Path]:
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("step of the plan generation")
     fig.tight_layout()
-    return _save(fig, stem)
+    return save(fig, stem)
 
 
 # ---------------------------------------------------------------- the report's section
@@ -145,7 +140,10 @@ def rise(pts: dict[int, dict]) -> tuple[bool, str]:
 
 
 def runs_needed(a: dict, b: dict) -> int | None:
-    """Runs per point that would tell two fig2 rows' means apart (their sd pooled)."""
+    """Runs per point that would tell two fig2 rows' means apart (their sd pooled); None
+    when a point has one run (no sd)."""
+    if a["std"] is None or b["std"] is None:
+        return None
     sd = ((a["std"] ** 2 + b["std"] ** 2) / 2) ** 0.5
     return stats.runs_to_resolve(b["mean"] - a["mean"], sd)
 

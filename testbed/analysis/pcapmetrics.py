@@ -27,9 +27,10 @@ were *transmitted* by the robot (its own traffic and what it forwards); the rest
 - throughput: delivered TCP payload bytes over the span of the captures, in bit/s.
 
 Times are host wall-clock: with a time scale K, emulated time runs K times faster, so delays
-and throughput are those the kernel saw, not emulated ones. `run_metrics` applies this to a
-run directory, compares the AODV counts with the daemons' own counters (aodv/rK.json, where
-present) and caches the result in the run directory as routing.json.
+and throughput are those the kernel saw. `run_metrics` applies this to a run directory,
+compares the AODV counts with the daemons' own counters (aodv/rK.json, where present), adds
+the delays and throughput in emulated time and what each number means
+(testbed.analysis.routingnotes) and caches the result in the run directory as routing.json.
 """
 
 from __future__ import annotations
@@ -46,9 +47,10 @@ import sys
 import tempfile
 from collections import Counter, defaultdict
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from testbed.analysis import routingnotes, runs
 from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
@@ -58,7 +60,7 @@ CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracl
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3  # 3: "emulated" and "about"
 
 _FIELDS = (
     "frame.time_epoch",
@@ -220,74 +222,102 @@ def _quantile(xs: list[float], q: float) -> float:
     return xs[min(len(xs) - 1, int(q * len(xs)))]
 
 
-def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int = 654) -> dict:
-    """Routing metrics of one run from each robot's frames (see the module docstring)."""
-    robots: dict[str, dict] = {}
-    # (src, dst, sport, dport, seq) -> [first time, length, transmissions]
-    sent: dict[tuple, list] = {}
-    # received segments per flow: flow -> {seq: [first time, length, receptions]}
-    received: dict[tuple, dict[int, list]] = defaultdict(dict)
-    tx_payload = rx_payload = 0  # TCP payload bytes, all transmissions / all receptions
-    sources = set(addrs.values())  # only traffic whose sender was captured too
-    t_min, t_max = float("inf"), float("-inf")
-    for k, frames in sorted(captures.items()):
-        addr = addrs[k]
-        mac = own_mac(frames, addr)
-        r = {
-            "mac": mac,
-            "frames": len(frames),
-            "tx_packets": 0,
-            "tx_bytes": 0,
-            "rx_packets": 0,
-            "control_tx_packets": 0,
-            "control_tx_bytes": 0,
-            "control_tx_payload_bytes": 0,
-            "control_rx_packets": 0,
-            "aodv_tx_by_type": Counter(),
-            "tcp_segments_sent": 0,
-        }
-        for f in frames:
-            t_min, t_max = min(t_min, f.time), max(t_max, f.time)
-            tx = mac is not None and f.eth_src == mac
-            control = _is_control(f, port)
-            if tx:
-                r["tx_packets"] += 1
-                r["tx_bytes"] += f.length
-                if control:
-                    r["control_tx_packets"] += 1
-                    r["control_tx_bytes"] += f.length
-                    r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
-                    if port == CONTROL_PORTS["aodv"]:
-                        r["aodv_tx_by_type"][_aodv_kind(f)] += 1
-                if f.ip_src == addr and f.tcp_len and f.ip_dst != addr and f.ip_proto == 6:
-                    tx_payload += f.tcp_len
-                    key = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport, f.tcp_seq)
-                    if key in sent:
-                        sent[key][2] += 1
-                    else:
-                        sent[key] = [f.time, f.tcp_len, 1]
-                        r["tcp_segments_sent"] += 1
-            else:
-                r["rx_packets"] += 1
-                if control:
-                    r["control_rx_packets"] += 1
-                if f.ip_dst == addr and f.tcp_len and f.ip_proto == 6 and f.ip_src in sources:
-                    rx_payload += f.tcp_len
-                    flow = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport)
-                    seen = received[flow].get(f.tcp_seq)
-                    if seen is None:
-                        received[flow][f.tcp_seq] = [f.time, f.tcp_len, 1]
-                    else:
-                        seen[0] = min(seen[0], f.time)
-                        seen[2] += 1
-        r["aodv_tx_by_type"] = dict(r["aodv_tx_by_type"])
-        robots[f"r{k}"] = r
+@dataclass
+class _Traffic:
+    """The robots' TCP traffic as compute() gathers it from every capture."""
 
-    index = {flow: sorted(segs) for flow, segs in received.items()}
-    delays, delivered, delivered_bytes, delivered_tx = [], 0, 0, 0
-    for (src, dst, sport, dport, seq), (t_sent, length, n_sent) in sent.items():
+    sources: set[str]  # only traffic whose sender was captured too
+    # (src, dst, sport, dport, seq) -> [first time, length, transmissions]
+    sent: dict[tuple, list] = field(default_factory=dict)
+    # received segments per flow: flow -> {seq: [first time, length, receptions]}
+    received: dict[tuple, dict[int, list]] = field(default_factory=lambda: defaultdict(dict))
+    tx_payload: int = 0  # TCP payload bytes, all transmissions
+    rx_payload: int = 0  # TCP payload bytes, all receptions
+    t_min: float = float("inf")
+    t_max: float = float("-inf")
+
+    def transmitted(self, f: Frame) -> bool:
+        """Note a TCP segment the robot sent as its source; True when it is a new one."""
+        self.tx_payload += f.tcp_len
+        key = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport, f.tcp_seq)
+        if key in self.sent:
+            self.sent[key][2] += 1
+            return False
+        self.sent[key] = [f.time, f.tcp_len, 1]
+        return True
+
+    def got(self, f: Frame) -> None:
+        """Note a TCP segment the robot received as its destination."""
+        self.rx_payload += f.tcp_len
+        flow = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport)
+        seen = self.received[flow].get(f.tcp_seq)
+        if seen is None:
+            self.received[flow][f.tcp_seq] = [f.time, f.tcp_len, 1]
+        else:
+            seen[0] = min(seen[0], f.time)
+            seen[2] += 1
+
+
+def _new_robot(mac: str | None, frames: int) -> dict:
+    return {
+        "mac": mac,
+        "frames": frames,
+        "tx_packets": 0,
+        "tx_bytes": 0,
+        "rx_packets": 0,
+        "control_tx_packets": 0,
+        "control_tx_bytes": 0,
+        "control_tx_payload_bytes": 0,
+        "control_rx_packets": 0,
+        "aodv_tx_by_type": Counter(),
+        "tcp_segments_sent": 0,
+    }
+
+
+def _robot_counts(frames: list[Frame], addr: str, port: int, traffic: _Traffic) -> dict:
+    """One robot's counts from its capture; its TCP traffic goes into `traffic`."""
+    r = _new_robot(own_mac(frames, addr), len(frames))
+    mac = r["mac"]
+    for f in frames:
+        traffic.t_min, traffic.t_max = min(traffic.t_min, f.time), max(traffic.t_max, f.time)
+        control = _is_control(f, port)
+        if mac is not None and f.eth_src == mac:
+            r["tx_packets"] += 1
+            r["tx_bytes"] += f.length
+            if control:
+                r["control_tx_packets"] += 1
+                r["control_tx_bytes"] += f.length
+                r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
+                if port == CONTROL_PORTS["aodv"]:
+                    r["aodv_tx_by_type"][_aodv_kind(f)] += 1
+            if f.ip_src == addr and f.tcp_len and f.ip_dst != addr and f.ip_proto == 6:
+                r["tcp_segments_sent"] += traffic.transmitted(f)
+        else:
+            r["rx_packets"] += 1
+            r["control_rx_packets"] += control
+            to_me = f.ip_dst == addr and f.tcp_len and f.ip_proto == 6
+            if to_me and f.ip_src in traffic.sources:
+                traffic.got(f)
+    r["aodv_tx_by_type"] = dict(r["aodv_tx_by_type"])
+    return r
+
+
+@dataclass
+class _Delivery:
+    delays_ms: list[float]
+    delivered: int  # segments
+    delivered_bytes: int
+    delivered_tx: int  # transmissions
+
+
+def _deliveries(traffic: _Traffic) -> _Delivery:
+    """Match each segment sent with its first reception: exactly (same flow and sequence
+    number) or, when GSO/GRO resegmented it, a received segment covering its first byte."""
+    index = {flow: sorted(segs) for flow, segs in traffic.received.items()}
+    out = _Delivery([], 0, 0, 0)
+    for (src, dst, sport, dport, seq), (t_sent, length, n_sent) in traffic.sent.items():
         flow = (src, dst, sport, dport)
-        segs = received.get(flow)
+        segs = traffic.received.get(flow)
         if not segs:
             continue
         hit = segs.get(seq)
@@ -298,11 +328,14 @@ def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int =
             hit = min(covering) if covering else None
         if hit is None:
             continue
-        delivered += 1
-        delivered_tx += min(n_sent, hit[2])
-        delivered_bytes += length
-        delays.append(hit[0] - t_sent)
+        out.delivered += 1
+        out.delivered_tx += min(n_sent, hit[2])
+        out.delivered_bytes += length
+        out.delays_ms.append(1000.0 * (hit[0] - t_sent))
+    return out
 
+
+def _control_totals(robots: dict[str, dict]) -> dict:
     tx_packets = sum(r["tx_packets"] for r in robots.values())
     tx_bytes = sum(r["tx_bytes"] for r in robots.values())
     ctl_packets = sum(r["control_tx_packets"] for r in robots.values())
@@ -310,13 +343,7 @@ def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int =
     by_type: Counter = Counter()
     for r in robots.values():
         by_type.update(r["aodv_tx_by_type"])
-    n_tx = sum(v[2] for v in sent.values())
-    duration = (t_max - t_min) if t_max > t_min else 0.0
-    delays_ms = [1000.0 * d for d in delays]
     return {
-        "format": CACHE_FORMAT,
-        "control_port": port,
-        "duration_s": duration,
         "tx_packets": tx_packets,
         "tx_bytes": tx_bytes,
         "control_tx_packets": ctl_packets,
@@ -325,19 +352,42 @@ def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int =
         "aodv_tx_by_type": dict(by_type),
         "overhead_packets": ctl_packets / tx_packets if tx_packets else None,
         "overhead_bytes": ctl_bytes / tx_bytes if tx_bytes else None,
+    }
+
+
+def _delivery_metrics(traffic: _Traffic, d: _Delivery, duration: float) -> dict:
+    sent, delays_ms = traffic.sent, d.delays_ms
+    return {
         "tcp_segments_sent": len(sent),
-        "tcp_segments_delivered": delivered,
-        "segment_delivery": delivered / len(sent) if sent else None,
-        "tcp_transmissions": n_tx,
-        "tcp_transmissions_delivered": delivered_tx,
-        "tcp_payload_bytes_transmitted": tx_payload,
-        "tcp_payload_bytes_received": rx_payload,
-        "pdf": rx_payload / tx_payload if tx_payload else None,
+        "tcp_segments_delivered": d.delivered,
+        "segment_delivery": d.delivered / len(sent) if sent else None,
+        "tcp_transmissions": sum(v[2] for v in sent.values()),
+        "tcp_transmissions_delivered": d.delivered_tx,
+        "tcp_payload_bytes_transmitted": traffic.tx_payload,
+        "tcp_payload_bytes_received": traffic.rx_payload,
+        "pdf": traffic.rx_payload / traffic.tx_payload if traffic.tx_payload else None,
         "delay_ms_mean": statistics.fmean(delays_ms) if delays_ms else None,
         "delay_ms_median": statistics.median(delays_ms) if delays_ms else None,
         "delay_ms_p95": _quantile(delays_ms, 0.95) if delays_ms else None,
-        "throughput_bps": 8.0 * delivered_bytes / duration if duration else None,
-        "delivered_payload_bytes": delivered_bytes,
+        "throughput_bps": 8.0 * d.delivered_bytes / duration if duration else None,
+        "delivered_payload_bytes": d.delivered_bytes,
+    }
+
+
+def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int = 654) -> dict:
+    """Routing metrics of one run from each robot's frames (see the module docstring)."""
+    traffic = _Traffic(sources=set(addrs.values()))
+    robots = {
+        f"r{k}": _robot_counts(frames, addrs[k], port, traffic)
+        for k, frames in sorted(captures.items())
+    }
+    duration = (traffic.t_max - traffic.t_min) if traffic.t_max > traffic.t_min else 0.0
+    return {
+        "format": CACHE_FORMAT,
+        "control_port": port,
+        "duration_s": duration,
+        **_control_totals(robots),
+        **_delivery_metrics(traffic, _deliveries(traffic), duration),
         "robots": robots,
     }
 
@@ -444,8 +494,12 @@ def _pcaps(run_dir: Path) -> dict[int, Path]:
     return out
 
 
-def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
-    """Routing metrics of one run directory (None if it has no captures), cached."""
+def run_metrics(
+    run_dir: str | Path, use_cache: bool = True, run: runs.RunRecord | None = None
+) -> dict | None:
+    """Routing metrics of one run directory (None if it has no captures), cached in its
+    routing.json. `run` (its routing says whose control port to count, its time scale turns
+    delays into emulated time) is read from the directory when not given."""
     run_dir = Path(run_dir)
     pcaps = _pcaps(run_dir)
     if not pcaps:
@@ -459,9 +513,12 @@ def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
                 return doc
         except (OSError, ValueError):
             pass
-    routing = "aodv"
-    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
-        routing = json.loads((run_dir / "result.json").read_text())["config"]["routing"]
+    if run is None:
+        try:
+            run = runs.load_run(run_dir)
+        except runs.ResultError as e:
+            log.warning("%s; counting AODV's port, wall-clock time only", e)
+    routing = run.config.routing if run else runs.DEFAULT_ROUTING
     captures = read_pcaps(pcaps)
     metrics = compute(
         captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
@@ -470,6 +527,9 @@ def run_metrics(run_dir: str | Path, use_cache: bool = True) -> dict | None:
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
+    scale = run and (run.time_scale_achieved or run.time_scale_requested or run.config.time_scale)
+    metrics["emulated"] = routingnotes.emulated(metrics, scale)
+    metrics["about"] = routingnotes.ABOUT
     try:
         write_json_atomic(cache, metrics)
     except OSError as e:

@@ -19,6 +19,7 @@ import statistics
 from pathlib import Path
 
 from testbed.analysis import stats
+from testbed.analysis.runs import RunRecord
 from topology.jsonfile import read_json
 
 PROTOCOL_ORDER = ("aodv", "babel", "batman", "oracle", "none")
@@ -37,24 +38,15 @@ CHOICE_RULE = (
 )
 
 
-def map_name(config: dict) -> str:
-    m = config.get("map")
-    return "empty" if not m else Path(m).stem
-
-
-def _map_delivery(result: dict) -> float | None:
+def _map_delivery(run: RunRecord) -> float | None:
     """Mean over robots of (map floods it received) / (map floods its teammates sent)."""
-    robots = result.get("robots") or {}
-    sent = {
-        k: ((r.get("messages") or {}).get("sent") or {}).get("map", 0) for k, r in robots.items()
-    }
+    sent = {r.name: r.sent.get("map", 0) for r in run.robots}
     total = sum(sent.values())
     shares = []
-    for k, r in robots.items():
-        others = total - sent[k]
+    for r in run.robots:
+        others = total - sent[r.name]
         if others:
-            got = ((r.get("messages") or {}).get("received") or {}).get("map", 0)
-            shares.append(min(1.0, got / others))
+            shares.append(min(1.0, r.received.get("map", 0) / others))
     return statistics.fmean(shares) if shares else None
 
 
@@ -67,13 +59,13 @@ def _discovery_ms(run_dir: Path) -> float | None:
     return statistics.median(lat) if lat else None
 
 
-def run_row(run, steps: float | None, metrics: dict | None) -> dict:
-    """One run's numbers (`run`: figures.Run; `metrics`: its pcapmetrics, or None)."""
+def run_row(run: RunRecord, steps: float | None, metrics: dict | None) -> dict:
+    """One run's numbers (`metrics`: its pcapmetrics, or None)."""
     c = run.config
-    n = c["robots"] + 1  # the display robot transmits too
+    n = c.robots + 1  # the display robot transmits too
     robot_s = None
     if metrics and metrics.get("duration_s"):
-        robot_s = metrics["duration_s"] * (run.result.get("time_scale_achieved") or c["time_scale"])
+        robot_s = metrics["duration_s"] * (run.time_scale_achieved or c.time_scale)
 
     def per_robot_s(key: str) -> float | None:
         if not metrics or not robot_s or metrics.get(key) is None:
@@ -82,16 +74,16 @@ def run_row(run, steps: float | None, metrics: dict | None) -> dict:
 
     return {
         "run": run.run_id,
-        "routing": c.get("routing", "aodv"),
-        "map": map_name(c),
-        "comm_range": c["comm_range"],
-        "robots": c["robots"],
+        "routing": c.routing,
+        "map": c.map_name,
+        "comm_range": c.comm_range,
+        "robots": c.robots,
         "steps": steps,
         "control_pkts_per_robot_s": per_robot_s("control_tx_packets"),
         "control_bytes_per_robot_s": per_robot_s("control_tx_bytes"),
         "pdf": metrics.get("pdf") if metrics else None,
         "delay_ms": metrics.get("delay_ms_median") if metrics else None,
-        "map_delivery": _map_delivery(run.result),
+        "map_delivery": _map_delivery(run),
         "discovery_ms": _discovery_ms(run.path),
         # AODV: captured control packets against its daemons' own counts (pcapmetrics).
         "daemon_difference": ((metrics or {}).get("daemon_comparison") or {}).get(
@@ -249,6 +241,14 @@ def section(rows: list[dict]) -> list[str]:
     points: dict[tuple, dict[str, dict]] = {}
     for r in rows:
         points.setdefault((r["map"], r["comm_range"], r["robots"]), {})[r["routing"]] = r
+    out += _table_rows(points)
+    out += [""] + _control_check(rows) + ["", f"**Rule.** {CHOICE_RULE}", ""]
+    return out + _choice_lines(points)
+
+
+def _table_rows(points: dict[tuple, dict[str, dict]]) -> list[str]:
+    """One table row per (point, protocol), each beside the oracle at the same point."""
+    out = []
     for (mp, comm, robots), by in points.items():
         o = by.get("oracle", {})
         for r in by.values():
@@ -265,7 +265,12 @@ def section(rows: list[dict]) -> list[str]:
                 f"{'' if base else _vs(r['map_delivery'], o.get('map_delivery'), False)} | "
                 f"{_fmt(r['discovery_ms'], '.1f')} |"
             )
-    out += [""] + _control_check(rows) + ["", f"**Rule.** {CHOICE_RULE}", ""]
+    return out
+
+
+def _choice_lines(points: dict[tuple, dict[str, dict]]) -> list[str]:
+    """Whether the paper's choice holds, point by point, and the measures beside the rule."""
+    out = []
     verdicts = [(key, *choice_holds(by)) for key, by in points.items()]
     judged = [(k, ok, why) for k, ok, why in verdicts if ok is not None]
     held = sum(ok for _, ok, _ in judged)

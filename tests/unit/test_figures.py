@@ -4,10 +4,14 @@ import csv
 import json
 import statistics
 
+import numpy as np
 import pytest
+from matplotlib.container import ErrorbarContainer
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from testbed import sweepfile
-from testbed.analysis import figures
+from testbed.analysis import figures, pathsfig, plots, tables
+from testbed.analysis.runs import load_runs
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 
@@ -95,7 +99,7 @@ def test_only_usable_unimpaired_runs_count(tmp_path):
     # a step-capped run: the unfinished robot counts the final step
     capped = result_doc(runs[2].config, [100, None], 3000, status="step_cap")
     write_run(tmp_path, runs[2], capped)
-    rows = figures.fig2_rows(figures.load_runs(tmp_path))
+    rows = tables.fig2_rows(load_runs(tmp_path))
     assert len(rows) == 1
     assert rows[0]["runs"] == [runs[0].run_id, runs[2].run_id]
     assert rows[0]["steps_per_run"][1] == (100 + 3000) / 2
@@ -107,14 +111,14 @@ def test_unreadable_results_are_skipped(tmp_path):
     bad = tmp_path / "runs" / runs[1].run_id
     bad.mkdir(parents=True)
     (bad / "result.json").write_text("{not json")
-    assert [r.run_id for r in figures.load_runs(tmp_path)] == [runs[0].run_id]
+    assert [r.run_id for r in load_runs(tmp_path)] == [runs[0].run_id]
 
 
 def test_plan_causes_are_counted(tmp_path):
     run = sweepfile.expand(small_spec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,)))[0]
     plans = {1: timer_plans(100, requests=3), 2: timer_plans(100)}
     write_run(tmp_path, run, result_doc(run.config, [90, 95], 100, plans))
-    (row,) = figures.plan_cause_rows(figures.load_runs(tmp_path))
+    (row,) = tables.plan_cause_rows(load_runs(tmp_path))
     assert row["start"] == 2 and row["request"] == 3 and row["timer"] == 2 * 4
 
 
@@ -161,3 +165,79 @@ def test_path_pictures_are_collected(tmp_path):
     assert got == ["n01-c5-l2-k1.png", "n02-c5-l2-k1.png"]  # first run of each point
     assert (tmp_path / "figures" / "paths" / got[0]).read_bytes().endswith(b"n01-c5-l2-k1")
     assert len([f for f in made["files"] if f.parent.name == "paths"]) == 2
+
+
+def _fig2_one_run_per_point():
+    return [
+        {"laser_range": 2.0, "comm_range": comm, "robots": n, "n": 1, "mean": 2000.0 / n,
+         "ci_low": None, "ci_high": None}
+        for comm in (5.0, 20.0) for n in (1, 2, 3)
+    ]  # fmt: skip
+
+
+def test_fig2_has_whole_team_sizes_and_n_per_point():
+    fig = plots.fig2_figure(_fig2_one_run_per_point(), 2.0, "a")
+    ax = fig.axes[0]
+    ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+    assert ticks and all(float(t).is_integer() for t in ticks)  # no 1.25, 1.5 robots
+    texts = [t.get_text() for t in ax.texts]
+    assert texts.count("n=1") == 6
+    assert any("no interval" in t for t in texts)
+    plots.plt.close(fig)
+
+
+def test_no_legend_entry_for_error_bars_that_are_not_drawn():
+    fig = plots.fig2_figure(_fig2_one_run_per_point(), 2.0, "a")
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    assert labels == ["range 5 m", "range 20 m"]
+    assert not any(isinstance(h, ErrorbarContainer) for h in handles)
+    assert not fig.axes[0].containers  # nothing to draw: no bars at all
+    plots.plt.close(fig)
+    # with intervals, the bars are drawn, and still no legend entry of their own
+    rows = [dict(r, n=3, ci_low=r["mean"] - 50, ci_high=r["mean"] + 50)
+            for r in _fig2_one_run_per_point()]  # fmt: skip
+    fig = plots.fig2_figure(rows, 2.0, "a")
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    assert labels == ["range 5 m", "range 20 m"] and len(fig.axes[0].containers) == 2
+    plots.plt.close(fig)
+
+
+def test_routing_panels_have_whole_team_sizes():
+    values = {f"{k}_{s}": 0.5 for k, _ in tables.ROUTING_METRICS for s in ("mean", "min", "max")}
+    rows = [{"comm_range": 5.0, "robots": n, "n": 1, **values} for n in (1, 2, 3)]
+    fig = plots.routing_figure(rows)
+    for ax in fig.axes:
+        ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+        assert all(float(t).is_integer() for t in ticks)
+        assert not ax.containers  # min == max: no bar, no legend entry for one
+    plots.plt.close(fig)
+
+
+def test_path_pictures_have_start_markers_a_scale_bar_and_names_inside_the_frame(tmp_path):
+    run = sweepfile.expand(small_spec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,)))[0]
+    d = write_run(tmp_path, run)
+    # robot 1 ends in the map's bottom-right corner, robot 2 at its top-left edge
+    rows = ["step,x1,y1,x2,y2"] + [f"{s},{1 + s},{1 + s},{5 - s * 0.2},{3 - s * 0.15}"
+                                   for s in range(20)]  # fmt: skip
+    (d / "positions.csv").write_text("\n".join(rows) + "\n")
+    (d / "display").mkdir()
+    np.save(d / "display" / "map.npy", np.ones((400, 400), dtype=np.uint8))  # 20 m x 20 m
+    rec = load_runs(tmp_path)[0]
+    paths = pathsfig.read_positions(d)
+    assert paths[1][0] == (1.0, 1.0) and paths[2][-1] == pytest.approx((1.2, 0.15))
+    fig = pathsfig.paths_figure(rec, paths)
+    ax = fig.axes[0]
+    starts = [ln for ln in ax.lines if ln.get_marker() == "s" and len(ln.get_xdata()) == 1]
+    assert [(ln.get_xdata()[0], ln.get_ydata()[0]) for ln in starts] == [(1.0, 1.0), (5.0, 3.0)]
+    assert any(isinstance(a, AnchoredSizeBar) for a in ax.artists)
+    fig.canvas.draw()
+    frame = ax.get_window_extent()
+    names = [t for t in ax.texts if t.get_text() in ("r1", "r2")]
+    assert len(names) == 2
+    for t in names:  # each name drawn wholly inside the axes, even at the map's edge
+        box = t.get_window_extent()
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1
+        assert frame.y0 <= box.y0 and box.y1 <= frame.y1
+    pathsfig.plt.close(fig)
+    figures.collect_paths([rec], tmp_path / "out")
+    assert (tmp_path / "out" / f"{run.run_id}.png").read_bytes()[:4] == b"\x89PNG"

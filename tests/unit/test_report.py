@@ -1,5 +1,6 @@
 """Report verdicts on synthetic data whose answer is known, and the report end to end."""
 
+import csv
 import json
 import re
 import subprocess
@@ -9,15 +10,16 @@ from pathlib import Path
 import pytest
 
 from testbed import sweepfile
-from testbed.analysis import figures, report
-from testbed.analysis.report import FAILS, HOLDS, NO_DATA, PARTLY
+from testbed.analysis import report, sweepinfo, tables, verdicts
+from testbed.analysis.runs import load_runs
+from testbed.analysis.verdicts import FAILS, HOLDS, NO_DATA, PARTLY, TOO_FEW
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 def rows(fn, robots=(1, 2, 3, 5, 8, 10), comms=(5.0, 20.0), lasers=(2.0, 1.5), noise=0.01):
-    """fig2 rows as figures.fig2_rows makes them, each point three runs of mean fn(...) that
+    """fig2 rows as tables.fig2_rows makes them, each point three runs of mean fn(...) that
     differ by +-`noise` of it."""
     out = []
     for la in lasers:
@@ -25,7 +27,7 @@ def rows(fn, robots=(1, 2, 3, 5, 8, 10), comms=(5.0, 20.0), lasers=(2.0, 1.5), n
             for n in robots:
                 m = fn(n, c, la)
                 row = {"laser_range": la, "comm_range": c, "robots": n}
-                row.update(figures._spread([m * (1 - noise), m, m * (1 + noise)]))
+                row.update(tables.spread([m * (1 - noise), m, m * (1 + noise)]))
                 out.append(row)
     return out
 
@@ -37,10 +39,10 @@ def paper(n, c, la):
 def test_all_section_5_1_claims_hold_on_the_papers_shape():
     fig2 = rows(paper)
     for f in (
-        report.verdict_team_beats_one,
-        report.verdict_fall_then_rise,
-        report.verdict_smaller_range,
-        report.verdict_shorter_laser,
+        verdicts.verdict_team_beats_one,
+        verdicts.verdict_fall_then_rise,
+        verdicts.verdict_smaller_range,
+        verdicts.verdict_shorter_laser,
     ):
         v = f(fig2)
         assert v.verdict == HOLDS, (v.claim, v.evidence)
@@ -50,31 +52,59 @@ def test_all_section_5_1_claims_hold_on_the_papers_shape():
 def test_claims_fail_when_the_data_says_otherwise():
     # more robots only get in each other's way; range and laser do not matter
     fig2 = rows(lambda n, c, la: 100.0 * n)
-    assert report.verdict_team_beats_one(fig2).verdict == FAILS
-    assert report.verdict_fall_then_rise(fig2).verdict == FAILS
-    assert report.verdict_smaller_range(fig2).verdict == FAILS
-    assert report.verdict_shorter_laser(fig2).verdict == FAILS
+    assert verdicts.verdict_team_beats_one(fig2).verdict == FAILS
+    assert verdicts.verdict_fall_then_rise(fig2).verdict == FAILS
+    assert verdicts.verdict_smaller_range(fig2).verdict == FAILS
+    assert verdicts.verdict_shorter_laser(fig2).verdict == FAILS
 
 
 def test_a_rise_or_a_range_effect_within_the_noise_does_not_hold():
     # The paper's shape, but runs that differ by +-30%: the rise at 8-10 robots and the
     # range effect are smaller than the spread of three runs.
     fig2 = rows(paper, noise=0.3)
-    rise = report.verdict_fall_then_rise(fig2)
+    rise = verdicts.verdict_fall_then_rise(fig2)
     assert rise.verdict == FAILS
     assert all("within the noise" in e for e in rise.evidence)
     assert any("runs per point would resolve it" in e for e in rise.evidence)
-    assert report.verdict_smaller_range(fig2).verdict == FAILS
-    assert "within the noise" in report.verdict_smaller_range(fig2).evidence[0]
+    assert verdicts.verdict_smaller_range(fig2).verdict == FAILS
+    assert "within the noise" in verdicts.verdict_smaller_range(fig2).evidence[0]
     # The same shape with tight runs holds.
-    assert report.verdict_fall_then_rise(rows(paper)).verdict == HOLDS
+    assert verdicts.verdict_fall_then_rise(rows(paper)).verdict == HOLDS
 
 
-def test_one_run_per_point_cannot_show_a_rise():
-    fig2 = [dict(r, ci_low=None, ci_high=None, std=0.0, n=1) for r in rows(paper)]
-    v = report.verdict_fall_then_rise(fig2)
-    assert v.verdict == FAILS
-    assert all("one run at a point, so its noise is unknown" in e for e in v.evidence)
+def test_one_run_per_point_is_too_few_runs_to_decide_not_a_failure():
+    # The short sweep's case: one run per point. Whatever the means say, the noise-aware
+    # claims cannot be decided, and the report must not say they do not hold.
+    for shape in (paper, lambda n, c, la: 100.0 * n):
+        fig2 = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(shape)]
+        v = verdicts.verdict_fall_then_rise(fig2)
+        assert v.verdict == TOO_FEW
+        assert all("so the noise is unknown -> too few runs" in e for e in v.evidence)
+        v = verdicts.verdict_smaller_range(fig2)
+        assert v.verdict == TOO_FEW
+        assert all(e.endswith("-> too few runs") for e in v.evidence)
+    # the claims decided on means say that they compare single runs
+    v = verdicts.verdict_team_beats_one(fig2)
+    assert any("rest on one run" in e for e in v.evidence)
+
+
+def test_a_group_with_one_run_points_is_left_undecided_beside_decided_ones():
+    fig2 = rows(paper)
+    one = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(paper, comms=(7.0,))]
+    v = verdicts.verdict_fall_then_rise(fig2 + one)
+    assert v.verdict == HOLDS  # decided where it can be
+    assert sum("too few runs" in e for e in v.evidence) == 2  # the two lasers at 7 m
+
+
+def test_fig2_csv_leaves_the_spread_of_a_one_run_point_empty(tmp_path):
+    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    make_sweep(tmp_path, spec)
+    report.write_report(tmp_path, metrics_of=lambda run: None)
+    with (tmp_path / "figures" / "fig2.csv").open() as f:
+        rows_ = list(csv.DictReader(f))
+    assert [(r["n"], r["std"], r["ci_low"], r["ci_high"]) for r in rows_] == [("1", "", "", "")] * 2
+    saved = json.loads((tmp_path / "figures" / "fig2.json").read_text())
+    assert all(r["std"] is None for r in saved)
 
 
 def test_partly_when_only_some_groups_agree():
@@ -82,9 +112,9 @@ def test_partly_when_only_some_groups_agree():
     def fn(n, c, la):
         return paper(n, c, la) if c == 5.0 else 100.0 * n
 
-    assert report.verdict_team_beats_one(rows(fn)).verdict == PARTLY
+    assert verdicts.verdict_team_beats_one(rows(fn)).verdict == PARTLY
     # shorter laser needs more steps everywhere, but the ratio changes with team size
-    v = report.verdict_shorter_laser(rows(lambda n, c, la: 100 + (n if la == 1.5 else 0) * 50))
+    v = verdicts.verdict_shorter_laser(rows(lambda n, c, la: 100 + (n if la == 1.5 else 0) * 50))
     assert v.verdict == PARTLY
     assert any("varies" in e for e in v.evidence)
 
@@ -92,37 +122,37 @@ def test_partly_when_only_some_groups_agree():
 def test_not_enough_data():
     one_point = rows(paper, robots=(3,), comms=(5.0,), lasers=(2.0,))
     for f in (
-        report.verdict_team_beats_one,
-        report.verdict_fall_then_rise,
-        report.verdict_smaller_range,
-        report.verdict_shorter_laser,
+        verdicts.verdict_team_beats_one,
+        verdicts.verdict_fall_then_rise,
+        verdicts.verdict_smaller_range,
+        verdicts.verdict_shorter_laser,
     ):
         assert f(one_point).verdict == NO_DATA
-    assert report.verdict_single_robot_timer([]).verdict == NO_DATA
-    assert report.verdict_requests_grow([{"robots": 3, "request": 4}]).verdict == NO_DATA
+    assert verdicts.verdict_single_robot_timer([]).verdict == NO_DATA
+    assert verdicts.verdict_requests_grow([{"robots": 3, "request": 4}]).verdict == NO_DATA
     # two team sizes are not enough to see a fall and a rise
-    assert report.verdict_fall_then_rise(rows(paper, robots=(1, 5))).verdict == NO_DATA
+    assert verdicts.verdict_fall_then_rise(rows(paper, robots=(1, 5))).verdict == NO_DATA
 
 
 def test_section_5_2_verdicts():
     alone = [{"robots": 1, "timer": 40, "request": 0, "start": 1}]
-    assert report.verdict_single_robot_timer(alone).verdict == HOLDS
+    assert verdicts.verdict_single_robot_timer(alone).verdict == HOLDS
     mixed = [{"robots": 1, "timer": 10, "request": 10, "start": 1}]
-    v = report.verdict_single_robot_timer(mixed)
+    v = verdicts.verdict_single_robot_timer(mixed)
     assert v.verdict == FAILS and "50%" in v.evidence[0]
     growing = [{"robots": n, "request": 3 * n + k} for n in (1, 2, 5, 10) for k in (0, 1)]
-    assert report.verdict_requests_grow(growing).verdict == HOLDS
+    assert verdicts.verdict_requests_grow(growing).verdict == HOLDS
     shrinking = [{"robots": n, "request": 30 - 3 * n} for n in (1, 2, 5, 10)]
-    assert report.verdict_requests_grow(shrinking).verdict == FAILS
+    assert verdicts.verdict_requests_grow(shrinking).verdict == FAILS
     noisy = [{"robots": n, "request": r} for n, r in ((1, 0), (2, 5), (3, 2), (4, 6))]
-    assert report.verdict_requests_grow(noisy).verdict == PARTLY
+    assert verdicts.verdict_requests_grow(noisy).verdict == PARTLY
 
 
 def test_spearman():
-    assert report.spearman([1, 2, 3], [10, 20, 30]) == pytest.approx(1.0)
-    assert report.spearman([1, 2, 3], [3, 2, 1]) == pytest.approx(-1.0)
-    assert report.spearman([1, 2, 3, 4], [1, 1, 2, 2]) == pytest.approx(0.894, abs=1e-3)
-    assert report.spearman([1, 2], [5, 5]) is None
+    assert verdicts.spearman([1, 2, 3], [10, 20, 30]) == pytest.approx(1.0)
+    assert verdicts.spearman([1, 2, 3], [3, 2, 1]) == pytest.approx(-1.0)
+    assert verdicts.spearman([1, 2, 3, 4], [1, 1, 2, 2]) == pytest.approx(0.894, abs=1e-3)
+    assert verdicts.spearman([1, 2], [5, 5]) is None
 
 
 def test_report_end_to_end(tmp_path):
@@ -228,7 +258,22 @@ def test_sweep_section_tells_time_scale_changes_from_concurrency_changes(tmp_pat
         ],
     }
     (tmp_path / "sweep.json").write_text(json.dumps(state))
-    text = " ".join(report._sweep_section(tmp_path, []))
+    text = " ".join(sweepinfo.lines(tmp_path, []))
     assert "lowered its concurrency 1 time(s)" in text and "now 1 job(s) at most" in text
     assert "changed a team size's time scale 1 time(s)" in text
     assert "0.85 for 1, 0.72 for 10" in text
+
+
+def test_sweep_section_gives_short_stalls_in_their_own_precision(tmp_path):
+    # 0.076 s of host stalls was reported as "0 s in all"
+    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    run = sweepfile.expand(spec)[0]
+    doc = result_doc(run.config, [90, 95], 100)
+    doc.update(deadlines_missed=3, host_stalls={"events": 2, "stalled_s": 0.076,
+                                                "deadlines_missed": 3})  # fmt: skip
+    write_run(tmp_path, run, doc)
+    text = " ".join(sweepinfo.lines(tmp_path, load_runs(tmp_path)))
+    assert "0.076 s in all" in text
+    assert [sweepinfo.seconds(x) for x in (0.0, 0.076, 1.234, 9.94, 12.6, 130.2)] == [
+        "0", "0.076", "1.2", "9.9", "13", "130",
+    ]  # fmt: skip

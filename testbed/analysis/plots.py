@@ -1,0 +1,187 @@
+"""Drawing the figures (matplotlib, Agg backend): each plot takes a table of
+testbed.analysis.tables and writes PNG and PDF files; nothing here reads a run.
+
+Fig. 2 draws each point's mean with its 95% interval as an error bar; the routing and
+impairment figures draw min-to-max bars over the point's runs. Fig. 4 scatters each plan
+generation's interval against its step, by cause, with the 20-step timer dashed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+from matplotlib.ticker import MaxNLocator
+
+from testbed.analysis.tables import ROUTING_METRICS
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+PLAN_TIMER_STEPS = 20
+
+
+def save(fig, stem: Path) -> list[Path]:
+    out = [stem.with_suffix(".png"), stem.with_suffix(".pdf")]
+    fig.savefig(out[0], dpi=120)
+    fig.savefig(out[1])
+    plt.close(fig)
+    return out
+
+
+def _fmt(x: float) -> str:
+    return f"{x:g}"
+
+
+def fig2_figure(rows: list[dict], laser: float, label: str):
+    """Fig. 2 for one laser range: each range's line of means, its 95% intervals where a
+    point has them, and each point's number of runs."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    bars = False
+    for comm in sorted({r["comm_range"] for r in rows if r["laser_range"] == laser}):
+        pts = sorted(
+            (r for r in rows if r["laser_range"] == laser and r["comm_range"] == comm),
+            key=lambda r: r["robots"],
+        )
+        bars |= _line(ax, pts, "robots", "mean", ("ci_low", "ci_high"), f"range {_fmt(comm)} m")
+    ax.set_xlabel("team size (robots)")
+    ax.set_ylabel("exploration steps (mean over robots)")
+    ax.set_title(f"Fig. 2({label}): laser range {_fmt(laser)} m")
+    _team_axis(ax)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    _note(ax, "bars: 95% interval of the mean; n: runs" if bars
+          else "n: runs; one run per point, so no interval")  # fmt: skip
+    fig.tight_layout()
+    return fig
+
+
+def plot_fig2(rows: list[dict], laser: float, stem: Path, label: str) -> list[Path]:
+    return save(fig2_figure(rows, laser, label), stem)
+
+
+def _team_axis(ax) -> None:
+    """Team sizes are whole robots: integer ticks only (no 1.25 or 1.5)."""
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+
+
+def _note(ax, text: str) -> None:
+    ax.text(0.99, 0.01, text, transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+            color="0.35")  # fmt: skip
+
+
+def _line(ax, pts: list[dict], x: str, y: str, bounds: tuple[str, str], label: str) -> bool:
+    """One line of `y` against `x` with error bars from bounds (low, high) where a point has
+    them and they span something, each point labelled with its n. The legend shows the line
+    alone: bars that are not drawn get no entry. True when a bar was drawn."""
+    xs, ys = [p[x] for p in pts], [p[y] for p in pts]
+    (line,) = ax.plot(xs, ys, marker="o", label=label)
+    lo, hi = bounds
+    barred = [p for p in pts if p[lo] is not None and p[hi] is not None and p[hi] > p[lo]]
+    if barred:
+        err = [[p[y] - p[lo] for p in barred], [p[hi] - p[y] for p in barred]]
+        ax.errorbar([p[x] for p in barred], [p[y] for p in barred], yerr=err, fmt="none",
+                    ecolor=line.get_color(), capsize=3)  # fmt: skip
+    ax.margins(x=0.08, y=0.12)  # room for the n labels inside the frame
+    for p in pts:
+        ax.annotate(f"n={p['n']}", (p[x], p[y]), textcoords="offset points", xytext=(4, 4),
+                    fontsize=7, color=line.get_color())  # fmt: skip
+    return bool(barred)
+
+
+def plot_fig4(rows: list[dict], stem: Path) -> list[Path]:
+    teams = sorted({r["robots"] for r in rows})
+    fig, axes = plt.subplots(len(teams), 1, figsize=(7, 2.2 * len(teams)), squeeze=False)
+    colors = {"timer": "tab:blue", "request": "tab:red"}
+    for ax, n, letter in zip(axes[:, 0], teams, "abcdefgh", strict=False):
+        pts = [r for r in rows if r["robots"] == n]
+        for cause in sorted({p["cause"] for p in pts}, key=str):
+            sel = [p for p in pts if p["cause"] == cause]
+            ax.scatter(
+                [p["step"] for p in sel],
+                [p["interval"] for p in sel],
+                s=10,
+                color=colors.get(cause, "tab:gray"),
+                label=str(cause),
+            )
+        ax.axhline(
+            PLAN_TIMER_STEPS, color="k", ls="--", lw=1, label=f"{PLAN_TIMER_STEPS}-step timer"
+        )
+        ax.set_ylabel("interval (steps)")
+        run = pts[0]["run"] if pts else ""
+        ax.set_title(f"Fig. 4({letter}): {n} robot{'s' if n > 1 else ''} ({run})", fontsize=9)
+        ax.legend(fontsize=7, loc="upper right")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("step of the plan generation")
+    fig.tight_layout()
+    return save(fig, stem)
+
+
+def routing_figure(rows: list[dict]):
+    fig, axes = plt.subplots(2, 2, figsize=(9, 6.5))
+    for ax, (key, label) in zip(axes.flat, ROUTING_METRICS, strict=True):
+        for comm in sorted({r["comm_range"] for r in rows}):
+            pts = sorted(
+                (r for r in rows if r["comm_range"] == comm and r[f"{key}_mean"] is not None),
+                key=lambda r: r["robots"],
+            )
+            if not pts:
+                continue
+            _spread_line(ax, pts, "robots", key, f"range {_fmt(comm)} m")
+        ax.set_xlabel("team size (robots)")
+        ax.set_ylabel(label, fontsize=8)
+        _team_axis(ax)
+        ax.grid(alpha=0.3)
+        _legend_or_no_data(ax)
+    fig.suptitle("Routing metrics from the captures (Section 2.4); bars: min to max over "
+                 "the runs; n: runs")  # fmt: skip
+    fig.tight_layout()
+    return fig
+
+
+def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
+    return save(routing_figure(rows), stem)
+
+
+def _legend_or_no_data(ax) -> None:
+    """A panel's legend, or "no data" on it when no run measured its metric (e.g. no
+    routing packets to count): an empty legend says nothing and matplotlib warns."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
+
+
+def _spread_line(ax, pts: list[dict], x: str, key: str, label: str) -> None:
+    """One line of means against `x`, with error bars from each point's min to max."""
+    _line(ax, pts, x, f"{key}_mean", (f"{key}_min", f"{key}_max"), label)
+
+
+def plot_impairments(rows: list[dict], stem: Path) -> list[Path]:
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
+    for ax, key, label in (
+        (axes[0], "steps", "exploration steps"),
+        (axes[1], "pdf", "packet delivery fraction"),
+    ):
+        for robots, comm, delay in sorted(
+            {(r["robots"], r["comm_range"], r["delay_ms"]) for r in rows}
+        ):
+            pts = sorted(
+                (
+                    r
+                    for r in rows
+                    if (r["robots"], r["comm_range"], r["delay_ms"]) == (robots, comm, delay)
+                    and r[f"{key}_mean"] is not None
+                ),
+                key=lambda r: r["loss_pct"],
+            )
+            if not pts:
+                continue
+            label = f"{robots} robots, {_fmt(comm)} m, delay {_fmt(delay)} ms"
+            _spread_line(ax, pts, "loss_pct", key, label)
+        ax.set_xlabel("link loss (%)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        _legend_or_no_data(ax)
+    fig.tight_layout()
+    return save(fig, stem)

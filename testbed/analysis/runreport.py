@@ -1,0 +1,135 @@
+"""`testbed report RUN_DIR`: one run's metrics, without a sweep around it.
+
+Theory of operation. A run directory (docs/run-results.md) is read once
+(testbed.analysis.runs.load_run); its captures, if it has any, become routing.json
+(testbed.analysis.pcapmetrics.run_metrics: the cache a sweep's report would write too, now
+with delays in emulated time and what each number means), and `summary` says in a page of
+Markdown what the run did: its outcome, exploration steps under both of their names (the
+step the last robot finished at, and the mean of the robots' finishing steps, which is what
+Fig. 2 plots), how well the host kept the time scale, and the routing metrics in wall-clock
+and emulated time, with this run's own numbers in the two explanations a reader needs (PDF
+against segment delivery, mean delay against median). The page goes to RUN_DIR/summary.md.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from testbed.analysis import pcapmetrics
+from testbed.analysis.runs import RunRecord
+from testbed.analysis.sweepinfo import seconds
+
+SUMMARY_NAME = "summary.md"
+
+
+def _num(x, spec: str) -> str:
+    return "–" if x is None else format(x, spec)
+
+
+def _outcome(run: RunRecord) -> list[str]:
+    c = run.config
+    mean = run.exploration_steps
+    lines = [
+        f"Status **{run.status}**" + (f": {run.status_detail}" if run.status_detail else "") + ".",
+        f"{c.robots} robot(s), range {c.comm_range:g} m, laser {c.laser_range:g} m, routing "
+        f"{c.routing}, map {c.map_name}, loss {c.loss_pct:g} %, delay {c.delay_ms:g} ms, "
+        f"seed {c.seed}.",
+        f"Steps run (when the last robot finished): {_num(run.steps, 'd')}; exploration "
+        f"steps (mean of the robots' finishing steps, as Fig. 2 plots): {_num(mean, '.1f')}; "
+        f"coverage at the end: {_num(run.coverage_final, '.1%')}.",
+    ]
+    return lines
+
+
+def _timing(run: RunRecord) -> list[str]:
+    ts, got = run.time_scale_requested or run.config.time_scale, run.time_scale_achieved
+    line = f"Time scale requested {_num(ts, 'g')}, achieved {_num(got, 'g')}"
+    line += f"; step deadlines missed: {run.deadlines_missed} ({run.deadline_miss_fraction:.1%})"
+    stalls = run.host_stalls
+    if stalls.events:
+        line += (f", {stalls.deadlines_missed} of them in {stalls.events} host stall(s) "
+                 f"({seconds(stalls.stalled_s)} s in all)")  # fmt: skip
+    return [line + "."]
+
+
+def _routing_table(m: dict) -> list[str]:
+    emu = m.get("emulated") or {}
+    scale = emu.get("time_scale")
+    rows = [
+        "| metric | wall clock | emulated"
+        + (f" (x {scale:g})" if scale else " (time scale unknown)")
+        + " |",
+        "|---|---|---|",
+        f"| routing overhead (control / all packets) | {_num(m.get('overhead_packets'), '.3f')}"
+        " | same |",
+        f"| packet delivery fraction (bytes, retransmissions included) | "
+        f"{_num(m.get('pdf'), '.3f')} | same |",
+        f"| segment delivery (unique segments) | {_num(m.get('segment_delivery'), '.3f')} | same |",
+    ]
+    for key, name in (("mean", "mean"), ("median", "median"), ("p95", "95th percentile")):
+        k = f"delay_ms_{key}"
+        rows.append(f"| delay, {name} (ms) | {_num(m.get(k), '.3f')} | {_num(emu.get(k), '.3f')} |")
+    bps = m.get("throughput_bps")
+    rows.append(
+        f"| throughput (kbit/s) | {_num(bps and bps / 1000, '.2f')} | "
+        f"{_num(emu.get('throughput_bps') and emu['throughput_bps'] / 1000, '.2f')} |"
+    )
+    return rows
+
+
+def _explanations(m: dict) -> list[str]:
+    """The two explanations, with this run's numbers."""
+    out = []
+    pdf, seg = m.get("pdf"), m.get("segment_delivery")
+    if pdf is not None and seg is not None:
+        out.append(
+            f"PDF {pdf:.3f} against segment delivery {seg:.3f}: of the "
+            f"{m.get('tcp_segments_sent')} TCP segments the robots sent, "
+            f"{m.get('tcp_segments_delivered')} reached their destination at least once, in "
+            f"{m.get('tcp_transmissions')} transmissions (retransmissions included); PDF counts "
+            "every transmission's bytes, so lost or repeated transmissions lower it even when "
+            "every segment arrived in the end."
+        )
+    mean, median = m.get("delay_ms_mean"), m.get("delay_ms_median")
+    if mean is not None and median is not None:
+        out.append(
+            f"Mean delay {mean:.3f} ms against median {median:.3f} ms (wall clock): most "
+            "segments cross a link that is up at once; a few wait for a route discovery or a "
+            "TCP retransmission timeout, and those waits pull the mean far above the median "
+            f"(95th percentile {_num(m.get('delay_ms_p95'), '.3f')} ms)."
+        )
+    return out
+
+
+def _routing(m: dict | None) -> list[str]:
+    if not m:
+        return ["No packet captures in this run (`testbed run --capture`): no routing metrics."]
+    out = _routing_table(m)
+    for line in _explanations(m):
+        out += ["", line]
+    cmp = m.get("daemon_comparison")
+    if cmp and cmp.get("relative_difference") is not None:
+        out += [
+            "",
+            f"AODV control packets in the captures: {cmp['pcap_control_tx_packets']}; the "
+            f"daemons counted {cmp['daemon_tx_packets']} sent "
+            f"(difference {cmp['relative_difference']:.2%}).",
+        ]
+    return out + ["", "All numbers and what each means: `routing.json` (its `about`)."]
+
+
+def summary(run: RunRecord, metrics: dict | None) -> str:
+    out = [f"# Run {run.run_id}", ""]
+    for line in _outcome(run) + _timing(run):
+        out += [line, ""]
+    out += ["## Routing (from the captures)", ""] + _routing(metrics)
+    return "\n".join(out) + "\n"
+
+
+def write(run: RunRecord) -> tuple[Path, dict | None]:
+    """routing.json (when the run has captures) and summary.md; returns the summary's path
+    and the metrics."""
+    metrics = pcapmetrics.run_metrics(run.path, run=run)
+    path = run.path / SUMMARY_NAME
+    path.write_text(summary(run, metrics))
+    return path, metrics

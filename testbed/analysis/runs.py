@@ -1,0 +1,296 @@
+"""The analysis's one reader of run results: a finished run's result.json as frozen values.
+
+Theory of operation. Every module of testbed.analysis that needs what a run did (figures,
+verdicts, the ablation, the protocols comparison, the causality check, the routing metrics)
+takes a `RunRecord`, made here once per run by `load_run`, instead of reading result.json
+and picking keys out of nested dicts itself. The contract is docs/run-results.md; this
+module is its reading side:
+
+- A key the analysis cannot do without (the status, the team size and both ranges) missing
+  or of the wrong type makes the file malformed: `load_run` raises `ResultError`, one line
+  naming the file and the key. `load_runs` (a sweep directory) logs that line and leaves the
+  run out, as a sweep's report counts what it could read.
+- Keys that results written by older versions lack get their defaults here and only here:
+  `routing` aodv, `map` none (the empty terrain), `loss_pct` and `delay_ms` 0,
+  `coordination` ours and `start` corner (before those existed, they were all there was).
+- Values keep the type JSON gave them (an int stays an int), so the numbers written from
+  them are those the file holds.
+
+Which runs count (`RunRecord.usable`): status `complete` or `step_cap`; a run that hit the
+step cap counts its unfinished robots at the final step (`exploration_steps`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import statistics
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+log = logging.getLogger(__name__)
+
+RESULT_NAME = "result.json"
+USABLE = ("complete", "step_cap")
+DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
+DEFAULT_ROUTING = "aodv"
+_EMPTY: Mapping = MappingProxyType({})
+
+
+class ResultError(ValueError):
+    """A result.json the analysis cannot read; str() is one line naming the file."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One plan generation of a robot: the step it happened at and why (start, timer,
+    request; None when the record does not say)."""
+
+    step: int
+    cause: str | None
+
+
+@dataclass(frozen=True)
+class RobotRecord:
+    """One robot's entry in result.json's `robots`."""
+
+    name: str
+    finish_step: int | None
+    crashed: bool
+    plans: tuple[Plan, ...]
+    sent: Mapping[str, int]  # messages sent, by kind
+    received: Mapping[str, int]  # messages received, by kind
+    path_length_m: float | None
+
+    @property
+    def number(self) -> int:
+        """K of robot "rK" (0 for a name that is not one)."""
+        try:
+            return int(self.name.lstrip("r"))
+        except ValueError:
+            return 0
+
+
+@dataclass(frozen=True)
+class ConfigRecord:
+    """result.json's `config`: what the run was asked to do, defaults applied."""
+
+    robots: int
+    comm_range: float
+    laser_range: float
+    time_scale: float | None
+    routing: str
+    map: str | None
+    loss_pct: float
+    delay_ms: float
+    coordination: str
+    start: str
+    seed: int | None = None
+    capture: bool = False
+    max_steps: int | None = None
+    extra: Mapping = field(default_factory=lambda: _EMPTY)
+
+    @property
+    def map_name(self) -> str:
+        """The map's file stem, or "empty" for the empty terrain."""
+        return "empty" if not self.map else Path(self.map).stem
+
+
+@dataclass(frozen=True)
+class HostStalls:
+    """Stalls of the whole machine during the run (testbed/stalls.py)."""
+
+    events: int = 0
+    stalled_s: float = 0.0
+    deadlines_missed: int = 0
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """A finished run: its directory and what its result.json says."""
+
+    run_id: str
+    path: Path
+    config: ConfigRecord
+    status: str
+    status_detail: str
+    steps: int | None  # steps run: when the last robot finished, or the cap
+    coverage_final: float | None
+    time_scale_requested: float | None
+    time_scale_achieved: float | None
+    deadlines_missed: int
+    deadline_miss_fraction: float
+    deadline_miss_fraction_outside_stalls: float
+    host_stalls: HostStalls
+    wall_time_s: float | None
+    robots: tuple[RobotRecord, ...]  # in the file's order
+
+    @property
+    def usable(self) -> bool:
+        return self.status in USABLE
+
+    @property
+    def unimpaired(self) -> bool:
+        return not self.config.loss_pct and not self.config.delay_ms
+
+    @property
+    def variant(self) -> tuple[str, str]:
+        """(coordination, start placement)."""
+        return self.config.coordination, self.config.start
+
+    @property
+    def network(self) -> tuple[str, str]:
+        """(routing, map name)."""
+        return self.config.routing, self.config.map_name
+
+    @property
+    def exploration_steps(self) -> float | None:
+        """Mean over robots of finish_step; a robot that never finished counts the final
+        step. None without robots, or with an unfinished robot and no final step."""
+        if not self.robots:
+            return None
+        values = [r.finish_step if r.finish_step is not None else self.steps for r in self.robots]
+        if any(v is None for v in values):
+            return None
+        return statistics.fmean(values)
+
+    def robots_by_number(self) -> list[RobotRecord]:
+        return sorted(self.robots, key=lambda r: r.number)
+
+
+# ---------------------------------------------------------------- reading
+
+
+def _get(doc: Mapping, key: str, kinds: tuple[type, ...], default=None, required=False):
+    """doc[key] checked against `kinds` (bool is not a number); default when absent or null."""
+    value = doc.get(key)
+    if value is None:
+        if required:
+            raise ResultError(f"no {key!r}")
+        return default
+    number = kinds in ((int,), (int, float), (float, int))
+    if not isinstance(value, kinds) or (number and isinstance(value, bool)):
+        want = " or ".join(k.__name__ for k in kinds)
+        raise ResultError(f"{key!r} is {type(value).__name__}, not {want}")
+    return value
+
+
+_NUM = (int, float)
+
+
+def _mapping(doc: Mapping, key: str) -> Mapping:
+    value = doc.get(key)
+    if value is None:
+        return _EMPTY
+    if not isinstance(value, Mapping):
+        raise ResultError(f"{key!r} is {type(value).__name__}, not an object")
+    return MappingProxyType(dict(value))
+
+
+def _config(doc: Mapping) -> ConfigRecord:
+    c = _mapping(doc, "config")
+    if not c:
+        raise ResultError("no 'config'")
+    extra = _mapping(c, "extra")
+    return ConfigRecord(
+        robots=_get(c, "robots", (int,), required=True),
+        comm_range=_get(c, "comm_range", _NUM, required=True),
+        laser_range=_get(c, "laser_range", _NUM, required=True),
+        time_scale=_get(c, "time_scale", _NUM),
+        routing=_get(c, "routing", (str,), DEFAULT_ROUTING),
+        map=_get(c, "map", (str,)),
+        loss_pct=_get(c, "loss_pct", _NUM, 0.0),
+        delay_ms=_get(c, "delay_ms", _NUM, 0.0),
+        coordination=c.get("coordination", extra.get("coordination", DEFAULT_VARIANT[0])),
+        start=c.get("start", extra.get("start", DEFAULT_VARIANT[1])),
+        seed=_get(c, "seed", (int,)),
+        capture=bool(c.get("capture")),
+        max_steps=_get(c, "max_steps", (int,)),
+        extra=extra,
+    )
+
+
+def _plans(doc: Mapping, robot: str) -> tuple[Plan, ...]:
+    plans = doc.get("plans") or []
+    if not isinstance(plans, list):
+        raise ResultError(f"robot {robot}: 'plans' is not a list")
+    try:
+        return tuple(Plan(int(p["step"]), p.get("cause")) for p in plans)
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise ResultError(f"robot {robot}: a plan without a step ({e})") from None
+
+
+def _robot(name: str, doc) -> RobotRecord:
+    if not isinstance(doc, Mapping):
+        raise ResultError(f"robot {name} is not an object")
+    messages = _mapping(doc, "messages")
+    return RobotRecord(
+        name=name,
+        finish_step=_get(doc, "finish_step", _NUM),
+        crashed=bool(doc.get("crashed")),
+        plans=_plans(doc, name),
+        sent=_mapping(messages, "sent"),
+        received=_mapping(messages, "received"),
+        path_length_m=_get(doc, "path_length_m", _NUM),
+    )
+
+
+def parse_result(doc, run_dir: Path) -> RunRecord:
+    """The RunRecord of a result.json's contents; ResultError when malformed."""
+    if not isinstance(doc, Mapping):
+        raise ResultError("not a JSON object")
+    stalls = _mapping(doc, "host_stalls")
+    return RunRecord(
+        run_id=run_dir.name,
+        path=run_dir,
+        config=_config(doc),
+        status=_get(doc, "status", (str,), required=True),
+        status_detail=_get(doc, "status_detail", (str,), ""),
+        steps=_get(doc, "steps", _NUM),
+        coverage_final=_get(doc, "coverage_final", _NUM),
+        time_scale_requested=_get(doc, "time_scale_requested", _NUM),
+        time_scale_achieved=_get(doc, "time_scale_achieved", _NUM),
+        deadlines_missed=_get(doc, "deadlines_missed", (int,), 0),
+        deadline_miss_fraction=_get(doc, "deadline_miss_fraction", _NUM, 0.0),
+        deadline_miss_fraction_outside_stalls=_get(
+            doc, "deadline_miss_fraction_outside_stalls", _NUM, 0.0
+        ),
+        host_stalls=HostStalls(
+            events=_get(stalls, "events", (int,), 0),
+            stalled_s=_get(stalls, "stalled_s", _NUM, 0.0),
+            deadlines_missed=_get(stalls, "deadlines_missed", (int,), 0),
+        ),
+        wall_time_s=_get(doc, "wall_time_s", _NUM),
+        robots=tuple(_robot(k, v) for k, v in _mapping(doc, "robots").items()),
+    )
+
+
+def load_run(run_dir: str | Path) -> RunRecord:
+    """The finished run in `run_dir`; ResultError (one line, naming the file) when its
+    result.json is missing, not JSON or lacks what the analysis needs."""
+    run_dir = Path(run_dir)
+    path = run_dir / RESULT_NAME
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ResultError(f"{path}: no such file (not a finished run)") from None
+    except (OSError, ValueError) as e:
+        raise ResultError(f"{path}: unreadable ({e})") from None
+    try:
+        return parse_result(doc, run_dir)
+    except ResultError as e:
+        raise ResultError(f"{path}: {e}") from None
+
+
+def load_runs(sweep_dir: str | Path) -> list[RunRecord]:
+    """Every run of a sweep directory with a readable result.json, sorted by run id; the
+    others are logged and left out."""
+    runs = []
+    for res in sorted(Path(sweep_dir).glob(f"runs/*/{RESULT_NAME}")):
+        try:
+            runs.append(load_run(res.parent))
+        except ResultError as e:
+            log.warning("skipping %s", e)
+    return runs

@@ -1,0 +1,359 @@
+"""The paper's claims, decided on the tables behind the figures.
+
+Theory of operation. Each claim of the paper's Section 5 is a pure function of the tables
+testbed.analysis.figures.make_all returns (`verdict_*`) that returns a `Verdict`: holds /
+partly / does not hold / not enough data, with the numbers it was decided on.
+
+How each claim is decided (a *group* is one laser range and communication range, a *point*
+one team size of a group; steps are the mean over runs of the exploration steps):
+
+- 5.1 team work beats one robot: in a group with a one-robot point, every larger team needs
+  fewer steps than one robot.
+- 5.1 steps fall then rise with team size: in a group with at least three team sizes, the
+  fewest steps are at a team size strictly between the smallest and the largest, and the rise
+  from there to the largest team exceeds the run-to-run noise: the two points' 95% confidence
+  intervals (testbed.analysis.stats, Student's t) do not overlap.
+- 5.1 a smaller range needs more steps: for each team of two or more and laser range, the
+  smallest communication range needs more steps than the largest, beyond the noise in the
+  same sense.
+- 5.1 a shorter laser needs more steps at the same steps-to-team ratio: for each range and
+  team, the shorter laser needs more steps, and the ratio of the two lasers' steps is the same
+  across team sizes (coefficient of variation at most RATIO_CV_MAX).
+- 5.2 a single robot plans on the timer: at least TIMER_SHARE_MIN of a lone robot's plan
+  generations (after its first) have cause "timer".
+- 5.2 on-request plan generations grow with team size: the Spearman rank correlation between
+  team size and the mean number of on-request generations per run is at least RHO_MIN.
+
+A claim holds when it holds in every group that has the data, partly when in some, and does
+not hold when in none. The two claims tested against the run-to-run noise (fall then rise, a
+smaller range) cannot be decided in a group where a point has one run: its noise is unknown,
+so neither a rise nor its absence is shown. Such a group counts as undecided, and a claim
+with no decided group is "too few runs to decide", not "does not hold". The claims decided
+on the means alone say so in their evidence when a point rests on one run.
+"""
+
+from __future__ import annotations
+
+import statistics
+from dataclasses import dataclass, field
+
+from testbed.analysis import ablation, stats
+
+HOLDS, PARTLY, FAILS, NO_DATA = "holds", "partly holds", "does not hold", "not enough data"
+TOO_FEW = "too few runs to decide"
+MIN_RUNS = 2  # runs a point needs before its noise (and so a noise-aware test) is known
+RATIO_CV_MAX = 0.15
+TIMER_SHARE_MIN = 0.95
+RHO_MIN = 0.8
+
+
+RULES = (
+    "team work beats one robot: in a group with a one-robot point, every larger team needs "
+    "fewer steps than one robot;",
+    "fall then rise: in a group with three or more team sizes, the fewest steps are at a team "
+    "size strictly between the smallest and the largest, and the 95% intervals of that point "
+    "and of the largest team do not overlap (the rise exceeds the run-to-run spread);",
+    "smaller range: for each team of two or more, the smallest range needs more steps than the "
+    "largest and their 95% intervals do not overlap;",
+    f"intervals: {stats.METHOD}, over a point's runs; the runs a point would need to resolve a "
+    "difference d with run-to-run standard deviation s (5% significance, 80% power): "
+    "2 ((1.96 + 0.84) s / d)^2;",
+    "shorter laser: the shorter laser needs more steps at every (range, team), and the ratio of "
+    f"the two lasers' steps varies across team sizes by at most {RATIO_CV_MAX:.0%} (CV);",
+    f"timer: at least {TIMER_SHARE_MIN:.0%} of a lone robot's plan generations after its first "
+    "are on the timer;",
+    "on request: the mean number of on-request plan generations per run rises with team size "
+    f"(Spearman rank correlation at least {RHO_MIN});",
+    "a claim holds when it holds in every group with the data, partly when in some, and does "
+    "not hold when in none;",
+    f"a noise-aware claim (fall then rise, smaller range) is undecided in a group where a point "
+    f"has fewer than {MIN_RUNS} runs (its noise is unknown); with no decided group it is "
+    f"'{TOO_FEW}'.",
+)
+
+
+@dataclass
+class Verdict:
+    section: str
+    claim: str
+    verdict: str
+    evidence: list[str] = field(default_factory=list)
+
+
+def _f(x: float) -> str:
+    return f"{x:g}"
+
+
+def _overall(results: list[bool | None]) -> str:
+    """The claim over its groups' results (None: undecided, too few runs)."""
+    if not results:
+        return NO_DATA
+    decided = [r for r in results if r is not None]
+    if not decided:
+        return TOO_FEW
+    if all(decided):
+        return HOLDS
+    return PARTLY if any(decided) else FAILS
+
+
+def _few(rows) -> list[int]:
+    """The team sizes among fig2 `rows` whose point has fewer than MIN_RUNS runs."""
+    return sorted(r["robots"] for r in rows if r["n"] < MIN_RUNS)
+
+
+def _yes_no(ok: bool | None) -> str:
+    return "too few runs" if ok is None else "yes" if ok else "no"
+
+
+def _single_run_note(rows: list[dict]) -> list[str]:
+    """For the claims decided on means alone: say when they compare single runs."""
+    few = [r for r in rows if r["n"] < MIN_RUNS]
+    if not few:
+        return []
+    return [
+        f"{len(few)} of {len(rows)} points rest on one run: this compares single runs, whose "
+        "run-to-run noise is unknown"
+    ]
+
+
+def _points(fig2: list[dict]) -> dict[tuple, dict[int, float]]:
+    """(laser, range) -> {team size: mean steps}."""
+    out: dict[tuple, dict[int, float]] = {}
+    for r in fig2:
+        out.setdefault((r["laser_range"], r["comm_range"]), {})[r["robots"]] = r["mean"]
+    return out
+
+
+def _rows(fig2: list[dict]) -> dict[tuple, dict[int, dict]]:
+    """(laser, range) -> {team size: fig2 row} (mean, interval, spread)."""
+    out: dict[tuple, dict[int, dict]] = {}
+    for r in fig2:
+        out.setdefault((r["laser_range"], r["comm_range"]), {})[r["robots"]] = r
+    return out
+
+
+def _group_name(laser, comm) -> str:
+    return f"laser {_f(laser)} m, range {_f(comm)} m"
+
+
+def verdict_team_beats_one(fig2: list[dict]) -> Verdict:
+    v = Verdict(
+        "5.1", "Team work beats one robot: every team needs fewer steps than one robot", NO_DATA
+    )
+    results = []
+    for (laser, comm), pts in sorted(_points(fig2).items()):
+        if 1 not in pts or len(pts) < 2:
+            continue
+        teams = {n: s for n, s in pts.items() if n > 1}
+        ok = all(s < pts[1] for s in teams.values())
+        results.append(ok)
+        worst = max(teams, key=teams.get)
+        v.evidence.append(
+            f"{_group_name(laser, comm)}: 1 robot {pts[1]:.0f} steps; teams of "
+            f"{min(teams)}-{max(teams)}: {min(teams.values()):.0f}-{max(teams.values()):.0f} "
+            f"(most steps: {worst} robots) -> {'yes' if ok else 'no'}"
+        )
+    v.verdict = _overall(results)
+    if results:
+        v.evidence += _single_run_note(fig2)
+    return v
+
+
+def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
+    """Noise-aware: the rise from the fewest steps to the largest team must exceed the spread
+    of the runs (their 95% intervals do not overlap; testbed.analysis.ablation.rise)."""
+    v = Verdict("5.1", "Exploration steps fall, then rise again as the team grows", NO_DATA)
+    results = []
+    for (laser, comm), pts in sorted(_rows(fig2).items()):
+        if len(pts) < 3:
+            continue
+        few = _few(pts.values())
+        ok, why = ablation.rise(pts)
+        note = ""
+        if few:
+            ok = None
+            why = f"one run at {', '.join(map(str, few))} robots, so the noise is unknown"
+        elif min(pts, key=lambda n: pts[n]["mean"]) == max(pts):
+            note = " (the sweep may stop short of the turning point)"
+        results.append(ok)
+        v.evidence.append(f"{_group_name(laser, comm)}: {why} -> {_yes_no(ok)}{note}")
+    v.verdict = _overall(results)
+    return v
+
+
+def verdict_smaller_range(fig2: list[dict]) -> Verdict:
+    """Noise-aware: for each laser and team of two or more, the smallest range needs more
+    steps than the largest and their 95% intervals do not overlap."""
+    v = Verdict("5.1", "A smaller communication range needs more steps", NO_DATA)
+    by: dict[tuple, dict[float, dict]] = {}
+    for r in fig2:
+        if r["robots"] >= 2:
+            by.setdefault((r["laser_range"], r["robots"]), {})[r["comm_range"]] = r
+    results, within = [], []
+    for (laser, robots), pts in sorted(by.items()):
+        if len(pts) < 2:
+            continue
+        small, large = pts[min(pts)], pts[max(pts)]
+        a, b = ablation._ci(small), ablation._ci(large)
+        ok = small["mean"] > large["mean"] and stats.separated(a, b)
+        if _few([small, large]):
+            ok = None
+        results.append(ok)
+        if small["mean"] > large["mean"] and not ok and a is not None and b is not None:
+            within.append(ablation.runs_needed(large, small))
+        v.evidence.append(
+            f"laser {_f(laser)} m, {robots} robots: range {_f(min(pts))} m "
+            f"{small['mean']:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
+            f"{large['mean']:.0f} {ablation._interval(b)} -> {_yes_no(ok)}"
+        )
+    v.verdict = _overall(results)
+    decided = [r for r in results if r is not None]
+    if decided:
+        head = (
+            f"smaller range needs more steps, beyond the noise, in {sum(decided)} of "
+            f"{len(decided)} cases"
+        )
+        if len(decided) < len(results):
+            head += f" ({len(results) - len(decided)} more undecided: one run at a point)"
+        if within:
+            need = sorted(n for n in within if n)
+            if need:
+                head += (f"; {len(within)} more in the same direction but within the noise "
+                         f"(resolving them would take {need[len(need) // 2]} runs per point, "
+                         "median)")  # fmt: skip
+        v.evidence.insert(0, head)
+    return v
+
+
+def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
+    v = Verdict(
+        "5.1",
+        "A shorter laser needs more steps, at the same steps-to-team ratio",
+        NO_DATA,
+    )
+    lasers = sorted({r["laser_range"] for r in fig2})
+    if len(lasers) < 2:
+        return v
+    short, long_ = lasers[0], lasers[-1]
+    by: dict[tuple, dict[float, float]] = {}
+    for r in fig2:
+        by.setdefault((r["comm_range"], r["robots"]), {})[r["laser_range"]] = r["mean"]
+    more, ratios_by_range = [], {}
+    for (comm, _robots), pts in sorted(by.items()):
+        if short in pts and long_ in pts:
+            more.append(pts[short] > pts[long_])
+            ratios_by_range.setdefault(comm, []).append(pts[short] / pts[long_])
+    if not more:
+        return v
+    same_ratio = []
+    v.evidence.append(
+        f"laser {_f(short)} m needs more steps than laser {_f(long_)} m in {sum(more)} of "
+        f"{len(more)} (range, team) points"
+    )
+    for comm, ratios in sorted(ratios_by_range.items()):
+        if len(ratios) < 2:
+            continue
+        mean = statistics.fmean(ratios)
+        cv = statistics.pstdev(ratios) / mean
+        same_ratio.append(cv <= RATIO_CV_MAX)
+        v.evidence.append(
+            f"range {_f(comm)} m: steps ratio {_f(short)} m / {_f(long_)} m = "
+            f"{min(ratios):.2f}-{max(ratios):.2f} over team sizes (mean {mean:.2f}, "
+            f"CV {cv:.2f}) -> {'same' if cv <= RATIO_CV_MAX else 'varies'}"
+        )
+    parts = [_overall(more), _overall(same_ratio) if same_ratio else NO_DATA]
+    if parts == [HOLDS, HOLDS]:
+        v.verdict = HOLDS
+    elif parts[0] == FAILS:
+        v.verdict = FAILS
+    else:
+        v.verdict = PARTLY
+        v.evidence.append(f"more steps: {parts[0]}; same ratio across team sizes: {parts[1]}")
+    v.evidence += _single_run_note(fig2)
+    return v
+
+
+def verdict_single_robot_timer(plans: list[dict]) -> Verdict:
+    v = Verdict("5.2", "A single robot generates its plans on the timer", NO_DATA)
+    alone = [p for p in plans if p["robots"] == 1]
+    timer = sum(p.get("timer", 0) for p in alone)
+    total = sum(p.get("timer", 0) + p.get("request", 0) for p in alone)
+    if not total:
+        return v
+    share = timer / total
+    v.verdict = HOLDS if share >= TIMER_SHARE_MIN else FAILS
+    v.evidence.append(
+        f"{len(alone)} one-robot runs: {timer} of {total} plan generations after the first "
+        f"were on the timer ({share:.0%}; needed {TIMER_SHARE_MIN:.0%})"
+    )
+    return v
+
+
+def spearman(xs: list[float], ys: list[float]) -> float | None:
+    """Spearman's rank correlation (average ranks for ties); None when undefined."""
+
+    def ranks(v):
+        order = sorted(range(len(v)), key=lambda i: v[i])
+        r = [0.0] * len(v)
+        i = 0
+        while i < len(order):
+            j = i
+            while j + 1 < len(order) and v[order[j + 1]] == v[order[i]]:
+                j += 1
+            for k in range(i, j + 1):
+                r[order[k]] = (i + j) / 2
+            i = j + 1
+        return r
+
+    if len(xs) < 2:
+        return None
+    rx, ry = ranks(xs), ranks(ys)
+    mx, my = statistics.fmean(rx), statistics.fmean(ry)
+    sx = sum((a - mx) ** 2 for a in rx) ** 0.5
+    sy = sum((b - my) ** 2 for b in ry) ** 0.5
+    if not sx or not sy:
+        return None
+    return sum((a - mx) * (b - my) for a, b in zip(rx, ry, strict=True)) / (sx * sy)
+
+
+def verdict_requests_grow(plans: list[dict]) -> Verdict:
+    v = Verdict("5.2", "On-request plan generations grow with team size", NO_DATA)
+    by_team: dict[int, list[int]] = {}
+    for p in plans:
+        by_team.setdefault(p["robots"], []).append(p.get("request", 0))
+    if len(by_team) < 2:
+        return v
+    teams = sorted(by_team)
+    means = [statistics.fmean(by_team[n]) for n in teams]
+    rho = spearman([float(n) for n in teams], means)
+    grows = means[-1] > means[0]
+    if rho is None:
+        v.verdict = FAILS
+    elif rho >= RHO_MIN and grows:
+        v.verdict = HOLDS
+    elif rho > 0 and grows:
+        v.verdict = PARTLY
+    else:
+        v.verdict = FAILS
+    v.evidence.append(
+        "on-request generations per run (all robots), by team size: "
+        + ", ".join(f"{n}: {m:.1f}" for n, m in zip(teams, means, strict=True))
+    )
+    v.evidence.append(
+        f"Spearman rank correlation {rho:.2f} (needed {RHO_MIN})"
+        if rho is not None
+        else "rank correlation undefined (no variation)"
+    )
+    return v
+
+
+def verdicts(tables: dict) -> list[Verdict]:
+    fig2, plans = tables["fig2"], tables["plans"]
+    return [
+        verdict_team_beats_one(fig2),
+        verdict_fall_then_rise(fig2),
+        verdict_smaller_range(fig2),
+        verdict_shorter_laser(fig2),
+        verdict_single_robot_timer(plans),
+        verdict_requests_grow(plans),
+    ]
