@@ -131,12 +131,12 @@ class StepClock:
     def summary(self) -> ClockSummary:
         """What result.json says of the clock. A loop that did not end normally (interrupted,
         failed) has no wall time and no achieved scale."""
-        wall = 0.0 if self.stopped_at is None else self.stopped_at - self.t0
+        stopped = self.stopped_at is not None
         return ClockSummary(
             steps=self.step,
             robots=self.robots,
-            loop_wall_s=wall,
-            time_scale_achieved=self.step * STEP_S / wall if wall > 0 else 0.0,
+            loop_wall_s=self.stopped_at - self.t0 if stopped else 0.0,
+            time_scale_achieved=self.achieved_scale(self.stopped_at) if stopped else 0.0,
             missed_world=self.missed_world,
             missed_robots=self.missed_robots,
             stalls=self.stalls.summary(),
