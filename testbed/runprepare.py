@@ -5,12 +5,12 @@ positions, lasers), each robot's timer phase (seeded, as robots booted one by on
 start theirs), the display's position and the description of the testbed network (one
 namespace per robot plus one for the display, robot N+1, which does not explore). Then it
 checks everything that can be checked before anything exists: the network's description,
-root and tools (topology.network.preflight), the kernel features the impairments need, the
-live view's address, and the output directory (testbed.runfiles: a directory holding a run
-is refused unless `replace`). Each is a UsageError (one line, exit 2) that leaves nothing
-behind. Only then it makes the directory and writes config.json, the first file of the
-run-results contract (docs/run-results.md), and returns a frozen `PreparedRun`, which the
-next stage (testbed.run.Run) takes.
+root and tools (topology.network.preflight), a testbed name nobody uses, the kernel
+features the impairments need, the live view's address, and the output directory
+(testbed.runfiles: a directory holding a run is refused unless `replace`). Each is a
+UsageError (one line, exit 2) that leaves nothing behind. Only then it makes the directory
+and writes config.json, the first file of the run-results contract (docs/run-results.md),
+and returns a frozen `PreparedRun`, which the next stage (testbed.run.Run) takes.
 """
 
 from __future__ import annotations
@@ -124,11 +124,15 @@ def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> Netw
 
 
 def check_machine(spec: NetworkSpec) -> None:
-    """Root, the tools, and the kernel features the impairments need; UsageError if not."""
+    """Root, the tools, a free testbed name and the kernel features the impairments need;
+    UsageError if not."""
+    from topology import state
     from topology.impair import kernel_has_netem
     from topology.network import preflight
 
     preflight(spec)
+    if os.path.exists(state.state_path(spec.name)):
+        raise UsageError(f"testbed name {spec.name!r} is already in use (--name)")
     imp = spec.impairment
     if imp.is_none:
         return

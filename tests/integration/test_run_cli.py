@@ -106,3 +106,15 @@ def test_delay_without_netem_is_one_line_and_makes_nothing(tmp_path, tb_name):
     r = tb_run("--robots", "1", "--out", str(out), "--name", tb_name, "--delay", "10", *FAST)
     one_line_error(r, "--delay", "sch_netem")
     assert not out.exists()
+
+
+def test_a_testbed_name_in_use_is_one_line_and_makes_nothing(tmp_path, tb_name):
+    up = subprocess.run(
+        [sys.executable, "-m", "testbed.cli", "net", "up", tb_name, "--robots", "1",
+         "--comm-range", "5"], capture_output=True, text=True, cwd=REPO,
+    )  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    out = tmp_path / "run"
+    one_line_error(tb_run("--robots", "1", "--out", str(out), "--name", tb_name, *FAST),
+                   tb_name, "in use")  # fmt: skip
+    assert not out.exists()
