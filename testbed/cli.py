@@ -381,6 +381,9 @@ def build_parser(argv: list[str] | None = None) -> Parser:
         p = sub.add_parser(cmd, help=help_text)
         if cmd in chosen and importlib.util.find_spec(module) is not None:
             importlib.import_module(module).add_arguments(p)
+        if cmd == "run":
+            p.add_argument("--replace", action="store_true",
+                           help="--out holds an earlier run: delete it first")  # fmt: skip
     return parser
 
 

@@ -1,8 +1,8 @@
 """What a finished run writes about itself: robots/rK.json, paths.png and the result dict.
 
-`write(run)` reads what the robot processes logged (robots/rK.events.jsonl) and what the
-world recorded on the `Run` (testbed.run), writes each robot's detailed record and the
-picture of the paths, and returns the contents of result.json, which the run writes last
+`write(record)` reads what the robot processes logged (robots/rK.events.jsonl) and the
+run's frozen record (testbed.runrecord: what the world and its clock saw), writes each
+robot's detailed record and the picture of the paths, and, last and atomically, result.json
 (docs/run-results.md says what every key means). A picture that cannot be drawn is logged,
 never a reason to lose the results.
 """
@@ -13,18 +13,18 @@ import contextlib
 import json
 import logging
 import os
+import time
 from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from node import render
-from testbed.runconfig import STEP_S
 from testbed.world.world import World
 from topology.jsonfile import write_json_atomic
 
 if TYPE_CHECKING:
-    from testbed.run import RobotRecord, Run
+    from testbed.runrecord import RobotOutcome, RunRecord
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +40,6 @@ SUMMARY_KEYS = (
     "frames", "latency_ms", "thread_cpu_s",
 )  # fmt: skip
 PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
-NO_STALLS = {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0}
 
 
 def read_events(path: str) -> list[dict]:
@@ -56,9 +55,9 @@ def read_events(path: str) -> list[dict]:
     return out
 
 
-def robot_result(run: Run, r: RobotRecord) -> dict:
+def robot_result(rec: RunRecord, r: RobotOutcome) -> dict:
     """Robot r's entry in result.json; its fuller record goes to robots/rK.json."""
-    ev = read_events(os.path.join(run.out, "robots", f"r{r.k}.events.jsonl"))
+    ev = read_events(os.path.join(rec.out, "robots", f"r{r.k}.events.jsonl"))
     plans = [{"step": e["step"], "cause": e["cause"]} for e in ev if e["e"] == "plan"]
     sent: dict[str, int] = {}
     received: dict[str, int] = {}
@@ -68,8 +67,8 @@ def robot_result(run: Run, r: RobotRecord) -> dict:
         elif e["e"] == "recv":
             received[e["kind"]] = received.get(e["kind"], 0) + 1
     summary = next((e for e in reversed(ev) if e["e"] == "summary"), {})
-    b = run.world.bodies[r.k - 1]
-    rec = {
+    b = rec.world.bodies[r.k - 1]
+    out = {
         "finish_step": r.finish_step,
         "crashed": r.crashed,
         "exit_status": r.exit_status,
@@ -77,60 +76,79 @@ def robot_result(run: Run, r: RobotRecord) -> dict:
         "messages": {"sent": sent, "received": received},
         "path_length_m": round(b.path_length, 3),
     }
-    detail = dict(rec)
+    detail = dict(out)
     detail.update(
         crash_step=r.crash_step, killed_at=r.killed_at, deadlines_missed=r.missed,
-        deadlines_missed_steps=r.missed_steps,
+        deadlines_missed_steps=list(r.missed_steps),
         collisions=b.collisions, final_pose=[round(b.x, 3), round(b.y, 3)],
         plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e["e"] == "plan"],
     )  # fmt: skip
     detail.update({k: summary.get(k) for k in SUMMARY_KEYS})
-    write_json_atomic(os.path.join(run.out, "robots", f"r{r.k}.json"), detail)
-    return rec
+    write_json_atomic(os.path.join(rec.out, "robots", f"r{r.k}.json"), detail)
+    return out
 
 
-def write(run: Run) -> dict:
+def write(rec: RunRecord) -> dict:
+    """robots/rK.json, paths.png and, last, result.json; returns result.json's contents."""
+    t0 = time.monotonic()
+    result = contents(rec)
+    result["wall_parts_s"]["results"] = round(time.monotonic() - t0, 3)
+    write_json_atomic(os.path.join(rec.out, "result.json"), result)
+    return result
+
+
+def contents(rec: RunRecord) -> dict:
     """robots/rK.json and paths.png; returns result.json's contents (not yet written)."""
-    robot_out = {f"r{k}": robot_result(run, r) for k, r in run.robots.items()}
-    steps, n = run.step_no, run.n
-    missed = run.missed_world + sum(r.missed for r in run.robots.values())
-    checks = max(1, steps * (n + 1))
-    stalls = run.stalls.summary() if run.timing else dict(NO_STALLS)
-    wall = run.loop_wall_s
-    achieved = steps * STEP_S / wall if wall > 0 else 0.0
+    robot_out = {f"r{r.k}": robot_result(rec, r) for r in rec.robots}
+    clock = rec.clock
     try:
-        paths_png(run.world, os.path.join(run.out, "paths.png"))
+        paths_png(rec.world, os.path.join(rec.out, "paths.png"))
     except Exception as e:  # a picture must not lose the results
         log.warning("paths.png: %s", e)
+    mean_finish = rec.mean_finish_step
     result = {
         "format": RESULT_FORMAT,
-        "config": {k: run.config[k] for k in RESULT_CONFIG_KEYS},
-        "status": run.status,
-        "status_detail": run.detail,
-        "steps": steps,
-        "coverage_final": round(run.world.coverage(), 5),
-        "time_scale_requested": run.cfg.time_scale,
-        "time_scale_achieved": round(achieved, 3),
-        "deadlines_missed": missed,
-        "deadline_miss_fraction": round(missed / checks, 5) if steps else 0.0,
-        "deadlines_missed_world": run.missed_world,
+        "config": {k: rec.config[k] for k in RESULT_CONFIG_KEYS},
+        "status": rec.status,
+        "status_detail": rec.detail,
+        "steps": clock.steps,
+        "last_finish_step": rec.last_finish_step,
+        "mean_finish_step": None if mean_finish is None else round(mean_finish, 2),
+        "coverage_final": round(rec.world.coverage(), 5),
+        "time_scale_requested": rec.time_scale,
+        "time_scale_achieved": round(clock.time_scale_achieved, 3),
+        "deadlines_missed": clock.deadlines_missed,
+        "deadline_miss_fraction": clock.miss_fraction,
+        "deadlines_missed_world": clock.missed_world,
         # Misses while the host stalled the whole machine (testbed.stalls), and the fraction
         # without them: what a lower time scale could have avoided.
-        "host_stalls": stalls,
-        "deadline_miss_fraction_outside_stalls": (
-            round((missed - stalls["deadlines_missed"]) / checks, 5) if steps else 0.0
-        ),
-        "wall_time_s": round(run.total_wall_s, 2),
-        "step_loop_wall_s": round(wall, 2),
-        "wall_parts_s": dict(run.parts),
-        "world_priority": run.priority,
-        "display": {"robot": n + 1, "coverage_final": display_coverage(run.out, run.world)},
-        "world_timing_s": run.timing.seconds() if run.timing else {},
-        "world_missed_steps_ms_late": run.timing.missed_steps if run.timing else [],
+        "host_stalls": dict(clock.stalls),
+        "deadline_miss_fraction_outside_stalls": clock.miss_fraction_outside_stalls,
+        "wall_time_s": round(time.monotonic() - rec.t_start, 2),
+        "step_loop_wall_s": round(clock.loop_wall_s, 2),
+        "wall_parts_s": dict(rec.parts),
+        "world_priority": rec.priority,
+        "display": {
+            "robot": len(rec.robots) + 1,
+            "coverage_final": display_coverage(rec.out, rec.world),
+            "snapshots": snapshot_steps(rec.out),
+        },
+        "world_timing_s": dict(rec.world_timing),
+        "world_missed_steps_ms_late": [list(m) for m in clock.world_missed_steps],
         "robots": robot_out,
     }
-    result["config"]["extra"] = {k: v for k, v in run.config.items() if k not in result["config"]}
+    result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
     return result
+
+
+def snapshot_steps(out: str) -> list[int]:
+    """The steps of the display's snapshots that were written (display/step-NNNNN.png)."""
+    try:
+        names = os.listdir(os.path.join(out, "display"))
+    except OSError:
+        return []
+    stems = (n.removeprefix("step-").removesuffix(".png") for n in names if n.endswith(".png"))
+    return sorted(int(s) for s in stems if s.isdigit())
 
 
 def display_coverage(out: str, world: World) -> float | None:

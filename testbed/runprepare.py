@@ -1,0 +1,162 @@
+"""A run's first stage: what it will do, checked, and its directory with config.json.
+
+Theory of operation. `prepare(cfg, out, name)` builds the world (ground truth, seeded start
+positions, lasers), each robot's timer phase (seeded, as robots booted one by one would
+start theirs), the display's position and the description of the testbed network (one
+namespace per robot plus one for the display, robot N+1, which does not explore). Then it
+checks everything that can be checked before anything exists: the network's description,
+root and tools (topology.network.preflight), a testbed name nobody uses, the kernel
+features the impairments need, the live view's address, and the output directory
+(testbed.runfiles: a directory holding a run is refused unless `replace`). Each is a
+UsageError (one line, exit 2) that leaves nothing behind. Only then it makes the directory
+and writes config.json, the first file of the run-results contract (docs/run-results.md),
+and returns a frozen `PreparedRun`, which the next stage (testbed.run.Run) takes.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+from dataclasses import dataclass
+
+import numpy as np
+
+from node.rays import Laser
+from testbed.errors import UsageError
+from testbed.runconfig import RunConfig
+from testbed.runfiles import claim_directory, make_directory
+from testbed.world.world import World
+from testbed.world.worldmap import (
+    GroundTruth,
+    empty_terrain,
+    free_space,
+    load_png,
+    start_positions,
+)
+from topology.jsonfile import write_json_atomic
+from topology.spec import Impairment, NetworkSpec
+
+DEFAULT_SNAPSHOTS = (100, 250, 500, 1000, 2000)  # display PNGs (plus one at the end)
+
+
+@dataclass(frozen=True)
+class PreparedRun:
+    """A run checked and described, its directory made and config.json written."""
+
+    cfg: RunConfig
+    out: str  # absolute
+    name: str  # the testbed's name
+    truth: GroundTruth
+    world: World
+    phases: tuple[int, ...]  # each robot's timer phase (steps)
+    display_pos: tuple[float, float]
+    spec: NetworkSpec
+    config: dict  # config.json's contents
+
+    @property
+    def robots(self) -> int:
+        return self.cfg.robots
+
+    @property
+    def display_k(self) -> int:
+        return self.cfg.robots + 1
+
+    @property
+    def snapshots(self) -> tuple[int, ...]:
+        """The steps at which the display saves its map (plus one at the end)."""
+        return tuple(self.config["snapshots"])
+
+    def path(self, *parts: str) -> str:
+        return os.path.join(self.out, *parts)
+
+
+def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> PreparedRun:
+    """The world, the network's description, the checks, the directory and config.json;
+    UsageError for a run this machine cannot do or a directory it may not write (nothing
+    is created then)."""
+    out = os.path.abspath(out)
+    truth = load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
+    rng = np.random.default_rng(cfg.seed)
+    starts = start_positions(truth, cfg.robots, rng, cfg.radius, cfg.start)
+    phases = tuple(int(v) for v in rng.integers(0, cfg.plan_period, size=cfg.robots))
+    laser = Laser(cfg.laser_range, cfg.laser_rays, truth.cell)
+    world = World(truth, starts, laser, free_space(truth, starts), cfg.speed, cfg.radius)
+    w_m, h_m = truth.size_m
+    display_pos = tuple(cfg.display_pos or (w_m / 2, h_m / 2))
+    spec = _network_spec(cfg, name, tuple(starts) + (display_pos,), out)
+    check_machine(spec)
+    if cfg.view:
+        check_view(cfg.view)
+    claim_directory(out, replace)
+    make_directory(out, cfg.capture, replace)
+    config = cfg.to_dict()
+    config.update(map_size=list(truth.shape), starts=[list(p) for p in starts],
+                  timer_phases=list(phases), display=cfg.robots + 1,
+                  display_pos=list(display_pos), name=name,
+                  snapshots=sorted(cfg.snapshots or DEFAULT_SNAPSHOTS))  # fmt: skip
+    prepared = PreparedRun(cfg, out, name, truth, world, phases, display_pos, spec, config)
+    try:
+        write_json_atomic(prepared.path("config.json"), prepared.config)
+    except OSError as e:
+        raise UsageError(f"--out {out}: cannot write there: {e.strerror}") from None
+    return prepared
+
+
+def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> NetworkSpec:
+    try:
+        return NetworkSpec(
+            name=name,
+            positions=positions,
+            comm_range=cfg.comm_range,
+            routing=cfg.routing,
+            aodv_profile=cfg.aodv_profile,
+            range_model=cfg.range_model,
+            map_png=os.path.abspath(cfg.map) if cfg.map else None,
+            map_cell=cfg.map_cell,
+            wall_loss_pct=cfg.wall_loss_pct,
+            impairment=Impairment(loss_pct=cfg.loss_pct, delay_ms=cfg.delay_ms),
+            capture_dir=os.path.join(out, "pcaps") if cfg.capture else None,
+            time_scale=cfg.time_scale,
+        )
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+def check_machine(spec: NetworkSpec) -> None:
+    """Root, the tools, a free testbed name and the kernel features the impairments need;
+    UsageError if not."""
+    from topology import state
+    from topology.impair import kernel_has_netem
+    from topology.network import preflight
+
+    preflight(spec)
+    if os.path.exists(state.state_path(spec.name)):
+        raise UsageError(f"testbed name {spec.name!r} is already in use (--name)")
+    imp = spec.impairment
+    if imp.is_none:
+        return
+    netem = kernel_has_netem()
+    if (imp.delay_ms > 0 or imp.jitter_ms > 0) and not netem:
+        raise UsageError(
+            "--delay needs the sch_netem kernel module, which this kernel lacks (--loss works "
+            "without it; `make vm-test` runs netem under a stock kernel)"
+        )
+    if not netem and shutil.which("nft") is None:
+        raise UsageError("--loss without sch_netem needs nftables: `nft` is not installed")
+
+
+def check_view(bind: str) -> None:
+    """UsageError unless the live view can listen at `bind` ([HOST:]PORT) now."""
+    from testbed.view.server import parse_bind
+
+    try:
+        host, port = parse_bind(bind)
+        family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the view's server does
+            s.bind(addr)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    except OSError as e:
+        raise UsageError(f"--view {bind}: cannot listen there: {e.strerror or e}") from None
