@@ -34,6 +34,7 @@ from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
 from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX, Medium
+from topology.ns3medium import Ns3Medium
 from topology.oracle import OracleRouter
 from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, NetworkSpec, Position
 
@@ -50,7 +51,9 @@ class Network:
         self.spec = spec
         self.persistent = persistent
         self.positions: list[Position] = list(spec.positions)
-        self.medium = Medium(spec.name, spec.time_scale)
+        self.medium = (
+            Ns3Medium(spec) if spec.medium == "ns3-wifi" else Medium(spec.name, spec.time_scale)
+        )
         self.current: dict[Pair, Impairment] = {}
         self.link_impairments: dict[Pair, Impairment] = {}  # set by hand, per link
         self.state: state.TestbedState | None = None
@@ -139,6 +142,8 @@ class Network:
             self._create_namespace(names.robot_ns(self.name, k))
         self.medium.add_robot_ports(robots)
         self.medium.configure_robots(robots)
+        if self.spec.medium == "ns3-wifi":
+            self.adopt_host_process(self.medium.start(self.positions), "ns3-wifi")
         self._apply_positions()
         if self.spec.routing == "oracle":
             self.oracle = OracleRouter(self.name, robots, WLAN_INDEX)
@@ -296,6 +301,8 @@ class Network:
         self._moved()
 
     def _apply_positions(self) -> tuple[list[Pair], list[Pair]]:
+        if self.spec.medium == "ns3-wifi":
+            self.medium.set_positions(self.positions)  # the channel decides who hears whom
         wanted = self.wanted()
         add, remove, change = ranges.diff(self.current, wanted)
         # Impairments before enabling, so no frame crosses a link without its loss and delay.

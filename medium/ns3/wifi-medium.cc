@@ -33,6 +33,8 @@
 // Protocol (requests and answers are single lines of ASCII):
 //   pos X1 Y1 X2 Y2 ...   -> "ok"             every robot's position, metres
 //   stats                 -> one JSON object  counters per robot and the lateness probe
+//   links                 -> "links 1-2 2-3"  the pairs that hear each other (1-based), by
+//                                              the propagation model at the current positions
 //   ping                  -> "ok"             answered from inside the simulator (readiness)
 // Anything else is answered "error ..." and the connection stays open.
 
@@ -316,6 +318,7 @@ struct Ghost
 };
 
 std::vector<Ghost> g_ghosts;
+Ptr<PropagationLossModel> g_loss; // the channel's, to answer "links"
 
 struct Lateness
 {
@@ -446,13 +449,10 @@ Build(const Options& o)
                                      "ControlMode",
                                      StringValue(control));
 
-    YansWifiChannelHelper channel;
-    channel.SetPropagationDelay("ns3::ConstantSpeedPropagationDelayModel");
     if (o.loss == "range")
     {
-        channel.AddPropagationLoss("ns3::RangePropagationLossModel",
-                                   "MaxRange",
-                                   DoubleValue(o.range));
+        g_loss = CreateObject<RangePropagationLossModel>();
+        g_loss->SetAttribute("MaxRange", DoubleValue(o.range));
     }
     else
     {
@@ -460,15 +460,16 @@ Build(const Options& o)
         // default sensitivity, -101 dBm, at the default 16.0206 dBm of transmit power) at
         // the communication range. Faster rates need more SNR and reach less far.
         const double exponent = 3.0;
-        const double refLoss = 16.0206 + 101.0 - 10 * exponent * std::log10(o.range);
-        channel.AddPropagationLoss("ns3::LogDistancePropagationLossModel",
-                                   "Exponent",
-                                   DoubleValue(exponent),
-                                   "ReferenceLoss",
-                                   DoubleValue(refLoss));
+        g_loss = CreateObject<LogDistancePropagationLossModel>();
+        g_loss->SetAttribute("Exponent", DoubleValue(exponent));
+        g_loss->SetAttribute("ReferenceLoss",
+                             DoubleValue(16.0206 + 101.0 - 10 * exponent * std::log10(o.range)));
     }
+    Ptr<YansWifiChannel> air = CreateObject<YansWifiChannel>();
+    air->SetPropagationLossModel(g_loss);
+    air->SetPropagationDelayModel(CreateObject<ConstantSpeedPropagationDelayModel>());
     YansWifiPhyHelper phy;
-    phy.SetChannel(channel.Create());
+    phy.SetChannel(air);
 
     WifiMacHelper mac;
     mac.SetType("ns3::AdhocWifiMac");
@@ -579,6 +580,24 @@ Execute(const std::string& line)
         return "ok";
     if (verb == "stats")
         return StatsJson();
+    if (verb == "links")
+    {
+        std::ostringstream s;
+        s << "links";
+        for (size_t i = 0; i < g_ghosts.size(); ++i)
+        {
+            Ptr<WifiPhy> phy = g_ghosts[i].wifi->GetPhy();
+            for (size_t j = i + 1; j < g_ghosts.size(); ++j)
+            {
+                double dbm = g_loss->CalcRxPower(phy->GetTxPowerStart(),
+                                                 g_ghosts[i].mobility,
+                                                 g_ghosts[j].mobility);
+                if (dbm >= phy->GetRxSensitivity())
+                    s << " " << i + 1 << "-" << j + 1;
+            }
+        }
+        return s.str();
+    }
     if (verb == "pos")
     {
         std::vector<double> xy;
