@@ -33,8 +33,8 @@ from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
 from topology.los import MapError, Walls
-from topology.medium import WLAN_INDEX, Medium
-from topology.ns3medium import Ns3Medium
+from topology.medium import WLAN_INDEX
+from topology.ns3medium import medium_for
 from topology.oracle import OracleRouter
 from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, NetworkSpec, Position
 
@@ -51,9 +51,7 @@ class Network:
         self.spec = spec
         self.persistent = persistent
         self.positions: list[Position] = list(spec.positions)
-        self.medium = (
-            Ns3Medium(spec) if spec.medium == "ns3-wifi" else Medium(spec.name, spec.time_scale)
-        )
+        self.medium = medium_for(spec)  # veth links, or ns-3's 802.11 channel
         self.current: dict[Pair, Impairment] = {}
         self.link_impairments: dict[Pair, Impairment] = {}  # set by hand, per link
         self.state: state.TestbedState | None = None

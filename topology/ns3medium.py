@@ -255,3 +255,10 @@ class Ns3Medium(Medium):
     def close(self) -> None:
         self._disconnect()
         super().close()
+
+
+def medium_for(spec: NetworkSpec) -> Medium:
+    """The medium `spec` asks for (not yet opened)."""
+    if spec.medium == "ns3-wifi":
+        return Ns3Medium(spec)
+    return Medium(spec.name, spec.time_scale)
