@@ -323,28 +323,45 @@ struct Ghost
 std::vector<Ghost> g_ghosts;
 Ptr<PropagationLossModel> g_loss; // the channel's, to answer "links"
 
-struct Lateness
+// How far behind the emulated clock the simulator runs when it executes an event.
+struct Lag
 {
-    uint64_t probes{0};
+    uint64_t count{0};
     int64_t maxNs{0};
     double sumNs{0};
     uint64_t over1ms{0};
-} g_late;
+
+    void Add()
+    {
+        auto impl = DynamicCast<RealtimeSimulatorImpl>(Simulator::GetImplementation());
+        int64_t late = (impl->RealtimeNow() - Simulator::Now()).GetNanoSeconds();
+        late = std::max<int64_t>(late, 0);
+        count++;
+        sumNs += late;
+        maxNs = std::max(maxNs, late);
+        if (late > 1000000)
+            over1ms++;
+    }
+
+    std::string Json(const char* countName) const
+    {
+        std::ostringstream s;
+        s << "{\"" << countName << "\": " << count << ", \"max_ms\": " << maxNs / 1e6
+          << ", \"mean_ms\": " << (count ? sumNs / count / 1e6 : 0.0)
+          << ", \"over_1ms\": " << over1ms << "}";
+        return s.str();
+    }
+};
+
+Lag g_late;  // a probe every kProbeEvery: timer lateness
+Lag g_relay; // each frame relayed: from its scheduled time (arrival, end of reception) to now
 
 const Time kProbeEvery = MilliSeconds(10);
 
 void
 LatenessProbe()
 {
-    auto impl = DynamicCast<RealtimeSimulatorImpl>(Simulator::GetImplementation());
-    int64_t late = (impl->RealtimeNow() - Simulator::Now()).GetNanoSeconds();
-    if (late < 0)
-        late = 0;
-    g_late.probes++;
-    g_late.sumNs += late;
-    g_late.maxNs = std::max(g_late.maxNs, late);
-    if (late > 1000000)
-        g_late.over1ms++;
+    g_late.Add();
     Simulator::Schedule(kProbeEvery, &LatenessProbe);
 }
 
@@ -398,6 +415,7 @@ FromLinux(size_t k,
         return true;
     }
     g.c.fromLinux++;
+    g_relay.Add();
     g.wifi->Send(packet->Copy(), to, protocol);
     return true;
 }
@@ -417,6 +435,7 @@ ToLinux(size_t k, Ptr<const Packet> packet, Mac48Address from, Mac48Address to)
     LlcSnapHeader llc;
     copy->RemoveHeader(llc);
     g.c.toLinux++;
+    g_relay.Add();
     g.fd->SendFrom(copy, from, to, llc.GetType());
 }
 
@@ -565,10 +584,9 @@ StatsJson()
 {
     std::ostringstream s;
     s << "{\"now_s\": " << Simulator::Now().GetSeconds() << ", \"qos\": "
-      << (g_ghosts[0].wifi->GetMac()->GetQosSupported() ? "true" : "false") << ", \"lateness\": {\"probes\": "
-      << g_late.probes << ", \"max_ms\": " << g_late.maxNs / 1e6 << ", \"mean_ms\": "
-      << (g_late.probes ? g_late.sumNs / g_late.probes / 1e6 : 0.0)
-      << ", \"over_1ms\": " << g_late.over1ms << "}, \"robots\": [";
+      << (g_ghosts[0].wifi->GetMac()->GetQosSupported() ? "true" : "false")
+      << ", \"lateness\": " << g_late.Json("probes")
+      << ", \"relay_lag\": " << g_relay.Json("frames") << ", \"robots\": [";
     for (size_t k = 0; k < g_ghosts.size(); ++k)
     {
         const Counters& c = g_ghosts[k].c;

@@ -74,6 +74,7 @@ def test_chain_routes_over_two_hops_with_aodv(tb_name):
         # would be retried 7 times (retries >> frames sent).
         assert totals(c, "retries") < totals(c, "mac_tx"), c
         assert all(r["airtime_s"] > 0 for r in c["robots"])
+        assert c["relay_lag"]["frames"] == totals(c, "from_linux") + totals(c, "to_linux")
 
 
 def test_a_robot_that_leaves_is_cut_off_within_a_step(tb_name):
