@@ -77,6 +77,19 @@ def test_chain_routes_over_two_hops_with_aodv(tb_name):
         assert c["relay_lag"]["frames"] == totals(c, "from_linux") + totals(c, "to_linux")
 
 
+@pytest.mark.parametrize("routing", ["oracle", "babel", "batman"])
+def test_the_other_routings_and_captures_work_as_on_veth(tb_name, tmp_path, routing):
+    cap = str(tmp_path / "pcaps")
+    with wifi(tb_name, [(0, 0), (8, 0), (16, 0)], routing=routing, capture_dir=cap) as net:
+        wait_for(lambda: ping(net, 1, "10.0.0.3", "-c", "1", "-W", "1").returncode == 0,
+                 60, f"r3 to answer over {routing}")  # fmt: skip
+        out = ping(net, 1, "10.0.0.3", "-c", "3", "-i", "0.2", "-W", "2")
+        assert "ttl=63" in out.stdout, out.stdout  # two hops
+    pcap = subprocess.run(["tcpdump", "-nr", f"{cap}/r2.pcap", "icmp"], capture_output=True,
+                          text=True)  # fmt: skip
+    assert "10.0.0.1 > 10.0.0.3: ICMP echo request" in pcap.stdout  # r2 forwarded them
+
+
 def test_a_robot_that_leaves_is_cut_off_within_a_step(tb_name):
     with wifi(tb_name, [(0, 0), (5, 0)]) as net:
         _neighbour_routes(net)
