@@ -39,6 +39,10 @@ from topology.spec import Impairment, NetworkSpec, Position
 ROLE = "ns3-wifi"
 BINARY_ENV = "TESTBED_NS3_WIFI"  # another build of tb-ns3-wifi (tests, development)
 START_TIMEOUT_S = 20.0
+# SCHED_RR priority of the ns-3 process: the robots' motion-control threads have 1 and the
+# world's step loop 2 (docs/architecture.md); the channel, part of the world, gets 2 too.
+# TESTBED_REALTIME=0 turns it off, as everywhere.
+RT_PRIORITY = 2
 REQUEST_TIMEOUT_S = 10.0
 SIOCETHTOOL = 0x8946
 ETHTOOL_STXCSUM = 0x17
@@ -75,6 +79,8 @@ def argv(spec: NetworkSpec, positions: list[Position], sock: str) -> list[str]:
     ]  # fmt: skip
     if spec.wifi_rate:
         out += ["--rate", spec.wifi_rate]
+    if os.environ.get("TESTBED_REALTIME", "1") != "0":
+        out += ["--rt-priority", str(RT_PRIORITY)]
     for k, (x, y) in zip(spec.robot_ids(), positions, strict=True):
         out += ["--robot", f"{names.robot_port(k)},{robot_mac(k)},{x!r},{y!r}"]
     return out

@@ -47,6 +47,8 @@
 #include <ns3/wifi-module.h>
 
 #include <arpa/inet.h>
+#include <sched.h>
+#include <sys/resource.h>
 #include <linux/if_packet.h>
 #include <net/ethernet.h>
 #include <net/if.h>
@@ -206,6 +208,7 @@ struct Options
     std::string standard{"80211a"}; // 80211a | 80211b | 80211g
     std::string rate;               // a WifiMode name, or "minstrel"
     double timeScale{1.0};
+    int rtPriority{0}; // SCHED_RR priority of the simulator (0: normal scheduling)
     std::vector<Robot> robots;
 };
 
@@ -272,6 +275,8 @@ ParseArgs(int argc, char** argv)
             o.rate = value;
         else if (key == "--time-scale")
             o.timeScale = Number("--time-scale", value);
+        else if (key == "--rt-priority")
+            o.rtPriority = static_cast<int>(Number("--rt-priority", value));
         else if (key == "--robot")
             o.robots.push_back(ParseRobot(value));
         else
@@ -723,6 +728,17 @@ int
 main(int argc, char** argv)
 {
     Options o = ParseArgs(argc, argv);
+    // The channel is part of the emulated world's clock: like the world's step loop it asks
+    // for real-time priority (inherited by ns-3's reader threads, started later), and falls
+    // back to nice -10 where that is refused.
+    if (o.rtPriority > 0)
+    {
+        sched_param param{};
+        param.sched_priority = o.rtPriority;
+        if (sched_setscheduler(0, SCHED_RR | SCHED_RESET_ON_FORK, &param) != 0 &&
+            setpriority(PRIO_PROCESS, 0, -10) != 0)
+            std::fprintf(stderr, "tb-ns3-wifi: no real-time priority nor nice -10\n");
+    }
     GlobalValue::Bind("SimulatorImplementationType", StringValue("ns3::RealtimeSimulatorImpl"));
     GlobalValue::Bind("ChecksumEnabled", BooleanValue(false));
     auto impl = DynamicCast<RealtimeSimulatorImpl>(Simulator::GetImplementation());
