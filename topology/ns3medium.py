@@ -207,18 +207,33 @@ class Ns3Medium(Medium):
 
     def set_positions(self, positions: list[Position]) -> None:
         """Move the ghost nodes; returns once the simulator has applied it."""
-        answer = self.request(positions_request(positions))
+        answer = self._ask(positions_request(positions))
         if answer != "ok":
             raise TestbedError(f"ns-3 medium: {answer}")
 
     def kernel_links(self) -> set[Pair]:
         """The pairs that hear each other on the channel now."""
-        return parse_links(self.request("links"))
+        return parse_links(self._ask("links"))
 
     def counters(self) -> dict:
         """The channel's counters: per robot (in robot order) frames relayed, MAC retries and
-        drops, PHY drops by reason, airtime; and how late the simulator ran (lateness)."""
-        return json.loads(self.request("stats"))
+        drops, PHY drops by reason, airtime; how late the simulator ran (lateness) and
+        handled the frames it relayed (relay_lag). docs/ns3-medium.md lists them."""
+        return json.loads(self._ask("stats"))
+
+    def _ask(self, line: str) -> str:
+        """request(), with a dead or stuck process reported as one TestbedError line."""
+        try:
+            return self.request(line)
+        except OSError as exc:
+            self._disconnect()
+            logp = os.path.join(state.run_dir(self.testbed), "ns3-wifi.log")
+            try:
+                with open(logp) as f:
+                    last = (f.read().strip().splitlines() or [""])[-1]
+            except OSError:
+                last = ""
+            raise TestbedError(f"the ns-3 medium does not answer ({exc}) {last}".strip()) from None
 
     def create_pairs(self, pairs: list[Pair]) -> None:
         """No links to create: the channel decides who hears whom."""

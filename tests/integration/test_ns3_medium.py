@@ -11,6 +11,7 @@ import time
 import pytest
 
 from topology import names, netns, state
+from topology.errors import TestbedError
 from topology.network import Network, destroy
 from topology.ns3medium import binary
 from topology.spec import NetworkSpec
@@ -230,3 +231,5 @@ def test_the_process_dies_cleanly_on_sigterm(tb_name):
         proc = net.children[pid]
         os.kill(pid, signal.SIGTERM)
         assert proc.wait(timeout=5) == -signal.SIGTERM
+        with pytest.raises(TestbedError, match="does not answer"):
+            net.move(2, (6, 0))  # a dead medium is one clear error, not a traceback

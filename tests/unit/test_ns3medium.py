@@ -101,3 +101,21 @@ def test_net_up_medium_arguments_are_one_line_exit_2(extra, words, capsys):
     assert len(err) == 1, err
     for w in words:
         assert w in err[0]
+
+
+def test_medium_for_picks_the_specs_medium():
+    from topology.medium import Medium
+
+    veth = ns3medium.medium_for(spec())
+    wifi = ns3medium.medium_for(spec(medium="ns3-wifi"))
+    assert type(veth) is Medium
+    assert isinstance(wifi, ns3medium.Ns3Medium) and wifi.spec.medium == "ns3-wifi"
+
+
+def test_a_medium_without_its_process_is_one_clear_error(tmp_path, monkeypatch):
+    from topology.errors import TestbedError
+
+    monkeypatch.setenv("TESTBED_STATE_DIR", str(tmp_path))
+    wifi = ns3medium.Ns3Medium(spec(medium="ns3-wifi"))
+    with pytest.raises(TestbedError, match="does not answer"):
+        wifi.set_positions([(0, 0)] * 3)
