@@ -28,11 +28,18 @@
 // the wall clock's speed; ScaledSynchronizer below runs K times faster (the testbed's time
 // scale): one emulated second is 1/K s of wall time, so the channel's airtime and back-offs
 // shrink by K with everything else in the run. A periodic probe records how late the
-// simulator runs behind that clock (its lateness is the medium's own fidelity).
+// simulator runs behind that clock, and every relayed frame how late it was handled (the
+// medium's own fidelity); with --rt-priority the process asks for SCHED_RR, like the
+// testbed's world loop.
+//
+// Usage: tb-ns3-wifi --socket PATH --range M [--loss range|logdistance]
+//          [--standard 80211a|80211b|80211g] [--rate WIFIMODE|minstrel] [--time-scale K]
+//          [--rt-priority N] --robot IFNAME,MAC,X,Y ...   (one --robot per robot, in order)
+// Bad arguments: one line on stderr, exit 2. It runs until SIGTERM.
 //
 // Protocol (requests and answers are single lines of ASCII):
 //   pos X1 Y1 X2 Y2 ...   -> "ok"             every robot's position, metres
-//   stats                 -> one JSON object  counters per robot and the lateness probe
+//   stats                 -> one JSON object  counters per robot, timer lateness, relay lag
 //   links                 -> "links 1-2 2-3"  the pairs that hear each other (1-based), by
 //                                              the propagation model at the current positions
 //   ping                  -> "ok"             answered from inside the simulator (readiness)
@@ -56,6 +63,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -241,10 +249,11 @@ ParseRobot(const std::string& arg)
     }
     Robot r;
     r.ifname = parts[0];
-    if (parts[1].size() != 17)
-    {
+    bool macOk = parts[1].size() == 17;
+    for (size_t i = 0; macOk && i < 17; ++i)
+        macOk = (i % 3 == 2) ? parts[1][i] == ':' : std::isxdigit(parts[1][i]) != 0;
+    if (!macOk)
         Fail("bad MAC address '" + parts[1] + "'");
-    }
     r.mac = Mac48Address(parts[1].c_str());
     r.x = Number("x", parts[2]);
     r.y = Number("y", parts[3]);
