@@ -233,3 +233,24 @@ def test_the_process_dies_cleanly_on_sigterm(tb_name):
         assert proc.wait(timeout=5) == -signal.SIGTERM
         with pytest.raises(TestbedError, match="does not answer"):
             net.move(2, (6, 0))  # a dead medium is one clear error, not a traceback
+
+
+def test_net_up_move_links_and_down_by_hand(tb_name):
+    """The CLI: `net up --medium ns3-wifi`, then other processes attach to move and look."""
+    cli = [sys.executable, "-m", "testbed.cli", "net"]
+
+    def tb(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(cli + list(args), capture_output=True, text=True, cwd=REPO,
+                              timeout=120)  # fmt: skip
+
+    up = tb("up", tb_name, "--robots", "3", "--spacing", "8", "--comm-range", "10",
+            "--medium", "ns3-wifi")  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    pid = next(p.pid for p in state.read(tb_name).processes if p.role == "ns3-wifi")
+    assert tb("links", tb_name).stdout.split("\n")[:2] == ["1 2", "2 3"]
+    assert tb("move", tb_name, "r3", "40", "0").returncode == 0
+    assert tb("links", tb_name).stdout.strip() == "1 2"
+    impair = tb("impair", tb_name, "r1", "r2", "--loss", "10")
+    assert impair.returncode == 2 and "no link impairments" in impair.stderr
+    assert tb("down", tb_name).returncode == 0
+    assert not os.path.exists(f"/proc/{pid}") or _zombie(pid)
