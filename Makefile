@@ -9,8 +9,14 @@ STAMP := $(VENV)/.installed
 
 # Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
 APT_PACKAGES := iproute2 nftables tcpdump tshark babeld batmand nanomsg-utils iputils-ping \
-	iperf3 procps python3-venv
+	iperf3 procps python3-venv g++ libns3-dev
 # `make vm-test` (netem under Debian's stock kernel) installs its own: tests/vm/run-netem-tests.
+
+# The ns3-wifi radio medium (medium/ns3, docs/ns3-medium.md): one binary, rebuilt when its
+# source changes. Debian's pkg-config file for ns-3 is broken: the libraries are named here.
+NS3_MEDIUM := build/tb-ns3-wifi
+NS3_LIBS := -lns3-wifi -lns3-fd-net-device -lns3-mobility -lns3-propagation -lns3-network \
+	-lns3-core -lpthread
 
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
@@ -18,7 +24,12 @@ NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespac
 	experiment-protocols \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test clean
 
-setup: apt venv
+setup: apt venv $(NS3_MEDIUM)
+
+$(NS3_MEDIUM): medium/ns3/wifi-medium.cc | apt
+	@[ -e /usr/include/ns3/wifi-module.h ] || { echo "the ns3-wifi medium needs Debian's libns3-dev: run 'sudo make setup'"; exit 2; }
+	@mkdir -p $(@D)
+	g++ -std=c++17 -O2 -Wall -o $@ $< $(NS3_LIBS)
 
 apt:
 	@missing=$$(for p in $(APT_PACKAGES); do \

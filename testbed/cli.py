@@ -16,7 +16,15 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from topology.argtypes import number
-from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS, ROUTINGS
+from topology.spec import (
+    AODV_PROFILES,
+    LOS_MODELS,
+    MEDIA,
+    RANGE_MODELS,
+    ROUTINGS,
+    WIFI_LOSSES,
+    WIFI_STANDARDS,
+)
 
 log = logging.getLogger("testbed")
 
@@ -114,6 +122,25 @@ def _add_net(sub) -> None:
     up.add_argument("--seed", type=int, default=None)
     up.add_argument("--time-scale", type=number(float, "time scale", above=0), default=1.0)
     up.add_argument(
+        "--medium",
+        choices=MEDIA,
+        default="veth",
+        help="veth links (default) or ns-3's 802.11 channel (docs/ns3-medium.md)",
+    )
+    up.add_argument(
+        "--wifi-loss",
+        choices=WIFI_LOSSES,
+        default="range",
+        help="ns3-wifi propagation: a cut-off at the range (default) or log-distance",
+    )
+    up.add_argument("--wifi-standard", choices=WIFI_STANDARDS, default="80211a")
+    up.add_argument(
+        "--wifi-rate",
+        default="",
+        metavar="MODE",
+        help="ns3-wifi data rate: an ns-3 WifiMode (OfdmRate12Mbps), or minstrel",
+    )
+    up.add_argument(
         "--view",
         metavar="[HOST:]PORT",
         help="serve a live view of the network (127.0.0.1 unless a host is given)",
@@ -198,6 +225,10 @@ def _net_up(args) -> int:
             wall_loss_pct=args.wall_loss,
             capture_dir=os.path.abspath(args.capture) if args.capture else None,
             time_scale=args.time_scale,
+            medium=args.medium,
+            wifi_loss=args.wifi_loss,
+            wifi_standard=args.wifi_standard,
+            wifi_rate=args.wifi_rate,
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None

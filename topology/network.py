@@ -33,7 +33,8 @@ from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
 from topology.los import MapError, Walls
-from topology.medium import WLAN_INDEX, Medium
+from topology.medium import WLAN_INDEX
+from topology.ns3medium import medium_for
 from topology.oracle import OracleRouter
 from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, NetworkSpec, Position
 
@@ -50,7 +51,7 @@ class Network:
         self.spec = spec
         self.persistent = persistent
         self.positions: list[Position] = list(spec.positions)
-        self.medium = Medium(spec.name, spec.time_scale)
+        self.medium = medium_for(spec)  # veth links, or ns-3's 802.11 channel
         self.current: dict[Pair, Impairment] = {}
         self.link_impairments: dict[Pair, Impairment] = {}  # set by hand, per link
         self.state: state.TestbedState | None = None
@@ -139,6 +140,8 @@ class Network:
             self._create_namespace(names.robot_ns(self.name, k))
         self.medium.add_robot_ports(robots)
         self.medium.configure_robots(robots)
+        if self.spec.medium == "ns3-wifi":
+            self.adopt_host_process(self.medium.start(self.positions), "ns3-wifi")
         self._apply_positions()
         if self.spec.routing == "oracle":
             self.oracle = OracleRouter(self.name, robots, WLAN_INDEX)
@@ -296,6 +299,8 @@ class Network:
         self._moved()
 
     def _apply_positions(self) -> tuple[list[Pair], list[Pair]]:
+        if self.spec.medium == "ns3-wifi":
+            self.medium.set_positions(self.positions)  # the channel decides who hears whom
         wanted = self.wanted()
         add, remove, change = ranges.diff(self.current, wanted)
         # Impairments before enabling, so no frame crosses a link without its loss and delay.

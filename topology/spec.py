@@ -16,6 +16,11 @@ LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topolog
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")
 LAYOUTS = ("chain", "grid", "random")
+# The radio medium (topology.medium: veth links; topology.ns3medium: ns-3's 802.11) and, for
+# ns3-wifi, its propagation (a cut-off at the range, or log-distance) and 802.11 standard.
+MEDIA = ("veth", "ns3-wifi")
+WIFI_LOSSES = ("range", "logdistance")
+WIFI_STANDARDS = ("80211a", "80211b", "80211g")
 
 
 @dataclass(frozen=True)
@@ -97,6 +102,10 @@ class NetworkSpec:
     map_png: str | None = None
     map_cell: float = 0.05
     wall_loss_pct: float | None = None
+    medium: str = "veth"  # MEDIA
+    wifi_loss: str = "range"  # the ns3-wifi medium's propagation (WIFI_LOSSES)
+    wifi_standard: str = "80211a"
+    wifi_rate: str = ""  # ns3-wifi: an ns-3 WifiMode name, "minstrel", or "": the fastest
 
     def __post_init__(self) -> None:
         names.check_name(self.name)
@@ -125,6 +134,10 @@ class NetworkSpec:
             raise ValueError(f"map cell size must be a positive number, not {self.map_cell}")
         if self.wall_loss_pct is not None and not 0 <= self.wall_loss_pct <= 100:
             raise ValueError(f"wall loss {self.wall_loss_pct}% is not in 0..100")
+        if self.medium not in MEDIA:
+            raise ValueError(f"unknown medium {self.medium!r} (choose from {', '.join(MEDIA)})")
+        if self.medium == "ns3-wifi":
+            _check_wifi(self)
         if self.aodv_profile not in AODV_PROFILES:
             raise ValueError(
                 f"unknown AODV profile {self.aodv_profile!r} "
@@ -137,6 +150,26 @@ class NetworkSpec:
 
     def robot_ids(self) -> range:
         return range(1, self.robots + 1)
+
+
+def _check_wifi(spec: NetworkSpec) -> None:
+    """What the ns3-wifi medium can do: its propagation replaces the range model (the disc,
+    for the links the view and the oracle see), and it has no per-link impairments yet."""
+    if spec.wifi_loss not in WIFI_LOSSES:
+        raise ValueError(
+            f"unknown wifi loss model {spec.wifi_loss!r} (choose from {', '.join(WIFI_LOSSES)})"
+        )
+    if spec.wifi_standard not in WIFI_STANDARDS:
+        raise ValueError(
+            f"unknown wifi standard {spec.wifi_standard!r} "
+            f"(choose from {', '.join(WIFI_STANDARDS)})"
+        )
+    if not all(c.isalnum() for c in spec.wifi_rate):
+        raise ValueError(f"wifi rate {spec.wifi_rate!r} is not an ns-3 WifiMode name")
+    if spec.range_model != "disc":
+        raise ValueError("the ns3-wifi medium decides reception itself: range model disc only")
+    if not spec.impairment.is_none:
+        raise ValueError("the ns3-wifi medium has no impairments (yet): use the veth medium")
 
 
 def layout_positions(

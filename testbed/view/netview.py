@@ -17,7 +17,7 @@ import time
 
 from testbed.view.live import KernelRoutes, LiveFeed, LiveServer
 from topology import state
-from topology.medium import Medium
+from topology.ns3medium import medium_for
 from topology.spec import LOS_MODELS
 
 POLL_S = 0.2
@@ -39,7 +39,7 @@ def main(argv: list[str]) -> int:
         print(f"netview: no testbed named {name!r} is up", file=sys.stderr)
         return 2
     spec = state.spec_from_dict(st.spec)
-    medium = Medium(name, spec.time_scale)
+    medium = medium_for(spec)
     medium.open()
     map_png = spec.map_png if spec.range_model in LOS_MODELS else None
     meta = {"run": name, "robots": spec.robots, "comm_range": spec.comm_range,
