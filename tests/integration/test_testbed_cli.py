@@ -248,7 +248,7 @@ def test_missing_tool_is_a_one_line_error(tb_name, tmp_path):
     env = {**os.environ, "PATH": str(bindir)}
     r = tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10", "--routing", "babel",
            env=env)  # fmt: skip
-    _one_line_error(r, "babeld")
+    _one_line_error(r, "babeld", "package(s) babeld")
     assert not [ns for ns in netns.list_names() if tb_name in ns]
 
 
