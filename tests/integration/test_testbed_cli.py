@@ -71,6 +71,10 @@ def ttl_becomes(name: str, src: int, dst: int, ttl: int, wait: float) -> bool:
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(
+    shutil.which("batmand") is None,
+    reason="batmand (package batmand) is not installed; some distributions do not have it",
+)
 def test_batman_chain_converges_and_diamond_reroutes_around_a_moved_robot(tb_name):
     """--routing batman (batmand, proactive): a 5-robot chain converges to 4-hop routes, and
     in a diamond the route leaves a next hop that walks away for the other side."""
