@@ -74,7 +74,7 @@ def main(argv: list[str]) -> int:
     medium = Medium(name, spec.time_scale)
     medium.open()
     map_png = spec.map_png if spec.range_model in LOS_MODELS else None
-    box = Walls.from_png(map_png, spec.map_cell).size_m() if map_png else None
+    box = Walls.from_png(map_png, spec.map_cell).size_m if map_png else None
     extent = Extent(spec.comm_range, box)
     extent.update(st.positions)
     meta = {"run": name, "robots": spec.robots, "comm_range": spec.comm_range,

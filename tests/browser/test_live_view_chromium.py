@@ -256,3 +256,34 @@ def test_report_html_renders_with_its_figures(tmp_path):
         assert console_errors(driver) == []
     finally:
         driver.quit()
+
+
+def test_net_up_view_on_the_office_map_draws_its_walls(tmp_path):
+    """`net up --range-model los --map PNG --view`: the map's picture under the robots (it
+    once failed to start: the view process died before it served anything)."""
+    name = "tv" + uuid.uuid4().hex[:6]
+    port = free_port()
+    run = dict(cwd=REPO, capture_output=True, text=True)
+    up = subprocess.run([*TESTBED, "net", "up", name, "--robots", "3", "--positions",
+                         "2.5,5 7.5,5 2.5,10", "--comm-range", "8", "--range-model", "los",
+                         "--map", str(OFFICE), "--view", str(port)], **run)  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    driver = None
+    try:
+        wait_listening(port, timeout=20)
+        driver = browser()
+        driver.get(f"http://127.0.0.1:{port}/")
+        deadline = time.monotonic() + 30
+        while not driver.execute_script("return mapImg !== null && run.positions.length > 0"):
+            assert time.monotonic() < deadline, "no map picture or no frame"
+            time.sleep(0.2)
+        time.sleep(0.3)
+        assert driver.execute_script("return run.map_img_m") == [20.0, 20.0]
+        assert "1 link," in driver.find_element("id", "counters").text  # r1-r3, not r1-r2
+        check_drawn_page(driver)
+        keep_screenshot(driver, "net-up-office-view.png")
+        assert console_errors(driver) == []
+    finally:
+        if driver is not None:
+            driver.quit()
+        subprocess.run([*TESTBED, "net", "down", name], **run)
