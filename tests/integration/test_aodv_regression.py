@@ -14,6 +14,13 @@ when robot 3's daemon is gone before robot 2's, robot 2 rightly finds the link l
 sends robot 1 a RERR about robot 3 (its capture runs until the last daemon is gone). On an
 idle machine they exit within the HELLO loss time; under load they may not, so RERRs are
 checked up to `t_end` only.
+
+Before that, a RERR outside the cut is allowed only when robot 2's own capture shows the
+protocol's condition for a lost link: nothing from robot 3 for longer than ALLOWED_HELLO_LOSS
+* HELLO_INTERVAL (2 s of protocol time, 0.4 s here). That is a late HELLO, not a defect:
+robot 3's daemon, descheduled on a loaded machine, sent it later in emulated time than the
+protocol allows, and robot 2 did what the RFC says. A RERR without that silence in the
+capture would be robot 2's fault and fails the test.
 """
 
 import re
@@ -28,6 +35,7 @@ from tests.integration.test_aodv_daemon import CHAIN5, aodv_net, stats
 T = 6.0
 RECOVERY_S = 30.0  # wall seconds after the return within which replies must come again
 REPLIES_AFTER_RETURN = 5  # the ping stops once this many replies came after the return
+HELLO_LOSS_S = 2 * 1.0 / 5.0  # ALLOWED_HELLO_LOSS * HELLO_INTERVAL at time scale 5
 REPLY = re.compile(r"^\[(\d+\.\d+)\] 64 bytes", re.M)
 
 
@@ -87,9 +95,21 @@ def test_aodv_regression_middle_robot_leaves_and_returns():
             k for k in kinds
             if k[3] == "3" and k[2] in ("10.0.0.1", "255.255.255.255") and k[0] < t_end
         ]  # fmt: skip
+        # What robot 2 heard from robot 3, as its capture saw it.
+        heard3 = [float(r[0]) for r in tshark(f"{cap}/r2.pcap", "frame.time_epoch",
+                                               filt="aodv && ip.src == 10.0.0.3")]  # fmt: skip
+
+        def late_hello(t: float) -> bool:
+            last = max((h for h in heard3 if h < t), default=None)
+            return last is None or t - last > HELLO_LOSS_S
+
         when = f"leave {t_leave:.3f}, back {t_back:.3f}, end {t_end:.3f}"
-        assert rerrs and all(t_leave < k[0] < t_back for k in rerrs), (when, rerrs)
-        assert any("10.0.0.5" in k[4].split(",") for k in rerrs)
+        outside = [k for k in rerrs if not t_leave < k[0] < t_back]
+        assert all(late_hello(k[0]) for k in outside), (when, outside)
+        if outside:
+            print(f"RERRs after late HELLOs from robot 3 (a loaded machine): {outside}")
+        assert [k for k in rerrs if t_leave < k[0] < t_back], (when, rerrs)
+        assert any("10.0.0.5" in k[4].split(",") for k in rerrs if t_leave < k[0] < t_back)
         rediscovery = [k for k in kinds if k[3] == "1" and k[1] == "10.0.0.1" and k[0] > t_leave]
         assert rediscovery
         assert [k for k in kinds if k[3] == "2" and k[2] == "10.0.0.1" and k[0] > t_back]
