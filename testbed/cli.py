@@ -399,15 +399,18 @@ DELEGATED = {
 def build_parser(argv: list[str] | None = None) -> Parser:
     """The whole command line. Of the delegated commands only the one named in `argv` (all of
     them when argv names none) has its module imported: `testbed run` starts in a quarter of
-    a second instead of paying for the report's matplotlib."""
+    a second instead of paying for the report's matplotlib, and `net` or `clean` import none."""
     parser = Parser(prog="testbed", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log what is done")
     sub = parser.add_subparsers(dest="cmd", required=True, parser_class=Parser)
     _add_net(sub)
     cl = sub.add_parser("clean", help="remove what dead or abandoned testbeds left behind")
     cl.add_argument("--all", action="store_true", help="also remove testbeds that are up")
-    words = set(sys.argv[1:] if argv is None else argv)
-    chosen = words & set(DELEGATED) or set(DELEGATED)
+    words = sys.argv[1:] if argv is None else argv
+    command = next((w for w in words if not w.startswith("-")), None)
+    # `net` and `clean` import none: matplotlib's first import may log a line of its own.
+    named = set(words) & set(DELEGATED) or set(DELEGATED)
+    chosen = set() if command in ("net", "clean") else named
     for cmd, (module, help_text) in DELEGATED.items():
         p = sub.add_parser(cmd, help=help_text)
         if cmd in chosen and importlib.util.find_spec(module) is not None:

@@ -397,6 +397,10 @@ class Network:
         self._owner = False
 
 
+# The Debian/Ubuntu package of each tool preflight asks for.
+TOOL_PACKAGES = {"ip": "iproute2", "unshare": "util-linux"}
+
+
 def preflight(spec: NetworkSpec) -> None:
     """What can be checked before touching the kernel: privileges and tools."""
     if os.geteuid() != 0:
@@ -406,7 +410,11 @@ def preflight(spec: NetworkSpec) -> None:
         missing.append("tcpdump")
     missing += routing.missing_tools(spec.routing)
     if missing:
-        raise UsageError(f"missing tool(s): {', '.join(missing)} (run `sudo make setup`)")
+        pkgs = ", ".join(dict.fromkeys(TOOL_PACKAGES.get(t, t) for t in missing))
+        raise UsageError(
+            f"missing tool(s): {', '.join(missing)} (package(s) {pkgs}: `sudo make setup` "
+            "installs those the distribution has)"
+        )
 
 
 def our_namespaces(name: str) -> list[str]:

@@ -86,12 +86,15 @@ class LiveFeed:
             **self._robot_events(),
             "snapshots": snapshot_steps(self.run_dir) if self.run_dir else [],
             "ended": self.ended,
-        }
+            # A view whose drawn area follows the robots (netview) says where it is now.
+            **({"origin": self.meta["origin"], "map_m": self.meta["map_m"]}
+               if "origin" in self.meta else {}),
+        }  # fmt: skip
 
 
 def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
     async def run(_request):
-        return web.json_response({**feed.meta, "live": True})
+        return web.json_response({**feed.meta, "live": True, "map": server.has_map(map_png)})
 
     async def live(request):
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream",

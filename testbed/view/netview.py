@@ -17,16 +17,48 @@ import time
 
 from testbed.view.live import KernelRoutes, LiveFeed, LiveServer
 from topology import state
+from topology.los import Walls
 from topology.ns3medium import medium_for
 from topology.spec import LOS_MODELS
 
 POLL_S = 0.2
 
 
-def _extent(positions: list, comm_range: float) -> list[float]:
-    """A square in metres that holds every robot with room for its range circle."""
-    far = max([max(x, y) for x, y in positions] + [0.0]) + comm_range
-    return [max(20.0, far), max(20.0, far)]
+class Extent:
+    """The square the page draws, in metres: every robot seen so far with room for its range
+    ring (so none is cut at the edge, wherever `net move` put it, negative coordinates
+    included) and the map's picture if there is one. It only grows: the picture does not
+    jump as robots move inside it."""
+
+    def __init__(self, comm_range: float, box: tuple[float, float] | None = None) -> None:
+        self.margin = comm_range
+        self.lo = [0.0, 0.0] if box else None
+        self.hi = list(box) if box else None
+
+    def update(self, positions: list) -> bool:
+        """Take in the robots' positions; True if the square changed."""
+        m = self.margin
+        lo = [min(p[i] for p in positions) - m for i in (0, 1)]
+        hi = [max(p[i] for p in positions) + m for i in (0, 1)]
+        if self.lo is not None:
+            lo = [min(a, b) for a, b in zip(lo, self.lo, strict=True)]
+            hi = [max(a, b) for a, b in zip(hi, self.hi, strict=True)]
+        changed = (lo, hi) != (self.lo, self.hi)
+        self.lo, self.hi = lo, hi
+        return changed
+
+    def _side(self) -> float:
+        return max(20.0, self.hi[0] - self.lo[0], self.hi[1] - self.lo[1])
+
+    def origin(self) -> list[float]:
+        """The square's corner, the robots centred in it along its longer side."""
+        side = self._side()
+        return [
+            round(lo - (side - (hi - lo)) / 2, 3) for lo, hi in zip(self.lo, self.hi, strict=True)
+        ]
+
+    def size(self) -> list[float]:
+        return [round(self._side(), 3)] * 2
 
 
 def main(argv: list[str]) -> int:
@@ -42,8 +74,12 @@ def main(argv: list[str]) -> int:
     medium = medium_for(spec)
     medium.open()
     map_png = spec.map_png if spec.range_model in LOS_MODELS else None
+    box = Walls.from_png(map_png, spec.map_cell).size_m if map_png else None
+    extent = Extent(spec.comm_range, box)
+    extent.update(st.positions)
     meta = {"run": name, "robots": spec.robots, "comm_range": spec.comm_range,
-            "map_m": _extent(st.positions, spec.comm_range), "display": [], "status": "up",
+            "origin": extent.origin(), "map_m": extent.size(), "map_img_m": box,
+            "time_scale": spec.time_scale, "display": [], "status": "up",
             "steps": 0, "positions": [], "links": [], "coverage": []}  # fmt: skip
     routes = KernelRoutes(name, spec.robots)
     feed = LiveFeed(meta, routes)
@@ -58,6 +94,8 @@ def main(argv: list[str]) -> int:
             if now is None:
                 break  # the testbed went down
             links = dict.fromkeys(medium.kernel_links())
+            if extent.update(now.positions):
+                feed.meta = {**feed.meta, "origin": extent.origin(), "map_m": extent.size()}
             tick += 1
             feed.publish(tick, [tuple(p) for p in now.positions], links, None, 0, None)
             time.sleep(POLL_S)

@@ -30,6 +30,11 @@ def png(path) -> web.Response:
     raise web.HTTPNotFound()
 
 
+def has_map(map_png: str | None) -> bool:
+    """Whether the page should ask for /map.png (the empty terrain has no picture)."""
+    return bool(map_png) and Path(map_png).is_file()
+
+
 def page_routes(run_dir: Path | None, map_png: str | None) -> list:
     """What the replay and the live view serve alike: the page, its static files (by exact
     name), the map picture and the display's snapshots (only steps the run saved)."""
@@ -61,6 +66,8 @@ def make_app(run_dir: str | Path) -> web.Application:
     run_dir = Path(run_dir).resolve()
     data = replay.load(run_dir)  # raises NotARun before anything listens
     map_png = (read_json(run_dir / "config.json") or {}).get("map")
+
+    data["map"] = has_map(map_png)
 
     async def run(_request: web.Request) -> web.Response:
         return web.json_response(data)

@@ -12,6 +12,8 @@ import sys
 import time
 
 SO_BINDTODEVICE = 25
+SO_RCVBUFFORCE = 33  # root may exceed rmem_max
+RCVBUF = 8 << 20  # a listener descheduled on a loaded machine must not drop what arrived
 
 
 def _socket() -> socket.socket:
@@ -24,6 +26,7 @@ def _socket() -> socket.socket:
 
 def listen(port: int, out: str) -> None:
     s = _socket()
+    s.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, RCVBUF)
     s.bind(("0.0.0.0", port))
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     with open(out, "w", buffering=1) as f:

@@ -83,7 +83,12 @@ def ping(net, k, dst, *args, timeout=30):
 
 
 def test_chain_ping_4_hops_pcap_and_nng():
-    with tempfile.TemporaryDirectory(prefix="ta-aodv-") as cap, aodv_net(CHAIN5, 1.0, cap) as net:
+    with tempfile.TemporaryDirectory(prefix="ta-aodv-") as cap:
+        _chain_ping_4_hops_pcap_and_nng(cap)
+
+
+def _chain_ping_4_hops_pcap_and_nng(cap):
+    with aodv_net(CHAIN5, 1.0, cap) as net:
         assert "10.0.0.5" not in routes(net, 1)
         out = ping(net, 1, "10.0.0.5", "-c", "2", "-W", "5")
         assert " 0% packet loss" in out, out
@@ -117,39 +122,39 @@ def test_chain_ping_4_hops_pcap_and_nng():
         )  # fmt: skip
         assert client.stdout.strip() == "pong:ping", client.stderr
         server.wait(timeout=10)
-        time.sleep(0.3)  # let tcpdump flush
+    # The network is down: each tcpdump drained its queue and stopped; the pcaps are whole.
 
-        # tshark decodes what crossed wlan0 as AODV with the expected fields.
-        fields = ["aodv.type", "aodv.flags", "aodv.hopcount", "aodv.dest_ip", "aodv.orig_ip",
-                  "aodv.dest_seqno", "aodv.orig_seqno", "ip.ttl", "ip.dst"]  # fmt: skip
-        rows = []
-        for k in (1, 5):
-            out = subprocess.run(
-                ["tshark", "-r", f"{cap}/r{k}.pcap", "-Y", "aodv", "-T", "fields",
-                 *sum((["-e", f] for f in fields), [])],
-                capture_output=True, text=True, check=True,
-            ).stdout  # fmt: skip
-            rows += [dict(zip(fields, line.split("\t"), strict=False)) for line in out.splitlines()]
-        rreqs = [r for r in rows if r["aodv.type"] == "1" and r["aodv.orig_ip"] == "10.0.0.1"]
-        assert rreqs and all(r["ip.dst"] == "255.255.255.255" for r in rreqs)
-        first = rreqs[0]
-        assert first["ip.ttl"] == "2" and first["aodv.hopcount"] == "0"  # TTL_START 2
-        # tshark shows the 16 bits after Type: G (0x2000) and U (0x0800) set.
-        assert int(first["aodv.flags"], 0) & 0x2800 == 0x2800
-        assert first["aodv.orig_seqno"] == "1" and first["aodv.dest_seqno"] == "0"
-        # The RREQ that reaches 5 (seen in r5.pcap, sent by 4) has hop count 3.
-        assert any(r["aodv.type"] == "1" and r["aodv.hopcount"] == "3" for r in rows)
-        # The RREP that reaches 1 has hop count 3 and comes from the destination 5.
-        rreps = [
-            r for r in rows
-            if r["aodv.type"] == "2"
-            and r["aodv.dest_ip"] == "10.0.0.5"
-            and r["ip.dst"] == "10.0.0.1"
-        ]  # fmt: skip
-        assert rreps and rreps[0]["aodv.hopcount"] == "3"
-        # HELLOs: RREPs to the broadcast address with IP TTL 1.
-        hellos = [r for r in rows if r["aodv.type"] == "2" and r["ip.dst"] == "255.255.255.255"]
-        assert hellos and all(h["ip.ttl"] == "1" and h["aodv.hopcount"] == "0" for h in hellos)
+    # tshark decodes what crossed wlan0 as AODV with the expected fields.
+    fields = ["aodv.type", "aodv.flags", "aodv.hopcount", "aodv.dest_ip", "aodv.orig_ip",
+              "aodv.dest_seqno", "aodv.orig_seqno", "ip.ttl", "ip.dst"]  # fmt: skip
+    rows = []
+    for k in (1, 5):
+        out = subprocess.run(
+            ["tshark", "-r", f"{cap}/r{k}.pcap", "-Y", "aodv", "-T", "fields",
+             *sum((["-e", f] for f in fields), [])],
+            capture_output=True, text=True, check=True,
+        ).stdout  # fmt: skip
+        rows += [dict(zip(fields, line.split("\t"), strict=False)) for line in out.splitlines()]
+    rreqs = [r for r in rows if r["aodv.type"] == "1" and r["aodv.orig_ip"] == "10.0.0.1"]
+    assert rreqs and all(r["ip.dst"] == "255.255.255.255" for r in rreqs)
+    first = rreqs[0]
+    assert first["ip.ttl"] == "2" and first["aodv.hopcount"] == "0"  # TTL_START 2
+    # tshark shows the 16 bits after Type: G (0x2000) and U (0x0800) set.
+    assert int(first["aodv.flags"], 0) & 0x2800 == 0x2800
+    assert first["aodv.orig_seqno"] == "1" and first["aodv.dest_seqno"] == "0"
+    # The RREQ that reaches 5 (seen in r5.pcap, sent by 4) has hop count 3.
+    assert any(r["aodv.type"] == "1" and r["aodv.hopcount"] == "3" for r in rows)
+    # The RREP that reaches 1 has hop count 3 and comes from the destination 5.
+    rreps = [
+        r for r in rows
+        if r["aodv.type"] == "2"
+        and r["aodv.dest_ip"] == "10.0.0.5"
+        and r["ip.dst"] == "10.0.0.1"
+    ]  # fmt: skip
+    assert rreps and rreps[0]["aodv.hopcount"] == "3"
+    # HELLOs: RREPs to the broadcast address with IP TTL 1.
+    hellos = [r for r in rows if r["aodv.type"] == "2" and r["ip.dst"] == "255.255.255.255"]
+    assert hellos and all(h["ip.ttl"] == "1" and h["aodv.hopcount"] == "0" for h in hellos)
 
 
 def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
@@ -188,16 +193,16 @@ def test_unknown_destination_icmp_unreachable_others_unaffected():
             1, ["ping", "-n", "-i", "0.1", "-c", "40", "-W", "2", "10.0.0.3"],
             role="test", stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
-        t0 = time.monotonic()
         out = ping(net, 1, "10.0.0.99", "-c", "1", "-W", "10")
-        elapsed = time.monotonic() - t0
         assert "Destination Host Unreachable" in out, out
-        # Ring search TTL 2, 4, 6, then NET_DIAMETER with RREQ_RETRIES = 2 and binary
-        # exponential backoff: 21.0 s at time scale 1, so 2.1 s here.
-        assert 1.8 < elapsed < 6.0, elapsed
         s1 = stats(net, 1)
         failed = [d for d in s1["discoveries"] if not d["ok"]]
         assert failed and failed[0]["dest"] == "10.0.0.99"
+        # Ring search TTL 2, 4, 6, then NET_DIAMETER with RREQ_RETRIES = 2 and binary
+        # exponential backoff: 21.0 s at time scale 1, so 2.1 s here, from the first RREQ
+        # to giving up as the daemon measured it (not ping's start-up: under load that
+        # took seconds). Timers never fire early; late ones (load) add little.
+        assert 2.1 * 0.99 < failed[0]["latency_s"] < 6.0, failed[0]
         assert s1["icmp_unreachable_sent"] >= 1
         text, _ = good.communicate(timeout=30)
         assert " 0% packet loss" in text, text
@@ -207,16 +212,24 @@ def test_idle_route_expires_active_route_stays():
     with aodv_net(CHAIN5[:4], time_scale=5.0) as net:
         assert " 0% packet loss" in ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
         pinger = net.spawn(
-            1, ["ping", "-n", "-i", "0.05", "-c", "100", "10.0.0.3"],
-            role="test", stdout=subprocess.DEVNULL,
-        )  # fmt: skip
-        time.sleep(0.5)
-        assert {"10.0.0.3", "10.0.0.4"} <= set(routes(net, 1))
-        # MY_ROUTE_TIMEOUT is 11.2 s, 2.24 s at time scale 5; wait well past it.
-        time.sleep(3.0)
-        r1 = routes(net, 1)
+            1, ["ping", "-n", "-i", "0.05", "10.0.0.3"], role="test", stdout=subprocess.DEVNULL
+        )
+        # Until the pinger found 3 (spawning it may take a while on a loaded machine).
+        deadline = time.monotonic() + 20
+        while "10.0.0.3" not in routes(net, 1) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert "10.0.0.3" in routes(net, 1)
+        # MY_ROUTE_TIMEOUT is 11.2 s, 2.24 s at time scale 5: the idle route to 4 goes from
+        # the kernel then, while the used one to 3 is refreshed through the nftables set
+        # and stays.
+        deadline = time.monotonic() + 20
+        while "10.0.0.4" in (r1 := routes(net, 1)) and time.monotonic() < deadline:
+            time.sleep(0.05)
         assert "10.0.0.4" not in r1, r1  # idle: gone from the kernel
-        assert "10.0.0.3" in r1, r1  # used: refreshed through the nftables set
+        time.sleep(1.0)  # and some time after, the used route is still there
+        assert "10.0.0.3" in routes(net, 1), routes(net, 1)
+        assert pinger.poll() is None
+        pinger.terminate()
         pinger.wait(timeout=10)
 
 
@@ -584,7 +597,9 @@ def test_hostile_flood_keeps_the_daemon_up_bounded_and_in_step_with_the_kernel()
         assert len(table) <= 1024  # Params.route_table_limit
         assert peak < RSS_BOUND_MB * 1024, f"peak RSS {peak / 1024:.0f} MB"
         # Once the forged routes have expired, kernel and table are equal, and work.
-        time.sleep(7.0)
-        assert set(routes(net, 2)) == set(stats(net, 2)["routes"])
+        deadline = time.monotonic() + 60
+        while set(routes(net, 2)) != set(stats(net, 2)["routes"]):
+            assert time.monotonic() < deadline, (routes(net, 2), stats(net, 2)["routes"])
+            time.sleep(0.5)
         assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
         print(f"RSS idle {rss_idle / 1024:.1f} MB, peak {peak / 1024:.1f} MB; {pd}")

@@ -78,12 +78,27 @@ def _check_exact_reachability(net: Network, outs: dict[int, str], round_tag: str
         uc = net.exec(i, PROBE + ["send", str(PORT), *others, "--count", "3", "--gap", "0.05",
                                   "--tag", f"u{round_tag}{i}"], cwd=REPO)  # fmt: skip
         assert bc.returncode == 0 and uc.returncode == 0
-    time.sleep(0.5)
-    for i in net.spec.robot_ids():
-        src = names.robot_addr(i)
-        # A socket hears its own broadcasts (the kernel loops them back): not the medium's doing.
-        bcast = {k for k, s in _received(outs, f"b{round_tag}{i}").items() if src in s and k != i}
-        ucast = {k for k, s in _received(outs, f"u{round_tag}{i}").items() if src in s}
+
+    def heard() -> dict[int, tuple[set[int], set[int]]]:
+        """sender -> (robots that heard its broadcast, robots that got its unicast)."""
+        got = {}
+        for i in net.spec.robot_ids():
+            src = names.robot_addr(i)
+            # A socket hears its own broadcasts (the kernel loops them back): not the medium's.
+            b = {k for k, s in _received(outs, f"b{round_tag}{i}").items() if src in s and k != i}
+            u = {k for k, s in _received(outs, f"u{round_tag}{i}").items() if src in s}
+            got[i] = (b, u)
+        return got
+
+    # Until every linked robot wrote down what it got (a loaded machine may take a while),
+    # then as long again for a datagram that should not have arrived to show up.
+    start, deadline = time.monotonic(), time.monotonic() + 20
+    while not all(b >= linked[i] and u >= linked[i] for i, (b, u) in heard().items()):
+        if time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
+    time.sleep(max(0.5, time.monotonic() - start))
+    for i, (bcast, ucast) in heard().items():
         assert bcast == linked[i], f"broadcast from r{i} reached {sorted(bcast)}"
         assert ucast == linked[i], f"unicast from r{i} reached {sorted(ucast)}"
 

@@ -9,6 +9,7 @@ that equivalence against an actual uninterrupted sweep, with a stand-in for `tes
 import importlib.util
 import json
 import os
+import shutil
 import signal
 import statistics
 import subprocess
@@ -189,6 +190,10 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
 PROTOCOLS_SHORT = REPO / "testbed" / "experiments" / "protocols-short.toml"
 
 
+@pytest.mark.skipif(
+    shutil.which("batmand") is None,
+    reason="batmand (package batmand) is not installed; some distributions do not have it",
+)
 def test_protocols_short_sweep_fills_the_protocols_section(tmp_path):
     """AODV, babel, batman and the oracle on the same seeds, on the empty and the office map
     (line of sight): the report compares them, and each protocol's control traffic in the

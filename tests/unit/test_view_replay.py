@@ -51,7 +51,9 @@ def test_server_serves_the_page_and_the_run_and_no_other_path(tmp_path):
             for bad in ("/static/../../config.json", "/static/index.html", "/static/x.js",
                         "/runs/r/config.json", "/etc/passwd"):  # fmt: skip
                 assert (await client.get(bad)).status == 404, bad
-            assert (await client.get("/map.png")).status == 404  # empty terrain: no picture
+            # Empty terrain: no picture, and the page is told not to ask for one.
+            assert data["map"] is False
+            assert (await client.get("/map.png")).status == 404
             assert data["snapshots"] == [2]
             assert (await client.get("/display.png?step=2")).status == 200
             for bad in ("3", "..%2Fconfig.json", "-1", ""):

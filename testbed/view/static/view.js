@@ -1,6 +1,8 @@
 // The replay page: draws one step of a finished run from /api/run (testbed/view/replay.py):
-// the map faint, each robot with its path so far and its communication range, the links
-// of that step. No framework and no build step: this file is what the browser runs.
+// the map, each robot with its path so far and a light ring for its communication range,
+// the links of that step; the display robot's newest snapshot (its own picture, with its
+// own labels) is shown beside the map, never over it. The live view (testbed/view/live.py)
+// feeds the same page. No framework and no build step: this file is what the browser runs.
 "use strict";
 const canvas = document.getElementById("map");
 const ctx = canvas.getContext("2d");
@@ -11,24 +13,40 @@ let run = null, mapImg = null, linkSets = [], playing = null;
 let selected = null, hops = {};  // live: the clicked robot, and each robot's next hop to it
 let goals = {};  // live: each robot's newest goal
 let stepNos = [];  // live: the run's step of each frame received (replay: the index is the step)
-const snaps = new Map();  // the display robot's merged-map snapshots, by step, once loaded
+const snapImg = document.getElementById("snapshot");
+const PAD = 14;  // pixels round the map: a robot on its edge is drawn whole, label and all
+
+function scale() {
+  // Pixels per metre, and the corner of the drawn area in metres (a `net up` network may
+  // have robots at negative coordinates: its view sends the origin that holds them).
+  const [wm, hm] = run.map_m;
+  return [(canvas.width - 2 * PAD) / Math.max(wm, hm), run.origin || [0, 0]];
+}
+
+function toCanvas(x, y) {
+  const [k, [x0, y0]] = scale();
+  return [PAD + (x - x0) * k, PAD + (y - y0) * k];
+}
 
 function stepOf(i) { return run.live ? stepNos[i] : i; }
 
-function snapshotFor(i) {
-  // The newest display snapshot at or before the step shown, loaded on first use.
+function showSnapshot(i) {
+  // The newest display snapshot at or before the step shown, in its own panel.
   const step = stepOf(i);
   let best = null;
   for (const s of run.snapshots || []) if (s <= step && (best === null || s > best)) best = s;
-  if (best === null) return null;
-  if (!snaps.has(best)) {
-    const img = new Image();
-    img.onload = () => draw(Number(slider.value));
-    img.src = "/display.png?step=" + best;
-    snaps.set(best, img);
-  }
-  const img = snaps.get(best);
-  return img.complete && img.naturalWidth ? img : null;
+  const panel = document.getElementById("display");
+  panel.hidden = best === null;
+  if (best === null) return;
+  const src = "/display.png?step=" + best;
+  if (snapImg.getAttribute("src") !== src) snapImg.setAttribute("src", src);
+  document.getElementById("snapstep").textContent = "step " + best;
+}
+
+function drawnLinks(step) {
+  // The links between robots drawn on the map (not the display robot's: it is not drawn).
+  return [...linksAt(step)].map((key) => key.split("-").map(Number))
+    .filter(([i, j]) => i <= run.robots && j <= run.robots);
 }
 
 function linksAt(step) {
@@ -56,26 +74,35 @@ function buildLinkSets() {
 function draw(step) {
   if (!run.positions.length) return;
   const [wm, hm] = run.map_m;
-  const k = canvas.width / Math.max(wm, hm);
+  const [k, [x0, y0]] = scale();
   ctx.clearRect(0, 0, canvas.width, canvas.height);
-  if (mapImg) {  // the ground truth, faint
-    ctx.globalAlpha = 0.3;
-    ctx.drawImage(mapImg, 0, 0, wm * k, hm * k);
+  if (mapImg) {  // the ground truth, walls dark enough to read under everything else
+    const [mx, my] = toCanvas(0, 0), [iw, ih] = run.map_img_m || run.map_m;
+    ctx.globalAlpha = 0.7;
+    ctx.drawImage(mapImg, mx, my, iw * k, ih * k);
     ctx.globalAlpha = 1;
   }
-  const snap = snapshotFor(step);
-  if (snap) {  // the display robot's merged map over it (its newest snapshot)
-    ctx.globalAlpha = 0.35;
-    ctx.drawImage(snap, 0, 0, wm * k, hm * k);
-    ctx.globalAlpha = 1;
-  }
+  showSnapshot(step);
+  const [fx, fy] = toCanvas(x0, y0);
   ctx.strokeStyle = "#999";
-  ctx.strokeRect(0, 0, wm * k, hm * k);
+  ctx.lineWidth = 1;
+  ctx.strokeRect(fx, fy, wm * k, hm * k);
   const pos = run.positions[step];
-  const at = (r) => [pos[2 * r] * k, pos[2 * r + 1] * k];
-  for (const key of linksAt(step)) {
-    const [i, j] = key.split("-").map(Number);
-    if (i > run.robots || j > run.robots) continue;  // the display's links
+  const at = (r) => toCanvas(pos[2 * r], pos[2 * r + 1]);
+  for (let r = 0; r < run.robots; r++) {
+    // Each robot's communication range: a light ring, so the map stays readable beneath.
+    const [x, y] = at(r);
+    ctx.strokeStyle = COLORS[r % COLORS.length];
+    ctx.globalAlpha = 0.35;
+    ctx.setLineDash([4, 4]);
+    ctx.beginPath(); ctx.arc(x, y, run.comm_range * k, 0, 2 * Math.PI); ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.globalAlpha = 0.03;
+    ctx.fillStyle = COLORS[r % COLORS.length];
+    ctx.fill();
+    ctx.globalAlpha = 1;
+  }
+  for (const [i, j] of drawnLinks(step)) {
     const [x1, y1] = at(i - 1), [x2, y2] = at(j - 1);
     ctx.strokeStyle = "#2a2";
     ctx.lineWidth = 2;
@@ -95,7 +122,7 @@ function draw(step) {
   ctx.lineWidth = 1;
   for (const [r, g] of Object.entries(run.live ? goals : {})) {
     // Each robot's current goal (its newest plan), a cross joined to the robot.
-    const [x, y] = at(Number(r) - 1), gx = g[0] * k, gy = g[1] * k;
+    const [x, y] = at(Number(r) - 1), [gx, gy] = toCanvas(g[0], g[1]);
     ctx.strokeStyle = COLORS[(Number(r) - 1) % COLORS.length];
     ctx.setLineDash([3, 3]);
     ctx.beginPath(); ctx.moveTo(x, y); ctx.lineTo(gx, gy); ctx.stroke();
@@ -106,27 +133,31 @@ function draw(step) {
   for (let r = 0; r < run.robots; r++) {
     const c = COLORS[r % COLORS.length];
     ctx.strokeStyle = c;
+    ctx.lineWidth = 1.5;
     ctx.beginPath();
     for (let s = 0; s <= step; s += Math.max(1, Math.floor(step / 400))) {
-      const p = run.positions[s];
-      if (s === 0) ctx.moveTo(p[2 * r] * k, p[2 * r + 1] * k);
-      else ctx.lineTo(p[2 * r] * k, p[2 * r + 1] * k);
+      const [px, py] = toCanvas(run.positions[s][2 * r], run.positions[s][2 * r + 1]);
+      if (s === 0) ctx.moveTo(px, py); else ctx.lineTo(px, py);
     }
     ctx.stroke();
     const [x, y] = at(r);
-    ctx.globalAlpha = 0.08;
     ctx.fillStyle = c;
-    ctx.beginPath(); ctx.arc(x, y, run.comm_range * k, 0, 2 * Math.PI); ctx.fill();
-    ctx.globalAlpha = 1;
-    ctx.beginPath(); ctx.arc(x, y, 5, 0, 2 * Math.PI); ctx.fill();
-    ctx.fillText("r" + (r + 1), x + 6, y - 6);
+    ctx.strokeStyle = "#fff";
+    ctx.lineWidth = 2;
+    ctx.beginPath(); ctx.arc(x, y, 6, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+    ctx.font = "bold 13px sans-serif";
+    ctx.lineWidth = 3;
+    ctx.strokeText("r" + (r + 1), x + 8, y - 8);  // a white halo: readable over any line
+    ctx.fillText("r" + (r + 1), x + 8, y - 8);
   }
+  ctx.lineWidth = 1;
   const cov = run.coverage[step];
+  const parts = [run.robots + " robots", run.comm_range + " m range",
+                 drawnLinks(step).length + (drawnLinks(step).length === 1 ? " link" : " links")];
+  if (cov !== undefined && cov !== null) parts.push("coverage " + (100 * cov).toFixed(1) + "%");
+  parts.push("status " + run.status);
   document.getElementById("step").textContent = "step " + stepOf(step);
-  document.getElementById("counters").textContent =
-    run.robots + " robots, " + run.comm_range + " m range, " + linksAt(step).size +
-    " links, coverage " + (cov === undefined || cov === null ? "?" : (100 * cov).toFixed(1) + "%") +
-    ", status " + run.status + liveInfo;
+  document.getElementById("counters").textContent = parts.join(", ") + liveInfo;
 }
 
 let liveInfo = "";
@@ -140,11 +171,16 @@ function follow(frame) {
   run.coverage.push(frame.coverage);
   stepNos.push(frame.step);
   goals = frame.goals || {};
+  if (frame.map_m) { run.map_m = frame.map_m; run.origin = frame.origin; }  // net up: grows
   run.snapshots = frame.snapshots;
   run.steps = run.positions.length - 1;
   slider.max = run.steps;
-  liveInfo = (selected === null ? "" : ", routes to r" + selected + " in red") +
-             ", deadlines missed " + frame.missed + ", time scale achieved " + frame.scale +
+  // A network brought up by hand (`net up --view`) has no step loop: no deadlines, no
+  // achieved scale; its own time scale is in run.time_scale.
+  const timing = frame.scale == null
+    ? (run.time_scale == null ? "" : ", time scale " + run.time_scale)
+    : ", deadlines missed " + frame.missed + ", time scale achieved " + frame.scale;
+  liveInfo = (selected === null ? "" : ", routes to r" + selected + " in red") + timing +
              (frame.messages_ps == null ? "" : ", messages " + frame.messages_ps + "/s") +
              (frame.routing_pps == null ? "" : ", routing packets " + frame.routing_pps + "/s") +
              (frame.ended ? " (run over)" : "");
@@ -152,7 +188,7 @@ function follow(frame) {
   if (atEnd) { slider.value = run.steps; }
   draw(Number(slider.value));
   document.body.dataset.frames = String(run.positions.length);
-  document.body.dataset.links = String(linksAt(run.steps).size);
+  document.body.dataset.links = String(drawnLinks(run.steps).length);
 }
 
 async function main() {
@@ -162,12 +198,11 @@ async function main() {
   buildLinkSets();
   canvas.addEventListener("click", (ev) => {
     if (!run.live || !run.positions.length) return;
-    const [wm, hm] = run.map_m;
-    const k = canvas.width / Math.max(wm, hm);
     const pos = run.positions[Number(slider.value)];
     let best = null, bestD = 20;
     for (let r = 0; r < run.robots; r++) {
-      const d = Math.hypot(pos[2 * r] * k - ev.offsetX, pos[2 * r + 1] * k - ev.offsetY);
+      const [x, y] = toCanvas(pos[2 * r], pos[2 * r + 1]);
+      const d = Math.hypot(x - ev.offsetX, y - ev.offsetY);
       if (d < bestD) { best = r + 1; bestD = d; }
     }
     selected = best;
@@ -184,9 +219,11 @@ async function main() {
     const events = new EventSource("/api/live");
     events.onmessage = (e) => follow(JSON.parse(e.data));
   }
-  const img = new Image();
-  img.onload = () => { mapImg = img; draw(Number(slider.value)); };
-  img.src = "/map.png";
+  if (run.map) {  // the empty terrain has no picture: nothing to ask for
+    const img = new Image();
+    img.onload = () => { mapImg = img; draw(Number(slider.value)); };
+    img.src = "/map.png";
+  }
   slider.addEventListener("input", () => draw(Number(slider.value)));
   document.getElementById("play").addEventListener("click", () => {
     if (playing) { clearInterval(playing); playing = null; return; }
