@@ -307,6 +307,12 @@ class Daemon:
             now = time.monotonic()
             deadline = self.core.next_deadline()
             if now >= deadline:
+                # What already waits in the sockets happened before the timer is handled: a
+                # daemon that was descheduled past a neighbour's timeout reads that
+                # neighbour's HELLO first, instead of expiring a neighbour that spoke.
+                for key, _ in sel.select(0):
+                    key.data()
+                now = time.monotonic()
                 self._execute(self.core.on_timer(now), now)
                 deadline = self.core.next_deadline()
             if now >= next_poll:
