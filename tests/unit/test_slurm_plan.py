@@ -3,17 +3,19 @@
 from pathlib import Path
 
 from testbed import slurm
+from testbed.runconfig import RunConfig
 
 
 def test_resources_grow_with_team_and_time_scale_and_fit_a_node():
-    small = slurm.resources({"robots": 1, "time_scale": 15, "max_steps": 6000})
-    big = slurm.resources({"robots": 10, "time_scale": 3.75, "max_steps": 6000})
-    fast_big = slurm.resources({"robots": 10, "time_scale": 15, "max_steps": 6000})
+    small = slurm.resources(RunConfig(robots=1, comm_range=5.0, time_scale=15, max_steps=6000))
+    big = slurm.resources(RunConfig(robots=10, comm_range=5.0, time_scale=3.75, max_steps=6000))
+    fast_big = slurm.resources(RunConfig(robots=10, comm_range=5.0, time_scale=15, max_steps=6000))
     assert small[0] >= 1 and big[0] >= 2 and fast_big[0] > big[0]
     # The time limit covers the step cap at the run's pace, with margin and start-up.
     assert big[1] >= 6000 * 0.1 / 3.75 * 3 / 60
     assert small[1] < big[1]
-    assert slurm.resources({"robots": 50, "time_scale": 15, "max_steps": 10}, 8)[0] == 8
+    crowd = RunConfig(robots=50, comm_range=5.0, time_scale=15, max_steps=10)
+    assert slurm.resources(crowd, 8)[0] == 8
 
 
 def test_batch_script_runs_one_task_of_the_list_with_this_python(tmp_path):
