@@ -2,11 +2,11 @@
 
 Theory of operation. The sweep file expands (testbed.sweepfile) into planned runs, each with an
 id derived from its parameters. Run `R` lives in `DIR/runs/R/` and is *done* iff
-`DIR/runs/R/result.json` exists: `testbed run` writes that file last and atomically (see
-docs/run-results.md), so the file system alone says what is finished. `plan` sorts the planned
-runs into done, to do (absent, or partial: a directory without result.json, deleted before the
-run is redone) and skipped (points this machine cannot run, e.g. delay without sch_netem, with
-the reason recorded).
+`DIR/runs/R/result.json` exists (testbed.rundir: `testbed run` writes that file last and
+atomically, so the file system alone says what is finished). testbed.sweepplan sorts the
+planned runs into done, to do (absent, or partial: a directory without result.json, deleted
+before the run is redone) and skipped (points this machine cannot run, e.g. delay without
+sch_netem, with the reason recorded); `Sweep.run` takes the runs to do.
 
 Each run is a child process, `testbed run ... --out DIR/runs/R`, with its output in
 `DIR/logs/R.log`. The children are forked from a fork server (topology.forkserver) that has
