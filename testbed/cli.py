@@ -14,17 +14,11 @@ import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
 
+from testbed import runoptions
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
+from testbed.runconfig import NET_OPTIONS
 from topology.argtypes import number
-from topology.spec import (
-    AODV_PROFILES,
-    LOS_MODELS,
-    MEDIA,
-    RANGE_MODELS,
-    ROUTINGS,
-    WIFI_LOSSES,
-    WIFI_STANDARDS,
-)
+from topology.spec import LAYOUTS, LOS_MODELS
 
 log = logging.getLogger("testbed")
 
@@ -80,97 +74,66 @@ def _name(text: str) -> str:
 # -- net ---------------------------------------------------------------------------------------
 
 
+NAME_HELP = "the testbed's name (as given to net up)"
+ROBOT_HELP = "a robot, rK (K from 1)"
+
+
 def _add_net(sub) -> None:
     net = sub.add_parser("net", help="bring a network up by hand, use it, take it down")
     nsub = net.add_subparsers(dest="net_cmd", required=True, parser_class=Parser)
 
     up = nsub.add_parser("up", help="build a testbed network and leave it running")
-    up.add_argument("name", type=_name)
-    up.add_argument("--robots", type=_robot_count, required=True)
-    up.add_argument("--layout", choices=("chain", "grid", "random"))
-    up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0)
-    up.add_argument("--positions", type=_positions, help='"X,Y X,Y ..." in metres')
-    up.add_argument("--comm-range", type=number(float, "communication range", above=0),
-                    required=True)  # fmt: skip
-    up.add_argument("--range-model", choices=RANGE_MODELS, default="disc",
-                    help="disc (default), lossy, los (walls of --map block the radio), "
-                         "los-lossy")  # fmt: skip
+    up.add_argument("name", type=_name, help="the testbed's name (lowercase letters, digits)")
+    up.add_argument("--robots", type=_robot_count, required=True, metavar="N",
+                    help="robots (required)")  # fmt: skip
+    up.add_argument("--layout", choices=LAYOUTS, help="where the robots stand (default chain)")
+    up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0, metavar="M",
+                    help="distance between neighbours of --layout (metres; default 8)")  # fmt: skip
+    up.add_argument("--positions", type=_positions, metavar='"X,Y X,Y ..."',
+                    help="where the robots stand (metres; instead of --layout)")  # fmt: skip
     up.add_argument(
         "--map",
         metavar="PNG",
-        help="walls for the los models (dark pixels); positions are metres on it",
+        help="walls for the los models (dark pixels); positions are metres on it (default none)",
     )
-    up.add_argument(
-        "--map-cell",
-        type=number(float, "map cell", above=0),
-        default=0.05,
-        metavar="M",
-        help="metres per pixel of --map (default 0.05)",
-    )
-    up.add_argument(
-        "--wall-loss",
-        type=number(float, "wall loss", minimum=0),
-        metavar="PCT",
-        help="with los: each wall crossed costs PCT loss instead of blocking",
-    )
-    up.add_argument("--routing", choices=ROUTINGS, default="none")
-    up.add_argument("--aodv-profile", choices=AODV_PROFILES, default="rfc",
-                    help="AODV parameters: rfc (default) or ns3 (ns-3's defaults)")  # fmt: skip
-    up.add_argument("--loss", type=number(float, "loss", minimum=0), default=0.0, metavar="PCT")
-    up.add_argument("--delay", type=number(float, "delay", minimum=0), default=0.0, metavar="MS")
-    up.add_argument("--capture", metavar="DIR", help="write one pcap per robot here")
-    up.add_argument("--seed", type=int, default=None)
-    up.add_argument("--time-scale", type=number(float, "time scale", above=0), default=1.0)
-    up.add_argument(
-        "--medium",
-        choices=MEDIA,
-        default="veth",
-        help="veth links (default) or ns-3's 802.11 channel (docs/ns3-medium.md)",
-    )
-    up.add_argument(
-        "--wifi-loss",
-        choices=WIFI_LOSSES,
-        default="range",
-        help="ns3-wifi propagation: a cut-off at the range (default) or log-distance",
-    )
-    up.add_argument("--wifi-standard", choices=WIFI_STANDARDS, default="80211a")
-    up.add_argument(
-        "--wifi-rate",
-        default="",
-        metavar="MODE",
-        help="ns3-wifi data rate: an ns-3 WifiMode (OfdmRate12Mbps), or minstrel",
-    )
+    up.add_argument("--capture", metavar="DIR", help="write one pcap per robot here (default none)")
+    up.add_argument("--seed", type=int, default=None, metavar="S",
+                    help="seed of --layout random (default: another layout each time)")  # fmt: skip
+    for opt in NET_OPTIONS:  # comm range, radio, routing, impairments, time scale: as `run`'s
+        runoptions.add_option(up, opt)
     up.add_argument(
         "--view",
         metavar="[HOST:]PORT",
-        help="serve a live view of the network (127.0.0.1 unless a host is given)",
+        help="serve a live view of the network (127.0.0.1 unless a host is given; default none)",
     )
 
     ex = nsub.add_parser("exec", help="run a command in a robot's namespace")
-    ex.add_argument("name", type=_name)
-    ex.add_argument("robot", type=_robot_ref)
-    ex.add_argument("command", nargs=argparse.REMAINDER)
+    ex.add_argument("name", type=_name, help=NAME_HELP)
+    ex.add_argument("robot", type=_robot_ref, help=ROBOT_HELP)
+    ex.add_argument("command", nargs=argparse.REMAINDER, help="-- CMD ARG ...: what to run")
 
     mv = nsub.add_parser("move", help="move a robot; links follow before this returns")
-    mv.add_argument("name", type=_name)
-    mv.add_argument("robot", type=_robot_ref)
-    mv.add_argument("x", type=number(float, "x"))
-    mv.add_argument("y", type=number(float, "y"))
+    mv.add_argument("name", type=_name, help=NAME_HELP)
+    mv.add_argument("robot", type=_robot_ref, help=ROBOT_HELP)
+    mv.add_argument("x", type=number(float, "x"), help="new x (metres)")
+    mv.add_argument("y", type=number(float, "y"), help="new y (metres)")
 
     im = nsub.add_parser("impair", help="impair one link (both directions), or clear it")
-    im.add_argument("name", type=_name)
-    im.add_argument("robot_a", type=_robot_ref)
-    im.add_argument("robot_b", type=_robot_ref)
-    im.add_argument("--loss", type=number(float, "loss", minimum=0), default=0.0, metavar="PCT")
-    im.add_argument("--delay", type=number(float, "delay", minimum=0), default=0.0, metavar="MS")
-    im.add_argument("--jitter", type=number(float, "jitter", minimum=0), default=0.0, metavar="MS")
-    im.add_argument("--rate", type=number(float, "rate", minimum=0), default=0.0, metavar="KBIT")
+    im.add_argument("name", type=_name, help=NAME_HELP)
+    im.add_argument("robot_a", type=_robot_ref, help="one end of the link: " + ROBOT_HELP)
+    im.add_argument("robot_b", type=_robot_ref, help="the other end")
+    for flag, unit, what in (
+        ("--loss", "PCT", "packet loss (percent"), ("--delay", "MS", "delay (ms"),
+        ("--jitter", "MS", "delay jitter (ms"), ("--rate", "KBIT", "rate limit (kbit/s"),
+    ):  # fmt: skip
+        im.add_argument(flag, type=number(float, flag[2:], minimum=0), default=0.0,
+                        metavar=unit, help=f"{what}; default 0: none)")  # fmt: skip
 
     ln = nsub.add_parser("links", help="print the current links, one 'i j' pair per line")
-    ln.add_argument("name", type=_name)
+    ln.add_argument("name", type=_name, help=NAME_HELP)
 
     dn = nsub.add_parser("down", help="tear a testbed network down")
-    dn.add_argument("name", type=_name)
+    dn.add_argument("name", type=_name, help=NAME_HELP)
 
     nsub.add_parser("list", help="list the testbeds that are up")
 
@@ -200,7 +163,7 @@ def _net_up(args) -> int:
         raise UsageError(f"--range-model {args.range_model} needs --map PNG (the walls)")
     if args.map and not los:
         raise UsageError("--map is for the los range models: add --range-model los")
-    if args.wall_loss is not None and not los:
+    if args.wall_loss_pct is not None and not los:
         raise UsageError("--wall-loss is for the los range models: add --range-model los")
     try:
         if args.positions is not None:
@@ -218,11 +181,11 @@ def _net_up(args) -> int:
             comm_range=args.comm_range,
             routing=args.routing,
             aodv_profile=args.aodv_profile,
-            impairment=Impairment(loss_pct=args.loss, delay_ms=args.delay),
+            impairment=Impairment(loss_pct=args.loss_pct, delay_ms=args.delay_ms),
             range_model=args.range_model,
             map_png=os.path.abspath(args.map) if args.map else None,
             map_cell=args.map_cell,
-            wall_loss_pct=args.wall_loss,
+            wall_loss_pct=args.wall_loss_pct,
             capture_dir=os.path.abspath(args.capture) if args.capture else None,
             time_scale=args.time_scale,
             medium=args.medium,
@@ -415,9 +378,6 @@ def build_parser(argv: list[str] | None = None) -> Parser:
         p = sub.add_parser(cmd, help=help_text)
         if cmd in chosen and importlib.util.find_spec(module) is not None:
             importlib.import_module(module).add_arguments(p)
-        if cmd == "run":
-            p.add_argument("--replace", action="store_true",
-                           help="--out holds an earlier run: delete it first")  # fmt: skip
     return parser
 
 

@@ -65,6 +65,7 @@ from testbed.runrecord import RobotRecord, RunRecord, WallParts
 from testbed.stepclock import StepClock, StepTiming, no_clock
 from testbed.world.bodylink import BodyServer
 from topology.forkserver import ForkServer, ForkServerError, python_env
+from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -292,6 +293,9 @@ class Run:
             keep_daemon_files(routing, range(1, self.n + 2), net.state_dir,
                               self.prep.path("routing"), self.prep.path(routing))  # fmt: skip
         self.parts.mark("routing_stopped")
+        counters = getattr(net.medium, "counters", None)  # the ns3-wifi channel's, if any
+        if counters is not None:
+            write_json_atomic(self.prep.path("medium.json"), counters())
 
     def finish(self, status: tuple[str, str], loop: StepLoop | None, priority) -> RunRecord:
         """The run's frozen record, for testbed.runresults to write."""

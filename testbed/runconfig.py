@@ -2,7 +2,9 @@
 
 `RunConfig` is the whole description of a run; `config.json` is its `to_dict()` plus what
 the run derived from it (start positions, timer phases), so a run can be repeated from its
-directory. The command line's checks live here; the run itself is testbed.run.
+directory. Each run option is declared once, on its field (`option(...)`, testbed.runoptions):
+`testbed run`'s flags, the `net up` flags it shares, a sweep file's keys and the argv a sweep
+hands a run are all made from these declarations. The run itself is testbed.run.
 """
 
 from __future__ import annotations
@@ -14,51 +16,19 @@ from dataclasses import asdict, dataclass
 from node import coordination
 from node.flood import MODES as FLOOD_MODES
 from node.timing import STEP_S
+from testbed import runoptions
 from testbed.errors import UsageError
+from testbed.runoptions import GRID, RUN, option
 from testbed.world.worldmap import START_PLACEMENTS
-from topology.argtypes import number
-from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS
-
-ROUTINGS = ("babel", "batman", "aodv", "oracle", "none")
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    robots: int
-    comm_range: float
-    laser_range: float = 2.0
-    seed: int = 1
-    time_scale: float = 1.0
-    routing: str = "babel"
-    aodv_profile: str = "rfc"  # aodv.params.PROFILES: rfc or ns3 (routing aodv only)
-    map: str | None = None
-    loss_pct: float = 0.0
-    delay_ms: float = 0.0
-    range_model: str = "disc"  # topology.ranges: disc (the paper's), lossy, los, los-lossy
-    wall_loss_pct: float | None = None  # los: a wall costs this much loss (None: blocks)
-    capture: bool = False
-    max_steps: int = 3000
-    coordination: str = coordination.DEFAULT  # node.coordination: "paper" or "ours"
-    start: str = "corner"  # start placement: "corner", "centre" or "spread" (worldmap)
-    # Beyond the contract's config keys (recorded too, so a run is reproducible):
-    map_cell: float = 0.05
-    laser_rays: int = 360
-    speed: float = 0.1  # m per step (1 m/s)
-    radius: float = 0.15
-    plan_period: int = 20
-    map_period: int = 10
-    flood: str = "pruned"  # node.flood: "pruned" (self-pruning) or "blind"
-    display_pos: tuple[float, float] | None = None  # default: the map's centre
-    snapshots: tuple[int, ...] = ()
-    kill: tuple[tuple[int, int], ...] = ()  # (robot, step): fault injection, SIGKILL
-    view: str | None = None  # --view [HOST:]PORT: the live page (testbed.view.live)
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["display_pos"] = list(self.display_pos) if self.display_pos else None
-        d["snapshots"] = list(self.snapshots)
-        d["kill"] = [f"{k}:{s}" for k, s in self.kill]
-        return d
+from topology.spec import (
+    AODV_PROFILES,
+    LOS_MODELS,
+    MEDIA,
+    RANGE_MODELS,
+    ROUTINGS,
+    WIFI_LOSSES,
+    WIFI_STANDARDS,
+)
 
 
 def _kill(text: str) -> tuple[int, int]:
@@ -83,55 +53,152 @@ def _steps(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"{text!r} is not a list of steps") from None
 
 
+STEP_S_TEXT = f"{STEP_S:g} s"
+SEED_HELP = (
+    "random seed of the start positions and the robots' timer phases; it makes a lone "
+    "robot's run repeatable, not a team's: real timing decides which robot hears what first "
+    "(one seed gave a team 823 steps, then 920)"
+)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One run's description. Fields made with `option(...)` are the run options (see
+    testbed.runoptions): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
+
+    robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=50, metavar="N",
+                         sweep={GRID})  # fmt: skip
+    comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
+                               sweep={GRID}, net=True)  # fmt: skip
+    laser_range: float = option(float, "laser range", 2.0, unit="metres", above=0, metavar="M",
+                                sweep={GRID})  # fmt: skip
+    seed: int = option(int, SEED_HELP, 1, minimum=0, metavar="S")
+    time_scale: float = option(
+        float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "
+        f"{STEP_S_TEXT} / K", 1.0, unit="factor", above=0,
+        metavar="K", sweep={RUN}, net=True,
+    )  # fmt: skip
+    routing: str = option(str, "routing protocol", "aodv", choices=ROUTINGS,
+                          sweep={GRID, RUN}, net=True)  # fmt: skip
+    aodv_profile: str = option(
+        str, "AODV parameters (routing aodv): rfc, RFC 3561 section 10, or ns3, ns-3's "
+        "defaults", "rfc", choices=AODV_PROFILES, sweep={RUN}, newer=True, net=True,
+    )  # fmt: skip
+    map: str | None = option(
+        str, "PNG map: dark pixels are obstacles, and walls for the los range models", None,
+        metavar="PNG", default_text="an empty 20 x 20 m terrain", sweep={GRID, RUN},
+    )  # fmt: skip
+    loss_pct: float = option(float, "packet loss on every link", 0.0, unit="percent",
+                             minimum=0, maximum=100, metavar="PCT", cli="--loss",
+                             sweep={GRID}, net=True)  # fmt: skip
+    delay_ms: float = option(float, "delay on every link, with sch_netem", 0.0, unit="ms",
+                             minimum=0, metavar="MS", cli="--delay", sweep={GRID},
+                             net=True)  # fmt: skip
+    range_model: str = option(
+        str, "radio: disc (the paper's), lossy, los (the map's walls block the radio), "
+        "los-lossy", "disc", choices=RANGE_MODELS, sweep={RUN}, newer=True, net=True,
+    )  # fmt: skip
+    wall_loss_pct: float | None = option(
+        float, "with los: each wall crossed costs PCT loss instead of blocking", None,
+        unit="percent", minimum=0, maximum=100, metavar="PCT", cli="--wall-loss",
+        default_text="walls block", sweep={RUN}, newer=True, net=True,
+    )  # fmt: skip
+    medium: str = option(
+        str, "radio medium: veth, perfect links switched by range, or ns3-wifi, ns-3's "
+        "802.11 ad hoc channel (docs/ns3-medium.md)", "veth", choices=MEDIA,
+        sweep={GRID, RUN}, newer=True, net=True,
+    )  # fmt: skip
+    wifi_loss: str = option(
+        str, "ns3-wifi propagation: range, a cut-off at the radio range, or logdistance",
+        "range", choices=WIFI_LOSSES, sweep={RUN}, newer=True, net=True,
+    )  # fmt: skip
+    wifi_standard: str = option(str, "ns3-wifi 802.11 standard", "80211a", choices=WIFI_STANDARDS,
+                                sweep={RUN}, newer=True, net=True)  # fmt: skip
+    wifi_rate: str = option(
+        str, "ns3-wifi data rate: an ns-3 WifiMode (e.g. OfdmRate12Mbps) or minstrel", "",
+        metavar="MODE", default_text="the standard's fastest", sweep={RUN}, newer=True,
+        net=True,
+    )  # fmt: skip
+    capture: bool = option(bool, "write pcaps/rK.pcap, one capture per robot", False,
+                           sweep={RUN})  # fmt: skip
+    max_steps: int = option(int, "stop the run after this many steps", 3000, metavar="N",
+                            unit=f"steps of {STEP_S_TEXT}", minimum=1, sweep={RUN})  # fmt: skip
+    coordination: str = option(
+        str, "goal coordination: 'paper' reads the paper's rules literally, 'ours' departs "
+        "from them where the text is silent; see README, 'Coordination'", coordination.DEFAULT,
+        choices=coordination.MODES, sweep={GRID},
+    )  # fmt: skip
+    start: str = option(str, "start placement: clustered near a corner (as in the paper), "
+                        "clustered at the centre, or spread over the map", "corner",
+                        choices=START_PLACEMENTS, sweep={GRID})  # fmt: skip
+    # Beyond the contract's config keys (recorded too, so a run is reproducible):
+    map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
+                             above=0, metavar="M", net=True)  # fmt: skip
+    laser_rays: int = option(int, "rays of a laser scan", 360, minimum=4, metavar="N")
+    # The field is in metres per step, the flag in m/s (per_step).
+    speed: float = option(float, "robot speed", 0.1, unit="m/s", above=0, metavar="V",
+                          per_step=STEP_S)  # fmt: skip
+    radius: float = 0.15
+    plan_period: int = 20
+    map_period: int = option(int, "steps between a robot's map floods", 10, unit="steps",
+                             minimum=1, metavar="N")  # fmt: skip
+    flood: str = option(str, "map flooding: pruned (self-pruning) or blind (every robot "
+                        "relays every flood)", "pruned", choices=FLOOD_MODES)  # fmt: skip
+    display_pos: tuple[float, float] | None = option(
+        str, "where the display stands", None, unit="metres", parse=_point, metavar="X,Y",
+        text=lambda p: f"{p[0]!r},{p[1]!r}", default_text="the map's centre",
+    )  # fmt: skip
+    snapshots: tuple[int, ...] = option(
+        str, "display snapshot steps, e.g. 200,600; one is always taken at the end", (),
+        unit="steps", parse=_steps, text=lambda s: ",".join(map(str, s)), metavar="STEPS",
+        default_text="100,250,500,1000,2000",
+    )  # fmt: skip
+    kill: tuple[tuple[int, int], ...] = option(
+        str, "SIGKILL robot ROBOT at step STEP (fault injection, for tests; repeatable)", (),
+        metavar="ROBOT:STEP", parse=_kill, text=lambda k: f"r{k[0]}:{k[1]}", repeat=True,
+        default_text="none",
+    )  # fmt: skip
+    view: str | None = option(
+        str, "serve a live view of the run at [HOST:]PORT (127.0.0.1 unless a host is given)",
+        None, metavar="[HOST:]PORT", default_text="none",
+    )  # fmt: skip
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["display_pos"] = list(self.display_pos) if self.display_pos else None
+        d["snapshots"] = list(self.snapshots)
+        d["kill"] = [f"{k}:{s}" for k, s in self.kill]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> RunConfig:
+        """The inverse of to_dict (a config as config.json, result.json or sweep.json hold it;
+        keys left out take their defaults)."""
+        kw = dict(d)
+        if kw.get("display_pos") is not None:
+            kw["display_pos"] = tuple(kw["display_pos"])
+        if "snapshots" in kw:
+            kw["snapshots"] = tuple(kw["snapshots"])
+        if "kill" in kw:
+            kw["kill"] = tuple(_kill(k) for k in kw["kill"])
+        return cls(**kw)
+
+
+OPTIONS = runoptions.options(RunConfig)
+BY_NAME = {opt.name: opt for opt in OPTIONS}
+# What `net up` shares with `run`: the network's options, the same flags and checks.
+NET_OPTIONS = tuple(opt for opt in OPTIONS if opt.net)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The `testbed run` options."""
+    """The `testbed run` options: the run options, then where the run goes and how it shows."""
+    runoptions.add_to_parser(parser, OPTIONS)
     a = parser.add_argument
-    a("--robots", type=number(int, "robots", minimum=1), required=True, help="team size")
-    a("--comm-range", type=number(float, "comm range", above=0), required=True, help="metres")
-    a("--laser-range", type=number(float, "laser range", above=0), default=2.0, help="metres")
-    a("--seed", type=number(int, "seed", minimum=0), default=1)
-    a("--out", required=True, help="run directory to write")
-    a("--time-scale", type=number(float, "time scale", above=0), default=1.0)
-    a("--routing", choices=ROUTINGS, default="babel")
-    a("--aodv-profile", choices=AODV_PROFILES, default="rfc",
-      help="AODV parameters: rfc (RFC 3561 section 10, default) or ns3 (ns-3's "
-           "defaults)")  # fmt: skip
-    a("--map", help="PNG map (dark pixels are obstacles); default: empty 20 x 20 m")
-    a("--map-cell", type=number(float, "map cell", above=0), default=0.05, help="m per pixel")
-    a("--loss", type=number(float, "loss", minimum=0), default=0.0, help="percent, every link")
-    a("--delay", type=number(float, "delay", minimum=0), default=0.0, help="ms, every link")
-    a("--range-model", choices=RANGE_MODELS, default="disc",
-      help="radio: disc (default, the paper's), lossy, los (the map's walls block the "
-           "radio), los-lossy")  # fmt: skip
-    a("--wall-loss", type=number(float, "wall loss", minimum=0), metavar="PCT",
-      help="with los: each wall crossed costs PCT loss instead of blocking")  # fmt: skip
-    a("--capture", action="store_true", help="write pcaps/rK.pcap")
-    a("--max-steps", type=number(int, "max steps", minimum=1), default=3000)
-    a("--laser-rays", type=number(int, "laser rays", minimum=4), default=360)
-    a("--speed", type=number(float, "speed", above=0), default=1.0, help="m/s")
-    a("--map-period", type=number(int, "map period", minimum=1), default=10,
-      help="steps between a robot's map floods (default 10)")  # fmt: skip
-    a(
-        "--flood",
-        choices=FLOOD_MODES,
-        default="pruned",
-        help="map flooding: self-pruning (default) or blind (every robot relays every flood)",
-    )
-    a("--coordination", choices=coordination.MODES, default=coordination.DEFAULT,
-      help="goal coordination: 'paper' reads the paper's rules literally, 'ours' (default) "
-           "departs from them where the text is silent; see README, 'Coordination'")  # fmt: skip
-    a("--start", choices=START_PLACEMENTS, default="corner",
-      help="start placement: clustered near a corner (default, as in the paper), clustered "
-           "at the centre, or spread over the map")  # fmt: skip
-    a("--display-pos", type=_point, help="X,Y of the display (default: map centre)")
-    a("--snapshots", type=_steps, default=(),
-      help="display snapshot steps, e.g. 200,600 (default 100,250,500,1000,2000; always one "
-           "at the end)")  # fmt: skip
-    a("--kill", type=_kill, action="append", default=[], help="ROBOT:STEP, SIGKILL (testing)")
+    a("--out", required=True, metavar="DIR", help="run directory to write (required)")
     a("--name", help="testbed name (default: random 'run' + 4 hex digits)")
-    a("--view", metavar="[HOST:]PORT",
-      help="serve a live view of the run (127.0.0.1 unless a host is given)")  # fmt: skip
-    a("--quiet", action="store_true", help="no progress line")
+    a("--quiet", action="store_true", help="no progress line (default off)")
+    a("--replace", action="store_true",
+      help="--out holds an earlier run: delete it first (default: refuse)")  # fmt: skip
 
 
 def _view(text: str | None) -> str | None:
@@ -147,25 +214,17 @@ def _view(text: str | None) -> str | None:
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
-    if args.loss > 100:
-        raise UsageError(f"loss {args.loss}% is more than 100%")
-    if args.wall_loss is not None and args.range_model not in LOS_MODELS:
+    """The RunConfig of parsed `testbed run` arguments, with the checks that join options."""
+    cfg = RunConfig(**runoptions.config_kwargs(args, OPTIONS))
+    if cfg.wall_loss_pct is not None and cfg.range_model not in LOS_MODELS:
         raise UsageError("--wall-loss is for the los range models: add --range-model los")
-    if args.wall_loss is not None and args.wall_loss > 100:
-        raise UsageError(f"wall loss {args.wall_loss}% is more than 100%")
-    if args.robots > 50:
-        raise UsageError(f"at most 50 robots ({args.robots} asked)")
-    for k, _ in args.kill:
-        if not 1 <= k <= args.robots:
-            raise UsageError(f"--kill names robot {k}, but the team is r1..r{args.robots}")
-    return RunConfig(
-        robots=args.robots, comm_range=args.comm_range, laser_range=args.laser_range,
-        seed=args.seed, time_scale=args.time_scale, routing=args.routing,
-        aodv_profile=args.aodv_profile, map=args.map,
-        loss_pct=args.loss, delay_ms=args.delay, capture=args.capture,
-        range_model=args.range_model, wall_loss_pct=args.wall_loss,
-        max_steps=args.max_steps, map_cell=args.map_cell, laser_rays=args.laser_rays,
-        speed=args.speed * STEP_S, display_pos=args.display_pos, snapshots=args.snapshots,
-        map_period=args.map_period, flood=args.flood, coordination=args.coordination,
-        start=args.start, kill=tuple(args.kill), view=_view(args.view),
-    )  # fmt: skip
+    for k, _ in cfg.kill:
+        if not 1 <= k <= cfg.robots:
+            raise UsageError(f"--kill names robot {k}, but the team is r1..r{cfg.robots}")
+    _view(cfg.view)
+    return cfg
+
+
+def to_argv(cfg: RunConfig, always: set[str] = frozenset()) -> list[str]:
+    """`testbed run` arguments that give back `cfg` (without --out): see runoptions.to_argv."""
+    return runoptions.to_argv(cfg, OPTIONS, always)

@@ -118,6 +118,10 @@ def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> Netw
             impairment=Impairment(loss_pct=cfg.loss_pct, delay_ms=cfg.delay_ms),
             capture_dir=os.path.join(out, "pcaps") if cfg.capture else None,
             time_scale=cfg.time_scale,
+            medium=cfg.medium,
+            wifi_loss=cfg.wifi_loss,
+            wifi_standard=cfg.wifi_standard,
+            wifi_rate=cfg.wifi_rate,
         )
     except ValueError as e:
         raise UsageError(str(e)) from None

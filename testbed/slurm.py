@@ -32,6 +32,8 @@ import sys
 from pathlib import Path
 
 from testbed.errors import TestbedError, UsageError
+from testbed.runconfig import RunConfig
+from testbed.rundir import is_done, run_argv, run_dir
 from testbed.sweepfile import PlannedRun
 from topology.jsonfile import read_json, write_json_atomic
 
@@ -44,17 +46,17 @@ TIME_MARGIN = 3.0
 STARTUP_S = 120.0  # bring-up, teardown, and a loaded node's slowness
 
 
-def resources(config: dict, cpus_per_node: int | None = None) -> tuple[int, int]:
+def resources(config: RunConfig, cpus_per_node: int | None = None) -> tuple[int, int]:
     """(CPUs, time limit in minutes) for one run: its robots (and the display) each use
     CPU_S_PER_ROBOT_STEP per step, and a step lasts STEP_S / time scale of wall time, plus a
     core for the world's clock and the captures; the time is the step cap at that pace,
     with margin. CPUs are capped at what a node of the partition has."""
-    ts = config["time_scale"]
-    cores = (config["robots"] + 1) * CPU_S_PER_ROBOT_STEP * ts / STEP_S * CPU_MARGIN + 1
+    ts = config.time_scale
+    cores = (config.robots + 1) * CPU_S_PER_ROBOT_STEP * ts / STEP_S * CPU_MARGIN + 1
     cpus = max(1, math.ceil(cores))
     if cpus_per_node:
         cpus = min(cpus, cpus_per_node)
-    seconds = config["max_steps"] * STEP_S / ts * TIME_MARGIN + STARTUP_S
+    seconds = config.max_steps * STEP_S / ts * TIME_MARGIN + STARTUP_S
     return cpus, max(1, math.ceil(seconds / 60))
 
 
@@ -142,7 +144,7 @@ def submit(
     jobs = submitted(out)
     groups: dict[int, list[PlannedRun]] = {}
     for run in todo:
-        groups.setdefault(run.config["robots"], []).append(run)
+        groups.setdefault(run.config.robots, []).append(run)
     for robots, runs in sorted(groups.items()):
         cpus = max(resources(r.config, cap)[0] for r in runs)
         minutes = max(resources(r.config, cap)[1] for r in runs)
@@ -173,8 +175,6 @@ def submit(
 
 def status(out: Path, plan_runs: list[dict]) -> list[tuple[str, str]]:
     """(run id, done | running | pending | failed | not submitted) for every planned run."""
-    from testbed.sweep import is_done
-
     in_queue = queued(out)
     ever = {rid for j in submitted(out) for rid in j["runs"]}
     rows = []
@@ -197,7 +197,6 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
     """One array task: run the `index`-th run of `task_list` (1-based) into its directory."""
     from testbed import cli
     from testbed.cli import main as cli_main
-    from testbed.sweep import is_done, run_argv, run_dir
     from topology.cleanup import clean
 
     run_ids = task_list.read_text().split()
@@ -227,7 +226,7 @@ def _mark_interrupted(rdir: Path) -> None:
     """A task cancelled or out of time gets SIGTERM, and so do its run's helper processes
     (Slurm signals the whole step): the run may end with an error of its own ("the fork
     server died") rather than as interrupted. It did not end on its own, so it is recorded
-    as interrupted, which `--resume` redoes (testbed.sweep.is_done)."""
+    as interrupted, which `--resume` redoes (testbed.rundir.is_done)."""
     path = rdir / "result.json"
     result = read_json(path)
     if result is None or result.get("status") == "interrupted":

@@ -33,8 +33,11 @@ for every run of the sweep::
     wall_loss_pct = 30            # optional, with los: a wall costs this loss, not a block
     seed = 0                      # optional base mixed into every derived seed
 
-Validation is strict: an unknown key, a value of the wrong type or an empty grid list is a
-`UsageError` whose one-line message names the key (`grid.robots`, `run.time_scale`, ...).
+The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
+varied, `sweep={RUN}` fixed), and each value is checked by its option's own rules (type,
+bounds, choices), the same as `testbed run` checks the flag. Validation is strict: an
+unknown key, a value of the wrong type or an empty grid list is a `UsageError` whose
+one-line message names the key (`grid.robots`, `run.time_scale`, ...).
 
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
 its parameters and run index only, so they are the same every time the file is expanded
@@ -53,27 +56,23 @@ import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from node.coordination import DEFAULT as DEFAULT_COORDINATION
-from node.coordination import MODES as COORDINATION_MODES
 from testbed.errors import UsageError
-from testbed.world.worldmap import START_PLACEMENTS
-from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS
-
-ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")
+from testbed.runconfig import BY_NAME, OPTIONS, RunConfig
+from testbed.runoptions import GRID, RUN, Option, check_value
+from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
-_GRID_LISTS = ("robots", "comm_range", "laser_range", "loss_pct", "delay_ms")
-# Grid lists of names, with the names each allows and its default.
-_GRID_CHOICES = {
-    "coordination": (COORDINATION_MODES, DEFAULT_COORDINATION),
-    "start": (START_PLACEMENTS, "corner"),
-}
-_GRID_KEYS = set(_GRID_LISTS) | set(_GRID_CHOICES) | {"runs", "routing", "map"}
-_RUN_KEYS = {
-    "time_scale", "routing", "aodv_profile", "max_steps", "capture", "map", "seed", "load_limit",
-    "range_model", "wall_loss_pct",
-}  # fmt: skip
+# The run options a sweep file may vary or fix (RunConfig fields marked so), and its own keys:
+# grid.runs, run.seed (the base of every derived seed), run.load_limit (testbed.sweep).
+_GRID_OPTIONS = tuple(opt for opt in OPTIONS if GRID in opt.sweep)
+_RUN_OPTIONS = tuple(opt for opt in OPTIONS if RUN in opt.sweep)
+_GRID_KEYS = {opt.name for opt in _GRID_OPTIONS} | {"runs"}
+_RUN_KEYS = {opt.name for opt in _RUN_OPTIONS} | {"seed", "load_limit"}
+_GRID_REQUIRED = ("robots", "comm_range", "laser_range")
+# Grid keys stored under another name in SweepSpec (the [run] value keeps the name).
+_GRID_FIELD = {"routing": "routings", "map": "maps"}
 EMPTY_MAP = "empty"  # grid.map: the paper's empty terrain
+_DEFAULT = RunConfig(robots=1, comm_range=1.0)
 
 
 @dataclass(frozen=True)
@@ -83,22 +82,22 @@ class SweepSpec:
     robots: tuple[int, ...]
     comm_range: tuple[float, ...]
     laser_range: tuple[float, ...]
-    loss_pct: tuple[float, ...] = (0.0,)
-    delay_ms: tuple[float, ...] = (0.0,)
-    coordination: tuple[str, ...] = (DEFAULT_COORDINATION,)
-    start: tuple[str, ...] = ("corner",)
+    loss_pct: tuple[float, ...] = (_DEFAULT.loss_pct,)
+    delay_ms: tuple[float, ...] = (_DEFAULT.delay_ms,)
+    coordination: tuple[str, ...] = (_DEFAULT.coordination,)
+    start: tuple[str, ...] = (_DEFAULT.start,)
     runs: int = 1
-    time_scale: float = 1.0  # for team sizes without an entry in time_scale_by_robots
+    time_scale: float = _DEFAULT.time_scale  # for team sizes without an entry below
     time_scale_by_robots: tuple[tuple[int, float], ...] = ()
     load_limit: float | None = None
-    routing: str = "aodv"
-    aodv_profile: str = "rfc"
-    max_steps: int = 3000
-    capture: bool = False
+    routing: str = _DEFAULT.routing
+    aodv_profile: str = _DEFAULT.aodv_profile
+    max_steps: int = _DEFAULT.max_steps
+    capture: bool = _DEFAULT.capture
     map: str | None = None
     routings: tuple[str, ...] = ()  # grid.routing: routing as a dimension (overrides routing)
     maps: tuple[str | None, ...] = ()  # grid.map: None is the empty terrain
-    range_model: str = "disc"
+    range_model: str = _DEFAULT.range_model
     wall_loss_pct: float | None = None
     seed: int = 0
     description: str = ""
@@ -119,14 +118,14 @@ class PlannedRun:
 
     run_id: str
     index: int  # 1-based run index within its point
-    config: dict
+    config: RunConfig
 
     @property
     def point(self) -> tuple:
         """The grid point this run belongs to (what its repetitions share)."""
         c = self.config
-        return (c["robots"], c["comm_range"], c["laser_range"], c["loss_pct"], c["delay_ms"],
-                c["coordination"], c["start"], c["routing"], c["map"])  # fmt: skip
+        return (c.robots, c.comm_range, c.laser_range, c.loss_pct, c.delay_ms,
+                c.coordination, c.start, c.routing, c.map)  # fmt: skip
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
@@ -151,26 +150,25 @@ def _check_table(path, name: str, table, allowed: set[str]) -> dict:
     return table
 
 
-def _number_list(path, key: str, value, *, integer: bool, low: float, low_open: bool, high=None):
-    kind = "integers" if integer else "numbers"
+def _value(path, key: str, opt: Option, v):
+    """One value of option `opt` from the file, checked by the option's own rules."""
+    problem = check_value(opt, v)
+    if problem:
+        raise _fail(path, key, problem)
+    return float(v) if opt.kind is float else v
+
+
+def _grid_list(path, opt: Option, value) -> tuple:
+    """grid.KEY: a non-empty list of distinct values of `opt`."""
+    key = f"grid.{opt.name}"
     if not isinstance(value, list):
-        raise _fail(path, key, f"expected a list of {kind}, got {type(value).__name__}")
+        raise _fail(path, key, f"expected a list, got {type(value).__name__}")
     if not value:
         raise _fail(path, key, "empty list: the grid needs at least one value")
-    out = []
-    for v in value:
-        ok = _is_int(v) if integer else _is_number(v)
-        if not ok:
-            raise _fail(path, key, f"expected a list of {kind}, got element {v!r}")
-        if v < low or (low_open and v == low) or (high is not None and v > high):
-            bound = f"> {low}" if low_open else f">= {low}"
-            if high is not None:
-                bound += f" and <= {high}"
-            raise _fail(path, key, f"value {v!r} out of range (must be {bound})")
-        out.append(int(v) if integer else float(v))
+    out = tuple(_value(path, key, opt, v) for v in value)
     if len(set(out)) != len(out):
         raise _fail(path, key, f"duplicate values in {value!r}")
-    return tuple(out)
+    return out
 
 
 def _positive(path, key: str, v) -> float:
@@ -181,38 +179,70 @@ def _positive(path, key: str, v) -> float:
     return float(v)
 
 
-def _count(path, key: str, v) -> int:
-    """A whole number of at least 1 (runs per point, a step cap)."""
-    if not _is_int(v):
-        raise _fail(path, key, f"expected an integer, got {v!r}")
-    if v < 1:
-        raise _fail(path, key, f"must be >= 1, got {v}")
-    return v
-
-
-def _choice_list(path, key: str, value, allowed: tuple[str, ...]) -> tuple[str, ...]:
-    """A non-empty list of distinct names, each one of `allowed`."""
-    if not isinstance(value, list) or not value:
-        raise _fail(path, key, f"expected a non-empty list of names, got {value!r}")
-    for v in value:
-        if v not in allowed:
-            raise _fail(path, key, f"{v!r} is not one of {', '.join(allowed)}")
-    if len(set(value)) != len(value):
-        raise _fail(path, key, f"duplicate values in {value!r}")
-    return tuple(value)
-
-
 def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
     """`time_scale = { 1 = 12.0, 2 = 10.0 }`: a time scale for each team size of the grid."""
     out = {}
     for key, v in table.items():
         if not key.isdigit() or int(key) < 1:
             raise _fail(path, f"run.time_scale.{key}", "keys are team sizes (1, 2, ...)")
-        out[int(key)] = _positive(path, f"run.time_scale.{key}", v)
+        out[int(key)] = _value(path, f"run.time_scale.{key}", BY_NAME["time_scale"], v)
     missing = [n for n in robots if n not in out]
     if missing:
         raise _fail(path, "run.time_scale", f"no entry for team size {missing[0]}")
     return tuple(sorted(out.items()))
+
+
+def _description(path, data: dict) -> str:
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise _fail(path, "description", f"expected a string, got {type(description).__name__}")
+    return description
+
+
+def _grid(path, grid: dict, run: dict) -> dict:
+    """The SweepSpec fields of [grid]."""
+    for key in _GRID_REQUIRED:
+        if key not in grid:
+            raise _fail(path, f"grid.{key}", "missing (the grid needs at least one value)")
+    kw: dict = {}
+    for opt in _GRID_OPTIONS:
+        if opt.name not in grid:
+            continue
+        if opt.name in run:
+            raise _fail(path, f"run.{opt.name}", f"already a grid dimension (grid.{opt.name})")
+        values = _grid_list(path, opt, grid[opt.name])
+        if opt.name == "map":
+            values = tuple(None if m == EMPTY_MAP else _map_path(path, m) for m in values)
+        kw[_GRID_FIELD.get(opt.name, opt.name)] = values
+    if "runs" in grid:
+        runs = grid["runs"]
+        if not _is_int(runs) or runs < 1:
+            raise _fail(path, "grid.runs", f"expected a whole number >= 1, got {runs!r}")
+        kw["runs"] = runs
+    return kw
+
+
+def _run(path, run: dict, robots: tuple[int, ...]) -> dict:
+    """The SweepSpec fields of [run]."""
+    kw: dict = {}
+    for opt in _RUN_OPTIONS:
+        if opt.name not in run:
+            continue
+        if opt.name == "time_scale" and isinstance(run["time_scale"], dict):
+            kw["time_scale_by_robots"] = _scale_table(path, run["time_scale"], robots)
+        else:
+            kw[opt.name] = _value(path, f"run.{opt.name}", opt, run[opt.name])
+    if "map" in kw:
+        kw["map"] = _map_path(path, kw["map"])
+    if "wall_loss_pct" in kw and kw.get("range_model", "disc") not in LOS_MODELS:
+        raise _fail(path, "run.wall_loss_pct", "needs range_model los or los-lossy")
+    if "load_limit" in run:
+        kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
+    if "seed" in run:
+        if not _is_int(run["seed"]):
+            raise _fail(path, "run.seed", f"expected an integer, got {run['seed']!r}")
+        kw["seed"] = run["seed"]
+    return kw
 
 
 def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
@@ -222,91 +252,9 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         raise _fail(path, "grid", "missing table [grid]")
     grid = _check_table(path, "grid", data["grid"], _GRID_KEYS)
     run = _check_table(path, "run", data.get("run", {}), _RUN_KEYS)
-    kw: dict = {}
-
-    description = data.get("description", "")
-    if not isinstance(description, str):
-        raise _fail(path, "description", f"expected a string, got {type(description).__name__}")
-    kw["description"] = description
-
-    for key in ("robots", "comm_range", "laser_range"):
-        if key not in grid:
-            raise _fail(path, f"grid.{key}", "missing (the grid needs at least one value)")
-    kw["robots"] = _number_list(
-        path, "grid.robots", grid["robots"], integer=True, low=1, low_open=False
-    )
-    for key in ("comm_range", "laser_range"):
-        kw[key] = _number_list(path, f"grid.{key}", grid[key], integer=False, low=0, low_open=True)
-    if "loss_pct" in grid:
-        kw["loss_pct"] = _number_list(
-            path, "grid.loss_pct", grid["loss_pct"], integer=False, low=0, low_open=False, high=100
-        )
-    if "delay_ms" in grid:
-        kw["delay_ms"] = _number_list(
-            path, "grid.delay_ms", grid["delay_ms"], integer=False, low=0, low_open=False
-        )
-    for key, (allowed, _default) in _GRID_CHOICES.items():
-        if key in grid:
-            kw[key] = _choice_list(path, f"grid.{key}", grid[key], allowed)
-    if "runs" in grid:
-        kw["runs"] = _count(path, "grid.runs", grid["runs"])
-    if "routing" in grid:
-        if "routing" in run:
-            raise _fail(path, "run.routing", "routing is already a grid dimension (grid.routing)")
-        kw["routings"] = _choice_list(path, "grid.routing", grid["routing"], ROUTINGS)
-    if "map" in grid:
-        if "map" in run:
-            raise _fail(path, "run.map", "the map is already a grid dimension (grid.map)")
-        value = grid["map"]
-        if (
-            not isinstance(value, list)
-            or not value
-            or not all(isinstance(m, str) and m for m in value)
-        ):
-            raise _fail(path, "grid.map", f"expected a non-empty list of paths, got {value!r}")
-        if len(set(value)) != len(value):
-            raise _fail(path, "grid.map", f"duplicate values in {value!r}")
-        kw["maps"] = tuple(None if m == EMPTY_MAP else _map_path(path, m) for m in value)
-
-    if "time_scale" in run:
-        ts = run["time_scale"]
-        if isinstance(ts, dict):
-            kw["time_scale_by_robots"] = _scale_table(path, ts, kw["robots"])
-        else:
-            kw["time_scale"] = _positive(path, "run.time_scale", ts)
-    if "load_limit" in run:
-        kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
-    for key, allowed in (
-        ("routing", ROUTINGS), ("aodv_profile", AODV_PROFILES), ("range_model", RANGE_MODELS),
-    ):  # fmt: skip
-        if key in run:
-            if run[key] not in allowed:
-                raise _fail(
-                    path, f"run.{key}", f"expected one of {', '.join(allowed)}, got {run[key]!r}"
-                )
-            kw[key] = run[key]
-    if "max_steps" in run:
-        kw["max_steps"] = _count(path, "run.max_steps", run["max_steps"])
-    if "capture" in run:
-        if not isinstance(run["capture"], bool):
-            raise _fail(path, "run.capture", f"expected true or false, got {run['capture']!r}")
-        kw["capture"] = run["capture"]
-    if "map" in run:
-        m = run["map"]
-        if not isinstance(m, str) or not m:
-            raise _fail(path, "run.map", f"expected a non-empty path string, got {m!r}")
-        kw["map"] = _map_path(path, m)
-    if "wall_loss_pct" in run:
-        v = run["wall_loss_pct"]
-        if not _is_number(v) or not 0 <= v <= 100:
-            raise _fail(path, "run.wall_loss_pct", f"expected a number in 0..100, got {v!r}")
-        if kw.get("range_model", "disc") not in LOS_MODELS:
-            raise _fail(path, "run.wall_loss_pct", "needs range_model los or los-lossy")
-        kw["wall_loss_pct"] = float(v)
-    if "seed" in run:
-        if not _is_int(run["seed"]):
-            raise _fail(path, "run.seed", f"expected an integer, got {run['seed']!r}")
-        kw["seed"] = run["seed"]
+    kw = {"description": _description(path, data)}
+    kw.update(_grid(path, grid, run))
+    kw.update(_run(path, run, kw["robots"]))
     return SweepSpec(**kw)
 
 
@@ -349,8 +297,8 @@ def run_id(
     loss_pct: float,
     delay_ms: float,
     index: int,
-    coordination: str = DEFAULT_COORDINATION,
-    start: str = "corner",
+    coordination: str = _DEFAULT.coordination,
+    start: str = _DEFAULT.start,
 ) -> str:
     """Stable, readable id of one run; impairments appear only when non-zero, coordination
     and start placement only when not the default (so ids of older sweeps stay valid)."""
@@ -359,9 +307,9 @@ def run_id(
         rid += f"-p{fmt(loss_pct)}"
     if delay_ms:
         rid += f"-d{fmt(delay_ms)}"
-    if coordination != _GRID_CHOICES["coordination"][1]:
+    if coordination != _DEFAULT.coordination:
         rid += f"-{coordination}"
-    if start != _GRID_CHOICES["start"][1]:
+    if start != _DEFAULT.start:
         rid += f"-{start}"
     return f"{rid}-k{index}"
 
@@ -396,28 +344,14 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
             # The seed leaves coordination and start out: the variants of a point share their
             # random numbers (start positions within a placement, timer phases), so they are
             # compared on the same draws.
-            config = {
-                "robots": robots,
-                "comm_range": comm,
-                "laser_range": laser,
-                "seed": derive_seed(spec.seed, robots, comm, laser, loss, delay, index),
-                "time_scale": spec.scale_for(robots),
-                "routing": routing,
-                "map": map_,
-                "loss_pct": loss,
-                "delay_ms": delay,
-                "capture": spec.capture,
-                "max_steps": spec.max_steps,
-                "coordination": coord,
-                "start": start,
-            }
-            # Only when chosen, so that the plans of older sweeps stay as they were.
-            if spec.aodv_profile != "rfc":
-                config["aodv_profile"] = spec.aodv_profile
-            if spec.range_model != "disc":
-                config["range_model"] = spec.range_model
-            if spec.wall_loss_pct is not None:
-                config["wall_loss_pct"] = spec.wall_loss_pct
+            config = RunConfig(
+                robots=robots, comm_range=comm, laser_range=laser,
+                seed=derive_seed(spec.seed, robots, comm, laser, loss, delay, index),
+                time_scale=spec.scale_for(robots), routing=routing, map=map_,
+                loss_pct=loss, delay_ms=delay, capture=spec.capture, max_steps=spec.max_steps,
+                coordination=coord, start=start, aodv_profile=spec.aodv_profile,
+                range_model=spec.range_model, wall_loss_pct=spec.wall_loss_pct,
+            )  # fmt: skip
             rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
             if spec.routings or spec.maps:
                 base = rid[: -len(f"-k{index}")]

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 from topology import names
 
-ROUTINGS = ("none", "babel", "batman", "aodv", "oracle")
+ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")  # the first is the default
 RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
 LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.los)
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).

@@ -21,8 +21,9 @@ from pathlib import Path
 from testbed.analysis import stats
 from testbed.analysis.runs import RunRecord
 from topology.jsonfile import read_json
+from topology.spec import ROUTINGS
 
-PROTOCOL_ORDER = ("aodv", "babel", "batman", "oracle", "none")
+PROTOCOL_ORDER = ROUTINGS  # the report lists protocols in the order of the choices
 PROACTIVE = ("babel", "batman")
 DAEMON_AGREEMENT = 0.01  # as the report's Section 2.4 check
 METRICS = (

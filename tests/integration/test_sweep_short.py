@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from testbed import sweepfile
+from testbed.rundir import plan_dict
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = REPO / "testbed" / "experiments" / "short.toml"
@@ -123,7 +124,7 @@ def processes_mentioning(text: str) -> list[int]:
 def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
     f = tmp_path / "s.toml"
     f.write_text(INTERRUPT_SWEEP)
-    plan = {r.run_id: r.config for r in sweepfile.expand(sweepfile.load(f))}
+    plan = {r.run_id: plan_dict(r.config) for r in sweepfile.expand(sweepfile.load(f))}
     out = tmp_path / "out"
     argv = [sys.executable, "-c", "import sys; from testbed.cli import main; sys.exit(main())"]
     p = subprocess.Popen(
@@ -178,7 +179,7 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
     }
     for rid, doc in final.items():
         # The same point as planned; the time scale may be lower: on a slow machine the sweep
-        # slows its runs down (testbed.sweep), which changes how fast, not what is run.
+        # slows its runs down (testbed.sweeprunner), which changes how fast, not what is run.
         want = {k: v for k, v in plan[rid].items() if k != "time_scale"}
         assert {k: doc["config"][k] for k in want} == want
         assert doc["config"]["time_scale"] <= plan[rid]["time_scale"]

@@ -215,6 +215,20 @@ def test_exec_passes_exit_status_through(tb_name):
         tb("net", "down", tb_name)
 
 
+def test_the_hint_net_up_prints_works_with_the_default_routing(tb_name):
+    """`net up` without --routing runs AODV (the default of run and sweep files too), so the
+    ping it suggests answers (it once defaulted to no routing: "Network is unreachable")."""
+    up = tb("net", "up", tb_name, "--robots", "2", "--comm-range", "10")
+    try:
+        assert up.returncode == 0 and "routing aodv" in up.stdout, up.stderr
+        hint = up.stdout.split("try: ", 1)[1].split()
+        assert hint[:6] == ["testbed", "net", "exec", tb_name, "r1", "--"]
+        r = tb(*hint[1:6], "ping", "-c1", "-W5", *hint[7:])
+        assert r.returncode == 0 and "1 received" in r.stdout, r.stdout + r.stderr
+    finally:
+        tb("net", "down", tb_name)
+
+
 def _one_line_error(r: subprocess.CompletedProcess, *words: str) -> None:
     assert r.returncode == 2, (r.returncode, r.stderr)
     assert "Traceback" not in r.stderr

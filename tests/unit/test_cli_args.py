@@ -56,3 +56,11 @@ def test_a_failed_file_operation_is_one_line_naming_the_file(tmp_path, capsys):
     assert cli.main(["report", str(tmp_path)]) == 1
     (err,) = capsys.readouterr().err.strip().splitlines()
     assert err == f"testbed: error: {tmp_path / 'figures'}: File exists"
+
+
+@pytest.mark.parametrize("command", ["up", "exec", "move", "impair", "links", "down"])
+def test_every_net_argument_has_help(command):
+    sub = next(a for a in cli.build_parser(["net"])._actions if a.dest == "cmd")
+    net_sub = next(a for a in sub.choices["net"]._actions if a.dest == "net_cmd")
+    for action in net_sub.choices[command]._actions:
+        assert action.help, (command, action.dest)

@@ -128,7 +128,7 @@ def test_routing_and_impairment_tables(tmp_path):
     fake = {
         r.run_id: {
             "overhead_packets": 0.1 * (1 + r.index),
-            "pdf": 1.0 - r.config["loss_pct"] / 100 - 0.01 * r.index,
+            "pdf": 1.0 - r.config.loss_pct / 100 - 0.01 * r.index,
             "delay_ms_median": 1.0,
             "throughput_bps": 1000.0,
             "control_tx_packets": 10,
@@ -148,7 +148,7 @@ def test_routing_and_impairment_tables(tmp_path):
     steps = {
         r.run_id: steps_from_result_file(tmp_path / "runs" / r.run_id / "result.json") for r in runs
     }
-    lossy = [steps[r.run_id] for r in runs if r.config["loss_pct"] == 30.0]
+    lossy = [steps[r.run_id] for r in runs if r.config.loss_pct == 30.0]
     assert imp[1]["steps_mean"] == pytest.approx(statistics.fmean(lossy))
     for name in ("routing", "impairments"):
         assert (tmp_path / "figures" / f"{name}.png").is_file()

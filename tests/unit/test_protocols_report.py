@@ -18,12 +18,12 @@ def sweep(tmp_path):
     metrics = {}
     for run in sweepfile.expand(spec):
         c = run.config
-        steps = STEPS[c["routing"]] + 5 * run.index
+        steps = STEPS[c.routing] + 5 * run.index
         write_run(tmp_path, run, result_doc(c, [steps] * 5, steps + 1))
-        robot_s = 6 * 10.0 * c["time_scale"]  # 5 robots and the display, 10 s of wall time
+        robot_s = 6 * 10.0 * c.time_scale  # 5 robots and the display, 10 s of wall time
         metrics[run.run_id] = {
-            "duration_s": 10.0, "control_tx_packets": CONTROL[c["routing"]] * robot_s,
-            "control_tx_bytes": 1000.0, "pdf": 0.9 if c["routing"] != "oracle" else 1.0,
+            "duration_s": 10.0, "control_tx_packets": CONTROL[c.routing] * robot_s,
+            "control_tx_bytes": 1000.0, "pdf": 0.9 if c.routing != "oracle" else 1.0,
             "delay_ms_median": 2.0,
         }  # fmt: skip
     return lambda run: metrics.get(run.run_id)

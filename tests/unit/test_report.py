@@ -184,8 +184,8 @@ def test_report_of_an_ablation_sweep(tmp_path):
                                coordination=("paper", "ours"), runs=3)  # fmt: skip
     for run in sweepfile.expand(spec):
         c = run.config
-        n = c["robots"]
-        steps = 1200 / n + (40 * n if c["coordination"] == "paper" else 0) + (run.index - 2)
+        n = c.robots
+        steps = 1200 / n + (40 * n if c.coordination == "paper" else 0) + (run.index - 2)
         plans = {k: timer_plans(int(steps)) for k in range(1, n + 1)}
         if n == 10:  # requests at the start and the end of the run, as in the paper's Fig. 4(d)
             plans[1] = plans[1] + [{"step": 2, "cause": "request"},

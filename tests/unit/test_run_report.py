@@ -1,6 +1,7 @@
 """`testbed report RUN_DIR`: one run's routing.json and summary, with delays in emulated
 time and the explanations a first reader needs."""
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -20,7 +21,7 @@ REPO = Path(__file__).resolve().parents[2]
 def one_run(tmp_path, time_scale=10.0):
     spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     run = sweepfile.expand(spec)[0]
-    config = dict(run.config, time_scale=time_scale)
+    config = dataclasses.replace(run.config, time_scale=time_scale)
     doc = result_doc(config, [817, 823], 823)
     doc["time_scale_achieved"] = time_scale
     return write_run(tmp_path, run, doc)

@@ -3,17 +3,19 @@
 from pathlib import Path
 
 from testbed import slurm
+from testbed.runconfig import RunConfig
 
 
 def test_resources_grow_with_team_and_time_scale_and_fit_a_node():
-    small = slurm.resources({"robots": 1, "time_scale": 15, "max_steps": 6000})
-    big = slurm.resources({"robots": 10, "time_scale": 3.75, "max_steps": 6000})
-    fast_big = slurm.resources({"robots": 10, "time_scale": 15, "max_steps": 6000})
+    small = slurm.resources(RunConfig(robots=1, comm_range=5.0, time_scale=15, max_steps=6000))
+    big = slurm.resources(RunConfig(robots=10, comm_range=5.0, time_scale=3.75, max_steps=6000))
+    fast_big = slurm.resources(RunConfig(robots=10, comm_range=5.0, time_scale=15, max_steps=6000))
     assert small[0] >= 1 and big[0] >= 2 and fast_big[0] > big[0]
     # The time limit covers the step cap at the run's pace, with margin and start-up.
     assert big[1] >= 6000 * 0.1 / 3.75 * 3 / 60
     assert small[1] < big[1]
-    assert slurm.resources({"robots": 50, "time_scale": 15, "max_steps": 10}, 8)[0] == 8
+    crowd = RunConfig(robots=50, comm_range=5.0, time_scale=15, max_steps=10)
+    assert slurm.resources(crowd, 8)[0] == 8
 
 
 def test_batch_script_runs_one_task_of_the_list_with_this_python(tmp_path):
@@ -42,3 +44,36 @@ def test_a_cancelled_run_is_recorded_as_interrupted_whatever_it_ended_with(tmp_p
     doc = json.loads((tmp_path / "result.json").read_text())
     assert doc["status"] == "interrupted" and "SIGTERM" in doc["status_detail"]
     assert "the fork server died" in doc["status_detail"]
+
+
+def test_submit_makes_one_array_per_team_size_from_the_planned_configs(tmp_path, monkeypatch):
+    """Stand-ins for sinfo and sbatch on PATH (real programs, recording their arguments)."""
+    import json
+    import os
+
+    from testbed import sweepfile
+
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    (bindir / "sinfo").write_text("#!/bin/sh\necho 64\n")
+    (bindir / "sbatch").write_text(
+        f'#!/bin/sh\necho "$@" >> {tmp_path}/sbatch.log\nwc -l < {tmp_path}/sbatch.log\n'
+    )
+    for tool in ("sinfo", "sbatch"):
+        (bindir / tool).chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bindir}:{os.environ['PATH']}")
+    scales = ((1, 15.0), (4, 9.0))
+    spec = sweepfile.SweepSpec(robots=(1, 4), comm_range=(5.0, 10.0), laser_range=(2.0,),
+                               time_scale_by_robots=scales, max_steps=6000)  # fmt: skip
+    runs = sweepfile.expand(spec)
+    out = tmp_path / "out"
+    jobs = slurm.submit(out, runs, partition="p1")
+    assert [(j["job"], j["robots"]) for j in jobs] == [(1, 1), (2, 4)]
+    lines = (tmp_path / "sbatch.log").read_text().splitlines()
+    for job, line in zip(jobs, lines, strict=True):
+        team = [r for r in runs if r.config.robots == job["robots"]]
+        assert job["runs"] == [r.run_id for r in team]
+        cpus, minutes = slurm.resources(team[0].config, 64)
+        assert f"--array=1-{len(team)}" in line and f"--cpus-per-task={cpus}" in line
+        assert f"--time={minutes}" in line and "--partition=p1" in line
+    assert json.loads((out / "slurm" / "jobs.json").read_text())["jobs"] == jobs

@@ -9,6 +9,7 @@ import pytest
 
 from testbed import sweepfile
 from testbed.errors import UsageError
+from testbed.rundir import plan_dict
 
 REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = REPO / "testbed" / "experiments"
@@ -130,18 +131,18 @@ def test_run_ids_and_seeds_are_stable_and_distinct():
     assert [r.run_id for r in a] == [r.run_id for r in b]
     assert [r.config for r in a] == [r.config for r in b]
     assert len({r.run_id for r in a}) == len(a)
-    assert len({r.config["seed"] for r in a}) == len(a)
+    assert len({r.config.seed for r in a}) == len(a)
     ids = {r.run_id for r in a}
     assert "n01-c5-l2-k1" in ids and "n02-c20-l2-p10-d50-k2" in ids
     # The id and seed depend on the point and index only: a bigger grid keeps them.
     bigger = parse(
         GOOD.replace("robots = [1, 2]", "robots = [1, 2, 3]").replace("runs = 2", "runs = 3")
     )
-    small = {r.run_id: r.config["seed"] for r in sweepfile.expand(parse(GOOD))}
-    big = {r.run_id: r.config["seed"] for r in sweepfile.expand(bigger)}
+    small = {r.run_id: r.config.seed for r in sweepfile.expand(parse(GOOD))}
+    big = {r.run_id: r.config.seed for r in sweepfile.expand(bigger)}
     assert all(big[k] == v for k, v in small.items())
     # ...and on the file's base seed.
-    other = {r.run_id: r.config["seed"] for r in sweepfile.expand(parse(GOOD + "seed = 7\n"))}
+    other = {r.run_id: r.config.seed for r in sweepfile.expand(parse(GOOD + "seed = 7\n"))}
     assert set(other) == set(small) and all(other[k] != small[k] for k in small)
 
 
@@ -149,11 +150,11 @@ def test_expansion_covers_every_point_once_before_repeating():
     runs = sweepfile.expand(parse(GOOD))
     assert [r.index for r in runs] == [1, 1, 1, 1, 2, 2, 2, 2]
     first = runs[0].config
-    assert set(first) == {
+    assert set(plan_dict(first)) == {
         "robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map",
         "loss_pct", "delay_ms", "capture", "max_steps", "coordination", "start",
     }  # fmt: skip
-    assert (first["coordination"], first["start"]) == ("ours", "corner")
+    assert (first.coordination, first.start) == ("ours", "corner")
 
 
 def test_cli_bad_file_one_line_exit_2(tmp_path):
@@ -176,7 +177,7 @@ def test_time_scale_per_team_size():
         GOOD.replace("time_scale = 4", "time_scale = { 2 = 6, 1 = 12.5 }\nload_limit = 40")
     )
     assert spec.time_scale_by_robots == ((1, 12.5), (2, 6.0)) and spec.load_limit == 40.0
-    scales = {(r.config["robots"], r.config["time_scale"]) for r in sweepfile.expand(spec)}
+    scales = {(r.config.robots, r.config.time_scale) for r in sweepfile.expand(spec)}
     assert scales == {(1, 12.5), (2, 6.0)}
     assert spec.to_dict()["time_scale_by_robots"] == {"1": 12.5, "2": 6.0}
 
@@ -188,11 +189,11 @@ def test_coordination_and_start_are_grid_dimensions_sharing_their_seeds():
     assert len(runs) == 4 * 2 * 2
     ids = {r.run_id: r.config for r in runs}
     # Defaults leave the id as older sweeps wrote it; other values name themselves.
-    assert ids["n01-c5-l2-k1"]["coordination"] == "ours"
-    assert ids["n01-c5-l2-paper-spread-k1"]["start"] == "spread"
-    assert ids["n01-c5-l2-spread-k1"]["coordination"] == "ours"
+    assert ids["n01-c5-l2-k1"].coordination == "ours"
+    assert ids["n01-c5-l2-paper-spread-k1"].start == "spread"
+    assert ids["n01-c5-l2-spread-k1"].coordination == "ours"
     # The variants of a point run on the same random numbers.
-    seeds = {c["seed"] for rid, c in ids.items() if rid.startswith("n01-c5-l2-")}
+    seeds = {c.seed for rid, c in ids.items() if rid.startswith("n01-c5-l2-")}
     assert len(seeds) == 1
     assert len({r.point for r in runs}) == len(runs)
 
@@ -200,8 +201,8 @@ def test_coordination_and_start_are_grid_dimensions_sharing_their_seeds():
 @pytest.mark.parametrize(
     ("line", "words"),
     [
-        ('coordination = ["paper", "nobody"]', "grid.coordination: 'nobody' is not one of"),
-        ("start = []", "grid.start: expected a non-empty list"),
+        ('coordination = ["paper", "nobody"]', "grid.coordination: expected one of paper, ours"),
+        ("start = []", "grid.start: empty list"),
         ('start = ["spread", "spread"]', "grid.start: duplicate values"),
     ],
 )
@@ -213,9 +214,9 @@ def test_bad_coordination_or_start_names_the_key(line, words):
 
 def test_aodv_profile_is_a_run_option_recorded_only_when_chosen():
     default = sweepfile.expand(parse(GOOD))
-    assert all("aodv_profile" not in r.config for r in default)  # older plans unchanged
+    assert all("aodv_profile" not in plan_dict(r.config) for r in default)  # older plans
     ns3 = sweepfile.expand(parse(GOOD.replace("capture = true", 'aodv_profile = "ns3"')))
-    assert {r.config["aodv_profile"] for r in ns3} == {"ns3"}
+    assert {r.config.aodv_profile for r in ns3} == {"ns3"}
     with pytest.raises(UsageError, match="run.aodv_profile: expected one of rfc, ns3"):
         parse(GOOD.replace("capture = true", 'aodv_profile = "olsr"'))
 
@@ -230,19 +231,19 @@ def test_routing_and_map_as_grid_dimensions_name_themselves_and_share_seeds(tmp_
     assert len(runs) == 4 * 2 * 2
     ids = {r.run_id: r.config for r in runs}
     c = ids["n02-c20-l2-oracle-moffice-k1"]
-    assert c["routing"] == "oracle" and c["map"] == str(tmp_path / "maps" / "office.png")
-    assert c["range_model"] == "los" and c["wall_loss_pct"] == 40.0
-    assert ids["n02-c20-l2-aodv-mempty-k1"]["map"] is None
-    assert len({c["seed"] for rid, c in ids.items() if rid.startswith("n02-c20-")}) == 1
+    assert c.routing == "oracle" and c.map == str(tmp_path / "maps" / "office.png")
+    assert c.range_model == "los" and c.wall_loss_pct == 40.0
+    assert ids["n02-c20-l2-aodv-mempty-k1"].map is None
+    assert len({c.seed for rid, c in ids.items() if rid.startswith("n02-c20-")}) == 1
     assert len({r.point for r in runs}) == len(runs)
 
 
 @pytest.mark.parametrize(
     ("grid", "run", "words"),
     [
-        ('routing = ["aodv", "olsr"]', "", "grid.routing: 'olsr' is not one of"),
-        ('routing = ["aodv"]', 'routing = "babel"', "run.routing: routing is already a grid"),
-        ("map = []", "", "grid.map: expected a non-empty list of paths"),
+        ('routing = ["aodv", "olsr"]', "", "grid.routing: expected one of aodv, babel"),
+        ('routing = ["aodv"]', 'routing = "babel"', "run.routing: already a grid dimension"),
+        ("map = []", "", "grid.map: empty list"),
         ("", 'range_model = "fog"', "run.range_model: expected one of"),
         ("", "wall_loss_pct = 20", "run.wall_loss_pct: needs range_model los"),
     ],

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from testbed import sweep, sweepfile
+from testbed import rundir, sweepfile, sweepplan, sweepprogress, sweeprunner
 from tests.unit.test_sweep_synthetic import write_run
 
 
@@ -23,7 +23,7 @@ def test_plan_sorts_runs_by_what_is_on_disk(tmp_path):
     pdir.mkdir(parents=True)
     (pdir / "config.json").write_text("{}")
     (pdir / "result.json.tmp").write_text("{")  # a run killed while writing its result
-    p = sweep.plan(runs, tmp_path, netem=False)
+    p = sweepplan.plan(runs, tmp_path, netem=False)
     assert [r.run_id for r in p.done] == [done.run_id]
     assert [r.run_id for r in p.todo] == [r.run_id for r in runs[1:]]
     assert [r.run_id for r in p.partial] == [partial.run_id]
@@ -32,53 +32,53 @@ def test_plan_sorts_runs_by_what_is_on_disk(tmp_path):
 
 def test_delay_points_are_skipped_without_netem_with_a_reason(tmp_path):
     runs = sweepfile.expand(spec(delay_ms=(0.0, 50.0), runs=1))
-    p = sweep.plan(runs, tmp_path, netem=False)
+    p = sweepplan.plan(runs, tmp_path, netem=False)
     assert sorted(p.skipped) == ["n01-c5-l2-d50-k1", "n02-c5-l2-d50-k1"]
     assert all("sch_netem" in why for why in p.skipped.values())
     assert len(p.todo) == 2
-    assert not sweep.plan(runs, tmp_path, netem=True).skipped
+    assert not sweepplan.plan(runs, tmp_path, netem=True).skipped
 
 
 def test_a_finished_delay_run_stays_done_without_netem(tmp_path):
     runs = sweepfile.expand(spec(delay_ms=(50.0,), runs=1))
     write_run(tmp_path, runs[0])
-    p = sweep.plan(runs, tmp_path, netem=False)
+    p = sweepplan.plan(runs, tmp_path, netem=False)
     assert [r.run_id for r in p.done] == [runs[0].run_id]
 
 
 def test_config_mismatch_is_found(tmp_path):
     runs = sweepfile.expand(spec())
     write_run(tmp_path, runs[0])
-    assert sweep.config_mismatch(tmp_path, runs[0]) is None
+    assert sweepplan.config_mismatch(tmp_path, runs[0]) is None
     changed = sweepfile.expand(spec(max_steps=123))[0]
-    assert "max_steps" in sweep.config_mismatch(tmp_path, changed)
+    assert "max_steps" in sweepplan.config_mismatch(tmp_path, changed)
     # How fast is not what: a run the sweep made slower still answers its point.
-    assert sweep.config_mismatch(tmp_path, sweepfile.expand(spec(time_scale=3.0))[0]) is None
+    assert sweepplan.config_mismatch(tmp_path, sweepfile.expand(spec(time_scale=3.0))[0]) is None
 
 
 def test_run_argv():
     cfg = sweepfile.expand(spec(capture=True, time_scale=2.5))[0].config
-    argv = sweep.run_argv(["testbed", "run"], cfg, "/x/runs/a")
+    argv = rundir.run_argv(["testbed", "run"], cfg, "/x/runs/a")
     assert argv[:2] == ["testbed", "run"]
     assert argv[-3:] == ["--quiet", "--out", "/x/runs/a"]
     assert "--capture" in argv and "--map" not in argv
     i = argv.index("--robots")
     assert argv[i + 1] == "1"
-    assert argv[argv.index("--comm-range") + 1] == "5"
+    assert float(argv[argv.index("--comm-range") + 1]) == 5
     assert argv[argv.index("--time-scale") + 1] == "2.5"
-    assert argv[argv.index("--seed") + 1] == str(cfg["seed"])
-    assert argv[argv.index("--loss") + 1] == "0"
+    assert argv[argv.index("--seed") + 1] == str(cfg.seed)
+    assert float(argv[argv.index("--loss") + 1]) == 0
 
 
 def test_default_jobs():
-    assert sweep.default_jobs(1) == 1
-    assert sweep.default_jobs(2) == 1
-    assert sweep.default_jobs(8) == 4
+    assert sweepplan.default_jobs(1) == 1
+    assert sweepplan.default_jobs(2) == 1
+    assert sweepplan.default_jobs(8) == 4
 
 
 def test_progress_line_per_run_when_not_a_tty():
     out = io.StringIO()
-    p = sweep.Progress(4, out)
+    p = sweepprogress.Progress(4, out)
     runs = sweepfile.expand(spec())
     assert p.eta(runs, 0, 1) is None
     p.record(1, 10.0)
@@ -98,7 +98,7 @@ def test_progress_redraws_in_place_on_a_tty():
             return True
 
     out = Tty()
-    p = sweep.Progress(3, out)
+    p = sweepprogress.Progress(3, out)
     p.update(0, 1, 0, None)
     p.update(1, 1, 0, 5.0, "n01: complete")
     p.close()
@@ -111,7 +111,8 @@ def test_sweep_json_is_written_atomically(tmp_path):
     s = spec()
     runs = sweepfile.expand(s)
     (tmp_path / "runs").mkdir()
-    sw = sweep.Sweep(s, runs, tmp_path, 1, False, command=["true"], progress_stream=io.StringIO())
+    quiet = io.StringIO()
+    sw = sweeprunner.Sweep(s, runs, tmp_path, 1, False, command=["true"], progress_stream=quiet)
     sw._write_state()
     doc = json.loads((tmp_path / "sweep.json").read_text())
     assert [r["id"] for r in doc["runs"]] == [r.run_id for r in runs]
@@ -123,8 +124,8 @@ def test_an_interrupted_run_is_not_done(tmp_path):
     """A run stopped by Ctrl-C writes its result.json (nothing lost) but is redone."""
     runs = sweepfile.expand(spec())
     write_run(tmp_path, runs[0])
-    doc = json.loads((sweep.run_dir(tmp_path, runs[0].run_id) / "result.json").read_text())
+    doc = json.loads((rundir.run_dir(tmp_path, runs[0].run_id) / "result.json").read_text())
     doc["status"] = "interrupted"
     write_run(tmp_path, runs[1], doc=doc)
-    p = sweep.plan(runs, tmp_path, netem=False)
+    p = sweepplan.plan(runs, tmp_path, netem=False)
     assert runs[0] in p.done and runs[1] in p.todo and runs[1] in p.partial

@@ -347,11 +347,11 @@ def test_calibrate_finds_each_team_sizes_scale_and_runs_there(env, tmp_path):
 
 
 def test_jobs_auto_is_one_at_a_time_on_two_cores_and_more_on_big_machines():
-    from testbed import sweep, sweepfile
+    from testbed import sweepfile, sweepplan
 
     runs = sweepfile.expand(sweepfile.load(REPO / "testbed" / "experiments" / "paper.toml"))
-    assert sweep.auto_jobs(runs, cores=2) == 1
-    assert sweep.auto_jobs(runs, cores=64) >= 12
+    assert sweepplan.auto_jobs(runs, cores=2) == 1
+    assert sweepplan.auto_jobs(runs, cores=64) >= 12
 
 
 def test_report_says_which_scales_each_team_ran_at(env, tmp_path):

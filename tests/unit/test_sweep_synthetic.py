@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 from testbed import sweepfile
+from testbed.rundir import plan_dict
 
 
 def paper_like_steps(robots: int, comm: float, laser: float, index: int) -> float:
@@ -17,6 +18,8 @@ def paper_like_steps(robots: int, comm: float, laser: float, index: int) -> floa
 
 def result_doc(config: dict, finish: list[int | None], steps: int, plans=None, status="complete",
                miss=0.0) -> dict:  # fmt: skip
+    if not isinstance(config, dict):
+        config = plan_dict(config)  # a PlannedRun's RunConfig, as sweep.json records it
     robots = {}
     for k, fs in enumerate(finish, start=1):
         robots[f"r{k}"] = {
@@ -55,12 +58,12 @@ def write_run(out: Path, run: sweepfile.PlannedRun, doc: dict | None = None) -> 
     an atomic rename."""
     d = out / "runs" / run.run_id
     d.mkdir(parents=True)
-    (d / "config.json").write_text(json.dumps(run.config))
+    (d / "config.json").write_text(json.dumps(plan_dict(run.config)))
     if doc is None:
         c = run.config
-        total = paper_like_steps(c["robots"], c["comm_range"], c["laser_range"], run.index)
+        total = paper_like_steps(c.robots, c.comm_range, c.laser_range, run.index)
         # finish steps whose mean is exactly `total`: spread symmetrically around it
-        n = c["robots"]
+        n = c.robots
         offsets = [(k - (n - 1) / 2) * 2 for k in range(n)]
         finish = [total + o for o in offsets]
         final = int(max(finish)) + 1
@@ -85,10 +88,10 @@ def test_synthetic_runs_follow_the_contract(tmp_path):
     for run in runs:
         d = tmp_path / "runs" / run.run_id
         doc = json.loads((d / "result.json").read_text())
-        assert doc["config"] == json.loads((d / "config.json").read_text()) == run.config
-        assert set(doc["robots"]) == {f"r{k}" for k in range(1, run.config["robots"] + 1)}
+        assert doc["config"] == json.loads((d / "config.json").read_text()) == plan_dict(run.config)
+        assert set(doc["robots"]) == {f"r{k}" for k in range(1, run.config.robots + 1)}
         assert not (d / "result.json.tmp").exists()
         steps = [r["finish_step"] for r in doc["robots"].values()]
         c = run.config
-        expected = paper_like_steps(c["robots"], c["comm_range"], c["laser_range"], run.index)
+        expected = paper_like_steps(c.robots, c.comm_range, c.laser_range, run.index)
         assert abs(sum(steps) / len(steps) - expected) < 1e-9

@@ -1,0 +1,83 @@
+"""The plan of a sweep: which planned runs are done, to do, partial or skipped, whether a
+finished run was made with other settings, and how many runs to start at once.
+
+Pure functions of the planned runs and the sweep directory (testbed.rundir's contract);
+nothing here starts a process.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from testbed.rundir import is_done, plan_dict, run_dir
+from testbed.sweepfile import PlannedRun
+from topology.jsonfile import read_json
+
+
+@dataclass
+class Plan:
+    done: list[PlannedRun] = field(default_factory=list)
+    todo: list[PlannedRun] = field(default_factory=list)
+    partial: list[PlannedRun] = field(default_factory=list)  # subset of todo: dir to delete
+    skipped: dict[str, str] = field(default_factory=dict)  # run id -> reason
+
+
+def skip_reason(run: PlannedRun, netem: bool) -> str | None:
+    """Why this machine cannot do `run`, or None."""
+    if run.config.delay_ms > 0 and not netem:
+        return "delay needs the sch_netem kernel module, which this kernel lacks"
+    return None
+
+
+def plan(runs: list[PlannedRun], out: Path, netem: bool) -> Plan:
+    """Sort planned runs into done / to do / skipped by what is on disk."""
+    p = Plan()
+    for run in runs:
+        reason = skip_reason(run, netem)
+        if is_done(out, run.run_id):
+            p.done.append(run)
+        elif reason:
+            p.skipped[run.run_id] = reason
+        else:
+            p.todo.append(run)
+            if run_dir(out, run.run_id).exists():
+                p.partial.append(run)
+    return p
+
+
+def config_mismatch(out: Path, run: PlannedRun) -> str | None:
+    """How a finished run's recorded config differs from the planned one, or None."""
+    recorded = (read_json(run_dir(out, run.run_id) / "result.json") or {}).get("config")
+    if not isinstance(recorded, dict):
+        return None  # unreadable results are the report's problem, not a reason to stop
+    for key, want in plan_dict(run.config).items():
+        if key == "time_scale":
+            continue  # how fast, not what: the sweep may have run it slower (sweeprunner)
+        if key in recorded and recorded[key] != want:
+            return f"{key} is {recorded[key]!r} there, {want!r} in the sweep file"
+    return None
+
+
+def auto_jobs(runs: list[PlannedRun], cores: int | None = None) -> int:
+    """--jobs auto: the cores divided by the CPUs the sweep's most demanding run needs
+    (testbed.slurm.resources: its robots' CPU per step at its time scale, and a core for the
+    world), at least 1. On the 2-core development machine: 1."""
+    from testbed.slurm import resources
+
+    cores = cores or os.cpu_count() or 1
+    need = max((resources(r.config)[0] for r in runs), default=1)
+    return max(1, cores // need)
+
+
+def default_jobs(cores: int | None = None) -> int:
+    """Concurrent runs to start with: half the cores (a run is a world plus N robots)."""
+    cores = cores or os.cpu_count() or 1
+    return max(1, cores // 2)
+
+
+def run_load(run: PlannedRun) -> float:
+    """What a run asks of the machine: process-steps (robots, plus the display) per 100 ms of
+    emulated time."""
+    return (run.config.robots + 1) * run.config.time_scale

@@ -1,0 +1,503 @@
+"""The sweep runner: runs the runs of a sweep directory as child processes, resumably.
+
+Theory of operation. The sweep file expands (testbed.sweepfile) into planned runs, each with an
+id derived from its parameters. Run `R` lives in `DIR/runs/R/` and is *done* iff
+`DIR/runs/R/result.json` exists (testbed.rundir: `testbed run` writes that file last and
+atomically, so the file system alone says what is finished). testbed.sweepplan sorts the
+planned runs into done, to do (absent, or partial: a directory without result.json, deleted
+before the run is redone) and skipped (points this machine cannot run, e.g. delay without
+sch_netem, with the reason recorded); `Sweep.run` takes the runs to do.
+
+Each run is a child process, `testbed run ... --out DIR/runs/R`, with its output in
+`DIR/logs/R.log`. The children are forked from a fork server (topology.forkserver) that has
+imported `testbed run` once: a fresh interpreter spent about 1 s of each run on its imports
+(pyroute2, OpenCV, numpy), 4 minutes over the paper's 240 runs. Children run in their own
+session (a Ctrl-C in the terminal reaches only the sweep, which forwards it) and with
+PR_SET_PDEATHSIG=SIGINT towards the server, which itself dies with the sweep, so a SIGKILLed
+sweep takes its runs down with it instead of leaving them writing into directories a resumed
+sweep redoes. SIGINT, not SIGTERM: `testbed run` tears its testbed down on KeyboardInterrupt,
+while SIGTERM's default action would kill it before it removes its namespaces. (With
+TESTBED_SWEEP_RUN_COMMAND set, tests run a stand-in program instead, exec'd the same way.)
+On SIGINT or SIGTERM the sweep starts nothing new, forwards SIGINT to each running child,
+waits, escalates to SIGTERM and then SIGKILL of the child's process group, and exits 130.
+A run that finishes during that grace period still counts.
+
+Concurrency: at most --jobs runs at once (default from the core count) and, when the sweep file
+sets `load_limit`, only while the loads of the runs in flight add up to at most that: a run's
+load is (robots + 1) x time_scale, the process-steps it asks of the machine per emulated
+100 ms, so a sweep whose time scale falls with team size packs small teams side by side and
+gives a large one the machine alone. The queue is served first-fit: the first waiting run
+that fits starts. What happens when a run misses step deadlines (the concurrency backs off,
+a team size's time scale goes down and up again, a run is redone) is decided by the pure
+rules of testbed.sweeppolicy; `Sweep._finish` only applies them.
+`DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
+something changes; a lock file keeps two sweeps out of one directory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import functools
+import logging
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from testbed import sweeppolicy
+from testbed.errors import TestbedError
+from testbed.runconfig import RunConfig
+from testbed.rundir import is_done, plan_dict, run_argv, run_dir
+from testbed.sweepfile import PlannedRun
+from testbed.sweepplan import run_load
+from testbed.sweepprogress import Progress
+from topology.forkserver import ForkServer, ForkServerError, python_env
+from topology.jsonfile import read_json, write_json_atomic
+from topology.state import is_alive, proc_start_time
+
+log = logging.getLogger(__name__)
+
+# Environment variable naming the command that runs one run (tests use a stand-in program).
+RUN_COMMAND_ENV = "TESTBED_SWEEP_RUN_COMMAND"
+# What the run server imports once for every run (testbed.cli imports the rest on demand).
+RUN_PRELOAD = ["testbed.cli", "testbed.run", "pyroute2", "topology.rtnl", "topology.network"]
+# Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
+GRACE_INT = 30.0
+GRACE_TERM = 10.0
+CALIBRATION_STEPS = 300  # steps of each --calibrate trial (30 s of robot time)
+_PR_SET_PDEATHSIG = 1
+
+
+def run_command() -> list[str] | None:
+    """The argv prefix of a program that runs one run, if TESTBED_SWEEP_RUN_COMMAND names one;
+    None: runs are `testbed run` forked from the run server (RunForker)."""
+    override = os.environ.get(RUN_COMMAND_ENV)
+    return shlex.split(override) if override else None
+
+
+class RunForker:
+    """Starts `testbed run` as forks of a server that has done its imports (RUN_PRELOAD)."""
+
+    def __init__(self, label: str):
+        env = python_env()
+        env["OPENBLAS_NUM_THREADS"] = "1"  # no BLAS thread pool in a process that forks
+        self.server = ForkServer(RUN_PRELOAD, env=env, label=label)
+
+    def start(self, argv: list[str], log_path: Path, title: str):
+        """`argv`: `testbed run`'s arguments. Returns a Popen-like Forked."""
+        try:
+            return self.server.spawn(
+                None, "testbed.cli", ["run", *argv], str(log_path), title=title,
+                pdeathsig=signal.SIGINT,
+            )  # fmt: skip
+        except ForkServerError as exc:
+            raise TestbedError(f"cannot start a run: {exc}") from None
+
+    def close(self) -> None:
+        self.server.close()
+
+
+def _child_setup(parent_pid: int) -> None:  # runs in the child between fork and exec
+    os.setsid()
+    with contextlib.suppress(Exception):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGINT, 0, 0, 0)
+    if os.getppid() != parent_pid:  # the sweep died before prctl took effect
+        os._exit(1)
+
+
+@dataclass
+class _Child:
+    run: PlannedRun
+    proc: subprocess.Popen
+    started: float
+    jobs_at_start: int
+    log_file: object
+    load: float = 0.0
+    shared: bool = False  # another run was in flight at some time during this one
+    load_seen: float = 0.0  # the most load in flight while this one ran
+
+
+class Sweep:
+    """Runs the to-do runs of one sweep directory; `run()` returns the process exit status."""
+
+    def __init__(
+        self,
+        spec,
+        runs: list[PlannedRun],
+        out: Path,
+        jobs: int,
+        netem: bool,
+        sweep_file: str = "",
+        command: list[str] | None = None,
+        progress_stream=None,
+        calibrate: bool = False,
+        view: str | None = None,
+    ):
+        self.spec = spec
+        self.runs = runs
+        self.out = out
+        self.jobs = jobs
+        self.jobs_requested = jobs
+        self.load_limit = getattr(spec, "load_limit", None)
+        self.load_limit_requested = self.load_limit
+        # Per team size, applied to its runs' time scales (see _finish): a large team that
+        # runs short of CPU says nothing about a lone robot, which is bound by latency.
+        self.scale_factors: dict[int, float] = {}
+        self.clean_runs: dict[int, int] = {}
+        # --calibrate: per team size, the factor its trials found (also its ceiling), and
+        # the trials themselves [(factor, miss outside stalls), ...] for sweep.json.
+        self.calibrate = calibrate
+        # --view: the run in progress serves the live page (one run at a time holds it).
+        self.view = view
+        self.view_owner: str | None = None
+        self.ceilings: dict[int, float] = {}
+        self.calibration: dict[int, list[tuple[float, float]]] = {}
+        self.netem = netem
+        self.sweep_file = sweep_file
+        self.command = command or run_command()
+        self.forker: RunForker | None = None  # started by run() when there is no command
+        self.status: dict[str, dict] = {r.run_id: {"status": "pending"} for r in runs}
+        self.backoffs: list[dict] = []
+        self.stop_signal: int | None = None
+        self.progress = Progress(len(runs), progress_stream)
+
+    # -- bookkeeping
+
+    def _write_state(self) -> None:
+        data = {
+            "format": 1,
+            "sweep_file": self.sweep_file,
+            "spec": self.spec.to_dict(),
+            "jobs_requested": self.jobs_requested,
+            "jobs": self.jobs,
+            "load_limit_requested": self.load_limit_requested,
+            "load_limit": self.load_limit,
+            "time_scale_factor": {
+                str(n): round(f, 3) for n, f in sorted(self.scale_factors.items())
+            },
+            "netem": self.netem,
+            "calibration": {
+                str(n): {"factor": self.ceilings.get(n), "trials": trials}
+                for n, trials in sorted(self.calibration.items())
+            },
+            "backoffs": self.backoffs,
+            "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "runs": [
+                {
+                    "id": r.run_id,
+                    "index": r.index,
+                    "config": plan_dict(r.config),
+                    **self.status[r.run_id],
+                }
+                for r in self.runs
+            ],
+        }
+        write_json_atomic(self.out / "sweep.json", data)
+
+    def _counts(self):
+        st = [s["status"] for s in self.status.values()]
+        return st.count("done"), st.count("running"), st.count("failed")
+
+    def _show(self, queue, event=None) -> None:
+        done, running, failed = self._counts()
+        jobs = self.jobs if self.load_limit is None else self.progress.parallelism()
+        eta = self.progress.eta(list(queue), running, jobs)
+        self.progress.update(done, running, failed, eta, event)
+
+    # -- signals
+
+    def _on_signal(self, signum, frame) -> None:
+        if self.stop_signal is None:
+            self.stop_signal = signum
+            log.warning("%s: stopping, waiting for runs in flight", signal.Signals(signum).name)
+        else:
+            self.stop_signal = -1  # a second signal: stop waiting politely
+
+    # -- one child
+
+    def _spawn(self, config: RunConfig, rdir: Path, log_path: Path, title: str):
+        """Start one `testbed run` of `config` into `rdir` (removed first if there): from
+        the run server, or the stand-in command with the death signal towards the sweep.
+        Returns (process, its open log file, which the caller closes)."""
+        if rdir.exists():
+            shutil.rmtree(rdir)
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+        log_file = open(log_path, "wb")  # noqa: SIM115 (the caller closes it)
+        if self.forker is not None:
+            proc = self.forker.start(run_argv([], config, rdir), log_path, title)
+        else:
+            proc = subprocess.Popen(
+                run_argv(self.command, config, rdir),
+                stdin=subprocess.DEVNULL,
+                stdout=log_file,
+                stderr=subprocess.STDOUT,
+                preexec_fn=functools.partial(_child_setup, os.getpid()),
+            )
+        return proc, log_file
+
+    def _start(self, run: PlannedRun) -> _Child:
+        config = run.config
+        factor = self._factor(config.robots)
+        if factor != 1.0:
+            config = replace(config, time_scale=round(config.time_scale * factor, 3))
+        if self.view and self.view_owner is None:
+            config = replace(config, view=self.view)
+            self.view_owner = run.run_id
+        proc, log_file = self._spawn(
+            config, run_dir(self.out, run.run_id), self.out / "logs" / f"{run.run_id}.log",
+            run.run_id,
+        )  # fmt: skip
+        self.status[run.run_id] = {
+            "status": "running",
+            "pid": proc.pid,
+            "pid_start": proc_start_time(proc.pid),
+            "attempts": self.status[run.run_id].get("attempts", 0) + 1,
+        }
+        child = _Child(run, proc, time.monotonic(), self.jobs, log_file, load=run_load(run))
+        child.load_seen = child.load
+        return child
+
+    def _finish(self, child: _Child, queue: deque) -> str:
+        """Record a child that exited; returns the event line for the progress display."""
+        child.log_file.close()
+        if self.view_owner == child.run.run_id:
+            self.view_owner = None
+        run = child.run
+        wall = time.monotonic() - child.started
+        st = self.status[run.run_id]
+        st.pop("pid", None)
+        st["exit_status"] = child.proc.returncode
+        st["wall_time_s"] = round(wall, 1)
+        if not is_done(self.out, run.run_id):
+            st["status"] = "failed"
+            st["reason"] = _last_line(self.out / "logs" / f"{run.run_id}.log") or (
+                f"exited with status {child.proc.returncode} without result.json"
+            )
+            return f"{run.run_id}: FAILED ({st['reason']})"
+        result = read_json(run_dir(self.out, run.run_id) / "result.json") or {}
+        st["status"] = "done"
+        st["result_status"] = result.get("status")
+        miss = result.get("deadline_miss_fraction")
+        st["deadline_miss_fraction"] = miss
+        n = run.config.robots
+        self.progress.record(n, wall)
+        outcome = sweeppolicy.Outcome(
+            robots=n,
+            miss=miss,
+            # Misses while the host stalled the whole machine (testbed.stalls) are told apart.
+            miss_outside_stalls=result.get("deadline_miss_fraction_outside_stalls", miss),
+            shared=child.shared,
+            load_seen=child.load_seen,
+            jobs_at_start=child.jobs_at_start,
+            attempts=st["attempts"],
+        )
+        decision = sweeppolicy.decide(outcome, self._policy_state())
+        self._apply(decision, run, st, queue)
+        return f"{run.run_id}: {result.get('status')} in {wall:.0f} s" + decision.words
+
+    def _policy_state(self) -> sweeppolicy.State:
+        return sweeppolicy.State(
+            jobs=self.jobs,
+            load_limit=self.load_limit,
+            scale_factors=dict(self.scale_factors),
+            clean_runs=dict(self.clean_runs),
+            ceilings=dict(self.ceilings),
+        )
+
+    def _apply(self, d: sweeppolicy.Decision, run: PlannedRun, st: dict, queue: deque) -> None:
+        """Carry out what the policy decided about `run` (status entry `st`)."""
+        self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
+        self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
+        self.backoffs += [{"run": run.run_id, **record} for record in d.backoffs]
+        if d.redo:
+            st["status"] = "pending"
+            queue.appendleft(run)
+
+    def _factor(self, robots: int) -> float:
+        return self.scale_factors.get(robots, 1.0)
+
+    def _calibrate(self, todo: list[PlannedRun]) -> None:
+        """Find each team size's time scale on this machine before its first run: short
+        runs alone (CALIBRATION_STEPS steps) at the file's scale times a factor, up while
+        they run clean, down while they miss (sweeppolicy.calibration_next)."""
+        firsts: dict[int, PlannedRun] = {}
+        for run in todo:
+            firsts.setdefault(run.config.robots, run)
+        for robots, run in sorted(firsts.items()):
+            trials: list[tuple[float, float]] = []
+            factor = sweeppolicy.calibration_next(trials)
+            while factor is not None and self.stop_signal is None:
+                miss = self._trial(run, factor, len(trials) + 1)
+                trials.append((round(factor, 3), miss))
+                factor = sweeppolicy.calibration_next(trials)
+            found = sweeppolicy.calibrated(trials)
+            self.calibration[robots], self.ceilings[robots] = trials, found
+            self.scale_factors[robots] = found
+            scale = run.config.time_scale * found
+            self.progress.update(0, 0, 0, None, f"calibrated teams of {robots}: time scale "
+                                 f"{scale:.3g} ({found:.0%} of the file's), {len(trials)} "
+                                 "trial(s)")  # fmt: skip
+
+    def _trial(self, run: PlannedRun, factor: float, k: int) -> float:
+        """One calibration run; the fraction of its step deadlines missed outside stalls."""
+        c = run.config
+        config = replace(c, max_steps=CALIBRATION_STEPS,
+                      time_scale=round(c.time_scale * factor, 3))  # fmt: skip
+        rdir = self.out / "calibration" / f"n{c.robots:02d}-{k}"
+        proc, log_file = self._spawn(config, rdir, rdir.with_suffix(".log"), f"calibrate {k}")
+        proc.wait()
+        log_file.close()
+        res = read_json(rdir / "result.json") or {}
+        miss = res.get("deadline_miss_fraction_outside_stalls")
+        if miss is None:
+            miss = res.get("deadline_miss_fraction")
+        return float(miss) if isinstance(miss, int | float) else 1.0
+
+    def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
+        for child in children.values():
+            with contextlib.suppress(ProcessLookupError):
+                child.proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + GRACE_INT
+        stage = "int"
+        while children:
+            for rid in [r for r, c in children.items() if c.proc.poll() is not None]:
+                self._finish(children.pop(rid), queue)
+            if not children:
+                break
+            now = time.monotonic()
+            if stage == "int" and (now > deadline or self.stop_signal == -1):
+                for child in children.values():
+                    with contextlib.suppress(ProcessLookupError):
+                        child.proc.terminate()
+                stage, deadline = "term", now + GRACE_TERM
+            elif stage == "term" and now > deadline:
+                for child in children.values():
+                    with contextlib.suppress(ProcessLookupError, PermissionError):
+                        os.killpg(child.proc.pid, signal.SIGKILL)
+                stage = "kill"
+            time.sleep(0.1)
+        for rid, st in self.status.items():
+            if st["status"] == "failed" and not is_done(self.out, rid):
+                st["status"] = "interrupted"
+
+    def _next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
+        """Take the first waiting run that fits under the load limit (any run, when nothing
+        is in flight); None when none fits."""
+        if self.load_limit is None or not children:
+            return queue.popleft()
+        room = self.load_limit - sum(c.load for c in children.values())
+        for i, run in enumerate(queue):
+            if run_load(run) <= room + 1e-9:
+                del queue[i]
+                return run
+        return None
+
+    # -- the loop
+
+    def run(self, todo: list[PlannedRun], done: list[PlannedRun], skipped: dict[str, str]) -> int:
+        for r in done:
+            self.status[r.run_id] = {"status": "done", "previous_sweep": True}
+            res = read_json(run_dir(self.out, r.run_id) / "result.json") or {}
+            self.status[r.run_id]["result_status"] = res.get("status")
+        for rid, reason in skipped.items():
+            self.status[rid] = {"status": "skipped", "reason": reason}
+        self.progress.total = len(self.runs) - len(skipped)
+        queue = deque(todo)
+        children: dict[str, _Child] = {}
+        old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        if self.command is None and queue:
+            self.forker = RunForker(label=str(self.out.resolve()))
+        try:
+            if self.calibrate:
+                self._calibrate(list(queue))
+            self._write_state()
+            self._show(queue)
+            while (queue or children) and self.stop_signal is None:
+                while queue and len(children) < self.jobs and self.stop_signal is None:
+                    run = self._next_fitting(queue, children)
+                    if run is None:
+                        break
+                    child = self._start(run)
+                    children[run.run_id] = child
+                    in_flight = sum(c.load for c in children.values())
+                    for c in children.values():
+                        c.shared = c.shared or len(children) > 1
+                        c.load_seen = max(c.load_seen, in_flight)
+                    self._write_state()
+                    self._show(queue)
+                exited = [rid for rid, c in children.items() if c.proc.poll() is not None]
+                for rid in exited:
+                    event = self._finish(children.pop(rid), queue)
+                    self._write_state()
+                    self._show(queue, event)
+                if not exited:
+                    time.sleep(0.1)
+            if self.stop_signal is not None:
+                self._stop_children(children, queue)
+                self._write_state()
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+            if self.forker is not None:
+                self.forker.close()
+            self.progress.close()
+        if self.stop_signal is not None:
+            done, _, _ = self._counts()
+            print(
+                f"sweep interrupted: {done} of {self.progress.total} runs done; "
+                f"resume with --resume",
+                file=sys.stderr,
+            )
+            return 130
+        failed = [rid for rid, s in self.status.items() if s["status"] == "failed"]
+        if failed:
+            print(
+                f"sweep finished with {len(failed)} failed run(s) (see {self.out}/logs/): "
+                + ", ".join(failed[:5])
+                + (" ..." if len(failed) > 5 else ""),
+                file=sys.stderr,
+            )
+            return 1
+        return 0
+
+
+def _last_line(path: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1][:200] if lines else ""
+
+
+# ---------------------------------------------------------------- orphans of a killed sweep
+
+
+def wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
+    """A SIGKILLed sweep's children get SIGINT (PDEATHSIG); wait until they are gone before
+    redoing their runs, and SIGKILL any still running after `timeout` (only the very processes
+    recorded in sweep.json: pid and start time)."""
+    state = read_json(out / "sweep.json") or {}
+    procs = [
+        (e["pid"], e.get("pid_start"))
+        for e in state.get("runs", [])
+        if e.get("status") == "running" and isinstance(e.get("pid"), int)
+    ]
+    procs = [(pid, start) for pid, start in procs if is_alive(pid, start)]
+    deadline = time.monotonic() + timeout
+    while procs and time.monotonic() < deadline:
+        time.sleep(0.2)
+        procs = [(pid, start) for pid, start in procs if is_alive(pid, start)]
+    for pid, _ in procs:
+        log.warning(
+            "run process %d of an earlier sweep still alive after %.0f s: SIGKILL", pid, timeout
+        )
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(pid, signal.SIGKILL)

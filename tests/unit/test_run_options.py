@@ -1,0 +1,148 @@
+"""The run options (testbed.runconfig, testbed.runoptions): one table, and the command line,
+the sweep file checks and the argv a sweep hands a run all made from it, as a closed loop."""
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from testbed import cli, sweepfile
+from testbed.errors import UsageError
+from testbed.runconfig import NET_OPTIONS, OPTIONS, RunConfig, config_from_args, to_argv
+from testbed.rundir import plan_dict, run_argv
+from topology.spec import ROUTINGS
+
+REPO = Path(__file__).resolve().parents[2]
+RUN_ONLY = {"out", "name", "quiet", "replace"}  # where the run goes and how it shows: not config
+
+
+def parse_run(argv: list[str]) -> RunConfig:
+    args = cli.build_parser(["run"]).parse_args(["run", *argv, "--out", "/x"])
+    return config_from_args(args)
+
+
+def run_parser():
+    sub = next(a for a in cli.build_parser(["run"])._actions if a.dest == "cmd")
+    return sub.choices["run"]
+
+
+def net_up_parser():
+    sub = next(a for a in cli.build_parser(["net"])._actions if a.dest == "cmd")
+    net_sub = next(a for a in sub.choices["net"]._actions if a.dest == "net_cmd")
+    return net_sub.choices["up"]
+
+
+def test_every_option_round_trips_through_argv_with_non_default_values():
+    cfg = RunConfig(
+        robots=7, comm_range=12.5, laser_range=1.5, seed=42, time_scale=0.1 + 0.2,
+        routing="oracle", aodv_profile="ns3", map="maps/office.png", loss_pct=12.5,
+        delay_ms=40.0, range_model="los", wall_loss_pct=30.0, capture=True, max_steps=1234,
+        coordination="paper", start="spread", map_cell=0.1, laser_rays=180, speed=0.05,
+        map_period=7, flood="blind", display_pos=(3.5, 4.25), snapshots=(200, 600),
+        kill=((2, 150), (3, 300)), view="127.0.0.1:8123", medium="ns3-wifi",
+        wifi_loss="logdistance", wifi_standard="80211b", wifi_rate="DsssRate1Mbps",
+    )  # fmt: skip
+    for opt in OPTIONS:
+        assert getattr(cfg, opt.name) != opt.default, opt.name  # every option non-default
+    assert parse_run(to_argv(cfg)) == cfg
+
+
+def test_defaults_agree_and_the_table_is_the_parser():
+    assert parse_run(["--robots", "2", "--comm-range", "5"]) == RunConfig(robots=2, comm_range=5)
+    dests = {a.dest for a in run_parser()._actions if a.dest != "help"}
+    assert dests == {opt.name for opt in OPTIONS} | RUN_ONLY
+    fields = {f.name for f in dataclasses.fields(RunConfig)}
+    assert {opt.name for opt in OPTIONS} <= fields
+    assert fields - {opt.name for opt in OPTIONS} == {"radius", "plan_period"}  # no flags
+
+
+def test_help_gives_every_options_default_and_unit():
+    text = " ".join(run_parser().format_help().split())
+    for opt in OPTIONS:
+        line = " ".join(opt.help_text().replace("%%", "%").split())
+        assert line in text, opt.name
+        assert ("required" if opt.required else "default") in line, opt.name
+        assert opt.unit in line
+    for flag in ("--seed", "--time-scale", "--max-steps"):
+        assert flag in text
+    assert "a lone robot's run repeatable, not a team's" in text  # what a seed fixes
+
+
+def test_one_default_routing_everywhere():
+    assert RunConfig(robots=1, comm_range=1).routing == ROUTINGS[0] == "aodv"
+    assert sweepfile.SweepSpec(robots=(1,), comm_range=(1.0,), laser_range=(2.0,)).routing == "aodv"
+    args = net_up_parser().parse_args(["n1", "--robots", "2", "--comm-range", "5"])
+    assert args.routing == "aodv"
+
+
+def test_net_up_takes_the_network_options_with_runs_checks():
+    run = {a.dest: a for a in run_parser()._actions}
+    up = {a.dest: a for a in net_up_parser()._actions}
+    assert {"comm_range", "routing", "loss_pct", "delay_ms", "time_scale"} <= {
+        o.name for o in NET_OPTIONS
+    }
+    for opt in NET_OPTIONS:
+        a, b = run[opt.name], up[opt.name]
+        assert (a.option_strings, a.choices, a.default, a.help) == (
+            b.option_strings, b.choices, b.default, b.help,
+        )  # fmt: skip
+    with pytest.raises(UsageError, match="at most 100"):
+        net_up_parser().parse_args(["n1", "--robots", "2", "--comm-range", "5", "--loss", "101"])
+
+
+@pytest.mark.parametrize("path", sorted((REPO / "testbed" / "experiments").glob("*.toml")),
+                         ids=lambda p: p.name)  # fmt: skip
+def test_each_planned_run_of_each_experiment_round_trips(path):
+    for run in sweepfile.expand(sweepfile.load(path)):
+        argv = run_argv([], run.config, Path("/x") / run.run_id)
+        assert parse_run(argv[: argv.index("--quiet")]) == run.config, run.run_id
+        # and from the plan sweep.json records (what a Slurm task reads)
+        assert run_argv([], plan_dict(run.config), Path("/x") / run.run_id) == argv
+
+
+GOOD = """
+[grid]
+robots = [1, 2]
+comm_range = [5]
+laser_range = [2.0]
+[run]
+"""
+
+
+def bad_values(opt):
+    if opt.choices:
+        return ['"nope"']
+    if opt.kind is bool:
+        return ['"yes"']
+    if opt.kind is str:
+        return ["3"]
+    out = ['"x"', "true"]
+    if opt.above is not None:
+        out.append(f"{opt.above:g}")
+    if opt.minimum is not None:
+        out.append(f"{opt.minimum - 1:g}")
+    if opt.maximum is not None:
+        out.append(f"{opt.maximum + 1:g}")
+    if opt.kind is int:
+        out.append("1.5")
+    return out
+
+
+@pytest.mark.parametrize("opt", [o for o in OPTIONS if o.sweep], ids=lambda o: o.name)
+def test_sweep_file_checks_come_from_the_table(opt):
+    for bad in bad_values(opt):
+        for table in sorted(opt.sweep):
+            text = GOOD.replace("[run]", "")
+            if table == "grid":
+                text = text.replace(f"{opt.name} = ", "_old = ")
+                text = text.replace("[grid]", f"[grid]\n{opt.name} = [{bad}]")
+                text = text.replace("_old = [1, 2]\n", "").replace("_old = [5]\n", "")
+                text = text.replace("_old = [2.0]\n", "")
+                key = f"grid.{opt.name}"
+            else:
+                text += f"[run]\n{opt.name} = {bad}\n"
+                key = f"run.{opt.name}"
+            with pytest.raises(UsageError) as e:
+                sweepfile.parse(tomllib.loads(text), "s.toml")
+            assert str(e.value).startswith(f"sweep file s.toml: {key}:"), (bad, str(e.value))
