@@ -21,6 +21,7 @@ it needs nothing from the process that built the testbed.
 Moving robots recomputes the wanted links and applies only the difference.
 """
 
+import contextlib
 import logging
 import math
 import os
@@ -61,6 +62,7 @@ class Network:
         self.oracle: OracleRouter | None = None  # routing "oracle": routes from here
         self.walls: Walls | None = None  # the los range models' walls, from spec.map_png
         self._range_cache: dict[Pair, Impairment] | None = None  # the last range-model links
+        self._deferred: list[state.ProcessRecord] | None = None  # see _recording
         if spec.map_png and spec.range_model in LOS_MODELS:
             try:
                 self.walls = Walls.from_png(spec.map_png, spec.map_cell)
@@ -145,9 +147,10 @@ class Network:
         if self.spec.routing == "oracle":
             self.oracle = OracleRouter(self.name, robots, WLAN_INDEX)
             self.oracle.update(self.current)
-        if self.spec.capture_dir:
-            self._start_captures()
-        self._start_routing()
+        with self._recording():
+            if self.spec.capture_dir:
+                self._start_captures()
+            self._start_routing()
         log.info(
             "%s: %d robots, %d links up in %.0f ms",
             self.name, self.spec.robots, len(self.current), 1000 * (time.perf_counter() - t0),
@@ -219,30 +222,45 @@ class Network:
         self._check_robot(k)
         proc = processes.spawn(self.robot_ns(k), argv, **popen_kwargs)
         self.children[proc.pid] = proc
+        self._record([processes.record(proc, k, role)])
+        return proc
+
+    def _record(self, records: list[state.ProcessRecord]) -> None:
+        """Add processes to the state file; inside _recording() they wait for its end, so a
+        bring-up of 1000 daemons writes the file once, not 1000 times (the file grows with
+        the team: writing it per process was quadratic, 9 s of a 200-robot bring-up)."""
+        if self._deferred is not None:
+            self._deferred.extend(records)
+            return
         with state.locked(self.name):
             self.state = state.read(self.name) or self.state
-            self.state.processes.append(processes.record(proc, k, role))
+            self.state.processes.extend(records)
             state.write(self.name, self.state)
-        return proc
+
+    @contextlib.contextmanager
+    def _recording(self):
+        """Record the processes started in this block in one write, at its end; also when
+        the block fails, so that teardown finds every one of them."""
+        self._deferred = []
+        try:
+            yield
+        finally:
+            records, self._deferred = self._deferred, None
+            if records:
+                self._record(records)
 
     def adopt(self, k: int, proc, role: str) -> None:
         """Record a process that was started in robot k's namespace by other means (the fork
         server): teardown stops it like the ones `spawn` started. `proc` answers poll()."""
         self._check_robot(k)
         self.children[proc.pid] = proc
-        with state.locked(self.name):
-            self.state = state.read(self.name) or self.state
-            self.state.processes.append(processes.record(proc, k, role))
-            state.write(self.name, self.state)
+        self._record([processes.record(proc, k, role)])
 
     def adopt_host_process(self, proc, role: str) -> None:
         """Record a helper that runs in the host namespace for this testbed (the view of a
         `net up`): teardown stops it by its pid like the robots' processes (robot 0)."""
         self.children[proc.pid] = proc
-        with state.locked(self.name):
-            self.state = state.read(self.name) or self.state
-            self.state.processes.append(processes.record(proc, 0, role))
-            state.write(self.name, self.state)
+        self._record([processes.record(proc, 0, role)])
 
     def process(self, k: int, role: str):
         """The newest live process of `role` (e.g. "aodv", the routing daemon) that this
@@ -457,9 +475,7 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
         if last:
             time.sleep(CAPTURE_DRAIN_S)
             processes.stop(last, children)
-    stray = [
-        pid for ns in namespaces for pid in processes.pids_in_namespace(ns) if pid != os.getpid()
-    ]
+    stray = [pid for pid in _pids_in(namespaces) if pid != os.getpid()]
     if stray:
         processes.stop(
             [state.ProcessRecord(pid, state.proc_start_time(pid), 0, "stray") for pid in stray],
@@ -470,6 +486,31 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
     _keep_logs(name, st)
     shutil.rmtree(state.run_dir(name), ignore_errors=True)
     state.remove(name)
+
+
+def _pids_in(namespaces: list[str]) -> list[int]:
+    """Every process inside one of `namespaces`, in one pass over /proc (one pass per
+    namespace, as processes.pids_in_namespace does, costs seconds at 1000 robots)."""
+    wanted = set()
+    for ns in namespaces:
+        try:
+            st = os.stat(netns.path(ns))
+        except FileNotFoundError:
+            continue
+        wanted.add((st.st_dev, st.st_ino))
+    if not wanted:
+        return []
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            st = os.stat(f"/proc/{entry}/ns/net")
+        except (FileNotFoundError, PermissionError, ProcessLookupError):
+            continue
+        if (st.st_dev, st.st_ino) in wanted:
+            found.append(int(entry))
+    return found
 
 
 def _keep_logs(name: str, st: state.TestbedState | None) -> None:
