@@ -14,6 +14,7 @@ import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
 
+from testbed import netextra
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from topology.argtypes import number
 from topology.spec import AODV_PROFILES, LOS_MODELS, RANGE_MODELS, ROUTINGS
@@ -78,7 +79,7 @@ def _add_net(sub) -> None:
 
     up = nsub.add_parser("up", help="build a testbed network and leave it running")
     up.add_argument("name", type=_name)
-    up.add_argument("--robots", type=_robot_count, required=True)
+    up.add_argument("--robots", type=_robot_count)
     up.add_argument("--layout", choices=("chain", "grid", "random"))
     up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0)
     up.add_argument("--positions", type=_positions, help='"X,Y X,Y ..." in metres')
@@ -118,6 +119,8 @@ def _add_net(sub) -> None:
         metavar="[HOST:]PORT",
         help="serve a live view of the network (127.0.0.1 unless a host is given)",
     )
+    netextra.add_up_arguments(up)
+    netextra.add_parsers(nsub, sub, _name)
 
     ex = nsub.add_parser("exec", help="run a command in a robot's namespace")
     ex.add_argument("name", type=_name)
@@ -175,8 +178,11 @@ def _net_up(args) -> int:
         raise UsageError("--map is for the los range models: add --range-model los")
     if args.wall_loss is not None and not los:
         raise UsageError("--wall-loss is for the los range models: add --range-model los")
+    trace, positions = netextra.up_positions(args)
     try:
-        if args.positions is not None:
+        if positions is not None:
+            pass
+        elif args.positions is not None:
             if len(args.positions) != args.robots:
                 raise UsageError(f"--positions has {len(args.positions)} positions "
                                  f"for --robots {args.robots}")  # fmt: skip
@@ -213,6 +219,7 @@ def _net_up(args) -> int:
     links = net.links()
     if args.view:
         _start_net_view(net, args.view)
+    netextra.after_up(net, args, trace)
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
@@ -385,6 +392,8 @@ def build_parser(argv: list[str] | None = None) -> Parser:
 
 
 def dispatch(args) -> int:
+    if getattr(args, "handler", None) is not None:  # testbed.netextra's commands
+        return args.handler(args)
     if args.cmd == "net":
         return NET_COMMANDS[args.net_cmd](args)
     if args.cmd == "clean":

@@ -63,6 +63,7 @@ class Network:
         self.walls: Walls | None = None  # the los range models' walls, from spec.map_png
         self._range_cache: dict[Pair, Impairment] | None = None  # the last range-model links
         self._deferred: list[state.ProcessRecord] | None = None  # see _recording
+        self._state_mtime: int | None = None  # of the state file we last read or wrote
         if spec.map_png and spec.range_model in LOS_MODELS:
             try:
                 self.walls = Walls.from_png(spec.map_png, spec.map_cell)
@@ -354,6 +355,8 @@ class Network:
         """Move several robots at once ({robot: (x, y)}); links follow, in one batch, before
         this returns. Returns (added, removed). save=False leaves the state file's positions
         as they were (a feed saves now and then, not on every batch)."""
+        if self.persistent:
+            self.refresh()
         for k, xy in moves.items():
             self._check_robot(k)
             x, y = float(xy[0]), float(xy[1])
@@ -377,6 +380,25 @@ class Network:
             self._save()
         return diff
 
+    def refresh(self) -> None:
+        """Take up what another process (a trace player, a feed, `net move`) saved since we
+        last read or wrote the state file: its positions, and the links they make (which
+        that process applied before saving). A stat when nothing changed."""
+        mtime = _mtime(self.name)
+        if mtime is None or mtime == self._state_mtime:
+            return
+        st = state.read(self.name)
+        if st is None:
+            return
+        self._state_mtime = mtime
+        self.positions = [tuple(p) for p in st.positions]
+        self.link_impairments = {
+            tuple(int(k) for k in key.split("-")): Impairment(**fields)
+            for key, fields in st.link_impairments.items()
+        }
+        self._range_cache = None
+        self.current = self.wanted()
+
     def links(self) -> set[Pair]:
         """The links up now: pairs (i, j), i < j."""
         return set(self.current)
@@ -397,6 +419,7 @@ class Network:
             st.persistent = self.state.persistent
             self.state = st
             state.write(self.name, st)
+            self._state_mtime = _mtime(self.name)
 
     # -- attach, detach, teardown -----------------------------------------------------------
 
@@ -408,6 +431,7 @@ class Network:
             raise UsageError(f"no testbed named {name!r} is up")
         net = cls(state.spec_from_dict(st.spec), persistent=st.persistent)
         net.state = st
+        net._state_mtime = _mtime(name)
         net.positions = [tuple(p) for p in st.positions]
         net.link_impairments = {
             tuple(int(k) for k in key.split("-")): Impairment(**fields)
@@ -486,6 +510,13 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
     _keep_logs(name, st)
     shutil.rmtree(state.run_dir(name), ignore_errors=True)
     state.remove(name)
+
+
+def _mtime(name: str) -> int | None:
+    try:
+        return os.stat(state.state_path(name)).st_mtime_ns
+    except FileNotFoundError:
+        return None
 
 
 def _pids_in(namespaces: list[str]) -> list[int]:
