@@ -93,7 +93,8 @@ class FeedServer:
         self.sel = selectors.DefaultSelector()
         self.timed: list[tuple[float, int, int, float, float]] = []
         self.seq = 0
-        self.applied = 0
+        self.applied = 0  # robot moves applied (a robot moved twice in one batch counts once)
+        self.lines = 0  # updates accepted
         self.batches = 0
         self.start = time.monotonic()
         self._ended: list[_Source] = []
@@ -163,6 +164,7 @@ class FeedServer:
             if parsed is None:
                 continue
             t, k, x, y = parsed
+            self.lines += 1
             if t is None:
                 moves[k] = (x, y)
             else:
@@ -172,15 +174,15 @@ class FeedServer:
     def emulated_now(self) -> float:
         return (time.monotonic() - self.start) * self.scale
 
-    def serve(self, until_stdin_closes: bool = True) -> None:
+    def serve(self, until_stdin_closes: bool = True, stop=None) -> None:
         """Apply updates until standard input ends (with stdin) or forever (without):
         timed updates still pending when stdin ends are applied when due first."""
         last_saved = time.monotonic()
         dirty = False
-        while True:
+        while stop is None or not stop.is_set():
             if until_stdin_closes and not self.stdin_open and not self.timed:
                 return
-            timeout = IDLE_SAVE_S if dirty else None
+            timeout = IDLE_SAVE_S if dirty or stop is not None else None
             if self.timed:
                 due = max(0.0, self.timed[0][0] / self.scale - (time.monotonic() - self.start))
                 timeout = due if timeout is None else min(timeout, due)

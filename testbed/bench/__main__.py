@@ -11,7 +11,7 @@ import os
 import sys
 import traceback
 
-BENCHMARKS = ("medium", "aodv", "aodv_profiles", "oracle", "los", "view", "node")
+BENCHMARKS = ("medium", "aodv", "aodv_profiles", "oracle", "los", "view", "node", "scale")
 
 
 def main(argv: list[str]) -> int:
