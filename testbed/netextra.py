@@ -36,6 +36,10 @@ def add_parsers(nsub, sub, name_type) -> None:
     fd.add_argument("name", type=name_type)
     fd.add_argument("--no-stdin", action="store_true", help=argparse.SUPPRESS)
     fd.set_defaults(handler=net_feed)
+    mt = sub.add_parser("metrics", help="PDF, delay and control overhead from the captures "
+                        "of a `net up --capture DIR` network")  # fmt: skip
+    mt.add_argument("dir", metavar="DIR")
+    mt.set_defaults(handler=metrics)
 
 
 def up_positions(args):
@@ -132,4 +136,55 @@ def _feed_client(path: str) -> int:
     if errors:
         print(f"testbed: net feed: {errors.splitlines()[0]}", file=sys.stderr)
         return 2
+    return 0
+
+
+def metrics(args) -> int:
+    """`testbed metrics DIR`: testbed.analysis.pcapmetrics.run_metrics on the captures of a
+    `net up --capture DIR` network (laid out as a run's pcaps/), written to DIR/metrics.json."""
+    import json
+    import re
+    import tempfile
+
+    from testbed.analysis import pcapmetrics
+
+    d = os.path.abspath(args.dir)
+    if not os.path.isdir(d):
+        raise UsageError(f"metrics: {args.dir} is not a directory")
+    if not any(re.fullmatch(r"r\d+\.pcap", e) for e in os.listdir(d)):
+        raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
+    routing = "aodv"
+    try:
+        with open(os.path.join(d, "network.json")) as f:
+            routing = json.load(f)["routing"]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    with tempfile.TemporaryDirectory(prefix="tb-metrics-") as tmp:
+        os.symlink(d, os.path.join(tmp, "pcaps"))
+        with open(os.path.join(tmp, "result.json"), "w") as f:
+            json.dump({"config": {"routing": routing}}, f)
+        m = pcapmetrics.run_metrics(tmp, use_cache=False)
+    if m is None:
+        raise UsageError(f"metrics: no captures in {args.dir}")
+    m = {k: v for k, v in m.items() if k not in ("pcaps",)}
+    out = os.path.join(d, "metrics.json")
+    with open(out, "w") as f:
+        json.dump(m, f, indent=1)
+
+    def fmt(v, spec: str) -> str:
+        return "n/a" if v is None else format(v, spec)
+
+    print(
+        f"routing {routing}: {len(m.get('robots', {}))} captures, {fmt(m['duration_s'], '.1f')} s"
+    )
+    print(f"  PDF (TCP payload bytes delivered): {fmt(m['pdf'], '.4f')}")
+    print(
+        f"  delay ms: median {fmt(m['delay_ms_median'], '.2f')}, "
+        f"mean {fmt(m['delay_ms_mean'], '.2f')}, p95 {fmt(m['delay_ms_p95'], '.2f')}"
+    )
+    print(
+        f"  control overhead: {m['control_tx_packets']} packets, "
+        f"{fmt(m['overhead_packets'], '.4f')} of frames, {fmt(m['overhead_bytes'], '.4f')} of bytes"
+    )
+    print(f"  written to {out}")
     return 0

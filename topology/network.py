@@ -34,6 +34,7 @@ from topology import capture, names, netns, processes, ranges, routing, state
 from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
+from topology.jsonfile import write_json_atomic
 from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX, Medium
 from topology.oracle import OracleRouter
@@ -167,6 +168,8 @@ class Network:
     def _start_captures(self) -> None:
         cdir = self.spec.capture_dir
         os.makedirs(cdir, exist_ok=True)
+        # What the captures are of (the routing protocol, for `testbed metrics`).
+        write_json_atomic(os.path.join(cdir, "network.json"), state.spec_to_dict(self.spec))
         started = []
         for k in self.spec.robot_ids():
             logp = os.path.join(self.state_dir, f"r{k}.tcpdump.log")
