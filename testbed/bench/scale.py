@@ -4,13 +4,16 @@ robots (pairs reached, memory, idle CPU), and the position feed's rate.
 - bring-up: ms per robot of Network.up() on a grid (spacing 8, range 10: four neighbours,
   routing none), at 100, 500 and 1000 robots; teardown: Network.down() of the same, in s.
   The kernel frees a namespace's devices in the background after teardown (cleanup_net) and
-  new namespaces are slow to create meanwhile: each bring-up waits SETTLE_S first.
+  new namespaces are slow to create meanwhile: `kernel_cleanup_s` is how long after down()
+  returned that lasted (measured with a probe namespace), and each bring-up waits for it.
 - 500 AODV robots on the same grid: PAIRS random pairs, each pinged until it answers or
   PING_WAIT_S pass (a route across the grid is up to 43 hops); the daemons' resident memory
   (sum of RSS, and per daemon); their CPU while idle (no traffic) over IDLE_S, in cores.
-- feed: a 1000-robot testbed, a FeedServer on it, FEED_UPDATES random moves written to its
-  socket as fast as one client can: updates applied (links updated) per second; and the
-  latency of one move_many of one robot (the cost of an unbatched update).
+- feed: a 1000-robot testbed, a FeedServer on it, FEED_UPDATES moves (a random robot, a
+  step of up to STEP_M metres each way) written to its socket as fast as one client can:
+  updates applied (links updated) per second; and the latency of one move_many of one robot
+  (the cost of an unbatched update). A link met for the first time costs a veth pair and
+  the kernel's carrier delay (topology.medium), so teleports anywhere would be much slower.
 Goals (issue 23): bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardown of 1000
 <= 10 s, every pair reached, >= 1000 feed updates per second.
 """
@@ -27,11 +30,12 @@ from topology import feed, names, netns
 from topology.network import Network
 from topology.spec import NetworkSpec, layout_positions
 
-SETTLE_S = 3.0
+PROBE_MS = 10.0
 PAIRS = 20
 PING_WAIT_S = 30.0
 IDLE_S = 10.0
 FEED_UPDATES = 5000
+STEP_M = 1.0
 
 
 def _name() -> str:
@@ -44,7 +48,7 @@ def _spec(n: int, routing: str = "none") -> NetworkSpec:
 
 
 def bring_up(n: int) -> dict:
-    time.sleep(SETTLE_S)
+    settle()
     net = Network(_spec(n))
     t0 = time.perf_counter()
     net.up()
@@ -54,9 +58,26 @@ def bring_up(n: int) -> dict:
     net.down()
     down_s = time.perf_counter() - t0
     left = [ns for ns in netns.list_names() if ns.startswith(f"tb-{net.name}-")]
+    cleanup_s = settle()
     return {"robots": n, "links": links, "up_s": round(up_s, 3),
             "up_ms_per_robot": round(1000 * up_s / n, 3), "down_s": round(down_s, 3),
-            "namespaces_left": len(left)}  # fmt: skip
+            "kernel_cleanup_s": round(cleanup_s, 3), "namespaces_left": len(left)}  # fmt: skip
+
+
+def settle(limit_s: float = 120.0) -> float:
+    """Wait until the kernel has freed the namespaces of earlier testbeds (it does so in the
+    background after teardown, and creating a namespace waits for it meanwhile): until a
+    probe namespace is created in under PROBE_MS. Returns the seconds waited."""
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < limit_s:
+        probe = f"tb-{_name()}-m"
+        t = time.perf_counter()
+        netns.create(probe)
+        netns.remove(probe)
+        if (time.perf_counter() - t) * 1000 < PROBE_MS:
+            break
+        time.sleep(0.2)
+    return time.perf_counter() - t0
 
 
 def _rss_kb(pid: int) -> int:
@@ -80,7 +101,7 @@ def _cpu_ticks(pid: int) -> int:
 
 
 def aodv(n: int = 500) -> dict:
-    time.sleep(SETTLE_S)
+    settle()
     net = Network(_spec(n, "aodv"))
     t0 = time.perf_counter()
     net.up()
@@ -117,23 +138,33 @@ def aodv(n: int = 500) -> dict:
 
 
 def feed_rate(n: int = 1000) -> dict:
-    time.sleep(SETTLE_S)
+    settle()
     net = Network(_spec(n), persistent=False)
     net.up()
     try:
         rng = random.Random(1)
-        side = 8.0 * (n**0.5)
         t0 = time.perf_counter()
-        for _ in range(200):
-            net.move_many({rng.randint(1, n): (rng.uniform(0, side), rng.uniform(0, side))})
-        single_ms = 1000 * (time.perf_counter() - t0) / 200
+        for _ in range(200):  # one robot a step away and back: no new veth pair
+            k = rng.randint(1, n)
+            x, y = net.positions[k - 1]
+            net.move_many({k: (x + 0.5, y)})
+            net.move_many({k: (x, y)})
+        single_ms = 1000 * (time.perf_counter() - t0) / 400
         path = os.path.join(net.state_dir, feed.SOCKET_NAME)
         server = feed.FeedServer(net, path, stdin=False)
         stop = threading.Event()
         thread = threading.Thread(target=server.serve, args=(False, stop))
         thread.start()
-        lines = [f"{rng.randint(1, n)} {rng.uniform(0, side):.2f} {rng.uniform(0, side):.2f}\n"
-                 for _ in range(FEED_UPDATES)]  # fmt: skip
+        # A simulator's stream: each update moves one robot a step of up to STEP_M metres
+        # (robots walking), so links change now and then, as on a real team.
+        pos = list(net.positions)
+        lines = []
+        for _ in range(FEED_UPDATES):
+            k = rng.randint(1, n)
+            x, y = pos[k - 1]
+            pos[k - 1] = (x + rng.uniform(-STEP_M, STEP_M), y + rng.uniform(-STEP_M, STEP_M))
+            lines.append(f"{k} {pos[k - 1][0]:.3f} {pos[k - 1][1]:.3f}\n")
+        links_before = set(net.links())
         t0 = time.perf_counter()
         with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
             s.connect(path)
@@ -145,7 +176,9 @@ def feed_rate(n: int = 1000) -> dict:
         stop.set()
         thread.join()
         server.close()
+        changed = len(links_before ^ set(net.links()))
         return {"robots": n, "updates": server.lines, "batches": server.batches,
+                "links_changed": changed, "step_m": STEP_M,
                 "updates_per_s": round(server.lines / spent, 1),
                 "single_move_ms": round(single_ms, 3)}  # fmt: skip
     finally:
