@@ -143,3 +143,35 @@ def test_feed_on_stdin_without_a_server(tb_name):
         assert r.returncode == 2 and "r1..r2" in r.stderr
     finally:
         assert tb("net", "down", tb_name).returncode == 0
+
+
+def test_metrics_of_a_captured_network_with_ping_and_iperf3(tb_name, tmp_path):
+    import json
+    import shutil
+
+    import pytest
+
+    if not (shutil.which("iperf3") and shutil.which("tshark")):
+        pytest.skip("needs iperf3 and tshark")
+    cap = tmp_path / "pcaps"
+    up = tb("net", "up", tb_name, "--robots", "3", "--layout", "chain", "--spacing", "8",
+            "--comm-range", "10", "--routing", "aodv", "--capture", str(cap))  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        assert tb("net", "exec", tb_name, "r3", "--", "iperf3", "-s", "-D").returncode == 0
+        assert wait_for(lambda: tb("net", "exec", tb_name, "r1", "--", "ping", "-c1", "-W1",
+                                   "10.0.0.3").returncode == 0)  # fmt: skip
+        r = tb("net", "exec", tb_name, "r1", "--", "iperf3", "-c", "10.0.0.3", "-t", "2",
+               "-b", "2M")  # fmt: skip
+        assert r.returncode == 0, r.stdout + r.stderr
+    finally:
+        assert tb("net", "down", tb_name).returncode == 0
+    r = tb("metrics", str(cap))
+    assert r.returncode == 0, r.stderr
+    assert "PDF" in r.stdout
+    m = json.loads((cap / "metrics.json").read_text())
+    assert m["tcp_payload_bytes_transmitted"] > 400_000  # 2 s at 2 Mbit/s
+    assert m["pdf"] > 0.99 and m["delay_ms_median"] is not None
+    assert m["control_tx_packets"] > 0  # AODV's hellos and route discovery
+    r = tb("metrics", str(tmp_path))
+    assert r.returncode == 2 and "no rK.pcap" in r.stderr

@@ -115,3 +115,35 @@ def test_links_of_the_moved_robots(model):
     full = ranges.wanted_links(pos, 10.0, model)
     kept = {p: v for p, v in full.items() if not set(p) & moved}
     assert kept | ranges.links_of(pos, moved, 10.0, model) == full
+
+
+class _NoKernel:
+    """Stands in for the medium: the links' bookkeeping is what is tested here."""
+
+    def create_pairs(self, pairs):
+        pass
+
+    def set_link_impairment(self, i, j, imp):
+        pass
+
+    def set_links(self, add, remove):
+        pass
+
+
+@pytest.mark.parametrize("model, loss", [("disc", 0.0), ("lossy", 5.0)])
+def test_incremental_moves_keep_the_links_the_positions_call_for(model, loss):
+    from topology.network import Network
+    from topology.spec import Impairment, NetworkSpec, layout_positions
+
+    spec = NetworkSpec(name="unit", positions=tuple(layout_positions("grid", 120, 8.0)),
+                       comm_range=10.0, range_model=model,
+                       impairment=Impairment(loss_pct=loss))  # fmt: skip
+    net = Network(spec)
+    net.medium = _NoKernel()
+    net._apply_positions()
+    rng = random.Random(3)
+    for _ in range(500):
+        ks = rng.sample(range(1, 121), rng.choice([1, 1, 4]))
+        net.move_many({k: (net.positions[k - 1][0] + rng.uniform(-4, 4),
+                           net.positions[k - 1][1] + rng.uniform(-4, 4)) for k in ks})  # fmt: skip
+        assert net.current == net.wanted()
