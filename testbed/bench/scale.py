@@ -7,8 +7,9 @@ robots (pairs reached, memory, idle CPU), and the position feed's rate.
   new namespaces are slow to create meanwhile: `kernel_cleanup_s` is how long after down()
   returned that lasted (measured with a probe namespace), and each bring-up waits for it.
 - 500 AODV robots on the same grid: PAIRS random pairs, each pinged until it answers or
-  PING_WAIT_S pass (a route across the grid is up to 43 hops); the daemons' resident memory
-  (sum of RSS, and per daemon); their CPU while idle (no traffic) over IDLE_S, in cores.
+  PING_WAIT_S pass (a route across the grid is up to 43 hops, and RFC 3561's NET_DIAMETER
+  is 35: the failures are listed with their hop counts); the daemons' memory (RSS and PSS
+  per daemon, PSS in total); their CPU while idle (no traffic) over IDLE_S, in cores.
 - feed: a 1000-robot testbed, a FeedServer on it, FEED_UPDATES moves (a random robot, a
   step of up to STEP_M metres each way) written to its socket as fast as one client can:
   updates applied (links updated) per second; and the latency of one move_many of one robot
@@ -18,6 +19,7 @@ Goals (issue 23): bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardow
 <= 10 s, every pair reached, >= 1000 feed updates per second.
 """
 
+import math
 import os
 import random
 import socket
@@ -80,15 +82,25 @@ def settle(limit_s: float = 120.0) -> float:
     return time.perf_counter() - t0
 
 
-def _rss_kb(pid: int) -> int:
+def _mem_kb(pid: int) -> tuple[int, int]:
+    """(RSS, PSS) in kB. The daemons are forked from one server, so most of their RSS is
+    pages they share with it and each other; PSS charges each shared page in parts."""
+    rss = pss = 0
     try:
-        with open(f"/proc/{pid}/status") as f:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
             for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-    except FileNotFoundError:
+                if line.startswith("Rss:"):
+                    rss = int(line.split()[1])
+                elif line.startswith("Pss:"):
+                    pss = int(line.split()[1])
+    except (FileNotFoundError, ProcessLookupError):
         pass
-    return 0
+    return rss, pss
+
+
+def _grid_hops(a: int, b: int, n: int) -> int:
+    cols = math.ceil(math.sqrt(n))
+    return abs((a - 1) % cols - (b - 1) % cols) + abs((a - 1) // cols - (b - 1) // cols)
 
 
 def _cpu_ticks(pid: int) -> int:
@@ -112,9 +124,10 @@ def aodv(n: int = 500) -> dict:
         before = sum(_cpu_ticks(p) for p in pids)
         time.sleep(IDLE_S)
         idle_cores = (sum(_cpu_ticks(p) for p in pids) - before) / hz / IDLE_S
-        rss = [_rss_kb(p) for p in pids]
+        mem = [_mem_kb(p) for p in pids]
+        rss, pss = [m[0] for m in mem], [m[1] for m in mem]
         rng = random.Random(23)
-        reached, times = 0, []
+        reached, times, failed = 0, [], []
         for _ in range(PAIRS):
             a, b = rng.sample(range(1, n + 1), 2)
             t0 = time.monotonic()
@@ -125,11 +138,15 @@ def aodv(n: int = 500) -> dict:
                     reached += 1
                     times.append(time.monotonic() - t0)
                     break
+            else:
+                failed.append([a, b, _grid_hops(a, b, n)])
         return {"robots": n, "up_s": round(up_s, 3), "pairs_tried": PAIRS,
                 "pairs_reached": reached, "median_s_to_first_reply": round(median(times), 3)
                 if times else None, "daemons": len(pids),
-                "rss_mb_total": round(sum(rss) / 1024, 1),
+                "failed_pairs_with_grid_hops": failed,
                 "rss_mb_per_daemon": round(median(rss) / 1024, 2) if rss else None,
+                "pss_mb_total": round(sum(pss) / 1024, 1),
+                "pss_mb_per_daemon": round(median(pss) / 1024, 2) if pss else None,
                 "idle_cpu_cores": round(idle_cores, 3)}  # fmt: skip
     finally:
         t0 = time.perf_counter()
