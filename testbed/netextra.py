@@ -155,7 +155,7 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
     routing = "aodv"
     try:
-        with open(os.path.join(d, "network.json")) as f:
+        with open(os.path.join(d, "daemons", "network.json")) as f:
             routing = json.load(f)["routing"]
     except (OSError, ValueError, KeyError, TypeError):
         pass

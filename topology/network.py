@@ -169,8 +169,12 @@ class Network:
     def _start_captures(self) -> None:
         cdir = self.spec.capture_dir
         os.makedirs(cdir, exist_ok=True)
-        # What the captures are of (the routing protocol, for `testbed metrics`).
-        write_json_atomic(os.path.join(cdir, "network.json"), state.spec_to_dict(self.spec))
+        # What the captures are of (the routing protocol, for `testbed metrics`), next to the
+        # daemons' logs that teardown keeps (_keep_logs).
+        os.makedirs(os.path.join(cdir, "daemons"), exist_ok=True)
+        write_json_atomic(
+            os.path.join(cdir, "daemons", "network.json"), state.spec_to_dict(self.spec)
+        )
         started = []
         for k in self.spec.robot_ids():
             logp = os.path.join(self.state_dir, f"r{k}.tcpdump.log")
