@@ -14,7 +14,7 @@ import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
 
-from testbed import runoptions
+from testbed import netextra, runoptions
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from testbed.runconfig import NET_OPTIONS
 from topology.argtypes import number
@@ -84,8 +84,8 @@ def _add_net(sub) -> None:
 
     up = nsub.add_parser("up", help="build a testbed network and leave it running")
     up.add_argument("name", type=_name, help="the testbed's name (lowercase letters, digits)")
-    up.add_argument("--robots", type=_robot_count, required=True, metavar="N",
-                    help="robots (required)")  # fmt: skip
+    up.add_argument("--robots", type=_robot_count, metavar="N",
+                    help="robots (required, unless --mobility's file gives them)")  # fmt: skip
     up.add_argument("--layout", choices=LAYOUTS, help="where the robots stand (default chain)")
     up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0, metavar="M",
                     help="distance between neighbours of --layout (metres; default 8)")  # fmt: skip
@@ -106,6 +106,8 @@ def _add_net(sub) -> None:
         metavar="[HOST:]PORT",
         help="serve a live view of the network (127.0.0.1 unless a host is given; default none)",
     )
+    netextra.add_up_arguments(up)
+    netextra.add_parsers(nsub, sub, _name)
 
     ex = nsub.add_parser("exec", help="run a command in a robot's namespace")
     ex.add_argument("name", type=_name, help=NAME_HELP)
@@ -152,9 +154,21 @@ def _start_net_view(net, bind: str) -> None:
     print(f"  live view: http://{bind if ':' in bind else '127.0.0.1:' + bind}/")
 
 
+def _start_positions(args) -> list:
+    """Where `net up` puts the robots: --positions, or --layout's pattern."""
+    from topology.spec import layout_positions
+
+    if args.positions is not None:
+        if len(args.positions) != args.robots:
+            raise UsageError(f"--positions has {len(args.positions)} positions "
+                             f"for --robots {args.robots}")  # fmt: skip
+        return args.positions
+    return layout_positions(args.layout or "chain", args.robots, args.spacing, args.seed)
+
+
 def _net_up(args) -> int:
     from topology.network import Network
-    from topology.spec import Impairment, NetworkSpec, layout_positions
+    from topology.spec import Impairment, NetworkSpec
 
     if args.positions is not None and args.layout is not None:
         raise UsageError("give either --layout or --positions, not both")
@@ -165,16 +179,10 @@ def _net_up(args) -> int:
         raise UsageError("--map is for the los range models: add --range-model los")
     if args.wall_loss_pct is not None and not los:
         raise UsageError("--wall-loss is for the los range models: add --range-model los")
+    trace, positions = netextra.up_positions(args)
     try:
-        if args.positions is not None:
-            if len(args.positions) != args.robots:
-                raise UsageError(f"--positions has {len(args.positions)} positions "
-                                 f"for --robots {args.robots}")  # fmt: skip
-            positions = args.positions
-        else:
-            positions = layout_positions(
-                args.layout or "chain", args.robots, args.spacing, args.seed
-            )
+        if positions is None:  # not from a --mobility trace
+            positions = _start_positions(args)
         spec = NetworkSpec(
             name=args.name,
             positions=tuple(positions),
@@ -207,6 +215,7 @@ def _net_up(args) -> int:
     links = net.links()
     if args.view:
         _start_net_view(net, args.view)
+    netextra.after_up(net, args, trace)
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
@@ -382,6 +391,8 @@ def build_parser(argv: list[str] | None = None) -> Parser:
 
 
 def dispatch(args) -> int:
+    if getattr(args, "handler", None) is not None:  # testbed.netextra's commands
+        return args.handler(args)
     if args.cmd == "net":
         return NET_COMMANDS[args.net_cmd](args)
     if args.cmd == "clean":

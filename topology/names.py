@@ -3,7 +3,7 @@
 Every namespace a testbed creates carries the testbed's name: `tb-NAME-m` is the medium,
 `tb-NAME-rK` is robot K. `testbed clean` finds leftovers by `NAMESPACE_PATTERN` and nothing
 else, so the two sides share this module. Interfaces live only inside those namespaces (none in
-the host), so their names need no run id; they fit in 15 characters for up to 999 robots.
+the host), so their names need no run id; they fit in 15 characters for up to 1000 robots.
 """
 
 import re
@@ -11,7 +11,7 @@ import re
 PREFIX = "tb"
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9]{0,9}$")
 NAMESPACE_PATTERN = re.compile(rf"^{PREFIX}-(?P<name>[a-z][a-z0-9]{{0,9}})-(?P<role>m|r\d+)$")
-MAX_ROBOTS = 999
+MAX_ROBOTS = 1000
 
 # The ad hoc network every robot address is in (robot_addr).
 NETWORK = "10.0.0.0/16"

@@ -21,7 +21,9 @@ it needs nothing from the process that built the testbed.
 Moving robots recomputes the wanted links and applies only the difference.
 """
 
+import contextlib
 import logging
+import math
 import os
 import shutil
 import subprocess
@@ -32,6 +34,7 @@ from topology import capture, names, netns, processes, ranges, routing, state
 from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
+from topology.jsonfile import write_json_atomic
 from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX
 from topology.ns3medium import medium_for
@@ -60,6 +63,10 @@ class Network:
         self._routing_forks: ForkServer | None = None
         self.oracle: OracleRouter | None = None  # routing "oracle": routes from here
         self.walls: Walls | None = None  # the los range models' walls, from spec.map_png
+        self._range_cache: dict[Pair, Impairment] | None = None  # the last range-model links
+        self._deferred: list[state.ProcessRecord] | None = None  # see _recording
+        self._state_mtime: int | None = None  # of the state file we last read or wrote
+        self._adj: dict[int, set[Pair]] | None = None  # robot -> its links in current
         if spec.map_png and spec.range_model in LOS_MODELS:
             try:
                 self.walls = Walls.from_png(spec.map_png, spec.map_cell)
@@ -146,9 +153,10 @@ class Network:
         if self.spec.routing == "oracle":
             self.oracle = OracleRouter(self.name, robots, WLAN_INDEX)
             self.oracle.update(self.current)
-        if self.spec.capture_dir:
-            self._start_captures()
-        self._start_routing()
+        with self._recording():
+            if self.spec.capture_dir:
+                self._start_captures()
+            self._start_routing()
         log.info(
             "%s: %d robots, %d links up in %.0f ms",
             self.name, self.spec.robots, len(self.current), 1000 * (time.perf_counter() - t0),
@@ -164,6 +172,12 @@ class Network:
     def _start_captures(self) -> None:
         cdir = self.spec.capture_dir
         os.makedirs(cdir, exist_ok=True)
+        # What the captures are of (the routing protocol, for `testbed metrics`), next to the
+        # daemons' logs that teardown keeps (_keep_logs).
+        os.makedirs(os.path.join(cdir, "daemons"), exist_ok=True)
+        write_json_atomic(
+            os.path.join(cdir, "daemons", "network.json"), state.spec_to_dict(self.spec)
+        )
         started = []
         for k in self.spec.robot_ids():
             logp = os.path.join(self.state_dir, f"r{k}.tcpdump.log")
@@ -220,30 +234,45 @@ class Network:
         self._check_robot(k)
         proc = processes.spawn(self.robot_ns(k), argv, **popen_kwargs)
         self.children[proc.pid] = proc
+        self._record([processes.record(proc, k, role)])
+        return proc
+
+    def _record(self, records: list[state.ProcessRecord]) -> None:
+        """Add processes to the state file; inside _recording() they wait for its end, so a
+        bring-up of 1000 daemons writes the file once, not 1000 times (the file grows with
+        the team: writing it per process was quadratic, 9 s of a 200-robot bring-up)."""
+        if self._deferred is not None:
+            self._deferred.extend(records)
+            return
         with state.locked(self.name):
             self.state = state.read(self.name) or self.state
-            self.state.processes.append(processes.record(proc, k, role))
+            self.state.processes.extend(records)
             state.write(self.name, self.state)
-        return proc
+
+    @contextlib.contextmanager
+    def _recording(self):
+        """Record the processes started in this block in one write, at its end; also when
+        the block fails, so that teardown finds every one of them."""
+        self._deferred = []
+        try:
+            yield
+        finally:
+            records, self._deferred = self._deferred, None
+            if records:
+                self._record(records)
 
     def adopt(self, k: int, proc, role: str) -> None:
         """Record a process that was started in robot k's namespace by other means (the fork
         server): teardown stops it like the ones `spawn` started. `proc` answers poll()."""
         self._check_robot(k)
         self.children[proc.pid] = proc
-        with state.locked(self.name):
-            self.state = state.read(self.name) or self.state
-            self.state.processes.append(processes.record(proc, k, role))
-            state.write(self.name, self.state)
+        self._record([processes.record(proc, k, role)])
 
     def adopt_host_process(self, proc, role: str) -> None:
         """Record a helper that runs in the host namespace for this testbed (the view of a
         `net up`): teardown stops it by its pid like the robots' processes (robot 0)."""
         self.children[proc.pid] = proc
-        with state.locked(self.name):
-            self.state = state.read(self.name) or self.state
-            self.state.processes.append(processes.record(proc, 0, role))
-            state.write(self.name, self.state)
+        self._record([processes.record(proc, 0, role)])
 
     def process(self, k: int, role: str):
         """The newest live process of `role` (e.g. "aodv", the routing daemon) that this
@@ -267,11 +296,27 @@ class Network:
 
     # -- positions and links ----------------------------------------------------------------
 
-    def wanted(self) -> dict[Pair, Impairment]:
-        links = ranges.wanted_links(
-            self.positions, self.spec.comm_range, self.spec.range_model,
-            self.walls, self.spec.wall_loss_pct,
-        )  # fmt: skip
+    def _range_links(self, moved: set[int] | None = None) -> dict[Pair, Impairment]:
+        """The range model's links for the current positions. With the distance models and
+        `moved` given, only the links of the robots that moved are computed again (the rest
+        come from the last call): what keeps a feed of many moves cheap at 1000 robots."""
+        cached = self._range_cache
+        if moved is not None and cached is not None and self.spec.range_model in ("disc", "lossy"):
+            links = {p: v for p, v in cached.items() if p[0] not in moved and p[1] not in moved}
+            links.update(ranges.links_of(self.positions, moved, self.spec.comm_range,
+                                         self.spec.range_model))  # fmt: skip
+        else:
+            links = ranges.wanted_links(
+                self.positions, self.spec.comm_range, self.spec.range_model,
+                self.walls, self.spec.wall_loss_pct,
+            )  # fmt: skip
+        self._range_cache = links
+        return links
+
+    def wanted(self, moved: set[int] | None = None) -> dict[Pair, Impairment]:
+        """The links (with their impairments) the positions call for; `moved`: the robots
+        that moved since the last call, if known."""
+        links = self._range_links(moved)
         base = self.spec.impairment
         if base.is_none and not self.link_impairments:
             return links  # the common case, once per world step: nothing to combine
@@ -298,26 +343,78 @@ class Network:
             self.link_impairments[pair] = imp
         self._moved()
 
-    def _apply_positions(self) -> tuple[list[Pair], list[Pair]]:
+    def _apply_positions(self, moved: set[int] | None = None) -> tuple[list[Pair], list[Pair]]:
         if self.spec.medium == "ns3-wifi":
             self.medium.set_positions(self.positions)  # the channel decides who hears whom
-        wanted = self.wanted()
-        add, remove, change = ranges.diff(self.current, wanted)
+        if moved is not None and self.spec.range_model in ("disc", "lossy"):
+            add, remove, change, wanted = self._diff_moved(moved)
+        else:
+            wanted = self.wanted()
+            add, remove, change = ranges.diff(self.current, wanted)
+            self._adj = None
         # Impairments before enabling, so no frame crosses a link without its loss and delay.
         self.medium.create_pairs(add)
         for p in add + change:
             self.medium.set_link_impairment(*p, wanted[p])
         self.medium.set_links(add, remove)
-        self.current = wanted
+        if moved is None or self.spec.range_model not in ("disc", "lossy"):
+            self.current = wanted
         if self.oracle is not None and (add or remove):
-            self.oracle.update(wanted)  # routes in place before the move returns
+            self.oracle.update(self.current)  # routes in place before the move returns
         return add, remove
+
+    def _diff_moved(self, moved: set[int]):
+        """What a move of `moved` changes, in O(links of the moved robots), with self.current
+        updated in place: only links of a robot that moved can change under the distance
+        models. A feed of single moves at 1000 robots would otherwise pay for every link
+        (diffing 2000 links: ~4 ms) per update. Returns (add, remove, change, new links)."""
+        if self._adj is None:
+            self._adj = {}
+            for p in self.current:
+                self._adj.setdefault(p[0], set()).add(p)
+                self._adj.setdefault(p[1], set()).add(p)
+        self._range_cache = None  # wanted() recomputes in full from now on
+        new = ranges.links_of(self.positions, moved, self.spec.comm_range, self.spec.range_model)
+        base = self.spec.impairment
+        if not base.is_none or self.link_impairments:
+            new = {
+                p: base.combined(imp).combined(self.link_impairments.get(p, NO_IMPAIRMENT))
+                for p, imp in new.items()
+            }
+        old = set().union(*(self._adj.get(k, ()) for k in moved))
+        add = sorted(set(new) - old)
+        remove = sorted(old - set(new))
+        change = sorted(p for p in old & set(new) if new[p] != self.current[p])
+        for p in remove:
+            del self.current[p]
+            self._adj[p[0]].discard(p)
+            self._adj[p[1]].discard(p)
+        for p in add:
+            self._adj.setdefault(p[0], set()).add(p)
+            self._adj.setdefault(p[1], set()).add(p)
+        for p in add + change:
+            self.current[p] = new[p]
+        return add, remove, change, new
 
     def move(self, k: int, xy: Position) -> tuple[list[Pair], list[Pair]]:
         """Move robot k; links follow before this returns. Returns (added, removed)."""
-        self._check_robot(k)
-        self.positions[k - 1] = (float(xy[0]), float(xy[1]))
-        return self._moved()
+        return self.move_many({k: xy})
+
+    def move_many(
+        self, moves: dict[int, Position], *, save: bool = True
+    ) -> tuple[list[Pair], list[Pair]]:
+        """Move several robots at once ({robot: (x, y)}); links follow, in one batch, before
+        this returns. Returns (added, removed). save=False leaves the state file's positions
+        as they were (a feed saves now and then, not on every batch)."""
+        if self.persistent:
+            self.refresh()
+        for k, xy in moves.items():
+            self._check_robot(k)
+            x, y = float(xy[0]), float(xy[1])
+            if not (math.isfinite(x) and math.isfinite(y)):
+                raise UsageError(f"position of r{k} must be finite, not ({x}, {y})")
+            self.positions[k - 1] = (x, y)
+        return self._moved(set(moves), save=save)
 
     def set_positions(self, positions: list[Position]) -> tuple[list[Pair], list[Pair]]:
         """Move every robot at once (one world step). Returns (added, removed) links."""
@@ -326,14 +423,42 @@ class Network:
         self.positions = [(float(x), float(y)) for x, y in positions]
         return self._moved()
 
-    def _moved(self) -> tuple[list[Pair], list[Pair]]:
-        diff = self._apply_positions()
-        if self.persistent:
+    def _moved(
+        self, moved: set[int] | None = None, save: bool = True
+    ) -> tuple[list[Pair], list[Pair]]:
+        diff = self._apply_positions(moved)
+        if self.persistent and save:
             self._save()
         return diff
 
+    def refresh(self) -> None:
+        """Take up what another process (a trace player, a feed, `net move`) saved since we
+        last read or wrote the state file: its positions, and the links they make (which
+        that process applied before saving). A stat when nothing changed."""
+        mtime = _mtime(self.name)
+        if mtime is None or mtime == self._state_mtime:
+            return
+        st = state.read(self.name)
+        if st is None:
+            return
+        self._state_mtime = mtime
+        self.positions = [tuple(p) for p in st.positions]
+        self.link_impairments = {
+            tuple(int(k) for k in key.split("-")): Impairment(**fields)
+            for key, fields in st.link_impairments.items()
+        }
+        self._range_cache = None
+        self.current = self.wanted()
+        self._adj = None
+
     def links(self) -> set[Pair]:
+        """The links up now: pairs (i, j), i < j."""
         return set(self.current)
+
+    def save(self) -> None:
+        """Write the positions and impairments to the state file (after move_many(save=False))."""
+        if self.persistent:
+            self._save()
 
     def _save(self) -> None:
         with state.locked(self.name):
@@ -346,6 +471,7 @@ class Network:
             st.persistent = self.state.persistent
             self.state = st
             state.write(self.name, st)
+            self._state_mtime = _mtime(self.name)
 
     # -- attach, detach, teardown -----------------------------------------------------------
 
@@ -357,6 +483,7 @@ class Network:
             raise UsageError(f"no testbed named {name!r} is up")
         net = cls(state.spec_from_dict(st.spec), persistent=st.persistent)
         net.state = st
+        net._state_mtime = _mtime(name)
         net.positions = [tuple(p) for p in st.positions]
         net.link_impairments = {
             tuple(int(k) for k in key.split("-")): Impairment(**fields)
@@ -432,9 +559,7 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
         if last:
             time.sleep(CAPTURE_DRAIN_S)
             processes.stop(last, children)
-    stray = [
-        pid for ns in namespaces for pid in processes.pids_in_namespace(ns) if pid != os.getpid()
-    ]
+    stray = [pid for pid in _pids_in(namespaces) if pid != os.getpid()]
     if stray:
         processes.stop(
             [state.ProcessRecord(pid, state.proc_start_time(pid), 0, "stray") for pid in stray],
@@ -445,6 +570,38 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
     _keep_logs(name, st)
     shutil.rmtree(state.run_dir(name), ignore_errors=True)
     state.remove(name)
+
+
+def _mtime(name: str) -> int | None:
+    try:
+        return os.stat(state.state_path(name)).st_mtime_ns
+    except FileNotFoundError:
+        return None
+
+
+def _pids_in(namespaces: list[str]) -> list[int]:
+    """Every process inside one of `namespaces`, in one pass over /proc (one pass per
+    namespace, as processes.pids_in_namespace does, costs seconds at 1000 robots)."""
+    wanted = set()
+    for ns in namespaces:
+        try:
+            st = os.stat(netns.path(ns))
+        except FileNotFoundError:
+            continue
+        wanted.add((st.st_dev, st.st_ino))
+    if not wanted:
+        return []
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            st = os.stat(f"/proc/{entry}/ns/net")
+        except (FileNotFoundError, PermissionError, ProcessLookupError):
+            continue
+        if (st.st_dev, st.st_ino) in wanted:
+            found.append(int(entry))
+    return found
 
 
 def _keep_logs(name: str, st: state.TestbedState | None) -> None:

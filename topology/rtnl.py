@@ -26,6 +26,7 @@ BR_STATE_FORWARDING = 3
 REQUEST = NLM_F_REQUEST | NLM_F_ACK
 CREATE = REQUEST | NLM_F_CREATE | NLM_F_EXCL
 MAX_WRITE = 60_000
+MAX_INFLIGHT = 256  # requests written before their acknowledgements are read
 _NLMSGHDR = struct.Struct("=LHHLL")
 
 
@@ -178,39 +179,56 @@ class Batch:
         return len(self.requests)
 
     def send(self, sock: socket.socket) -> None:
-        """Write every request, read every acknowledgement; raise on the first failure."""
+        """Write the requests a chunk at a time, reading each chunk's acknowledgements before
+        the next is written; raise on the first failure once every chunk has gone.
+
+        The kernel queues one acknowledgement per request on the socket (a successful one is
+        an NLMSG_ERROR of ~0.7 kB of buffer once the skb overhead is counted; a failed one
+        quotes the request), and drops the socket with ENOBUFS when the receive buffer is
+        full: a whole bring-up of 500 robots written before reading would need tens of MB.
+        A chunk of at most MAX_WRITE bytes and MAX_INFLIGHT requests always fits."""
         if not self.requests:
             return
-        seqs = {}
+        seqs: dict[int, str] = {}
+        failures: list[tuple[str, int]] = []
         chunk = bytearray()
+        inflight = 0
         for n, (req, what) in enumerate(self.requests, start=1):
             buf = bytearray(req)
             struct.pack_into("=L", buf, 8, n)  # our own sequence numbers, 1..N
             seqs[n] = what
-            if len(chunk) + len(buf) > MAX_WRITE:
-                sock.send(chunk)
-                chunk = bytearray()
+            if chunk and (len(chunk) + len(buf) > MAX_WRITE or inflight >= MAX_INFLIGHT):
+                _exchange(sock, chunk, inflight, seqs, failures)
+                chunk, inflight = bytearray(), 0
             chunk += buf
+            inflight += 1
         if chunk:
-            sock.send(chunk)
-        failures = []
-        acked = 0
-        while acked < len(self.requests):
-            data = sock.recv(1 << 20)
-            off = 0
-            while off + _NLMSGHDR.size <= len(data):
-                length, mtype, _, seq, _ = _NLMSGHDR.unpack_from(data, off)
-                if mtype == NLMSG_ERROR:
-                    (code,) = struct.unpack_from("=i", data, off + _NLMSGHDR.size)
-                    acked += 1
-                    if code:
-                        failures.append((seqs.get(seq, f"request {seq}"), -code))
-                off += max((length + 3) & ~3, _NLMSGHDR.size)
+            _exchange(sock, chunk, inflight, seqs, failures)
         self.requests.clear()
         if failures:
             what, code = failures[0]
             more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
             raise NetlinkBatchError(code, f"{what}: {os.strerror(code)}{more}")
+
+
+def _exchange(
+    sock: socket.socket, chunk: bytearray, count: int, seqs: dict[int, str],
+    failures: list[tuple[str, int]],
+) -> None:  # fmt: skip
+    """Write one chunk of `count` requests and read their `count` acknowledgements."""
+    sock.send(chunk)
+    acked = 0
+    while acked < count:
+        data = sock.recv(1 << 20)
+        off = 0
+        while off + _NLMSGHDR.size <= len(data):
+            length, mtype, _, seq, _ = _NLMSGHDR.unpack_from(data, off)
+            if mtype == NLMSG_ERROR:
+                (code,) = struct.unpack_from("=i", data, off + _NLMSGHDR.size)
+                acked += 1
+                if code:
+                    failures.append((seqs.get(seq, f"request {seq}"), -code))
+            off += max((length + 3) & ~3, _NLMSGHDR.size)
 
 
 def open_socket() -> socket.socket:

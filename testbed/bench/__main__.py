@@ -11,7 +11,17 @@ import os
 import sys
 import traceback
 
-BENCHMARKS = ("medium", "aodv", "aodv_profiles", "oracle", "los", "view", "node", "ns3wifi")
+BENCHMARKS = (
+    "medium",
+    "aodv",
+    "aodv_profiles",
+    "oracle",
+    "los",
+    "view",
+    "node",
+    "ns3wifi",
+    "scale",
+)
 
 
 def main(argv: list[str]) -> int:

@@ -1,0 +1,190 @@
+"""Command-line pieces for bringing your own robots: `net up --mobility FILE` (a trace
+player), `net up --feed` and `net feed NAME` (a live position feed). testbed.cli calls
+add_up_arguments, add_parsers, up_positions and after_up; everything else is here.
+"""
+
+import argparse
+import os
+import socket
+import subprocess
+import sys
+import time
+
+from testbed.errors import TestbedError, UsageError
+from topology.argtypes import number
+
+READY_TIMEOUT_S = 10.0
+
+
+def add_up_arguments(up) -> None:
+    """The options of `net up` that belong here."""
+    up.add_argument("--mobility", metavar="FILE",
+                    help="play an ns-2 movement file (BonnMotion NSFile, CORE) or a ONE trace; "
+                         "node i is robot i+1, --robots defaults to the file's nodes")  # fmt: skip
+    up.add_argument("--tick", type=number(float, "tick", above=0), default=0.1, metavar="S",
+                    help="with --mobility: emulated s between samples (default 0.1)")  # fmt: skip
+    up.add_argument("--links-out", metavar="CSV",
+                    help="with --mobility: where the applied link timeline goes "
+                         "(default: links.csv in the capture dir, else the state dir)")  # fmt: skip
+    up.add_argument("--feed", action="store_true",
+                    help="open the position feed socket (see `testbed net feed`)")  # fmt: skip
+
+
+def add_parsers(nsub, sub, name_type) -> None:
+    """`net feed` (and its siblings to come) under `net`; top-level commands under `sub`."""
+    fd = nsub.add_parser("feed", help="move robots from lines 'ID X Y' or 'T ID X Y' on stdin")
+    fd.add_argument("name", type=name_type)
+    fd.add_argument("--no-stdin", action="store_true", help=argparse.SUPPRESS)
+    fd.set_defaults(handler=net_feed)
+    mt = sub.add_parser("metrics", help="PDF, delay and control overhead from the captures "
+                        "of a `net up --capture DIR` network")  # fmt: skip
+    mt.add_argument("dir", metavar="DIR")
+    mt.set_defaults(handler=metrics)
+
+
+def up_positions(args):
+    """(trace, positions) for `net up`: the trace's positions at time 0 with --mobility,
+    else (None, None). Sets args.robots from the trace when it was not given."""
+    if not args.mobility:
+        if args.robots is None:
+            raise UsageError("net up: --robots is required (unless --mobility gives it)")
+        return None, None
+    from topology import mobility
+
+    if args.positions is not None or args.layout is not None:
+        raise UsageError("--mobility gives the positions: drop --layout/--positions")
+    try:
+        trace = mobility.load(args.mobility)
+    except mobility.TraceError as exc:
+        raise UsageError(str(exc)) from None
+    if args.robots is None:
+        args.robots = trace.nodes
+    elif args.robots > trace.nodes:
+        raise UsageError(f"--robots {args.robots}, but {args.mobility} has {trace.nodes} nodes")
+    return trace, trace.positions(0.0, args.robots)
+
+
+def after_up(net, args, trace) -> None:
+    """Start what runs beside the network: the trace player, the feed server."""
+    if trace is not None:
+        out = args.links_out or os.path.join(args.capture or net.state_dir, "links.csv")
+        out = os.path.abspath(out)
+        argv = [sys.executable, "-m", "topology.player", net.name, os.path.abspath(args.mobility),
+                "--tick", repr(args.tick), "--links-out", out]  # fmt: skip
+        _start(net, argv, "mobility")
+        print(f"  trace: {trace.nodes} nodes, {trace.end:g} s emulated; links to {out}")
+    if args.feed:
+        from topology import feed
+
+        argv = [sys.executable, "-m", "testbed.cli", "net", "feed", net.name, "--no-stdin"]
+        proc = _start(net, argv, "feed")
+        path = feed.socket_path(net.name)
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        while not os.path.exists(path):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise TestbedError("the feed server did not start (see feed.log in the state dir)")
+            time.sleep(0.02)
+        print(f"  feed: {path}")
+
+
+def _start(net, argv: list[str], role: str):
+    log = open(os.path.join(net.state_dir, f"{role}.log"), "w")  # noqa: SIM115 (the child's)
+    proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                            start_new_session=True)  # fmt: skip
+    net.adopt_host_process(proc, role)
+    return proc
+
+
+def net_feed(args) -> int:
+    """Client of a running feed server if there is one, else the server itself."""
+    from topology import feed, state
+
+    if os.geteuid() != 0:
+        raise UsageError("network namespaces need root: run this under sudo")
+    if state.read(args.name) is None:
+        raise UsageError(f"no testbed named {args.name!r} is up")
+    path = feed.socket_path(args.name)
+    if not args.no_stdin and os.path.exists(path):
+        try:
+            return _feed_client(path)
+        except ConnectionRefusedError:
+            pass  # a stale socket: serve ourselves
+    from topology.network import Network
+
+    net = Network.attach(args.name)
+    server = feed.FeedServer(net, path, stdin=not args.no_stdin)
+    try:
+        server.serve(until_stdin_closes=not args.no_stdin)
+    except feed.FeedError as exc:
+        raise UsageError(f"net feed: stdin {exc}") from None
+    finally:
+        server.close()
+        net.detach()
+    return 0
+
+
+def _feed_client(path: str) -> int:
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.connect(path)
+        while chunk := os.read(0, 1 << 16):
+            s.sendall(chunk)
+        s.shutdown(socket.SHUT_WR)
+        answer = b""
+        while data := s.recv(1 << 16):
+            answer += data
+    errors = answer.decode(errors="replace").strip()
+    if errors:
+        print(f"testbed: net feed: {errors.splitlines()[0]}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def metrics(args) -> int:
+    """`testbed metrics DIR`: testbed.analysis.pcapmetrics.run_metrics on the captures of a
+    `net up --capture DIR` network (laid out as a run's pcaps/), written to DIR/metrics.json."""
+    import json
+    import re
+    import tempfile
+
+    from testbed.analysis import pcapmetrics
+
+    d = os.path.abspath(args.dir)
+    if not os.path.isdir(d):
+        raise UsageError(f"metrics: {args.dir} is not a directory")
+    if not any(re.fullmatch(r"r\d+\.pcap", e) for e in os.listdir(d)):
+        raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
+    routing = "aodv"
+    try:
+        with open(os.path.join(d, "daemons", "network.json")) as f:
+            routing = json.load(f)["routing"]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    with tempfile.TemporaryDirectory(prefix="tb-metrics-") as tmp:
+        os.symlink(d, os.path.join(tmp, "pcaps"))
+        with open(os.path.join(tmp, "result.json"), "w") as f:
+            json.dump({"config": {"routing": routing}}, f)
+        m = pcapmetrics.run_metrics(tmp, use_cache=False)
+    if m is None:
+        raise UsageError(f"metrics: no captures in {args.dir}")
+    m = {k: v for k, v in m.items() if k not in ("pcaps",)}
+    out = os.path.join(d, "metrics.json")
+    with open(out, "w") as f:
+        json.dump(m, f, indent=1)
+
+    def fmt(v, spec: str) -> str:
+        return "n/a" if v is None else format(v, spec)
+
+    print(
+        f"routing {routing}: {len(m.get('robots', {}))} captures, {fmt(m['duration_s'], '.1f')} s"
+    )
+    print(f"  PDF (TCP payload bytes delivered): {fmt(m['pdf'], '.4f')}")
+    print(
+        f"  delay ms: median {fmt(m['delay_ms_median'], '.2f')}, "
+        f"mean {fmt(m['delay_ms_mean'], '.2f')}, p95 {fmt(m['delay_ms_p95'], '.2f')}"
+    )
+    print(
+        f"  control overhead: {m['control_tx_packets']} packets, "
+        f"{fmt(m['overhead_packets'], '.4f')} of frames, {fmt(m['overhead_bytes'], '.4f')} of bytes"
+    )
+    print(f"  written to {out}")
+    return 0
