@@ -107,6 +107,10 @@ def test_relative_map_path_is_relative_to_the_file(tmp_path):
         ("impairments", 2 * 3 * 2 * 3),
         ("protocols", 3 * 3 * 4 * 2 * 3),
         ("protocols-short", 4 * 2),
+        ("media", 3 * 2 * 2 * 5),
+        ("media-protocols", 2 * 3 * 2 * 5),
+        ("media-rise", 6 * 2 * 3),
+        ("media-rise-slow", 6 * 2 * 3),
     ],  # fmt: skip
 )
 def test_profiles_load(name, n_runs):
@@ -123,6 +127,25 @@ def test_paper_profile_is_the_papers_grid():
     assert spec.comm_range == (5.0, 10.0, 15.0, 20.0)
     assert spec.laser_range == (2.0, 1.5)
     assert spec.runs == 3
+
+
+def test_media_profiles_are_issue_22s_grids():
+    media = sweepfile.load(EXPERIMENTS / "media.toml")
+    assert (media.robots, media.comm_range, media.laser_range) == ((2, 5, 10), (5.0, 20.0), (2.0,))
+    assert (media.media, media.routing, media.runs) == (("veth", "ns3-wifi"), "aodv", 5)
+    protos = sweepfile.load(EXPERIMENTS / "media-protocols.toml")
+    assert (protos.robots, protos.routings) == ((10,), ("aodv", "babel", "batman"))
+    assert protos.media == ("veth", "ns3-wifi")
+    rise = sweepfile.load(EXPERIMENTS / "media-rise.toml")
+    slow = sweepfile.load(EXPERIMENTS / "media-rise-slow.toml")
+    assert rise.robots == (1, 2, 4, 6, 8, 10) and rise.comm_range == (5.0, 20.0)
+    assert (rise.medium, rise.wifi_standard, rise.runs) == ("ns3-wifi", "80211a", 3)
+    assert (slow.wifi_standard, slow.wifi_rate) == ("80211b", "DsssRate1Mbps")
+    # the slow channel's runs are the fast one's, point for point (ids, seeds, time scales)
+    fast_runs, slow_runs = sweepfile.expand(rise), sweepfile.expand(slow)
+    assert [(r.run_id, r.config.seed, r.config.time_scale) for r in fast_runs] == [
+        (r.run_id, r.config.seed, r.config.time_scale) for r in slow_runs
+    ]
 
 
 def test_run_ids_and_seeds_are_stable_and_distinct():
