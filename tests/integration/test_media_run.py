@@ -48,11 +48,12 @@ def test_a_short_exploration_runs_on_ns3_wifi_and_keeps_the_channel_counters(tb_
     assert all(r.frames_sent > 0 and r.frames_delivered > 0 for r in ch.robots)
     # Every frame a robot sent reached the channel: what its capture saw it send (its own
     # frames and those it forwards) is what the channel counted from it, give or take the
-    # frames in flight when the captures stopped.
+    # frames in flight when the captures stopped and those the kernel dropped from them.
     metrics = figures.capture_metrics(rec)
     assert metrics is not None
-    sent = ch.total("frames_sent")
-    assert abs(metrics["tx_packets"] - sent) <= max(5, 0.02 * sent), (metrics["tx_packets"], sent)
+    sent, seen = ch.total("frames_sent"), metrics["tx_packets"]
+    lost = (metrics.get("capture_dropped") or {}).get("packets", 0)
+    assert abs(seen - sent) <= max(5, 0.02 * sent) + lost, (seen, sent, lost)
     row = media.run_row(rec, metrics)
     assert row["medium"] == "ns3-wifi" and 0 < row["control_airtime_share"] < 1
     assert row["channel_airtime_share"] == ch.airtime_share
