@@ -250,7 +250,8 @@ def section(rows: list[dict]) -> list[str]:
         "robots' TCP segments in emulated ms. Control traffic per robot per second of robot "
         "time, from the captures; its share of airtime is the share of the radios' sending "
         "time that routing control took, each captured frame priced at the run's 802.11 PHY "
-        "(veth: what 802.11a at 54 Mbit/s would have taken; no ACKs or retries counted).",
+        "(veth: what 802.11a at 54 Mbit/s would have taken; no ACKs or retries counted). "
+        "The paper's figures and verdicts above are drawn from the veth runs alone.",
         "",
         "| routing | range (m) | robots | medium | runs | "
         + " | ".join(name for _, name, _ in COMPARED)

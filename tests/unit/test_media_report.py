@@ -72,6 +72,7 @@ def test_noise_sentences_say_where_veth_is_within_the_noise(tmp_path):
         "beyond it at aodv, 20 m, 5 robots: veth 0.28 below 802.11's 2.08." in text
     )
     assert "| aodv | 20 | 5 | ns3-wifi | 3 | 414 [" in text
+    assert "drawn from the veth runs alone" in text
     assert "| aodv | 20 | 5 | 0.600 | 0.020 | 18.0 | 0.20 | 1.0% |" in text  # the channel
 
 
