@@ -29,7 +29,7 @@ NS3_LIBS := -lns3-wifi -lns3-fd-net-device -lns3-mobility -lns3-propagation -lns
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
-	experiment-protocols \
+	experiment-protocols experiment-media experiment-media-rise \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test clean
 
 setup: apt venv $(NS3_MEDIUM)
@@ -90,6 +90,24 @@ experiment-protocols: setup
 	$(NEED_ROOT)
 	$(VENV)/bin/testbed sweep testbed/experiments/protocols.toml --out results/protocols --resume
 	$(VENV)/bin/testbed report results/protocols
+
+# Issue 22: veth against ns3-wifi (802.11a), AODV at teams 2, 5, 10 (60 runs), then AODV,
+# babel and batman with 10 robots on both media (60 runs); docs/ns3-medium.md.
+experiment-media: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/media.toml --out results/media --resume
+	$(VENV)/bin/testbed report results/media
+	$(VENV)/bin/testbed sweep testbed/experiments/media-protocols.toml --out results/media-protocols --resume
+	$(VENV)/bin/testbed report results/media-protocols
+
+# Issue 22: Fig. 2(a) at 5 and 20 m on ns3-wifi at 54 Mbit/s (802.11a) and 1 Mbit/s (802.11b),
+# 36 runs each: does a shared channel bring back the paper's rise?
+experiment-media-rise: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/media-rise.toml --out results/media-rise --resume
+	$(VENV)/bin/testbed report results/media-rise
+	$(VENV)/bin/testbed sweep testbed/experiments/media-rise-slow.toml --out results/media-rise-slow --resume
+	$(VENV)/bin/testbed report results/media-rise-slow
 
 experiment-ablation: setup
 	$(NEED_ROOT)

@@ -17,6 +17,7 @@ for every run of the sweep::
     routing = ["aodv", "oracle"]  # optional: routing as a grid dimension (then not in [run])
     map = ["empty", "maps/office.png"]  # optional: maps as a grid dimension ("empty": the
                                   # paper's empty terrain; else as run.map)
+    medium = ["veth", "ns3-wifi"] # optional: the radio medium as a grid dimension
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -31,6 +32,10 @@ for every run of the sweep::
     map = "maps/office.png"       # optional; relative paths are relative to the sweep file
     range_model = "los"           # disc | lossy | los | los-lossy, default disc
     wall_loss_pct = 30            # optional, with los: a wall costs this loss, not a block
+    medium = "ns3-wifi"           # veth | ns3-wifi, default veth (docs/ns3-medium.md)
+    wifi_standard = "80211b"      # ns3-wifi only: 80211a | 80211b | 80211g, default 80211a
+    wifi_rate = "DsssRate1Mbps"   # ns3-wifi only: an ns-3 WifiMode or minstrel
+    wifi_loss = "range"           # ns3-wifi only: range | logdistance
     seed = 0                      # optional base mixed into every derived seed
 
 The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
@@ -41,8 +46,9 @@ one-line message names the key (`grid.robots`, `run.time_scale`, ...).
 
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
 its parameters and run index only, so they are the same every time the file is expanded
-(a routing or map grid names its value in every id, `-aodv`, `-moffice`; the variants of a
-point share their seeds, so protocols and maps are compared on the same draws):
+(a routing, map or medium grid names its value in every id, `-aodv`, `-moffice`,
+`-ns3wifi`; the variants of a point share their seeds, so protocols, maps and media are
+compared on the same draws):
 that is what lets an interrupted sweep resume without redoing a finished run. Runs are
 ordered run index first, so an interrupted sweep has covered every point once before it
 covers any point twice.
@@ -70,7 +76,7 @@ _GRID_KEYS = {opt.name for opt in _GRID_OPTIONS} | {"runs"}
 _RUN_KEYS = {opt.name for opt in _RUN_OPTIONS} | {"seed", "load_limit"}
 _GRID_REQUIRED = ("robots", "comm_range", "laser_range")
 # Grid keys stored under another name in SweepSpec (the [run] value keeps the name).
-_GRID_FIELD = {"routing": "routings", "map": "maps"}
+_GRID_FIELD = {"routing": "routings", "map": "maps", "medium": "media"}
 EMPTY_MAP = "empty"  # grid.map: the paper's empty terrain
 _DEFAULT = RunConfig(robots=1, comm_range=1.0)
 
@@ -99,6 +105,11 @@ class SweepSpec:
     maps: tuple[str | None, ...] = ()  # grid.map: None is the empty terrain
     range_model: str = _DEFAULT.range_model
     wall_loss_pct: float | None = None
+    medium: str = _DEFAULT.medium
+    media: tuple[str, ...] = ()  # grid.medium: the medium as a dimension (overrides medium)
+    wifi_loss: str = _DEFAULT.wifi_loss
+    wifi_standard: str = _DEFAULT.wifi_standard
+    wifi_rate: str = _DEFAULT.wifi_rate
     seed: int = 0
     description: str = ""
 
@@ -125,7 +136,7 @@ class PlannedRun:
         """The grid point this run belongs to (what its repetitions share)."""
         c = self.config
         return (c.robots, c.comm_range, c.laser_range, c.loss_pct, c.delay_ms,
-                c.coordination, c.start, c.routing, c.map)  # fmt: skip
+                c.coordination, c.start, c.routing, c.map, c.medium)  # fmt: skip
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
@@ -222,7 +233,7 @@ def _grid(path, grid: dict, run: dict) -> dict:
     return kw
 
 
-def _run(path, run: dict, robots: tuple[int, ...]) -> dict:
+def _run(path, run: dict, grid: dict, robots: tuple[int, ...]) -> dict:
     """The SweepSpec fields of [run]."""
     kw: dict = {}
     for opt in _RUN_OPTIONS:
@@ -236,6 +247,9 @@ def _run(path, run: dict, robots: tuple[int, ...]) -> dict:
         kw["map"] = _map_path(path, kw["map"])
     if "wall_loss_pct" in kw and kw.get("range_model", "disc") not in LOS_MODELS:
         raise _fail(path, "run.wall_loss_pct", "needs range_model los or los-lossy")
+    wifi = [k for k in ("wifi_loss", "wifi_standard", "wifi_rate") if k in run]
+    if wifi and "ns3-wifi" not in (grid.get("medium") or [run.get("medium", _DEFAULT.medium)]):
+        raise _fail(path, f"run.{wifi[0]}", "needs medium ns3-wifi (in [run] or grid.medium)")
     if "load_limit" in run:
         kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
     if "seed" in run:
@@ -254,7 +268,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
     run = _check_table(path, "run", data.get("run", {}), _RUN_KEYS)
     kw = {"description": _description(path, data)}
     kw.update(_grid(path, grid, run))
-    kw.update(_run(path, run, kw["robots"]))
+    kw.update(_run(path, run, grid, kw["robots"]))
     return SweepSpec(**kw)
 
 
@@ -269,6 +283,11 @@ def _map_path(path, m: str) -> str:
 def map_label(m: str | None) -> str:
     """The name a map has in run ids: `empty`, or the file's stem (letters and digits)."""
     return EMPTY_MAP if m is None else "".join(ch for ch in Path(m).stem if ch.isalnum())
+
+
+def medium_label(medium: str) -> str:
+    """The name a medium has in run ids: its letters and digits (`veth`, `ns3wifi`)."""
+    return "".join(ch for ch in medium if ch.isalnum())
 
 
 def load(path: str | Path) -> SweepSpec:
@@ -331,15 +350,24 @@ def derive_seed(
     return int(hashlib.sha256(key.encode()).hexdigest()[:8], 16) % (2**31 - 1) + 1
 
 
+def _wifi(spec: SweepSpec, medium: str) -> dict:
+    """The wifi options of a run on `medium`: the file's on ns3-wifi, the defaults on veth
+    (which has no 802.11, so its config.json does not claim one)."""
+    keys = ("wifi_loss", "wifi_standard", "wifi_rate")
+    src = spec if medium == "ns3-wifi" else _DEFAULT
+    return {k: getattr(src, k) for k in keys}
+
+
 def expand(spec: SweepSpec) -> list[PlannedRun]:
     """All runs of the sweep, run index first (see the module docstring)."""
     out = []
     routings = spec.routings or (spec.routing,)
     maps = spec.maps or (spec.map,)
+    media = spec.media or (spec.medium,)
     for index in range(1, spec.runs + 1):
-        for robots, comm, laser, loss, delay, coord, start, routing, map_ in itertools.product(
-            spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct, spec.delay_ms,
-            spec.coordination, spec.start, routings, maps,
+        for robots, comm, laser, loss, delay, coord, start, routing, map_, medium in (
+            itertools.product(spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct,
+                              spec.delay_ms, spec.coordination, spec.start, routings, maps, media)
         ):  # fmt: skip
             # The seed leaves coordination and start out: the variants of a point share their
             # random numbers (start positions within a placement, timer phases), so they are
@@ -351,14 +379,17 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 loss_pct=loss, delay_ms=delay, capture=spec.capture, max_steps=spec.max_steps,
                 coordination=coord, start=start, aodv_profile=spec.aodv_profile,
                 range_model=spec.range_model, wall_loss_pct=spec.wall_loss_pct,
+                medium=medium, **_wifi(spec, medium),
             )  # fmt: skip
             rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
-            if spec.routings or spec.maps:
+            if spec.routings or spec.maps or spec.media:
                 base = rid[: -len(f"-k{index}")]
                 if spec.routings:
                     base += f"-{routing}"
                 if spec.maps:
                     base += f"-m{map_label(map_)}"
+                if spec.media:
+                    base += f"-{medium_label(medium)}"
                 rid = f"{base}-k{index}"
             out.append(PlannedRun(rid, index, config))
     return out

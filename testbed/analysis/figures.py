@@ -37,7 +37,7 @@ import shutil
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from testbed.analysis import ablation, pathsfig, pcapmetrics, plots, protocols, tables
+from testbed.analysis import ablation, media, pathsfig, pcapmetrics, plots, protocols, tables
 from testbed.analysis.runs import RunRecord, load_runs
 from testbed.analysis.tables import MetricsOf, write_table
 
@@ -122,6 +122,18 @@ def _protocol_tables(all_runs: list[RunRecord], metrics: dict, figdir: Path, mad
     write_table(made["tables"]["protocols"], figdir / "protocols")
 
 
+def _media_tables(all_runs: list[RunRecord], metrics: dict, figdir: Path, made: dict) -> None:
+    """The media comparison's tables, when the sweep ran more than one medium."""
+    usable = [r for r in all_runs if r.usable]
+    if len({r.config.medium for r in usable}) < 2:
+        return
+    per_run = [media.run_row(r, metrics[r.run_id]) for r in usable]
+    made["tables"]["media_runs"] = per_run
+    write_table(per_run, figdir / "media_runs")
+    made["tables"]["media"] = media.point_rows(per_run)
+    write_table(made["tables"]["media"], figdir / "media")
+
+
 def _routing_figures(runs: list[RunRecord], metrics: dict, figdir: Path, made: dict) -> None:
     """Section 2.4's routing metrics, and the impairments when loss or delay varied."""
     per_run = tables.routing_per_run(runs, lambda run: metrics[run.run_id])
@@ -152,6 +164,7 @@ def make_all(sweep_dir: str | Path, metrics_of: MetricsOf | None = None) -> dict
     _paper_figures(runs, figdir, made)
     metrics = _all_metrics(all_runs, metrics_of or capture_metrics)
     _protocol_tables(all_runs, metrics, figdir, made)
+    _media_tables(all_runs, metrics, figdir, made)
     _routing_figures(runs, metrics, figdir, made)
     made["files"] += collect_paths(runs, figdir / "paths")
     return made

@@ -8,9 +8,10 @@ steps (as Fig. 2), routing overhead from the captures (control packets and bytes
 per second of robot time, i.e. wall seconds x time scale), packet delivery fraction and
 median end-to-end delay of the robots' TCP traffic (wall clock), the share of map floods
 that reached each teammate, and, for AODV, the median route-discovery latency its daemons
-measured. `point_rows` averages them per (map, range, team, routing), steps with their 95%
-interval; `section` sets each protocol beside the oracle, point by point, and says whether
-the paper's choice holds, by the rule in `CHOICE_RULE` (fixed before any sweep was run).
+measured. `point_rows` averages them per (map, medium, range, team, routing), steps with
+their 95% interval (a sweep that also varied the medium compares protocols within each);
+`section` sets each protocol beside the oracle, point by point, and says whether the paper's
+choice holds, by the rule in `CHOICE_RULE` (fixed before any sweep was run).
 """
 
 from __future__ import annotations
@@ -77,6 +78,7 @@ def run_row(run: RunRecord, steps: float | None, metrics: dict | None) -> dict:
         "run": run.run_id,
         "routing": c.routing,
         "map": c.map_name,
+        "medium": c.medium,
         "comm_range": c.comm_range,
         "robots": c.robots,
         "steps": steps,
@@ -94,14 +96,16 @@ def run_row(run: RunRecord, steps: float | None, metrics: dict | None) -> dict:
 
 
 def point_rows(per_run: list[dict]) -> list[dict]:
-    """Per (map, range, team, routing): each metric's mean; steps with their 95% interval."""
+    """Per (map, medium, range, team, routing): each metric's mean; steps with their 95%
+    interval."""
     groups: dict[tuple, list[dict]] = {}
     for r in per_run:
-        groups.setdefault((r["map"], r["comm_range"], r["robots"], r["routing"]), []).append(r)
+        key = (r["map"], r.get("medium", "veth"), r["comm_range"], r["robots"], r["routing"])
+        groups.setdefault(key, []).append(r)
     out = []
     order = {p: i for i, p in enumerate(PROTOCOL_ORDER)}
-    for key, items in sorted(groups.items(), key=lambda kv: (*kv[0][:3], order.get(kv[0][3], 9))):
-        row = dict(zip(("map", "comm_range", "robots", "routing"), key, strict=True))
+    for key, items in sorted(groups.items(), key=lambda kv: (*kv[0][:4], order.get(kv[0][4], 9))):
+        row = dict(zip(("map", "medium", "comm_range", "robots", "routing"), key, strict=True))
         row["n"] = len(items)
         diffs = [i["daemon_difference"] for i in items if i.get("daemon_difference") is not None]
         row["daemon_difference_max"] = max(diffs) if diffs else None
@@ -241,10 +245,16 @@ def section(rows: list[dict]) -> list[str]:
     ]
     points: dict[tuple, dict[str, dict]] = {}
     for r in rows:
-        points.setdefault((r["map"], r["comm_range"], r["robots"]), {})[r["routing"]] = r
+        points.setdefault((_where(r), r["comm_range"], r["robots"]), {})[r["routing"]] = r
     out += _table_rows(points)
     out += [""] + _control_check(rows) + ["", f"**Rule.** {CHOICE_RULE}", ""]
     return out + _choice_lines(points)
+
+
+def _where(row: dict) -> str:
+    """The map column: the map, and the medium when it is not veth (a media sweep)."""
+    medium = row.get("medium", "veth")
+    return row["map"] if medium == "veth" else f"{row['map']} ({medium})"
 
 
 def _table_rows(points: dict[tuple, dict[str, dict]]) -> list[str]:

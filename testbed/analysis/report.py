@@ -23,6 +23,7 @@ from testbed.analysis import (
     ablation,
     figures,
     htmlreport,
+    media,
     pcapmetrics,
     protocols,
     runreport,
@@ -94,6 +95,7 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     out += [f"- {rule}" for rule in RULES] + [""]
     out += ablation.section(tables.get("fig2_all", []), tables.get("ablation_thirds", []))
     out += protocols.section(tables.get("protocols", []))
+    out += media.section(tables.get("media", []))
     out += ["## Figures", ""]
     for name, data, caption in (
         ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),

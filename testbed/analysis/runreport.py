@@ -8,7 +8,8 @@ Markdown what the run did: its outcome, exploration steps under both of their na
 step the last robot finished at, and the mean of the robots' finishing steps, which is what
 Fig. 2 plots), how well the host kept the time scale, and the routing metrics in wall-clock
 and emulated time, with this run's own numbers in the two explanations a reader needs (PDF
-against segment delivery, mean delay against median). The page goes to RUN_DIR/summary.md.
+against segment delivery, mean delay against median); for a run on the ns3-wifi medium, the
+802.11 channel's own counters (medium.json) beside them. The page goes to RUN_DIR/summary.md.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def _outcome(run: RunRecord) -> list[str]:
         f"Status **{run.status}**" + (f": {run.status_detail}" if run.status_detail else "") + ".",
         f"{c.robots} robot(s), range {c.comm_range:g} m, laser {c.laser_range:g} m, routing "
         f"{c.routing}, map {c.map_name}, loss {c.loss_pct:g} %, delay {c.delay_ms:g} ms, "
-        f"seed {c.seed}.",
+        f"seed {c.seed}" + (f", medium {c.medium}." if c.medium != "veth" else "."),
         f"Steps run (when the last robot finished): {_num(run.steps, 'd')}; exploration "
         f"steps (mean of the robots' finishing steps, as Fig. 2 plots): {_num(mean, '.1f')}; "
         f"coverage at the end: {_num(run.coverage_final, '.1%')}.",
@@ -118,11 +119,43 @@ def _routing(m: dict | None) -> list[str]:
     return out + ["", "All numbers and what each means: `routing.json` (its `about`)."]
 
 
+def _channel(run: RunRecord) -> list[str]:
+    """The 802.11 channel's counters (medium.json), for a run on ns3-wifi."""
+    ch = run.channel
+    if ch is None:
+        return []
+    c = run.config
+    lines = [
+        "## The 802.11 channel (ns3-wifi, from medium.json)",
+        "",
+        f"{c.wifi_standard or '80211a'} at {c.wifi_rate or 'its fastest rate'}; "
+        f"{ch.duration_s:.1f} s of emulated time. Air in use (all robots' sending time over "
+        f"that time): {_num(ch.airtime_share, '.2%')}; unacknowledged transmissions per frame "
+        f"handed to the MAC: {_num(ch.retry_rate, '.3f')}; frames the MACs lost (retry limit, "
+        f"full or expired queue): {ch.drops}; receptions lost (collisions, half duplex, "
+        f"preamble missed): {int(ch.total('phy_rx_drops'))}. Relay lag: mean "
+        f"{_num(ch.relay_lag_mean_ms, '.2f')} ms of emulated time, "
+        f"{_num(ch.relay_lag_over_1ms, '.1%')} of frames over 1 ms late (more than a few "
+        "percent: the host did not keep up with the time scale, and delays include it).",
+        "",
+        "| robot | frames sent | delivered to it | retries | MAC drops | airtime (ms) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in ch.robots:
+        name = f"{r.name} (display)" if r.name == f"r{c.robots + 1}" else r.name
+        drops = r.retry_drops + r.queue_drops + r.queue_expired
+        lines.append(f"| {name} | {r.frames_sent} | {r.frames_delivered} | {r.retries} | "
+                     f"{drops} | {1000 * r.airtime_s:.1f} |")  # fmt: skip
+    return lines + [""]
+
+
 def summary(run: RunRecord, metrics: dict | None) -> str:
     out = [f"# Run {run.run_id}", ""]
     for line in _outcome(run) + _timing(run):
         out += [line, ""]
     out += ["## Routing (from the captures)", ""] + _routing(metrics)
+    if run.channel:
+        out += [""] + _channel(run)
     return "\n".join(out) + "\n"
 
 

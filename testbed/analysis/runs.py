@@ -15,6 +15,10 @@ module is its reading side:
   `coordination` ours and `start` corner (before those existed, they were all there was).
 - Values keep the type JSON gave them (an int stays an int), so the numbers written from
   them are those the file holds.
+- A run on the ns3-wifi medium also left `medium.json`, the 802.11 channel's counters
+  (docs/ns3-medium.md, "Counters"): read into `RunRecord.channel` (`ChannelRecord`), None
+  for a veth run or a run made before the file existed. A medium.json that is there but
+  not what the channel writes makes the run malformed, as a bad result.json does.
 
 Which runs count (`RunRecord.usable`): status `complete` or `step_cap`; a run that hit the
 step cap counts its unfinished robots at the final step (`exploration_steps`).
@@ -36,6 +40,8 @@ RESULT_NAME = "result.json"
 USABLE = ("complete", "step_cap")
 DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
 DEFAULT_ROUTING = "aodv"
+DEFAULT_MEDIUM = "veth"
+MEDIUM_NAME = "medium.json"
 _EMPTY: Mapping = MappingProxyType({})
 
 
@@ -90,6 +96,9 @@ class ConfigRecord:
     seed: int | None = None
     capture: bool = False
     max_steps: int | None = None
+    medium: str = DEFAULT_MEDIUM
+    wifi_standard: str | None = None  # ns3-wifi only (None: the run did not say)
+    wifi_rate: str | None = None  # ns3-wifi only; "" is the standard's fastest
     extra: Mapping = field(default_factory=lambda: _EMPTY)
 
     @property
@@ -105,6 +114,57 @@ class HostStalls:
     events: int = 0
     stalled_s: float = 0.0
     deadlines_missed: int = 0
+
+
+@dataclass(frozen=True)
+class ChannelRobot:
+    """One robot's counters on the 802.11 channel (ns3-wifi's medium.json)."""
+
+    name: str  # "rK"; the display robot is the last
+    frames_sent: int  # frames the robot handed to the channel (from_linux)
+    frames_delivered: int  # frames the channel delivered to it (to_linux)
+    mac_tx: int  # MSDUs handed to its WiFi MAC
+    retries: int  # data transmissions not acknowledged
+    retry_drops: int  # MSDUs given up after the retry limit
+    queue_drops: int  # MSDUs refused by a full MAC queue
+    queue_expired: int  # MSDUs that waited longer than the queue's limit
+    phy_tx_drops: int
+    phy_rx_drops: int  # receptions lost: collisions, half duplex, preamble missed
+    airtime_s: float  # emulated seconds its PHY spent transmitting
+
+
+@dataclass(frozen=True)
+class ChannelRecord:
+    """The 802.11 channel's counters at the end of a run (medium.json)."""
+
+    duration_s: float  # emulated seconds the channel ran (now_s)
+    robots: tuple[ChannelRobot, ...]
+    relay_lag_mean_ms: float | None = None  # emulated ms; how late frames were relayed
+    relay_lag_over_1ms: float | None = None  # share of relayed frames over 1 ms late
+    lateness_max_ms: float | None = None
+
+    def total(self, key: str) -> float:
+        """The sum over robots of one ChannelRobot field."""
+        return sum(getattr(r, key) for r in self.robots)
+
+    @property
+    def airtime_share(self) -> float | None:
+        """Transmitting time of all robots over the channel's duration: the share of the
+        air in use where every robot hears every other (more than 1 is possible when robots
+        out of each other's range transmit at once)."""
+        return self.total("airtime_s") / self.duration_s if self.duration_s > 0 else None
+
+    @property
+    def retry_rate(self) -> float | None:
+        """Unacknowledged transmissions per MSDU handed to the MACs."""
+        mac_tx = self.total("mac_tx")
+        return self.total("retries") / mac_tx if mac_tx else None
+
+    @property
+    def drops(self) -> int:
+        """MSDUs the MACs lost: retry limit, full queue, expired in the queue."""
+        return int(self.total("retry_drops") + self.total("queue_drops")
+                   + self.total("queue_expired"))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -126,6 +186,7 @@ class RunRecord:
     host_stalls: HostStalls
     wall_time_s: float | None
     robots: tuple[RobotRecord, ...]  # in the file's order
+    channel: ChannelRecord | None = None  # medium.json: the ns3-wifi channel's counters
 
     @property
     def usable(self) -> bool:
@@ -141,9 +202,9 @@ class RunRecord:
         return self.config.coordination, self.config.start
 
     @property
-    def network(self) -> tuple[str, str]:
-        """(routing, map name)."""
-        return self.config.routing, self.config.map_name
+    def network(self) -> tuple[str, str, str]:
+        """(routing, map name, medium)."""
+        return self.config.routing, self.config.map_name, self.config.medium
 
     @property
     def exploration_steps(self) -> float | None:
@@ -208,6 +269,10 @@ def _config(doc: Mapping) -> ConfigRecord:
         seed=_get(c, "seed", (int,)),
         capture=bool(c.get("capture")),
         max_steps=_get(c, "max_steps", (int,)),
+        # result.json keeps these under config.extra; a sweep's plan at the top
+        medium=_get(c, "medium", (str,)) or _get(extra, "medium", (str,), DEFAULT_MEDIUM),
+        wifi_standard=_get(c, "wifi_standard", (str,)) or _get(extra, "wifi_standard", (str,)),
+        wifi_rate=_get(c, "wifi_rate", (str,), _get(extra, "wifi_rate", (str,))),
         extra=extra,
     )
 
@@ -237,8 +302,60 @@ def _robot(name: str, doc) -> RobotRecord:
     )
 
 
-def parse_result(doc, run_dir: Path) -> RunRecord:
-    """The RunRecord of a result.json's contents; ResultError when malformed."""
+_CHANNEL_COUNTS = {
+    "frames_sent": "from_linux", "frames_delivered": "to_linux", "mac_tx": "mac_tx",
+    "retries": "retries", "retry_drops": "retry_drops", "queue_drops": "queue_drops",
+    "queue_expired": "queue_expired", "phy_tx_drops": "phy_tx_drops",
+    "phy_rx_drops": "phy_rx_drops",
+}  # fmt: skip
+
+
+def parse_channel(doc) -> ChannelRecord:
+    """The ChannelRecord of a medium.json's contents; ResultError when malformed."""
+    if not isinstance(doc, Mapping):
+        raise ResultError("not a JSON object")
+    robots = doc.get("robots")
+    if not isinstance(robots, list):
+        raise ResultError("'robots' is not a list")
+    out = []
+    for k, r in enumerate(robots, start=1):
+        if not isinstance(r, Mapping):
+            raise ResultError(f"robot {k} is not an object")
+        try:
+            counts = {f: _get(r, key, (int,), 0) for f, key in _CHANNEL_COUNTS.items()}
+            airtime = _get(r, "airtime_s", _NUM, 0.0)
+        except ResultError as e:
+            raise ResultError(f"robot {k}: {e}") from None
+        out.append(ChannelRobot(name=f"r{k}", airtime_s=airtime, **counts))
+    lag, late = _mapping(doc, "relay_lag"), _mapping(doc, "lateness")
+    frames = _get(lag, "frames", (int,), 0)
+    over = _get(lag, "over_1ms", (int,), 0)
+    return ChannelRecord(
+        duration_s=_get(doc, "now_s", _NUM, required=True),
+        robots=tuple(out),
+        relay_lag_mean_ms=_get(lag, "mean_ms", _NUM),
+        relay_lag_over_1ms=over / frames if frames else None,
+        lateness_max_ms=_get(late, "max_ms", _NUM),
+    )
+
+
+def _load_channel(run_dir: Path) -> ChannelRecord | None:
+    path = run_dir / MEDIUM_NAME
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as e:
+        raise ResultError(f"{path}: unreadable ({e})") from None
+    try:
+        return parse_channel(doc)
+    except ResultError as e:
+        raise ResultError(f"{path}: {e}") from None
+
+
+def parse_result(doc, run_dir: Path, channel: ChannelRecord | None = None) -> RunRecord:
+    """The RunRecord of a result.json's contents (and of medium.json's, `channel`);
+    ResultError when malformed."""
     if not isinstance(doc, Mapping):
         raise ResultError("not a JSON object")
     stalls = _mapping(doc, "host_stalls")
@@ -264,13 +381,16 @@ def parse_result(doc, run_dir: Path) -> RunRecord:
         ),
         wall_time_s=_get(doc, "wall_time_s", _NUM),
         robots=tuple(_robot(k, v) for k, v in _mapping(doc, "robots").items()),
+        channel=channel,
     )
 
 
 def load_run(run_dir: str | Path) -> RunRecord:
     """The finished run in `run_dir`; ResultError (one line, naming the file) when its
-    result.json is missing, not JSON or lacks what the analysis needs."""
+    result.json is missing, not JSON or lacks what the analysis needs, or its medium.json
+    is there but unreadable."""
     run_dir = Path(run_dir)
+    channel = _load_channel(run_dir)
     path = run_dir / RESULT_NAME
     try:
         doc = json.loads(path.read_text())
@@ -279,7 +399,7 @@ def load_run(run_dir: str | Path) -> RunRecord:
     except (OSError, ValueError) as e:
         raise ResultError(f"{path}: unreadable ({e})") from None
     try:
-        return parse_result(doc, run_dir)
+        return parse_result(doc, run_dir, channel)
     except ResultError as e:
         raise ResultError(f"{path}: {e}") from None
 

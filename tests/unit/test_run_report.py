@@ -89,3 +89,25 @@ def test_report_of_a_malformed_run_or_neither_is_one_line_and_exit_2(tmp_path):
     r = report(tmp_path / "empty")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "neither a sweep directory" in r.stderr
+
+
+def test_a_run_on_ns3_wifi_shows_the_channel_counters(tmp_path):
+    from tests.unit.test_analysis_runs import channel_doc
+
+    spec = sweepfile.SweepSpec(robots=(1,), comm_range=(5.0,), laser_range=(2.0,),
+                               medium="ns3-wifi", wifi_standard="80211b",
+                               wifi_rate="DsssRate1Mbps")  # fmt: skip
+    run = sweepfile.expand(spec)[0]
+    d = write_run(tmp_path, run, result_doc(run.config, [300], 301))
+    (d / "medium.json").write_text(json.dumps(channel_doc()))
+    text = runreport.summary(load_run(d), None)
+    assert "seed " in text and ", medium ns3-wifi." in text
+    assert "## The 802.11 channel (ns3-wifi, from medium.json)" in text
+    assert "80211b at DsssRate1Mbps; 10.0 s of emulated time. Air in use" in text
+    assert (
+        "7.50%" in text and "frames the MACs lost (retry limit, full or expired queue): 6" in text
+    )
+    assert "| r1 | 100 | 180 | 3 | 3 | 500.0 |" in text
+    assert "| r2 (display) | 100 | 180 | 1 | 3 | 250.0 |" in text
+    # a veth run has no such section
+    assert "802.11 channel" not in runreport.summary(load_run(one_run(tmp_path / "v")), None)

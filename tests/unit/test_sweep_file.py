@@ -107,6 +107,10 @@ def test_relative_map_path_is_relative_to_the_file(tmp_path):
         ("impairments", 2 * 3 * 2 * 3),
         ("protocols", 3 * 3 * 4 * 2 * 3),
         ("protocols-short", 4 * 2),
+        ("media", 3 * 2 * 2 * 5),
+        ("media-protocols", 2 * 3 * 2 * 5),
+        ("media-rise", 6 * 2 * 3),
+        ("media-rise-slow", 6 * 2 * 3),
     ],  # fmt: skip
 )
 def test_profiles_load(name, n_runs):
@@ -123,6 +127,25 @@ def test_paper_profile_is_the_papers_grid():
     assert spec.comm_range == (5.0, 10.0, 15.0, 20.0)
     assert spec.laser_range == (2.0, 1.5)
     assert spec.runs == 3
+
+
+def test_media_profiles_are_issue_22s_grids():
+    media = sweepfile.load(EXPERIMENTS / "media.toml")
+    assert (media.robots, media.comm_range, media.laser_range) == ((2, 5, 10), (5.0, 20.0), (2.0,))
+    assert (media.media, media.routing, media.runs) == (("veth", "ns3-wifi"), "aodv", 5)
+    protos = sweepfile.load(EXPERIMENTS / "media-protocols.toml")
+    assert (protos.robots, protos.routings) == ((10,), ("aodv", "babel", "batman"))
+    assert protos.media == ("veth", "ns3-wifi")
+    rise = sweepfile.load(EXPERIMENTS / "media-rise.toml")
+    slow = sweepfile.load(EXPERIMENTS / "media-rise-slow.toml")
+    assert rise.robots == (1, 2, 4, 6, 8, 10) and rise.comm_range == (5.0, 20.0)
+    assert (rise.medium, rise.wifi_standard, rise.runs) == ("ns3-wifi", "80211a", 3)
+    assert (slow.wifi_standard, slow.wifi_rate) == ("80211b", "DsssRate1Mbps")
+    # the slow channel's runs are the fast one's, point for point (ids, seeds, time scales)
+    fast_runs, slow_runs = sweepfile.expand(rise), sweepfile.expand(slow)
+    assert [(r.run_id, r.config.seed, r.config.time_scale) for r in fast_runs] == [
+        (r.run_id, r.config.seed, r.config.time_scale) for r in slow_runs
+    ]
 
 
 def test_run_ids_and_seeds_are_stable_and_distinct():
@@ -246,6 +269,11 @@ def test_routing_and_map_as_grid_dimensions_name_themselves_and_share_seeds(tmp_
         ("map = []", "", "grid.map: empty list"),
         ("", 'range_model = "fog"', "run.range_model: expected one of"),
         ("", "wall_loss_pct = 20", "run.wall_loss_pct: needs range_model los"),
+        ('medium = ["veth", "hwsim"]', "", "grid.medium: expected one of veth, ns3-wifi"),
+        ('medium = ["veth"]', 'medium = "veth"', "run.medium: already a grid dimension"),
+        ("", 'wifi_standard = "80211b"', "run.wifi_standard: needs medium ns3-wifi"),
+        ('medium = ["veth"]', 'wifi_rate = "DsssRate1Mbps"', "run.wifi_rate: needs medium"),
+        ("", 'medium = "ns3-wifi"\nwifi_standard = "80211n"', "run.wifi_standard: expected"),
     ],
 )
 def test_bad_routing_map_or_radio_names_the_key(grid, run, words):
@@ -253,3 +281,28 @@ def test_bad_routing_map_or_radio_names_the_key(grid, run, words):
     with pytest.raises(UsageError) as e:
         parse(text)
     assert words in str(e.value)
+
+
+def test_medium_as_a_grid_dimension_names_itself_shares_seeds_and_keeps_veth_plain():
+    text = GOOD.replace("runs = 2", 'runs = 1\nmedium = ["veth", "ns3-wifi"]').replace(
+        "capture = true", 'wifi_standard = "80211b"\nwifi_rate = "DsssRate1Mbps"'
+    )
+    runs = sweepfile.expand(parse(text))
+    assert len(runs) == 2 * 2 * 2
+    ids = {r.run_id: r.config for r in runs}
+    wifi, veth = ids["n02-c20-l2-ns3wifi-k1"], ids["n02-c20-l2-veth-k1"]
+    assert (wifi.medium, wifi.wifi_standard, wifi.wifi_rate) == (
+        "ns3-wifi", "80211b", "DsssRate1Mbps")  # fmt: skip
+    # veth has no 802.11: its config keeps the defaults rather than claim one.
+    assert (veth.medium, veth.wifi_standard, veth.wifi_rate) == ("veth", "80211a", "")
+    assert wifi.seed == veth.seed
+    assert len({r.point for r in runs}) == len(runs)
+    assert plan_dict(wifi)["medium"] == "ns3-wifi"
+
+
+def test_medium_fixed_in_run_is_not_in_the_ids():
+    spec = parse(GOOD.replace("capture = true", 'medium = "ns3-wifi"\nwifi_loss = "logdistance"'))
+    runs = sweepfile.expand(spec)
+    assert {r.config.medium for r in runs} == {"ns3-wifi"}
+    assert {r.config.wifi_loss for r in runs} == {"logdistance"}
+    assert runs[0].run_id == "n01-c5-l2-k1"
