@@ -16,7 +16,7 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from testbed import netextra, runoptions
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
-from testbed.runconfig import NET_OPTIONS
+from testbed.runconfig import NET_OPTIONS, network_fields
 from topology.argtypes import number
 from topology.spec import LAYOUTS, LOS_MODELS
 
@@ -168,7 +168,7 @@ def _start_positions(args) -> list:
 
 def _net_up(args) -> int:
     from topology.network import Network
-    from topology.spec import Impairment, NetworkSpec
+    from topology.spec import NetworkSpec
 
     if args.positions is not None and args.layout is not None:
         raise UsageError("give either --layout or --positions, not both")
@@ -186,20 +186,9 @@ def _net_up(args) -> int:
         spec = NetworkSpec(
             name=args.name,
             positions=tuple(positions),
-            comm_range=args.comm_range,
-            routing=args.routing,
-            aodv_profile=args.aodv_profile,
-            impairment=Impairment(loss_pct=args.loss_pct, delay_ms=args.delay_ms),
-            range_model=args.range_model,
             map_png=os.path.abspath(args.map) if args.map else None,
-            map_cell=args.map_cell,
-            wall_loss_pct=args.wall_loss_pct,
             capture_dir=os.path.abspath(args.capture) if args.capture else None,
-            time_scale=args.time_scale,
-            medium=args.medium,
-            wifi_loss=args.wifi_loss,
-            wifi_standard=args.wifi_standard,
-            wifi_rate=args.wifi_rate,
+            **network_fields(args),
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None

@@ -188,6 +188,19 @@ OPTIONS = runoptions.options(RunConfig)
 BY_NAME = {opt.name: opt for opt in OPTIONS}
 # What `net up` shares with `run`: the network's options, the same flags and checks.
 NET_OPTIONS = tuple(opt for opt in OPTIONS if opt.net)
+# The net options that are not a NetworkSpec field of the same name: its one Impairment.
+_IMPAIRMENT_OPTIONS = ("loss_pct", "delay_ms")
+
+
+def network_fields(values) -> dict:
+    """The NetworkSpec fields that `net up` and `run` share, from a RunConfig or from `net
+    up`'s parsed flags (both carry every net option under its name): what each caller adds
+    is only its name, positions, map path and capture directory."""
+    from topology.spec import Impairment
+
+    fields = {o.name: getattr(values, o.name) for o in NET_OPTIONS}
+    loss, delay = (fields.pop(name) for name in _IMPAIRMENT_OPTIONS)
+    return dict(fields, impairment=Impairment(loss_pct=loss, delay_ms=delay))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

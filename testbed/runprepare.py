@@ -24,7 +24,7 @@ import numpy as np
 
 from node.rays import Laser
 from testbed.errors import UsageError
-from testbed.runconfig import RunConfig
+from testbed.runconfig import RunConfig, network_fields
 from testbed.runfiles import claim_directory, make_directory
 from testbed.world.world import World
 from testbed.world.worldmap import (
@@ -35,7 +35,7 @@ from testbed.world.worldmap import (
     start_positions,
 )
 from topology.jsonfile import write_json_atomic
-from topology.spec import Impairment, NetworkSpec
+from topology.spec import NetworkSpec
 
 DEFAULT_SNAPSHOTS = (100, 250, 500, 1000, 2000)  # display PNGs (plus one at the end)
 
@@ -108,20 +108,9 @@ def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> Netw
         return NetworkSpec(
             name=name,
             positions=positions,
-            comm_range=cfg.comm_range,
-            routing=cfg.routing,
-            aodv_profile=cfg.aodv_profile,
-            range_model=cfg.range_model,
             map_png=os.path.abspath(cfg.map) if cfg.map else None,
-            map_cell=cfg.map_cell,
-            wall_loss_pct=cfg.wall_loss_pct,
-            impairment=Impairment(loss_pct=cfg.loss_pct, delay_ms=cfg.delay_ms),
             capture_dir=os.path.join(out, "pcaps") if cfg.capture else None,
-            time_scale=cfg.time_scale,
-            medium=cfg.medium,
-            wifi_loss=cfg.wifi_loss,
-            wifi_standard=cfg.wifi_standard,
-            wifi_rate=cfg.wifi_rate,
+            **network_fields(cfg),
         )
     except ValueError as e:
         raise UsageError(str(e)) from None
