@@ -433,7 +433,7 @@ class StepLoop:
             b = self.world.bodies[k - 1]
             self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
         x, y = self.prep.display_pos
-        self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None), True)
+        self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None, now), True)
 
     def _show_progress(self, coverage: float) -> None:
         now = time.monotonic()

@@ -37,7 +37,7 @@ RESULT_CONFIG_KEYS = (
 # What each robot's summary line (its last event) says, copied into robots/rK.json.
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
-    "frames", "latency_ms", "thread_cpu_s",
+    "frames", "latency_ms", "thread_cpu_s", "lateness",
 )  # fmt: skip
 PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
 
