@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from node import render
+from testbed import fidelity
 from testbed.world.world import World
 from topology.jsonfile import write_json_atomic
 
@@ -55,8 +56,9 @@ def read_events(path: str) -> list[dict]:
     return out
 
 
-def robot_result(rec: RunRecord, r: RobotOutcome) -> dict:
-    """Robot r's entry in result.json; its fuller record goes to robots/rK.json."""
+def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict | None]:
+    """Robot r's entry in result.json, and its lateness record (node.lateness; None when
+    it left no summary); its fuller record goes to robots/rK.json."""
     ev = read_events(os.path.join(rec.out, "robots", f"r{r.k}.events.jsonl"))
     plans = [{"step": e["step"], "cause": e["cause"]} for e in ev if e["e"] == "plan"]
     sent: dict[str, int] = {}
@@ -85,7 +87,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> dict:
     )  # fmt: skip
     detail.update({k: summary.get(k) for k in SUMMARY_KEYS})
     write_json_atomic(os.path.join(rec.out, "robots", f"r{r.k}.json"), detail)
-    return out
+    return out, summary.get("lateness")
 
 
 def write(rec: RunRecord) -> dict:
@@ -99,7 +101,8 @@ def write(rec: RunRecord) -> dict:
 
 def contents(rec: RunRecord) -> dict:
     """robots/rK.json and paths.png; returns result.json's contents (not yet written)."""
-    robot_out = {f"r{r.k}": robot_result(rec, r) for r in rec.robots}
+    robots = {f"r{r.k}": robot_result(rec, r) for r in rec.robots}
+    robot_out = {k: v[0] for k, v in robots.items()}
     clock = rec.clock
     try:
         paths_png(rec.world, os.path.join(rec.out, "paths.png"))
@@ -137,8 +140,36 @@ def contents(rec: RunRecord) -> dict:
         "world_missed_steps_ms_late": [list(m) for m in clock.world_missed_steps],
         "robots": robot_out,
     }
+    result["fidelity"] = fidelity.verdict(
+        fidelity.measures(
+            clock.miss_fraction_outside_stalls if clock.steps else None,
+            [v[1] for v in robots.values()],
+            display_summary(rec.out).get("lateness"),
+            daemon_lateness(rec.out, len(rec.robots) + 1),
+        )
+    )
     result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
     return result
+
+
+def display_summary(out: str) -> dict:
+    """The display's summary event ({} when it wrote none)."""
+    ev = read_events(os.path.join(out, "display", "events.jsonl"))
+    return next((e for e in reversed(ev) if e.get("e") == "summary"), {})
+
+
+def daemon_lateness(out: str, n: int) -> list[dict]:
+    """The AODV daemons' timer lateness (aodv/rK.json), for those that wrote it."""
+    found = []
+    for k in range(1, n + 1):
+        try:
+            with open(os.path.join(out, "aodv", f"r{k}.json")) as f:
+                late = json.load(f).get("timer_lateness_ms")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if isinstance(late, dict):
+            found.append(late)
+    return found
 
 
 def snapshot_steps(out: str) -> list[int]:
