@@ -96,6 +96,7 @@ class Stats:
             "discoveries_failed": len(self.discoveries) - len(ok),
             "discoveries": self.discoveries[-1000:],
             "timer_lateness_ms": {k: v.as_dict() for k, v in self.timer_lateness.items()},
+            "cpu_s": round(time.process_time(), 3),
         }
 
     def write(self, path: str) -> None:

@@ -93,6 +93,7 @@ class Display:
                 video_frames=self.video.frames, malformed=self.malformed,
                 flood=dict(self.flooder.counts),
                 lateness={"frame_done_ms": self.frame_lateness.as_dict()},
+                cpu_s=round(time.process_time(), 3),
             )  # fmt: skip
 
     def _visualization(self) -> None:

@@ -114,7 +114,7 @@ def measures(
     plans = late_plans = timers = late_timers = 0
     age_max = timer_max = 0.0
     for r in robots:
-        if not r:
+        if not isinstance(r, dict):
             continue
         p, t = r.get("plan_age_steps") or {}, r.get("plan_timer_steps") or {}
         plans += p.get("n", 0)
@@ -125,7 +125,7 @@ def measures(
         timer_max = max(timer_max, t.get("max", 0))
     hello = expiry = None
     for d in daemons:
-        if not d:
+        if not isinstance(d, dict):
             continue
         h, e = d.get("hello") or {}, d.get("expiry") or {}
         hello = max(hello or 0.0, h.get("max", 0.0))

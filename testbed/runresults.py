@@ -56,9 +56,9 @@ def read_events(path: str) -> list[dict]:
     return out
 
 
-def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict | None]:
-    """Robot r's entry in result.json, and its lateness record (node.lateness; None when
-    it left no summary); its fuller record goes to robots/rK.json."""
+def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
+    """Robot r's entry in result.json, and its summary event ({} when it left none: its
+    lateness, node.lateness, and CPU); its fuller record goes to robots/rK.json."""
     ev = read_events(os.path.join(rec.out, "robots", f"r{r.k}.events.jsonl"))
     plans = [{"step": e["step"], "cause": e["cause"]} for e in ev if e["e"] == "plan"]
     sent: dict[str, int] = {}
@@ -87,7 +87,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict | None]:
     )  # fmt: skip
     detail.update({k: summary.get(k) for k in SUMMARY_KEYS})
     write_json_atomic(os.path.join(rec.out, "robots", f"r{r.k}.json"), detail)
-    return out, summary.get("lateness")
+    return out, summary
 
 
 def write(rec: RunRecord) -> dict:
@@ -140,16 +140,38 @@ def contents(rec: RunRecord) -> dict:
         "world_missed_steps_ms_late": [list(m) for m in clock.world_missed_steps],
         "robots": robot_out,
     }
+    summaries = [v[1] for v in robots.values()]
+    display = display_summary(rec.out)
+    daemons = daemon_stats(rec.out, len(rec.robots) + 1)
+    result["cpu_s"] = cpu_seconds(rec, summaries, display, daemons)
     result["fidelity"] = fidelity.verdict(
         fidelity.measures(
             clock.miss_fraction_outside_stalls if clock.steps else None,
-            [v[1] for v in robots.values()],
-            display_summary(rec.out).get("lateness"),
-            daemon_lateness(rec.out, len(rec.robots) + 1),
+            [sm.get("lateness") for sm in summaries],
+            display.get("lateness"),
+            [d.get("timer_lateness_ms") for d in daemons],
         )
     )
     result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
     return result
+
+
+def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:
+    """CPU seconds of the run's processes (the robots', the display's, the world's step
+    loop, the AODV daemons'), and all of it per robot-step in ms: what a cluster's run
+    needs per robot (testbed.slurm)."""
+    parts = {
+        "robots": sum(sm.get("cpu_s") or 0.0 for sm in summaries),
+        "display": display.get("cpu_s") or 0.0,
+        "world": rec.world_timing.get("world_cpu_s", 0.0),
+        "routing": sum(d.get("cpu_s") or 0.0 for d in daemons),
+    }
+    out = {k: round(v, 3) for k, v in parts.items()}
+    robot_steps = rec.clock.steps * len(rec.robots)
+    out["per_robot_step_ms"] = (
+        round(sum(parts.values()) / robot_steps * 1000, 3) if robot_steps else None
+    )
+    return out
 
 
 def display_summary(out: str) -> dict:
@@ -158,17 +180,17 @@ def display_summary(out: str) -> dict:
     return next((e for e in reversed(ev) if e.get("e") == "summary"), {})
 
 
-def daemon_lateness(out: str, n: int) -> list[dict]:
-    """The AODV daemons' timer lateness (aodv/rK.json), for those that wrote it."""
+def daemon_stats(out: str, n: int) -> list[dict]:
+    """The AODV daemons' statistics (aodv/rK.json), for those that wrote them."""
     found = []
     for k in range(1, n + 1):
         try:
             with open(os.path.join(out, "aodv", f"r{k}.json")) as f:
-                late = json.load(f).get("timer_lateness_ms")
-        except (OSError, ValueError, AttributeError):
+                stats = json.load(f)
+        except (OSError, ValueError):
             continue
-        if isinstance(late, dict):
-            found.append(late)
+        if isinstance(stats, dict):
+            found.append(stats)
     return found
 
 
