@@ -382,6 +382,9 @@ class Robot:
 
     def _planning(self) -> None:
         cfg = self.cfg
+        # A test hook: wall seconds the planner waits before installing each plan, so that
+        # plans arrive late in emulated time (tests of the fidelity verdict, testbed.fidelity).
+        delay = float(os.environ.get("NODE_PLAN_DELAY_MS", "0") or 0) / 1000
         while not self.stopping.is_set():
             try:
                 cause = self.requests.get(timeout=0.5)
@@ -406,6 +409,8 @@ class Robot:
             ms = (time.perf_counter() - t0) * 1000
             self.busy["plan"] += ms / 1000
             self.plan_ms.append(ms)
+            if delay > 0:
+                time.sleep(delay)
             with self.lock:
                 s.plan, s.wp = p, 0
                 s.plan_fresh = s.plan_asked
