@@ -17,16 +17,21 @@ was when it asked, so a late plan first drives the robot back to where it was, t
 (seed 2: 200 reversals of direction at K = 60 against 52 at K = 5; path 248 m against
 188 m), and every later plan is computed from a different pose and map: 2602 steps
 instead of 1989 (+31%). The timer's own lateness (it fires a step after it is due) shifts
-every later plan by as much. The numbers that set the thresholds below are in
-docs/architecture.md ("Time dilation and fidelity").
+every later plan by as much. The lone robot took exactly the same steps only where no plan
+and no timer was late (seed 1 at K = 5: 0 of 95 plans late, 1901 steps, as at K = 15 on a
+quiet machine); one late plan already moves it (seed 2: 1 of 99 late and 2 timers, 1991
+steps for 1989), because exploration is chaotic: a path that differs once differs after.
+All the numbers are in docs/architecture.md ("Time dilation and fidelity").
 
 The verdict: a run is faithful when, over all its robots and daemons,
 
 - the step deadlines missed outside host stalls are at most DEADLINE_MISS_LIMIT (the
   sweep's limit: a missed deadline is a frame answered after the world moved on);
-- the plans applied late (age >= 1 step) are at most LATE_PLAN_LIMIT of the plans applied,
-  and so are the plan timers that fired late: a lone robot takes exactly the same steps at
-  every scale where no plan was late, and one late plan already changes its path;
+- the plans applied late (age >= 1 step) are at most LATE_PLAN_LIMIT (1%) of the plans
+  applied, and so are the plan timers that fired late. Exactness needs none; the verdict
+  tolerates one plan in a hundred (one of a lone robot's run, ten of a ten-robot team's),
+  which a team's run-to-run noise covers if anything does (issue 21 part 6 is to show it).
+  A calibration trial (300 steps, ~15 plans a robot) must have none;
 - no AODV HELLO timer fired more than HELLO_LATE_LIMIT_MS emulated ms late, and no expiry
   timer more than EXPIRY_LATE_LIMIT_MS: a HELLO later than the neighbour's allowance
   (ALLOWED_HELLO_LOSS x HELLO_INTERVAL, 2 s) breaks a link that exists;
@@ -43,7 +48,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
 DEADLINE_MISS_LIMIT = 0.01
-LATE_PLAN_LIMIT = 0.02
+LATE_PLAN_LIMIT = 0.01
 HELLO_LATE_LIMIT_MS = 250.0
 EXPIRY_LATE_LIMIT_MS = 250.0
 DISPLAY_LATE_LIMIT = 0.05
