@@ -14,7 +14,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 LONE = ["--robots", "1", "--comm-range", "20", "--laser-range", "2", "--seed", "1",
         "--routing", "aodv", "--quiet"]  # fmt: skip
 STEPS = 300  # 15 plans: short, and long enough for a late plan to show in the path
-TRIES = 3  # a loaded machine may make either run of a pair unfaithful: such a pair is redone
+HIGHER = (15, 10, 7.5)  # tried in turn until one is faithful (a loaded machine may need 7.5)
+TRIES = 3  # runs at scale 5 until one is faithful
 
 
 def lone_run(out, name, scale, **env):
@@ -30,19 +31,28 @@ def lone_run(out, name, scale, **env):
 
 
 def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(tmp_path, tb_name):
+    """Under load a run may come out unfaithful (its verdict says so, and then its path
+    differs: seen 3 times in 3 at scale 15 under a load average of 350, one or two of 15
+    plans a step late); such a run proves nothing here, so a lower scale is tried."""
     verdicts = []
+    slow = fast = None
     for k in range(TRIES):
-        runs = [lone_run(tmp_path / f"x{scale}-{k}", tb_name, scale) for scale in (5, 15)]
-        verdicts.append([res["fidelity"] for _, res, _ in runs])
-        if all(res["fidelity"]["ok"] for _, res, _ in runs):
+        slow = lone_run(tmp_path / f"x5-{k}", tb_name, 5)
+        verdicts.append((5, slow[1]["fidelity"].get("reason")))
+        if slow[1]["fidelity"]["ok"]:
             break
-    else:
-        pytest.fail(f"no pair of faithful runs at 5 and 15 in {TRIES} tries: {verdicts}")
-    (_, slow, slow_path), (r, fast, fast_path) = runs
-    assert slow["steps"] == fast["steps"] == STEPS
-    assert slow_path == fast_path  # every step's position, the same
-    assert fast["fidelity"]["measures"]["late_plans"] == 0
-    assert fast["fidelity"]["measures"]["plans"] >= 10
+    for scale in HIGHER:
+        fast = lone_run(tmp_path / f"x{scale}", tb_name, scale)
+        verdicts.append((scale, fast[1]["fidelity"].get("reason")))
+        if fast[1]["fidelity"]["ok"]:
+            break
+    if not (slow[1]["fidelity"]["ok"] and fast[1]["fidelity"]["ok"]):
+        pytest.fail(f"no faithful run at 5 and at a higher scale: {verdicts}")
+    (_, low, low_path), (r, high, high_path) = slow, fast
+    assert low["steps"] == high["steps"] == STEPS
+    assert low_path == high_path  # every step's position, the same
+    assert high["fidelity"]["measures"]["late_plans"] == 0
+    assert high["fidelity"]["measures"]["plans"] >= 10
     assert "not faithful" not in r.stderr
 
 
