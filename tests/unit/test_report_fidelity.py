@@ -51,3 +51,14 @@ def test_a_sweep_of_faithful_runs_says_nothing_of_fidelity(tmp_path):
     sweep(tmp_path)
     path, _ = report.write_report(tmp_path, metrics_of=lambda run: None)
     assert "Not faithful" not in path.read_text()
+
+
+def test_one_runs_summary_says_it_was_not_faithful(tmp_path):
+    from testbed.analysis import runreport
+
+    d = sweep(tmp_path)[0]
+    path, _ = runreport.write(load_run(d))
+    assert "Not faithful" not in path.read_text()
+    mark_unfaithful(d)
+    path, _ = runreport.write(load_run(d))
+    assert "**Not faithful to its time scale**: 30.0% of plans applied" in path.read_text()
