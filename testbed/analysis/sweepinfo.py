@@ -164,15 +164,16 @@ def _backoff_lines(state: dict) -> list[str]:
     if concurrency:
         out.append(
             f"The sweep lowered its concurrency {len(concurrency)} time(s) because runs "
-            f"missed step deadlines (now {state.get('jobs')} job(s) at most)."
+            f"missed step deadlines or were not faithful (now {state.get('jobs')} job(s) at "
+            "most)."
         )
     scale = [b for b in backoffs if "time_scale_factor" in b]
     if scale:
         factors = state.get("time_scale_factor") or {}
         out.append(
             f"The sweep changed a team size's time scale {len(scale)} time(s) as runs missed step "
-            "deadlines alone (down) or ran clean (up); the factors it ended with, of the file's "
-            "time scale: "
+            "deadlines or were not faithful alone (down) or ran clean (up); the factors it ended "
+            "with, of the file's time scale: "
             + (", ".join(f"{v:g} for {k}" for k, v in factors.items()) or "none")
             + "."
         )
