@@ -150,21 +150,30 @@ def measures(
 def verdict(m: Measures, th: Thresholds = Thresholds()) -> dict:
     """result.json's `fidelity`: {ok, reason (when not ok), measures, thresholds}."""
     checks = (
-        ("deadline_miss_fraction", m.deadline_miss_fraction, "of step deadlines missed"),
-        ("late_plan_fraction", m.late_plan_fraction, "of plans applied a step or more late"),
-        ("late_timer_fraction", m.late_timer_fraction, "of plan timers fired late"),
-        ("hello_late_max_ms", m.hello_late_max_ms, "ms: an AODV HELLO timer fired that late"),
-        ("expiry_late_max_ms", m.expiry_late_max_ms, "ms: an AODV expiry timer fired that late"),
+        ("deadline_miss_fraction", m.deadline_miss_fraction, "of step deadlines missed", None),
+        ("late_plan_fraction", m.late_plan_fraction, "plans applied a step or more late",
+         (m.late_plans, m.plans)),
+        ("late_timer_fraction", m.late_timer_fraction, "plan timers fired late",
+         (m.late_timers, m.timers)),
+        ("hello_late_max_ms", m.hello_late_max_ms, "ms: an AODV HELLO timer fired that late",
+         None),
+        ("expiry_late_max_ms", m.expiry_late_max_ms, "ms: an AODV expiry timer fired that late",
+         None),
         ("display_late_fraction", m.display_late_fraction,
-         "of the display's frames handled over two steps late"),
+         "display frames handled over two steps late", (m.display_late_frames, m.display_frames)),
     )  # fmt: skip
     reasons = []
-    for key, value, words in checks:
+    for key, value, words, counts in checks:
         limit = getattr(th, key)
-        if value is not None and value > limit:
-            shown = f"{value:.1%}" if key.endswith("fraction") else f"{value:g}"
-            bound = f"{limit:.1%}" if key.endswith("fraction") else f"{limit:g}"
-            reasons.append(f"{shown} {words} (limit {bound})")
+        if value is None or value <= limit:
+            continue
+        if counts:  # "3 of 99 plans applied ... (3.0%, limit 1.0%)"
+            share = counts[0] / counts[1]
+            reasons.append(f"{counts[0]} of {counts[1]} {words} ({share:.1%}, limit {limit:.1%})")
+        elif key.endswith("fraction"):
+            reasons.append(f"{value:.1%} {words} (limit {limit:.1%})")
+        else:
+            reasons.append(f"{value:g} {words} (limit {limit:g})")
     out: dict = {"ok": not reasons}
     if reasons:
         out["reason"] = "; ".join(reasons)

@@ -61,7 +61,7 @@ def test_plans_that_come_late_make_a_run_unfaithful_and_testbed_run_says_so(tmp_
     r, res, _ = lone_run(tmp_path / "late", tb_name, 5, NODE_PLAN_DELAY_MS="60")
     f = res["fidelity"]
     assert f["ok"] is False, f
-    assert "of plans applied a step or more late" in f["reason"]
+    assert "plans applied a step or more late (100.0%, limit 1.0%)" in f["reason"]
     assert f["measures"]["late_plans"] == f["measures"]["plans"] > 0
     assert f["measures"]["plan_age_max_steps"] >= 3
     warnings = [line for line in r.stderr.splitlines() if "warning: not faithful" in line]

@@ -47,7 +47,7 @@ def test_a_run_with_every_plan_on_time_is_faithful():
 def test_late_plans_over_the_limit_make_a_run_unfaithful_and_say_why():
     v = verdict(measures(0.001, [robot(130, 96, age_max=6)]))
     assert v["ok"] is False
-    assert "% of plans applied a step or more late (limit " in v["reason"]
+    assert v["reason"] == "96 of 130 plans applied a step or more late (73.8%, limit 1.0%)"
     assert v["measures"]["late_plan_fraction"] == pytest.approx(96 / 130, abs=1e-4)
     assert v["measures"]["plan_age_max_steps"] == 6
 
@@ -63,10 +63,11 @@ def test_each_measure_over_its_threshold_is_a_reason():
     th = Thresholds()
     cases = {
         "deadline": Measures(deadline_miss_fraction=th.deadline_miss_fraction * 2),
-        "plan timers": Measures(timers=10, late_timers=5),
+        "5 of 10 plan timers fired late (50.0%": Measures(timers=10, late_timers=5),
         "HELLO": Measures(hello_late_max_ms=th.hello_late_max_ms + 1),
         "expiry": Measures(expiry_late_max_ms=th.expiry_late_max_ms + 1),
-        "display": Measures(display_frames=100, display_late_frames=50),
+        "50 of 100 display frames": Measures(display_frames=100, display_late_frames=50),
+        "2.0% of step deadlines missed (limit 1.0%)": Measures(deadline_miss_fraction=0.02),
     }
     for words, m in cases.items():
         v = verdict(m)

@@ -10,7 +10,9 @@ from testbed.analysis.runs import load_run, load_runs
 from tests.unit.test_sweep_synthetic import make_sweep
 
 
-def mark_unfaithful(run_dir, reason="30.0% of plans applied a step or more late"):
+def mark_unfaithful(
+    run_dir, reason="3 of 10 plans applied a step or more late (30.0%, limit 1.0%)"
+):
     path = run_dir / "result.json"
     doc = json.loads(path.read_text())
     doc["fidelity"] = {"ok": False, "reason": reason, "measures": {}, "thresholds": {}}
@@ -40,7 +42,7 @@ def test_the_report_names_and_counts_unfaithful_runs_and_leaves_them_out(tmp_pat
     path, _ = report.write_report(tmp_path, metrics_of=lambda run: None)
     text = path.read_text()
     assert "**Not faithful to their time scale: 1 run(s)**, left out of the figures" in text
-    assert f"{dirs[0].name} at time scale 1 (30.0% of plans applied" in text
+    assert f"{dirs[0].name} at time scale 1 (3 of 10 plans applied" in text
     fig2 = (tmp_path / "figures" / "fig2.csv").read_text()
     path, _ = report.write_report(tmp_path, metrics_of=lambda run: None, unfaithful=True)
     assert "counted nevertheless (--include-unfaithful)" in path.read_text()
@@ -61,4 +63,4 @@ def test_one_runs_summary_says_it_was_not_faithful(tmp_path):
     assert "Not faithful" not in path.read_text()
     mark_unfaithful(d)
     path, _ = runreport.write(load_run(d))
-    assert "**Not faithful to its time scale**: 30.0% of plans applied" in path.read_text()
+    assert "**Not faithful to its time scale**: 3 of 10 plans applied" in path.read_text()
