@@ -150,8 +150,8 @@ def _scale_lines(runs: list[RunRecord], state: dict) -> list[str]:
             for n, c in sorted(cal.items(), key=lambda kv: int(kv[0]))
         ]
         out.append(
-            "Calibrated on this machine (--calibrate: short runs alone, up while clean, down "
-            "while late): " + "; ".join(found) + "."
+            "Calibrated on this machine (--calibrate: short runs alone, up while clean and "
+            "faithful, down while late or not faithful): " + "; ".join(found) + "."
         )
     return out
 
