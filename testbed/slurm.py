@@ -38,9 +38,9 @@ from testbed.sweepfile import PlannedRun
 from topology.jsonfile import read_json, write_json_atomic
 
 # CPU the whole run uses per robot-step: robots, display, the world's step loop and the
-# routing daemons together (result.json's cpu_s.per_robot_step_ms). Measured 1.0-1.5 ms
-# (10 robots at 20 m; a lone robot 1.2-1.5 ms with the world), where 4 ms was
-# assumed before. A sweep directory with finished runs sizes by what they measured.
+# routing daemons together (result.json's cpu_s.per_robot_step_ms). Measured 1.0-1.5 ms for
+# 10 robots at 20 m on a quiet machine, 1.8 ms on a loaded one (CPU_MARGIN covers it), where
+# 4 ms was assumed before. A sweep directory with finished runs sizes by what they measured.
 CPU_S_PER_ROBOT_STEP = 0.0015
 STEP_S = 0.1  # a world step is 100 ms of robot time
 CPU_MARGIN = 1.5
