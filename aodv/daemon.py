@@ -307,6 +307,9 @@ class Daemon:
             now = time.monotonic()
             deadline = self.core.next_deadline()
             if now >= deadline:
+                kind = "hello" if deadline == self.core.next_hello else "expiry"
+                late_ms = (now - deadline) * 1000 * self.p.time_scale
+                self.stats.timer_lateness[kind].add(late_ms)
                 # What already waits in the sockets happened before the timer is handled: a
                 # daemon that was descheduled past a neighbour's timeout reads that
                 # neighbour's HELLO first, instead of expiring a neighbour that spoke.

@@ -10,6 +10,36 @@ from collections import Counter
 
 from topology.jsonfile import write_json_atomic
 
+TIMER_BOUNDS_MS = (10, 25, 50, 100, 200)  # emulated ms late: histogram bounds
+
+
+class TimerLateness:
+    """How late one kind of timer fired, in emulated ms: count, maximum and a histogram over
+    TIMER_BOUNDS_MS (O(1) per firing; the same shape as node.lateness, which aodv may not
+    import)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.late = 0
+        self.max = 0.0
+        self.counts = [0] * (len(TIMER_BOUNDS_MS) + 1)
+
+    def add(self, late_ms: float) -> None:
+        self.n += 1
+        self.late += late_ms > 0
+        self.max = max(self.max, late_ms)
+        i = next((i for i, b in enumerate(TIMER_BOUNDS_MS) if late_ms <= b), -1)
+        self.counts[i] += 1
+
+    def as_dict(self) -> dict:
+        labels = [f"<={b}" for b in TIMER_BOUNDS_MS] + [f">{TIMER_BOUNDS_MS[-1]}"]
+        return {
+            "n": self.n,
+            "late": self.late,
+            "max": round(self.max, 3),
+            "hist": dict(zip(labels, self.counts, strict=True)),
+        }
+
 
 class Stats:
     def __init__(self, robot: str, addr: str) -> None:
@@ -35,6 +65,9 @@ class Stats:
         # The core's own counters (aodv.core.AodvCore.dropped): what it bounded or refused.
         self.protocol_dropped: Counter[str] = Counter()
         self.routes: dict[str, dict] = {}
+        # How late the core's timers fired (emulated ms): the HELLO timer, and the others
+        # (route, neighbour, discovery and acknowledgement expiries).
+        self.timer_lateness = {"hello": TimerLateness(), "expiry": TimerLateness()}
 
     def as_dict(self) -> dict:
         ok = [d for d in self.discoveries if d["ok"]]
@@ -62,6 +95,8 @@ class Stats:
             "discoveries_ok": len(ok),
             "discoveries_failed": len(self.discoveries) - len(ok),
             "discoveries": self.discoveries[-1000:],
+            "timer_lateness_ms": {k: v.as_dict() for k, v in self.timer_lateness.items()},
+            "cpu_s": round(time.process_time(), 3),
         }
 
     def write(self, path: str) -> None:

@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         d = Display(
             me, args.map_size, args.cell, link, flooder, events, args.out_dir,
             args.snapshots, args.video_every, map_period=args.map_period,
+            time_scale=args.time_scale,
         )  # fmt: skip
         stop["robot"] = d
         log.info("display up")

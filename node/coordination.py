@@ -100,6 +100,11 @@ def timer_due(
     """Whether the timer asks for a plan at `step` (difference 3). `next_tick` is the step
     of the timer's next tick on its own schedule (paper); `last_plan_step` the step of the
     last plan generation of any cause (ours)."""
+    return step >= timer_due_step(mode, last_plan_step, next_tick, period)
+
+
+def timer_due_step(mode: str, last_plan_step: int, next_tick: int, period: int) -> int:
+    """The step at which the timer is due to ask for a plan (`timer_due`'s rule)."""
     if mode == "paper":
-        return step >= next_tick
-    return step - last_plan_step >= period
+        return next_tick
+    return last_plan_step + period

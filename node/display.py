@@ -15,6 +15,7 @@ import logging
 import os
 import select
 import threading
+import time
 from collections import Counter
 
 import cv2
@@ -24,6 +25,7 @@ from node import body, render, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.grid import FREE, OccupancyGrid
+from node.lateness import MS_BOUNDS, Lateness
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +44,7 @@ class Display:
         video_every: int = 10,
         scale: int = 2,
         map_period: int = 10,
+        time_scale: float = 1.0,
     ):
         self.me = me
         self.shape = shape
@@ -62,6 +65,9 @@ class Display:
         self.received: Counter[int] = Counter()
         self.malformed = 0
         self.step = -1
+        self.time_scale = time_scale
+        # Emulated ms from the world sending a frame to the display done with it (node.lateness).
+        self.frame_lateness = Lateness(MS_BOUNDS)
         os.makedirs(out_dir, exist_ok=True)
         size = (shape[1], shape[0])  # video frames at one pixel per cell, snapshots at `scale`
         self.video = render.Video(os.path.join(out_dir, "run"), size)
@@ -86,6 +92,8 @@ class Display:
                 known_free_cells=known, video=os.path.basename(self.video.path),
                 video_frames=self.video.frames, malformed=self.malformed,
                 flood=dict(self.flooder.counts),
+                lateness={"frame_done_ms": self.frame_lateness.as_dict()},
+                cpu_s=round(time.process_time(), 3),
             )  # fmt: skip
 
     def _visualization(self) -> None:
@@ -107,6 +115,9 @@ class Display:
                 self._snapshot(step)
             if step % self.video_every == 0 and not self.link.pending():
                 self.video.add(self._frame(step, 1))
+            if msg[1].sent > 0:
+                late_s = time.monotonic() - msg[1].sent
+                self.frame_lateness.add(late_s * 1000 * self.time_scale)
 
     def _frame(self, step: int, scale: int | None = None) -> np.ndarray:
         scale = scale or self.scale

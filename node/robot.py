@@ -44,6 +44,7 @@ from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
 from node.grid import FREE, OCC, OccupancyGrid
+from node.lateness import MS_BOUNDS, Lateness
 from node.rays import Laser
 from node.timing import RobotTimings
 
@@ -99,6 +100,8 @@ class Shared:
     last_plan_step: int = -(10**9)
     dirty: tuple[int, int, int, int] | None = None  # local-map window changed since the last flood
     plan_pending: bool = False
+    plan_asked: int = -1  # the step at which the pending plan was asked for
+    plan_fresh: int | None = None  # a plan not yet applied: the step it was asked for
     finished: bool = False
     teammates: dict[int, Teammate] = field(default_factory=dict)
 
@@ -185,6 +188,15 @@ class Robot:
         self.busy: Counter[str] = Counter()  # thread CPU seconds per part
         # Wall seconds: world send -> frame received; frame received -> command sent.
         self.latency: dict[str, list[float]] = {"delivery": [], "answer": []}
+        # Lateness in emulated time (node.lateness), for the run's fidelity verdict: a plan's
+        # age in steps when applied (0: at the first frame after it was asked for), the
+        # timer's lateness in steps, a frame's answer in emulated ms after the world sent it.
+        self.lateness = {
+            "plan_age_steps": Lateness(),
+            "plan_timer_steps": Lateness(),
+            "map_timer_steps": Lateness(),
+            "frame_answer_ms": Lateness(MS_BOUNDS),
+        }
         self.threads: list[threading.Thread] = []
 
     # -- the five parts ---------------------------------------------------------------------
@@ -240,6 +252,7 @@ class Robot:
             max_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             busy_s={k: round(v, 3) for k, v in self.busy.items()},
             thread_cpu_s=thread_cpu,
+            lateness={k: v.as_dict() for k, v in self.lateness.items()},
             latency_ms={
                 k: {
                     q: round(float(np.percentile(v, p)) * 1000, 2)
@@ -293,6 +306,9 @@ class Robot:
                 s.step = f.step
                 s.scans.append((f.step, f.x, f.y, f.ranges))
                 target = None if behind else self._follow(moved)
+                if not behind and s.plan_fresh is not None:
+                    self.lateness["plan_age_steps"].add(f.step - s.plan_fresh - 1)
+                    s.plan_fresh = None
             if behind:
                 self.skipped += 1  # a newer frame is waiting: act on that one
             else:
@@ -301,6 +317,9 @@ class Robot:
             t_out = time.monotonic()
             if f.sent > 0:
                 self.latency["delivery"].append(t_in - f.sent)
+                if not behind:
+                    lag_ms = (t_out - f.sent) * 1000 * self.cfg.timing.time_scale
+                    self.lateness["frame_answer_ms"].add(lag_ms)
             self.latency["answer"].append(t_out - t_in)
             with self.tick:
                 self.tick.notify_all()
@@ -358,10 +377,14 @@ class Robot:
             if self.s.finished or self.s.plan_pending:
                 return
             self.s.plan_pending = True
+            self.s.plan_asked = self.s.step
         self.requests.put(cause)
 
     def _planning(self) -> None:
         cfg = self.cfg
+        # A test hook: wall seconds the planner waits before installing each plan, so that
+        # plans arrive late in emulated time (tests of the fidelity verdict, testbed.fidelity).
+        delay = float(os.environ.get("NODE_PLAN_DELAY_MS", "0") or 0) / 1000
         while not self.stopping.is_set():
             try:
                 cause = self.requests.get(timeout=0.5)
@@ -386,8 +409,11 @@ class Robot:
             ms = (time.perf_counter() - t0) * 1000
             self.busy["plan"] += ms / 1000
             self.plan_ms.append(ms)
+            if delay > 0:
+                time.sleep(delay)
             with self.lock:
                 s.plan, s.wp = p, 0
+                s.plan_fresh = s.plan_asked
                 s.last_plan_step = step
                 s.plan_pending = False
                 if p.status == "done":
@@ -442,14 +468,15 @@ class Robot:
                 started = self.s.last_plan_step >= 0  # the first plan is motion control's
                 if started and next_tick is None:
                     next_tick = self.s.last_plan_step + period
+                due_step = coordination.timer_due_step(
+                    cfg.coordination, self.s.last_plan_step, next_tick, period
+                )
                 due = (
                     step >= 0
                     and started
                     and not self.s.finished
                     and not self.s.plan_pending
-                    and coordination.timer_due(
-                        cfg.coordination, step, self.s.last_plan_step, next_tick, period
-                    )
+                    and step >= due_step
                 )
                 while next_tick is not None and next_tick <= step:
                     next_tick += cfg.plan_period
@@ -458,12 +485,15 @@ class Robot:
             seen_step = step
             if due:
                 timer_fired = True
+                self.lateness["plan_timer_steps"].add(step - due_step)
                 self.request("timer")
             if (
                 step >= 0
                 and step - last_map >= cfg.map_period
                 and step >= cfg.phase % cfg.map_period
             ):
+                if last_map >= 0:
+                    self.lateness["map_timer_steps"].add(step - last_map - cfg.map_period)
                 last_map = step
                 self._share_map(step)
 

@@ -89,10 +89,26 @@ def main(args: argparse.Namespace) -> int:
     replace = getattr(args, "replace", False)
     result = run(cfg, args.out, name, progress=not args.quiet, replace=replace)
     print(summary_line(result, args.out), flush=True)
+    warning = fidelity_warning(result)
+    if warning:
+        sys.stderr.write(warning + "\n")
     if result["status"] != "complete":
         sys.stderr.write(f"testbed run: {result['status']}: {result['status_detail']}\n")
         return 1
     return 0
+
+
+def fidelity_warning(result: dict) -> str | None:
+    """The one line `testbed run` prints for a run its verdict (testbed.fidelity) found
+    unfaithful to the time scale; None for a faithful one."""
+    f = result.get("fidelity") or {}
+    if f.get("ok", True):
+        return None
+    scale = result.get("time_scale_requested")
+    return (
+        f"testbed run: warning: not faithful at time scale {scale:g}: {f.get('reason')}; "
+        "its results may differ from a slower run's (a lower --time-scale)"
+    )
 
 
 def run(cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False) -> dict:
@@ -433,7 +449,7 @@ class StepLoop:
             b = self.world.bodies[k - 1]
             self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
         x, y = self.prep.display_pos
-        self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None), True)
+        self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None, now), True)
 
     def _show_progress(self, coverage: float) -> None:
         now = time.monotonic()

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from node import render
+from testbed import fidelity
 from testbed.world.world import World
 from topology.jsonfile import write_json_atomic
 
@@ -37,7 +38,7 @@ RESULT_CONFIG_KEYS = (
 # What each robot's summary line (its last event) says, copied into robots/rK.json.
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
-    "frames", "latency_ms", "thread_cpu_s",
+    "frames", "latency_ms", "thread_cpu_s", "lateness",
 )  # fmt: skip
 PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
 
@@ -55,8 +56,9 @@ def read_events(path: str) -> list[dict]:
     return out
 
 
-def robot_result(rec: RunRecord, r: RobotOutcome) -> dict:
-    """Robot r's entry in result.json; its fuller record goes to robots/rK.json."""
+def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
+    """Robot r's entry in result.json, and its summary event ({} when it left none: its
+    lateness, node.lateness, and CPU); its fuller record goes to robots/rK.json."""
     ev = read_events(os.path.join(rec.out, "robots", f"r{r.k}.events.jsonl"))
     plans = [{"step": e["step"], "cause": e["cause"]} for e in ev if e["e"] == "plan"]
     sent: dict[str, int] = {}
@@ -85,7 +87,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> dict:
     )  # fmt: skip
     detail.update({k: summary.get(k) for k in SUMMARY_KEYS})
     write_json_atomic(os.path.join(rec.out, "robots", f"r{r.k}.json"), detail)
-    return out
+    return out, summary
 
 
 def write(rec: RunRecord) -> dict:
@@ -99,7 +101,8 @@ def write(rec: RunRecord) -> dict:
 
 def contents(rec: RunRecord) -> dict:
     """robots/rK.json and paths.png; returns result.json's contents (not yet written)."""
-    robot_out = {f"r{r.k}": robot_result(rec, r) for r in rec.robots}
+    robots = {f"r{r.k}": robot_result(rec, r) for r in rec.robots}
+    robot_out = {k: v[0] for k, v in robots.items()}
     clock = rec.clock
     try:
         paths_png(rec.world, os.path.join(rec.out, "paths.png"))
@@ -137,8 +140,58 @@ def contents(rec: RunRecord) -> dict:
         "world_missed_steps_ms_late": [list(m) for m in clock.world_missed_steps],
         "robots": robot_out,
     }
+    summaries = [v[1] for v in robots.values()]
+    display = display_summary(rec.out)
+    daemons = daemon_stats(rec.out, len(rec.robots) + 1)
+    result["cpu_s"] = cpu_seconds(rec, summaries, display, daemons)
+    result["fidelity"] = fidelity.verdict(
+        fidelity.measures(
+            clock.miss_fraction_outside_stalls if clock.steps else None,
+            [sm.get("lateness") for sm in summaries],
+            display.get("lateness"),
+            [d.get("timer_lateness_ms") for d in daemons],
+        )
+    )
     result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
     return result
+
+
+def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:
+    """CPU seconds of the run's processes (the robots', the display's, the world's step
+    loop, the AODV daemons'), and all of it per robot-step in ms: what a cluster's run
+    needs per robot (testbed.slurm)."""
+    parts = {
+        "robots": sum(sm.get("cpu_s") or 0.0 for sm in summaries),
+        "display": display.get("cpu_s") or 0.0,
+        "world": rec.world_timing.get("world_cpu_s", 0.0),
+        "routing": sum(d.get("cpu_s") or 0.0 for d in daemons),
+    }
+    out = {k: round(v, 3) for k, v in parts.items()}
+    robot_steps = rec.clock.steps * len(rec.robots)
+    out["per_robot_step_ms"] = (
+        round(sum(parts.values()) / robot_steps * 1000, 3) if robot_steps else None
+    )
+    return out
+
+
+def display_summary(out: str) -> dict:
+    """The display's summary event ({} when it wrote none)."""
+    ev = read_events(os.path.join(out, "display", "events.jsonl"))
+    return next((e for e in reversed(ev) if e.get("e") == "summary"), {})
+
+
+def daemon_stats(out: str, n: int) -> list[dict]:
+    """The AODV daemons' statistics (aodv/rK.json), for those that wrote them."""
+    found = []
+    for k in range(1, n + 1):
+        try:
+            with open(os.path.join(out, "aodv", f"r{k}.json")) as f:
+                stats = json.load(f)
+        except (OSError, ValueError):
+            continue
+        if isinstance(stats, dict):
+            found.append(stats)
+    return found
 
 
 def snapshot_steps(out: str) -> list[int]:

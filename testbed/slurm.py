@@ -37,22 +37,28 @@ from testbed.rundir import is_done, run_argv, run_dir
 from testbed.sweepfile import PlannedRun
 from topology.jsonfile import read_json, write_json_atomic
 
-# CPU a robot process uses per step (node benchmark: about 2.3 ms per step for the robot;
-# its routing daemon and its share of the world and captures bring it near 4 ms).
-CPU_S_PER_ROBOT_STEP = 0.004
+# CPU the whole run uses per robot-step: robots, display, the world's step loop and the
+# routing daemons together (result.json's cpu_s.per_robot_step_ms). Measured 1.0-1.5 ms for
+# 10 robots at 20 m on a quiet machine, 1.8 ms on a loaded one (CPU_MARGIN covers it), where
+# 4 ms was assumed before. A sweep directory with finished runs sizes by what they measured.
+CPU_S_PER_ROBOT_STEP = 0.0015
 STEP_S = 0.1  # a world step is 100 ms of robot time
 CPU_MARGIN = 1.5
 TIME_MARGIN = 3.0
 STARTUP_S = 120.0  # bring-up, teardown, and a loaded node's slowness
 
 
-def resources(config: RunConfig, cpus_per_node: int | None = None) -> tuple[int, int]:
+def resources(
+    config: RunConfig, cpus_per_node: int | None = None, cpu_per_robot_step: float | None = None
+) -> tuple[int, int]:
     """(CPUs, time limit in minutes) for one run: its robots (and the display) each use
-    CPU_S_PER_ROBOT_STEP per step, and a step lasts STEP_S / time scale of wall time, plus a
-    core for the world's clock and the captures; the time is the step cap at that pace,
-    with margin. CPUs are capped at what a node of the partition has."""
+    `cpu_per_robot_step` seconds (default CPU_S_PER_ROBOT_STEP) per step, and a step lasts
+    STEP_S / time scale of wall time, plus a core for the world's clock and the captures;
+    the time is the step cap at that pace, with margin. CPUs are capped at what a node of
+    the partition has."""
     ts = config.time_scale
-    cores = (config.robots + 1) * CPU_S_PER_ROBOT_STEP * ts / STEP_S * CPU_MARGIN + 1
+    per_step = cpu_per_robot_step or CPU_S_PER_ROBOT_STEP
+    cores = (config.robots + 1) * per_step * ts / STEP_S * CPU_MARGIN + 1
     cpus = max(1, math.ceil(cores))
     if cpus_per_node:
         cpus = min(cpus, cpus_per_node)
@@ -73,6 +79,17 @@ def _run(argv: list[str]) -> str:
         first = (proc.stderr.strip() or proc.stdout.strip() or "no output").splitlines()[0]
         raise TestbedError(f"{Path(argv[0]).name} failed: {first}")
     return proc.stdout
+
+
+def measured_cpu_per_robot_step(out: Path) -> float | None:
+    """The most CPU seconds per robot-step that the finished runs (and calibration trials)
+    of the sweep directory measured (result.json's cpu_s), or None when none says."""
+    found = []
+    for res in [*out.glob("runs/*/result.json"), *out.glob("calibration/*/result.json")]:
+        ms = ((read_json(res) or {}).get("cpu_s") or {}).get("per_robot_step_ms")
+        if isinstance(ms, int | float) and ms > 0:
+            found.append(ms / 1000)
+    return max(found, default=None)
 
 
 def node_cpus(partition: str | None) -> int | None:
@@ -139,6 +156,7 @@ def submit(
     """Submit one job array per team size for `todo`; returns the jobs (also recorded)."""
     sbatch = _tool("sbatch")
     cap = node_cpus(partition)
+    measured = measured_cpu_per_robot_step(out)
     slurm_dir = out / "slurm"
     (slurm_dir / "logs").mkdir(parents=True, exist_ok=True)
     jobs = submitted(out)
@@ -146,8 +164,8 @@ def submit(
     for run in todo:
         groups.setdefault(run.config.robots, []).append(run)
     for robots, runs in sorted(groups.items()):
-        cpus = max(resources(r.config, cap)[0] for r in runs)
-        minutes = max(resources(r.config, cap)[1] for r in runs)
+        cpus = max(resources(r.config, cap, measured)[0] for r in runs)
+        minutes = max(resources(r.config, cap, measured)[1] for r in runs)
         n = len(jobs) + 1
         task_list = slurm_dir / f"tasks-{n}.txt"
         task_list.write_text("".join(f"{r.run_id}\n" for r in runs))

@@ -62,7 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--calibrate",
         action="store_true",
         help="before each team size's first run, find the time scale this machine sustains "
-        "with short runs (up to 4x the file's, or down); for hardware the file was not made for",
+        "with short runs that stay in time and faithful (up to 4x the file's, or down); for "
+        "hardware the file was not made for",
     )
     parser.add_argument(
         "--resume",

@@ -1,11 +1,14 @@
-"""The sweep's rules for runs that missed step deadlines: a pure `decide(outcome, state)`.
+"""The sweep's rules for runs that missed step deadlines or were not faithful: a pure
+`decide(outcome, state)`.
 
-Theory of operation. A run records the fraction of step deadlines it missed, and how much of
-that fell in host stalls (testbed.stalls: the machine itself stopped, so no slower clock
-would have helped). When a run ends, the sweep (testbed.sweep, the mechanism) describes it
-as an `Outcome`, hands it with the sweep's `State` to `decide`, and applies the `Decision`:
-the new state, the back-off records for sweep.json, whether to redo the run, and the words
-for the progress line. `decide` reads no clock, does no IO and changes nothing it is given.
+Theory of operation. A run records the fraction of step deadlines it missed, its fidelity
+verdict (testbed.fidelity: whether its plans and timers came late in emulated time), and
+how much of its misses fell in host stalls (testbed.stalls: the machine itself stopped, so
+no slower clock would have helped). When a run ends, the sweep (testbed.sweep, the
+mechanism) describes it as an `Outcome`, hands it with the sweep's `State` to `decide`, and
+applies the `Decision`: the new state, the back-off records for sweep.json, whether to
+redo the run, and the words for the progress line. `decide` reads no clock, does no IO
+and changes nothing it is given.
 
 The rules, in the order they are tried (each is cited at its branch below):
 
@@ -23,8 +26,12 @@ The rules, in the order they are tried (each is cited at its branch below):
    run is redone (3 attempts) if it missed more than REDO_MISS, else kept. Only this team
    size: a small team is bound by the latency of a step's round trip, a large one by CPU,
    so one says little about the other; each finds its own scale.
-6. A run of a slowed-down team size that missed at most CLEAN_MISS outside stalls counts
-   as clean; after CLEAN_RUNS_TO_SPEED_UP clean runs since the last change the factor goes
+6. Within the limit, but not faithful (testbed.fidelity: plans applied late, timers
+   late): the load made emulated time run ahead of the work, as with missed deadlines, so
+   rules 3 to 5 apply as they would to a late run, and the run is redone once (2 attempts)
+   at the backed-off scale or concurrency: its results changed with the dilation.
+7. A faithful run of a slowed-down team size that missed at most CLEAN_MISS outside stalls
+   counts as clean; after CLEAN_RUNS_TO_SPEED_UP clean runs since the last change the factor goes
    back up a notch (divided by SLOWDOWN, never past the team size's ceiling: the file's
    scale, or what calibration found). Before stalls were told apart, a ratchet that needed
    6 runs under 0.3% to speed up again took the paper sweep's team sizes down to 0.44-0.72
@@ -33,9 +40,10 @@ The rules, in the order they are tried (each is cited at its branch below):
 Calibration (`testbed sweep --calibrate`, for a machine the file's scales were not made
 for): before a team size's first run, short runs alone at the file's scale times a factor;
 `calibration_next` says which factor to try next from the trials so far, and
-`calibrated` which one to keep: up by 1/SLOWDOWN per trial while runs stay clean (up to
-MAX_SCALE_FACTOR), down by SLOWDOWN while they miss over the limit; the team's factor and
-ceiling become the last clean factor.
+`calibrated` which one to keep: up by 1/SLOWDOWN per trial while runs stay clean and
+faithful (up to MAX_SCALE_FACTOR), down by SLOWDOWN while they miss over the limit or are
+not faithful; the team's factor and ceiling become the last clean, faithful factor. A
+trial is (factor, miss outside stalls, faithful); a pair (factor, miss) is a faithful one.
 """
 
 from __future__ import annotations
@@ -63,6 +71,8 @@ class Outcome:
     load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.run_load)
     jobs_at_start: int = 1  # the concurrency allowed when it started
     attempts: int = 1  # how many times it has been started, this one included
+    faithful: bool | None = None  # its fidelity verdict (None: the run did not say)
+    fidelity_reason: str = ""  # why not, when not
 
 
 @dataclass(frozen=True)
@@ -99,7 +109,40 @@ def _back_off(o: Outcome, state: State, change: dict, what: str, attempts: int) 
     redo = o.attempts < attempts
     words = f"; {what}" + (", redoing it" if redo else "")
     record = {"deadline_miss_fraction": o.miss, **change}
+    if o.faithful is False:
+        record["faithful"] = False
     return Decision(state, (record,), redo, words)
+
+
+def _relieve(o: Outcome, state: State) -> Decision:
+    """Rules 3 to 5: less load (a lower load limit, fewer jobs) or, alone, a lower time scale
+    for this team size; an unfaithful run is redone at least once."""
+    n, miss = o.robots, o.miss
+    if state.load_limit is not None and o.shared:
+        # Rule 3: shared under a load limit: the limit falls below what this run saw.
+        limit = round(min(state.load_limit, LOAD_BACKOFF * o.load_seen), 1)
+        return _back_off(o, replace(state, load_limit=limit), {"load_limit": limit},
+                         f"load limit down to {limit:g}", attempts=2)  # fmt: skip
+    if state.load_limit is None and o.jobs_at_start > 1:
+        # Rule 4: shared by job count: one run fewer at a time.
+        jobs = max(1, min(state.jobs, o.jobs_at_start) - 1)
+        return _back_off(o, replace(state, jobs=jobs), {"jobs": jobs},
+                         f"concurrency down to {jobs}", attempts=2)  # fmt: skip
+    if not o.shared and state.factor(n) > MIN_SCALE_FACTOR:
+        # Rule 5: alone and still late: this team size slows down, this run again if bad.
+        new = max(MIN_SCALE_FACTOR, state.factor(n) * SLOWDOWN)
+        slower = replace(
+            state,
+            scale_factors={**state.scale_factors, n: new},
+            clean_runs={**state.clean_runs, n: 0},
+        )
+        bad = _number(miss) and miss > REDO_MISS
+        return _back_off(
+            o, slower, {"robots": n, "time_scale_factor": round(new, 3)},
+            f"time scales of teams of {n} down to {new:.0%} of the file's",
+            attempts=3 if bad else 2 if o.faithful is False else 1,
+        )  # fmt: skip
+    return Decision(state)
 
 
 def decide(o: Outcome, state: State) -> Decision:
@@ -115,33 +158,18 @@ def decide(o: Outcome, state: State) -> Decision:
             if miss > REDO_MISS:
                 d = _back_off(o, state, {"in_host_stalls": True},
                               "the host's stalls, time scale kept", attempts=3)  # fmt: skip
-        elif state.load_limit is not None and o.shared:
-            # Rule 3: shared under a load limit: the limit falls below what this run saw.
-            limit = round(min(state.load_limit, LOAD_BACKOFF * o.load_seen), 1)
-            d = _back_off(o, replace(state, load_limit=limit), {"load_limit": limit},
-                          f"load limit down to {limit:g}", attempts=2)  # fmt: skip
-        elif state.load_limit is None and o.jobs_at_start > 1:
-            # Rule 4: shared by job count: one run fewer at a time.
-            jobs = max(1, min(state.jobs, o.jobs_at_start) - 1)
-            d = _back_off(o, replace(state, jobs=jobs), {"jobs": jobs},
-                          f"concurrency down to {jobs}", attempts=2)  # fmt: skip
-        elif not o.shared and state.factor(n) > MIN_SCALE_FACTOR:
-            # Rule 5: alone and still late: this team size slows down, this run again if bad.
-            new = max(MIN_SCALE_FACTOR, state.factor(n) * SLOWDOWN)
-            slower = replace(
-                state,
-                scale_factors={**state.scale_factors, n: new},
-                clean_runs={**state.clean_runs, n: 0},
-            )
-            d = _back_off(
-                o, slower, {"robots": n, "time_scale_factor": round(new, 3)},
-                f"time scales of teams of {n} down to {new:.0%} of the file's",
-                attempts=3 if miss > REDO_MISS else 1,
-            )  # fmt: skip
+        else:
+            d = _relieve(o, state)  # rules 3 to 5
+        d = replace(d, words=words + d.words)
+    elif o.faithful is False:
+        # Rule 6: in time but not faithful: relieved as a late run would be, redone once.
+        words = ", not faithful" + (f" ({o.fidelity_reason})" if o.fidelity_reason else "")
+        d = _relieve(o, state)
         d = replace(d, words=words + d.words)
     s = d.state
-    if _number(ours) and ours <= CLEAN_MISS and s.factor(n) < s.ceiling(n):
-        # Rule 6: a clean run of a slowed-down size; enough of them speed it up a notch.
+    clean = _number(ours) and ours <= CLEAN_MISS and o.faithful is not False
+    if clean and s.factor(n) < s.ceiling(n):
+        # Rule 7: a clean run of a slowed-down size; enough of them speed it up a notch.
         clean = s.clean_runs.get(n, 0) + 1
         if clean < CLEAN_RUNS_TO_SPEED_UP:
             return replace(d, state=replace(s, clean_runs={**s.clean_runs, n: clean}))
@@ -158,29 +186,45 @@ def decide(o: Outcome, state: State) -> Decision:
     return d
 
 
-def calibration_next(trials: list[tuple[float, float]]) -> float | None:
-    """The next factor to try, from the (factor, miss outside stalls) trials so far (in the
-    order they ran), or None when calibration is over."""
+Trial = tuple  # (factor, miss outside stalls[, faithful]): a calibration run's outcome
+
+
+def _faithful(trial: Trial) -> bool:
+    return len(trial) < 3 or trial[2] is not False
+
+
+def _clean(trial: Trial) -> bool:
+    """Clean: at most CLEAN_MISS of its deadlines missed, and faithful."""
+    return trial[1] <= CLEAN_MISS and _faithful(trial)
+
+
+def _within(trial: Trial) -> bool:
+    """Within the limit: at most DEADLINE_MISS_LIMIT missed, and faithful."""
+    return trial[1] <= DEADLINE_MISS_LIMIT and _faithful(trial)
+
+
+def calibration_next(trials: list[Trial]) -> float | None:
+    """The next factor to try, from the trials so far (in the order they ran), or None when
+    calibration is over."""
     if not trials:
         return 1.0
-    first_clean = trials[0][1] <= CLEAN_MISS
-    factor, miss = trials[-1]
-    if first_clean:  # going up: until a trial misses, or the top
-        if miss > CLEAN_MISS or factor >= MAX_SCALE_FACTOR:
+    factor = trials[-1][0]
+    if _clean(trials[0]):  # going up: until a trial misses or is not faithful, or the top
+        if not _clean(trials[-1]) or factor >= MAX_SCALE_FACTOR:
             return None
         return min(MAX_SCALE_FACTOR, factor / SLOWDOWN)
-    if trials[0][1] <= DEADLINE_MISS_LIMIT:
+    if _within(trials[0]):
         return None  # within the limit at the file's scale: keep it
-    if miss <= CLEAN_MISS or factor <= MIN_SCALE_FACTOR:  # going down: until clean
+    if _clean(trials[-1]) or factor <= MIN_SCALE_FACTOR:  # going down: until clean
         return None
     return max(MIN_SCALE_FACTOR, factor * SLOWDOWN)
 
 
-def calibrated(trials: list[tuple[float, float]]) -> float:
-    """The factor calibration keeps: the highest that ran clean; if none did, the file's
-    scale when it stayed within the limit, else the lowest tried."""
-    clean = [f for f, miss in trials if miss <= CLEAN_MISS]
+def calibrated(trials: list[Trial]) -> float:
+    """The factor calibration keeps: the highest that ran clean (and faithful); if none
+    did, the file's scale when it stayed within the limit, else the lowest tried."""
+    clean = [t[0] for t in trials if _clean(t)]
     if clean:
         return max(clean)
-    within = [f for f, miss in trials if miss <= DEADLINE_MISS_LIMIT]
-    return max(within) if within else min((f for f, _ in trials), default=1.0)
+    within = [t[0] for t in trials if _within(t)]
+    return max(within) if within else min((t[0] for t in trials), default=1.0)

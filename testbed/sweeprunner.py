@@ -51,7 +51,7 @@ from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from testbed import sweeppolicy
+from testbed import fidelity, sweeppolicy
 from testbed.errors import TestbedError
 from testbed.runconfig import RunConfig
 from testbed.rundir import is_done, plan_dict, run_argv, run_dir
@@ -159,7 +159,7 @@ class Sweep:
         self.view = view
         self.view_owner: str | None = None
         self.ceilings: dict[int, float] = {}
-        self.calibration: dict[int, list[tuple[float, float]]] = {}
+        self.calibration: dict[int, list[tuple[float, float, bool]]] = {}
         self.netem = netem
         self.sweep_file = sweep_file
         self.command = command or run_command()
@@ -287,6 +287,10 @@ class Sweep:
         st["result_status"] = result.get("status")
         miss = result.get("deadline_miss_fraction")
         st["deadline_miss_fraction"] = miss
+        verdict = result.get("fidelity") if isinstance(result.get("fidelity"), dict) else {}
+        faithful = fidelity.is_faithful(result)
+        if faithful is not None:
+            st["faithful"] = faithful
         n = run.config.robots
         self.progress.record(n, wall)
         outcome = sweeppolicy.Outcome(
@@ -298,6 +302,8 @@ class Sweep:
             load_seen=child.load_seen,
             jobs_at_start=child.jobs_at_start,
             attempts=st["attempts"],
+            faithful=faithful,
+            fidelity_reason=str(verdict.get("reason", "")),
         )
         decision = sweeppolicy.decide(outcome, self._policy_state())
         self._apply(decision, run, st, queue)
@@ -327,16 +333,17 @@ class Sweep:
     def _calibrate(self, todo: list[PlannedRun]) -> None:
         """Find each team size's time scale on this machine before its first run: short
         runs alone (CALIBRATION_STEPS steps) at the file's scale times a factor, up while
-        they run clean, down while they miss (sweeppolicy.calibration_next)."""
+        they run clean and faithful, down while they miss or are not faithful
+        (sweeppolicy.calibration_next)."""
         firsts: dict[int, PlannedRun] = {}
         for run in todo:
             firsts.setdefault(run.config.robots, run)
         for robots, run in sorted(firsts.items()):
-            trials: list[tuple[float, float]] = []
+            trials: list[tuple[float, float, bool]] = []
             factor = sweeppolicy.calibration_next(trials)
             while factor is not None and self.stop_signal is None:
-                miss = self._trial(run, factor, len(trials) + 1)
-                trials.append((round(factor, 3), miss))
+                miss, faithful = self._trial(run, factor, len(trials) + 1)
+                trials.append((round(factor, 3), miss, faithful))
                 factor = sweeppolicy.calibration_next(trials)
             found = sweeppolicy.calibrated(trials)
             self.calibration[robots], self.ceilings[robots] = trials, found
@@ -346,8 +353,9 @@ class Sweep:
                                  f"{scale:.3g} ({found:.0%} of the file's), {len(trials)} "
                                  "trial(s)")  # fmt: skip
 
-    def _trial(self, run: PlannedRun, factor: float, k: int) -> float:
-        """One calibration run; the fraction of its step deadlines missed outside stalls."""
+    def _trial(self, run: PlannedRun, factor: float, k: int) -> tuple[float, bool]:
+        """One calibration run: the fraction of its step deadlines missed outside stalls,
+        and whether it was faithful (testbed.fidelity; a run without a verdict is)."""
         c = run.config
         config = replace(c, max_steps=CALIBRATION_STEPS,
                       time_scale=round(c.time_scale * factor, 3))  # fmt: skip
@@ -359,7 +367,8 @@ class Sweep:
         miss = res.get("deadline_miss_fraction_outside_stalls")
         if miss is None:
             miss = res.get("deadline_miss_fraction")
-        return float(miss) if isinstance(miss, int | float) else 1.0
+        faithful = fidelity.is_faithful(res) is not False
+        return (float(miss) if isinstance(miss, int | float) else 1.0), faithful
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
         for child in children.values():

@@ -8,10 +8,11 @@ results. It returns the runs and the tables, which the report decides its verdic
 
 Which runs count: runs whose status is `complete` or `step_cap` (a run that hit the step cap
 counts its unfinished robots at the final step, as the contract says). Runs that crashed or
-failed are left out and counted by the report. The paper's figures use the unimpaired runs
-(loss 0, delay 0) of one routing on one map (AODV on the empty terrain where it ran; a
-protocols sweep compares the others in its own section); the impairment figures exist when
-a sweep varies loss or delay.
+failed are left out and counted by the report, and so are runs not faithful to their time
+scale (testbed.fidelity) unless `testbed report --include-unfaithful`. The paper's
+figures use the unimpaired runs (loss 0, delay 0) of one routing on one map (AODV on the
+empty terrain where it ran; a protocols sweep compares the others in its own section); the
+impairment figures exist when a sweep varies loss or delay.
 
 - Fig. 2(a)/(b): exploration steps of a run (mean over robots of finish_step) against team
   size, one line per communication range; the point is the mean over runs, the error bar its
@@ -151,13 +152,16 @@ def _routing_figures(runs: list[RunRecord], metrics: dict, figdir: Path, made: d
         made["files"] += plots.plot_impairments(imp, figdir / "impairments")
 
 
-def make_all(sweep_dir: str | Path, metrics_of: MetricsOf | None = None) -> dict:
+def make_all(
+    sweep_dir: str | Path, metrics_of: MetricsOf | None = None, unfaithful: bool = False
+) -> dict:
     """Write every figure the sweep has data for into DIR/figures/; returns what was made:
-    {"files": [...], "runs": [RunRecord, ...], "tables": {name: rows}}."""
+    {"files": [...], "runs": [RunRecord, ...], "tables": {name: rows}}. Runs not faithful
+    to their time scale are left out unless `unfaithful`."""
     sweep_dir = Path(sweep_dir)
     figdir = sweep_dir / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
-    all_runs = load_runs(sweep_dir)
+    all_runs = load_runs(sweep_dir, unfaithful=unfaithful)
     network = tables.main_network(all_runs)
     runs = [r for r in all_runs if r.network == network]
     made: dict = {"files": [], "runs": all_runs, "tables": {}}

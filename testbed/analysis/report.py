@@ -151,9 +151,11 @@ def _num(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
-def write_report(sweep_dir: str | Path, metrics_of=None) -> tuple[Path, list[Verdict]]:
+def write_report(
+    sweep_dir: str | Path, metrics_of=None, unfaithful: bool = False
+) -> tuple[Path, list[Verdict]]:
     sweep_dir = Path(sweep_dir)
-    made = figures.make_all(sweep_dir, metrics_of=metrics_of)
+    made = figures.make_all(sweep_dir, metrics_of=metrics_of, unfaithful=unfaithful)
     vs = verdicts(made["tables"])
     path = sweep_dir / "report.md"
     text = render(sweep_dir, made, vs) + "\n"
@@ -176,10 +178,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "report.html; or one run's directory (testbed run --out DIR): its routing.json "
         "(from the captures) and summary.md",
     )
+    parser.add_argument(
+        "--include-unfaithful",
+        action="store_true",
+        help="count the runs whose fidelity verdict says time dilation changed them "
+        "(result.json's fidelity.ok false); by default they are left out and counted",
+    )
 
 
-def _sweep_main(sweep_dir: Path) -> int:
-    path, vs = write_report(sweep_dir)
+def _sweep_main(sweep_dir: Path, unfaithful: bool = False) -> int:
+    path, vs = write_report(sweep_dir, unfaithful=unfaithful)
     held = sum(v.verdict == HOLDS for v in vs)
     print(f"{path}: {held} of {len(vs)} claims hold", file=sys.stderr)
     for v in vs:
@@ -202,7 +210,7 @@ def _run_main(run_dir: Path) -> int:
 def main(args: argparse.Namespace) -> int:
     d = Path(args.dir)
     if (d / "runs").is_dir():
-        return _sweep_main(d)
+        return _sweep_main(d, getattr(args, "include_unfaithful", False))
     if (d / "result.json").is_file():
         return _run_main(d)
     raise UsageError(

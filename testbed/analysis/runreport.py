@@ -50,7 +50,11 @@ def _timing(run: RunRecord) -> list[str]:
     if stalls.events:
         line += (f", {stalls.deadlines_missed} of them in {stalls.events} host stall(s) "
                  f"({seconds(stalls.stalled_s)} s in all)")  # fmt: skip
-    return [line + "."]
+    out = [line + "."]
+    if run.faithful is False:
+        out.append(f"**Not faithful to its time scale**: {run.fidelity_reason}: its results "
+                   "may differ from a slower run's.")  # fmt: skip
+    return out
 
 
 def _routing_table(m: dict) -> list[str]:

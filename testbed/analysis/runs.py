@@ -20,8 +20,10 @@ module is its reading side:
   for a veth run or a run made before the file existed. A medium.json that is there but
   not what the channel writes makes the run malformed, as a bad result.json does.
 
-Which runs count (`RunRecord.usable`): status `complete` or `step_cap`; a run that hit the
-step cap counts its unfinished robots at the final step (`exploration_steps`).
+Which runs count (`RunRecord.usable`): status `complete` or `step_cap`, and faithful to its
+time scale (result.json's `fidelity`, testbed.fidelity; a run written before verdicts
+counts) unless `load_runs(..., unfaithful=True)` keeps those too; a run that hit the step
+cap counts its unfinished robots at the final step (`exploration_steps`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import json
 import logging
 import statistics
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 
@@ -187,10 +189,13 @@ class RunRecord:
     wall_time_s: float | None
     robots: tuple[RobotRecord, ...]  # in the file's order
     channel: ChannelRecord | None = None  # medium.json: the ns3-wifi channel's counters
+    faithful: bool | None = None  # its fidelity verdict (None: written before verdicts)
+    fidelity_reason: str = ""  # why not, when not
+    count_unfaithful: bool = False  # usable even if not faithful (load_runs(unfaithful=True))
 
     @property
     def usable(self) -> bool:
-        return self.status in USABLE
+        return self.status in USABLE and (self.faithful is not False or self.count_unfaithful)
 
     @property
     def unimpaired(self) -> bool:
@@ -359,6 +364,7 @@ def parse_result(doc, run_dir: Path, channel: ChannelRecord | None = None) -> Ru
     if not isinstance(doc, Mapping):
         raise ResultError("not a JSON object")
     stalls = _mapping(doc, "host_stalls")
+    fidelity = _mapping(doc, "fidelity")
     return RunRecord(
         run_id=run_dir.name,
         path=run_dir,
@@ -382,6 +388,8 @@ def parse_result(doc, run_dir: Path, channel: ChannelRecord | None = None) -> Ru
         wall_time_s=_get(doc, "wall_time_s", _NUM),
         robots=tuple(_robot(k, v) for k, v in _mapping(doc, "robots").items()),
         channel=channel,
+        faithful=_get(fidelity, "ok", (bool,)),
+        fidelity_reason=_get(fidelity, "reason", (str,), ""),
     )
 
 
@@ -404,13 +412,14 @@ def load_run(run_dir: str | Path) -> RunRecord:
         raise ResultError(f"{path}: {e}") from None
 
 
-def load_runs(sweep_dir: str | Path) -> list[RunRecord]:
+def load_runs(sweep_dir: str | Path, unfaithful: bool = False) -> list[RunRecord]:
     """Every run of a sweep directory with a readable result.json, sorted by run id; the
-    others are logged and left out."""
+    others are logged and left out. `unfaithful`: runs not faithful to their time scale
+    count as usable too."""
     runs = []
     for res in sorted(Path(sweep_dir).glob(f"runs/*/{RESULT_NAME}")):
         try:
-            runs.append(load_run(res.parent))
+            runs.append(replace(load_run(res.parent), count_unfaithful=unfaithful))
         except ResultError as e:
             log.warning("skipping %s", e)
     return runs

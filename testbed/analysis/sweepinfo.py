@@ -63,6 +63,7 @@ def _finished_lines(runs: list[RunRecord], planned: list[dict]) -> list[str]:
         + ", ".join(f"{k}: {n}" for k, n in sorted(status.items()))
         + "). Runs that crashed or failed are left out of the figures."
     ]
+    out += _fidelity_lines(runs)
     skipped = [r for r in planned if r.get("status") == "skipped"]
     if skipped:
         out.append(f"Skipped {len(skipped)} run(s): {skipped[0].get('reason')}.")
@@ -74,6 +75,26 @@ def _finished_lines(runs: list[RunRecord], planned: list[dict]) -> list[str]:
             f"{' ...' if len(missing) > 5 else ''}); resume the sweep to complete them."
         )
     return out
+
+
+def _fidelity_lines(runs: list[RunRecord]) -> list[str]:
+    """The runs whose fidelity verdict (testbed.fidelity) says time dilation changed them."""
+    bad = [r for r in runs if r.faithful is False]
+    if not bad:
+        return []
+    counted = bad[0].count_unfaithful
+    shown = "; ".join(f"{r.run_id} at time scale {r.time_scale_requested or r.config.time_scale:g}"
+                      f" ({r.fidelity_reason})" for r in bad[:5])  # fmt: skip
+    more = f"; and {len(bad) - 5} more" if len(bad) > 5 else ""
+    how = (
+        "counted nevertheless (--include-unfaithful)"
+        if counted
+        else "left out of the figures and verdicts (--include-unfaithful counts them)"
+    )
+    return [
+        f"**Not faithful to their time scale: {len(bad)} run(s)**, {how}: work of a step came "
+        f"late in emulated time, which changes what the robots do: {shown}{more}."
+    ]
 
 
 def _timing_lines(runs: list[RunRecord]) -> list[str]:
@@ -129,8 +150,8 @@ def _scale_lines(runs: list[RunRecord], state: dict) -> list[str]:
             for n, c in sorted(cal.items(), key=lambda kv: int(kv[0]))
         ]
         out.append(
-            "Calibrated on this machine (--calibrate: short runs alone, up while clean, down "
-            "while late): " + "; ".join(found) + "."
+            "Calibrated on this machine (--calibrate: short runs alone, up while clean and "
+            "faithful, down while late or not faithful): " + "; ".join(found) + "."
         )
     return out
 
@@ -143,15 +164,16 @@ def _backoff_lines(state: dict) -> list[str]:
     if concurrency:
         out.append(
             f"The sweep lowered its concurrency {len(concurrency)} time(s) because runs "
-            f"missed step deadlines (now {state.get('jobs')} job(s) at most)."
+            f"missed step deadlines or were not faithful (now {state.get('jobs')} job(s) at "
+            "most)."
         )
     scale = [b for b in backoffs if "time_scale_factor" in b]
     if scale:
         factors = state.get("time_scale_factor") or {}
         out.append(
             f"The sweep changed a team size's time scale {len(scale)} time(s) as runs missed step "
-            "deadlines alone (down) or ran clean (up); the factors it ended with, of the file's "
-            "time scale: "
+            "deadlines or were not faithful alone (down) or ran clean (up); the factors it ended "
+            "with, of the file's time scale: "
             + (", ".join(f"{v:g} for {k}" for k, v in factors.items()) or "none")
             + "."
         )

@@ -1,5 +1,6 @@
 """What a --slurm sweep asks of the cluster per run, and the batch script it submits."""
 
+import json
 from pathlib import Path
 
 from testbed import slurm
@@ -77,3 +78,17 @@ def test_submit_makes_one_array_per_team_size_from_the_planned_configs(tmp_path,
         assert f"--array=1-{len(team)}" in line and f"--cpus-per-task={cpus}" in line
         assert f"--time={minutes}" in line and "--partition=p1" in line
     assert json.loads((out / "slurm" / "jobs.json").read_text())["jobs"] == jobs
+
+
+def test_sizing_uses_the_cpu_per_robot_step_the_sweeps_runs_measured(tmp_path):
+    assert slurm.measured_cpu_per_robot_step(tmp_path) is None
+    for name, ms in (("a", 1.2), ("b", 3.0), ("c", None)):
+        d = tmp_path / "runs" / name
+        d.mkdir(parents=True)
+        cpu = {} if ms is None else {"per_robot_step_ms": ms}
+        (d / "result.json").write_text(json.dumps({"cpu_s": cpu}))
+    assert slurm.measured_cpu_per_robot_step(tmp_path) == 0.003
+    config = RunConfig(robots=10, comm_range=5.0, time_scale=15, max_steps=6000)
+    assert slurm.resources(config, cpu_per_robot_step=0.003)[0] > slurm.resources(config)[0]
+    # The default is what was measured here: 10 robots at 15 need 5 cores, not 11.
+    assert slurm.resources(config)[0] == 5

@@ -8,6 +8,7 @@ from testbed.sweeppolicy import (
     CLEAN_RUNS_TO_SPEED_UP,
     MIN_SCALE_FACTOR,
     SLOWDOWN,
+    Decision,
     Outcome,
     State,
     decide,
@@ -141,3 +142,60 @@ def test_a_calibrated_ceiling_above_the_file_lets_a_slowed_team_climb_back_to_it
     for _ in range(3):
         s = decide(Outcome(robots=3, miss=0.0, miss_outside_stalls=0.0), s).state
     assert 1.5 < s.factor(3) <= 2.0
+
+
+def test_rule6_an_unfaithful_run_alone_slows_its_team_size_and_is_redone_once():
+    state = State(jobs=1)
+    o = outcome(0.002, faithful=False, fidelity_reason="30% of plans late")
+    d = decide(o, state)
+    assert d.state.scale_factors == {5: SLOWDOWN} and d.redo
+    assert d.backoffs == ({"deadline_miss_fraction": 0.002, "robots": 5,
+                           "time_scale_factor": SLOWDOWN, "faithful": False},)  # fmt: skip
+    assert d.words == (", not faithful (30% of plans late); time scales of teams of 5 down "
+                       "to 85% of the file's, redoing it")  # fmt: skip
+    # Redone once: the second attempt is kept whatever its verdict (and slows down again).
+    again = decide(Outcome(5, 0.002, 0.002, faithful=False, attempts=2), d.state)
+    assert not again.redo and again.state.factor(5) == pytest.approx(SLOWDOWN**2)
+
+
+def test_rule6_an_unfaithful_shared_run_lowers_the_concurrency_or_the_load_limit():
+    d = decide(outcome(0.0, faithful=False, shared=True, jobs_at_start=3), State(jobs=3))
+    assert d.state.jobs == 2 and d.redo and d.state.scale_factors == {}
+    d = decide(outcome(0.0, faithful=False, shared=True, load_seen=10.0),
+               State(jobs=4, load_limit=20.0))  # fmt: skip
+    assert d.state.load_limit == 8.0 and d.redo
+
+
+def test_a_late_and_unfaithful_run_alone_is_redone_once_even_when_mildly_late():
+    d = decide(outcome(0.02, faithful=False), State(jobs=1))
+    assert d.redo and d.backoffs[0]["faithful"] is False
+    assert not decide(outcome(0.02, faithful=True), State(jobs=1)).redo
+
+
+def test_a_faithful_run_or_one_without_a_verdict_changes_nothing():
+    for faithful in (True, None):
+        d = decide(outcome(0.0, faithful=faithful), State(jobs=1))
+        assert d == Decision(State(jobs=1))
+
+
+def test_rule7_an_unfaithful_run_is_not_clean():
+    state = State(jobs=1, scale_factors={5: 0.5})
+    assert decide(outcome(0.0, faithful=True), state).state.clean_runs == {5: 1}
+    assert decide(outcome(0.0, faithful=False), state).state.clean_runs == {5: 0}
+
+
+def test_calibration_climbs_only_while_its_trials_stay_faithful():
+    from testbed.sweeppolicy import calibrated, calibration_next
+
+    up = [(1.0, 0.0, True), (1.176, 0.0, True)]
+    assert calibration_next(up) > 1.176
+    up += [(calibration_next(up), 0.0, False)]  # in time, but its plans came late: stop
+    assert calibration_next(up) is None and calibrated(up) == 1.176
+    # Unfaithful at the file's scale: down until a trial is clean and faithful.
+    down = [(1.0, 0.0, False)]
+    assert calibration_next(down) == 0.85
+    down += [(0.85, 0.0, False)]
+    assert calibration_next(down) == pytest.approx(0.7225)
+    down += [(0.7225, 0.001, True)]
+    assert calibration_next(down) is None and calibrated(down) == 0.7225
+    assert calibrated([(1.0, 0.0, False), (0.85, 0.0, False)]) == 0.85  # the lowest tried

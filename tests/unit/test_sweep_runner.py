@@ -64,6 +64,12 @@ res = {"format": 1, "config": cfg, "status": "complete", "status_detail": "", "s
        "time_scale_achieved": a.time_scale, "deadlines_missed": 0,
        "deadline_miss_fraction": miss, "deadline_miss_fraction_outside_stalls": min(miss, ours),
        "wall_time_s": 0.2, "robots": robots}
+above = os.environ.get("STANDIN_UNFAITHFUL_ABOVE")  # time scales above it are not faithful
+if above and a.time_scale > float(above):
+    res["fidelity"] = {"ok": False, "reason": "12 of 30 plans applied a step or more late "
+                                              "(40.0%, limit 1.0%)"}
+elif above:
+    res["fidelity"] = {"ok": True}
 tmp = os.path.join(a.out, "result.json.tmp")
 with open(tmp, "w") as f:
     json.dump(res, f)
@@ -336,14 +342,50 @@ def test_calibrate_finds_each_team_sizes_scale_and_runs_there(env, tmp_path):
                   STANDIN_MISS_IDS="n01-3,n02-1,n02-2")  # fmt: skip
     assert r.returncode == 0, r.stderr
     cal = json.loads((out / "sweep.json").read_text())["calibration"]
-    assert [f for f, _ in cal["1"]["trials"]] == [1.0, 1.176, 1.384]
+    assert [f for f, *_ in cal["1"]["trials"]] == [1.0, 1.176, 1.384]
     assert cal["1"]["factor"] == 1.176
-    assert [f for f, _ in cal["2"]["trials"]] == [1.0, 0.85, 0.722]
+    assert [f for f, *_ in cal["2"]["trials"]] == [1.0, 0.85, 0.722]
     assert cal["2"]["factor"] == 0.722
     assert cal["3"]["factor"] == 4.0
     scales = {d["config"]["robots"]: d["config"]["time_scale"] for d in results(out).values()}
     assert scales == {1: round(5 * 1.176, 3), 2: round(5 * 0.722, 3), 3: 20.0}
     assert all(p.name.startswith("n0") for p in (out / "calibration").iterdir())
+
+
+def lone_robot_sweep(env, comm=(5, 20)):
+    sweep_file = env["tmp"] / "ones.toml"
+    sweep_file.write_text(SWEEP.replace("robots = [1, 2, 3]", "robots = [1]").replace(
+        "comm_range = [5, 20]", f"comm_range = {list(comm)}"))  # fmt: skip
+    return dict(env, file=sweep_file)
+
+
+def test_an_unfaithful_run_is_redone_once_at_a_lower_scale(env):
+    """The lone robot's first run, at the file's scale 5, is in time but not faithful: its
+    team size goes down to 85% and the run is redone there (faithful); the next run too."""
+    out = env["tmp"] / "out"
+    r = run_sweep(lone_robot_sweep(env), out, "--jobs", "1", STANDIN_UNFAITHFUL_ABOVE="4.5")
+    assert r.returncode == 0, r.stderr
+    assert (
+        "not faithful (12 of 30 plans applied a step or more late (40.0%, limit 1.0%))" in r.stderr
+    )
+    assert "time scales of teams of 1 down to 85% of the file's, redoing it" in r.stderr
+    state = json.loads((out / "sweep.json").read_text())
+    attempts = {x["id"]: x["attempts"] for x in state["runs"]}
+    assert attempts == {"n01-c5-l2-k1": 2, "n01-c20-l2-k1": 1}
+    assert state["backoffs"][0]["faithful"] is False
+    assert {res["config"]["time_scale"] for res in results(out).values()} == {4.25}
+    assert all(res["fidelity"]["ok"] for res in results(out).values())
+
+
+def test_calibrate_climbs_only_while_its_trials_are_faithful(env, tmp_path):
+    out = tmp_path / "cal"
+    r = run_sweep(lone_robot_sweep(env, comm=(20,)), out, "--calibrate",
+                  STANDIN_UNFAITHFUL_ABOVE="6.5")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    cal = json.loads((out / "sweep.json").read_text())["calibration"]["1"]
+    assert cal["trials"] == [[1.0, 0.0, True], [1.176, 0.0, True], [1.384, 0.0, False]]
+    assert cal["factor"] == 1.176
+    assert [res["config"]["time_scale"] for res in results(out).values()] == [5.88]
 
 
 def test_jobs_auto_is_one_at_a_time_on_two_cores_and_more_on_big_machines():

@@ -1,0 +1,196 @@
+"""The fidelity verdict of a run: did time dilation leave the robots' behaviour as it was?
+
+Theory of operation. `--time-scale K` runs emulated time K times faster than the wall clock.
+That is harmless while every piece of work that belongs to a step is done within the step,
+as it would be on the robots' own processors at K = 1; it changes the answer when the work
+completes late *in emulated time*, because the robots act on the step at which it arrives.
+
+The mechanism, measured (a lone robot, empty terrain, laser 2 m, range 20 m, AODV; the
+machine loaded by other work, load average 2-5, 2 cores). A robot's plan is asked for at
+step s (by its timer, every 20 steps, or at the start) and computed from the map and the
+pose of that step; it is applied at the first frame the motion thread answers after the
+planner installed it. On time, that is step s + 1. Planning costs 1-2 ms of wall time
+(median 1.2 ms, up to ~10 ms), i.e. 6-20% of a step at K = 5 but 70-100% of a step at
+K = 60 (1.67 ms): there, most plans are applied one to six steps late (seed 2: 96 of 130
+plans late, against 1 of 99 at K = 5). The plan's path starts at the cell where the robot
+was when it asked, so a late plan first drives the robot back to where it was, then on
+(seed 2: 200 reversals of direction at K = 60 against 52 at K = 5; path 248 m against
+188 m), and every later plan is computed from a different pose and map: 2602 steps
+instead of 1989 (+31%). The timer's own lateness (it fires a step after it is due) shifts
+every later plan by as much. The lone robot took exactly the same steps only where no plan
+and no timer was late (seed 1 at K = 5: 0 of 95 plans late, 1901 steps, as at K = 15 on a
+quiet machine); one late plan already moves it (seed 2: 1 of 99 late and 2 timers, 1991
+steps for 1989), because exploration is chaotic: a path that differs once differs after.
+All the numbers are in docs/architecture.md ("Time dilation and fidelity").
+
+The verdict: a run is faithful when, over all its robots and daemons,
+
+- the step deadlines missed outside host stalls are at most DEADLINE_MISS_LIMIT (the
+  sweep's limit: a missed deadline is a frame answered after the world moved on);
+- the plans applied late (age >= 1 step) are at most LATE_PLAN_LIMIT (1%) of the plans
+  applied, and so are the plan timers that fired late. Exactness needs none; the verdict
+  tolerates one plan in a hundred (one of a lone robot's run, ten of a ten-robot team's),
+  which a team's run-to-run noise covers if anything does (issue 21 part 6 is to show it).
+  A calibration trial (300 steps, ~15 plans a robot) must have none;
+- no AODV HELLO timer fired more than HELLO_LATE_LIMIT_MS emulated ms late, and no expiry
+  timer more than EXPIRY_LATE_LIMIT_MS: a HELLO later than the neighbour's allowance
+  (ALLOWED_HELLO_LOSS x HELLO_INTERVAL, 2 s) breaks a link that exists;
+- the display handled at most DISPLAY_LATE_LIMIT of its frames more than two steps late
+  (its beacons, which tell robots it is back in reach, follow its frames).
+
+`measures(...)` folds the per-process records (node.lateness dicts, the AODV daemons'
+`timer_lateness_ms`) into one `Measures`; `verdict(...)` judges them; both are pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+
+DEADLINE_MISS_LIMIT = 0.01
+LATE_PLAN_LIMIT = 0.01
+HELLO_LATE_LIMIT_MS = 250.0
+EXPIRY_LATE_LIMIT_MS = 250.0
+DISPLAY_LATE_LIMIT = 0.05
+DISPLAY_LATE_MS = 200  # "more than two steps late": a bound of node.lateness.MS_BOUNDS
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    deadline_miss_fraction: float = DEADLINE_MISS_LIMIT
+    late_plan_fraction: float = LATE_PLAN_LIMIT
+    late_timer_fraction: float = LATE_PLAN_LIMIT
+    hello_late_max_ms: float = HELLO_LATE_LIMIT_MS
+    expiry_late_max_ms: float = EXPIRY_LATE_LIMIT_MS
+    display_late_fraction: float = DISPLAY_LATE_LIMIT
+
+
+@dataclass(frozen=True)
+class Measures:
+    """A run's lateness, over all its robots (and daemons); None: not measured (an older
+    run, a run without that process)."""
+
+    deadline_miss_fraction: float | None = None  # outside host stalls
+    plans: int = 0  # plans applied
+    late_plans: int = 0  # applied one step or more late
+    plan_age_max_steps: float = 0
+    timers: int = 0  # plan timer firings
+    late_timers: int = 0
+    timer_late_max_steps: float = 0
+    hello_late_max_ms: float | None = None
+    expiry_late_max_ms: float | None = None
+    display_frames: int = 0
+    display_late_frames: int = 0  # handled more than DISPLAY_LATE_MS after the world sent them
+
+    @property
+    def late_plan_fraction(self) -> float:
+        return round(self.late_plans / self.plans, 4) if self.plans else 0.0
+
+    @property
+    def late_timer_fraction(self) -> float:
+        return round(self.late_timers / self.timers, 4) if self.timers else 0.0
+
+    @property
+    def display_late_fraction(self) -> float:
+        if not self.display_frames:
+            return 0.0
+        return round(self.display_late_frames / self.display_frames, 4)
+
+
+def _late_over(hist: dict, bound: float) -> int:
+    """Events of a node.lateness histogram above `bound` (one of its bounds)."""
+    total = 0
+    for label, n in hist.items():
+        b = float(label.lstrip("<=>"))
+        if label.startswith(">") or b > bound:
+            total += n
+    return total
+
+
+def measures(
+    miss_fraction: float | None,
+    robots: Iterable[dict | None],
+    display: dict | None = None,
+    daemons: Iterable[dict | None] = (),
+) -> Measures:
+    """Fold the records into Measures: `robots` are the robots' `lateness` dicts (None: the
+    robot left none), `display` the display's, `daemons` the AODV daemons'
+    `timer_lateness_ms` dicts."""
+    plans = late_plans = timers = late_timers = 0
+    age_max = timer_max = 0.0
+    for r in robots:
+        if not isinstance(r, dict):
+            continue
+        p, t = r.get("plan_age_steps") or {}, r.get("plan_timer_steps") or {}
+        plans += p.get("n", 0)
+        late_plans += p.get("late", 0)
+        age_max = max(age_max, p.get("max", 0))
+        timers += t.get("n", 0)
+        late_timers += t.get("late", 0)
+        timer_max = max(timer_max, t.get("max", 0))
+    hello = expiry = None
+    for d in daemons:
+        if not isinstance(d, dict):
+            continue
+        h, e = d.get("hello") or {}, d.get("expiry") or {}
+        hello = max(hello or 0.0, h.get("max", 0.0))
+        expiry = max(expiry or 0.0, e.get("max", 0.0))
+    frames = late_frames = 0
+    f = (display or {}).get("frame_done_ms")
+    if f:
+        frames, late_frames = f.get("n", 0), _late_over(f.get("hist", {}), DISPLAY_LATE_MS)
+    return Measures(
+        deadline_miss_fraction=miss_fraction, plans=plans, late_plans=late_plans,
+        plan_age_max_steps=age_max, timers=timers, late_timers=late_timers,
+        timer_late_max_steps=timer_max, hello_late_max_ms=hello, expiry_late_max_ms=expiry,
+        display_frames=frames, display_late_frames=late_frames,
+    )  # fmt: skip
+
+
+def verdict(m: Measures, th: Thresholds = Thresholds()) -> dict:
+    """result.json's `fidelity`: {ok, reason (when not ok), measures, thresholds}."""
+    checks = (
+        ("deadline_miss_fraction", m.deadline_miss_fraction, "of step deadlines missed", None),
+        ("late_plan_fraction", m.late_plan_fraction, "plans applied a step or more late",
+         (m.late_plans, m.plans)),
+        ("late_timer_fraction", m.late_timer_fraction, "plan timers fired late",
+         (m.late_timers, m.timers)),
+        ("hello_late_max_ms", m.hello_late_max_ms, "ms: an AODV HELLO timer fired that late",
+         None),
+        ("expiry_late_max_ms", m.expiry_late_max_ms, "ms: an AODV expiry timer fired that late",
+         None),
+        ("display_late_fraction", m.display_late_fraction,
+         "display frames handled over two steps late", (m.display_late_frames, m.display_frames)),
+    )  # fmt: skip
+    reasons = []
+    for key, value, words, counts in checks:
+        limit = getattr(th, key)
+        if value is None or value <= limit:
+            continue
+        if counts:  # "3 of 99 plans applied ... (3.0%, limit 1.0%)"
+            share = counts[0] / counts[1]
+            reasons.append(f"{counts[0]} of {counts[1]} {words} ({share:.1%}, limit {limit:.1%})")
+        elif key.endswith("fraction"):
+            reasons.append(f"{value:.1%} {words} (limit {limit:.1%})")
+        else:
+            reasons.append(f"{value:g} {words} (limit {limit:g})")
+    out: dict = {"ok": not reasons}
+    if reasons:
+        out["reason"] = "; ".join(reasons)
+    values = asdict(m)
+    values.update(
+        late_plan_fraction=m.late_plan_fraction,
+        late_timer_fraction=m.late_timer_fraction,
+        display_late_fraction=m.display_late_fraction,
+    )
+    out["measures"] = values
+    out["thresholds"] = asdict(th)
+    return out
+
+
+def is_faithful(result: dict) -> bool | None:
+    """A result.json's verdict: True or False, None for a run made before verdicts."""
+    f = result.get("fidelity")
+    if not isinstance(f, dict) or not isinstance(f.get("ok"), bool):
+        return None
+    return f["ok"]

@@ -1,0 +1,108 @@
+"""The fidelity verdict (testbed.fidelity) and the lateness records it reads (node.lateness)."""
+
+import pytest
+
+from node.lateness import MS_BOUNDS, Lateness
+from testbed import fidelity
+from testbed.fidelity import Measures, Thresholds, measures, verdict
+
+
+def robot(plans: int, late: int, timers: int = 0, late_timers: int = 0, age_max: int = 1):
+    """A robot's lateness dict as node.robot writes it."""
+    p, t = Lateness(), Lateness()
+    for i in range(plans):
+        p.add(age_max if i < late else 0)
+    for i in range(timers):
+        t.add(1 if i < late_timers else 0)
+    return {"plan_age_steps": p.as_dict(), "plan_timer_steps": t.as_dict()}
+
+
+def test_lateness_counts_the_maximum_and_the_histogram():
+    lat = Lateness()
+    for v in (0, 0, 1, 3, 9, -1):
+        lat.add(v)
+    d = lat.as_dict()
+    assert d["n"] == 6 and d["late"] == 3 and d["max"] == 9
+    assert d["hist"] == {"<=0": 3, "<=1": 1, "<=2": 0, "<=4": 1, "<=8": 0, ">8": 1}
+    assert lat.over(2) == 2
+
+
+def test_lateness_in_ms_has_its_own_bounds():
+    lat = Lateness(MS_BOUNDS)
+    lat.add(12.5)
+    lat.add(250)
+    assert lat.as_dict()["hist"] == {"<=10": 0, "<=25": 1, "<=50": 0, "<=100": 0,
+                                     "<=200": 0, ">200": 1}  # fmt: skip
+    with pytest.raises(ValueError):
+        Lateness((5, 1))
+
+
+def test_a_run_with_every_plan_on_time_is_faithful():
+    v = verdict(measures(0.0, [robot(100, 0, 99, 0)]))
+    assert v["ok"] is True and "reason" not in v
+    assert v["measures"]["plans"] == 100 and v["measures"]["late_plan_fraction"] == 0.0
+    assert v["thresholds"]["late_plan_fraction"] == fidelity.LATE_PLAN_LIMIT
+
+
+def test_late_plans_over_the_limit_make_a_run_unfaithful_and_say_why():
+    v = verdict(measures(0.001, [robot(130, 96, age_max=6)]))
+    assert v["ok"] is False
+    assert v["reason"] == "96 of 130 plans applied a step or more late (73.8%, limit 1.0%)"
+    assert v["measures"]["late_plan_fraction"] == pytest.approx(96 / 130, abs=1e-4)
+    assert v["measures"]["plan_age_max_steps"] == 6
+
+
+def test_plans_are_counted_over_all_robots():
+    m = measures(0.0, [robot(100, 1), robot(100, 2), None])
+    assert (m.plans, m.late_plans) == (200, 3)
+    assert m.late_plan_fraction == 0.015
+    assert verdict(m)["ok"] is (fidelity.LATE_PLAN_LIMIT >= 0.015)
+
+
+def test_each_measure_over_its_threshold_is_a_reason():
+    th = Thresholds()
+    cases = {
+        "deadline": Measures(deadline_miss_fraction=th.deadline_miss_fraction * 2),
+        "5 of 10 plan timers fired late (50.0%": Measures(timers=10, late_timers=5),
+        "HELLO": Measures(hello_late_max_ms=th.hello_late_max_ms + 1),
+        "expiry": Measures(expiry_late_max_ms=th.expiry_late_max_ms + 1),
+        "50 of 100 display frames": Measures(display_frames=100, display_late_frames=50),
+        "2.0% of step deadlines missed (limit 1.0%)": Measures(deadline_miss_fraction=0.02),
+    }
+    for words, m in cases.items():
+        v = verdict(m)
+        assert v["ok"] is False, words
+        assert words in v["reason"], (words, v["reason"])
+        assert ";" not in v["reason"]  # one reason each
+
+
+def test_a_measure_at_its_threshold_is_still_faithful():
+    th = Thresholds()
+    m = Measures(deadline_miss_fraction=th.deadline_miss_fraction,
+                 hello_late_max_ms=th.hello_late_max_ms)  # fmt: skip
+    assert verdict(m)["ok"] is True
+
+
+def test_what_was_not_measured_is_not_judged():
+    v = verdict(measures(None, [], None, []))
+    assert v["ok"] is True
+    assert v["measures"]["hello_late_max_ms"] is None
+
+
+def test_daemons_and_display_are_folded_in():
+    daemon = {"hello": {"n": 3, "max": 40.0}, "expiry": {"n": 1, "max": 300.0}}
+    display = {"frame_done_ms": Lateness(MS_BOUNDS).as_dict()}
+    display["frame_done_ms"]["n"] = 10
+    display["frame_done_ms"]["hist"][">200"] = 2
+    m = measures(0.0, [], display, [daemon, None, {"hello": {"max": 60.0}}])
+    assert (m.hello_late_max_ms, m.expiry_late_max_ms) == (60.0, 300.0)
+    assert (m.display_frames, m.display_late_frames) == (10, 2)
+    v = verdict(m)
+    assert v["ok"] is False and "expiry" in v["reason"] and "display" in v["reason"]
+
+
+def test_is_faithful_reads_a_result():
+    assert fidelity.is_faithful({"fidelity": {"ok": False}}) is False
+    assert fidelity.is_faithful({"fidelity": {"ok": True}}) is True
+    assert fidelity.is_faithful({}) is None
+    assert fidelity.is_faithful({"fidelity": "yes"}) is None
