@@ -21,7 +21,6 @@ dumps), where speed does not matter.
 
 import logging
 import os
-import socket
 import time
 
 from topology import names, netns, rtnl
@@ -219,24 +218,21 @@ class Medium:
 
     def _wait_forwarding(self, indices: set[int], timeout: float = 5.0) -> None:
         """The kernel brings a new veth's carrier up asynchronously (linkwatch), and only then
-        does the bridge forward through it: wait for that, so a link is usable on return."""
-
-        def forwarding(ipr) -> set[int]:
-            ready = set()
-            for port in ipr.get_links(family=socket.AF_BRIDGE):
-                if port["index"] in indices:
-                    info = port.get_attr("IFLA_PROTINFO")
-                    if info is not None and info.get_attr("IFLA_BRPORT_STATE") == 3:
-                        ready.add(port["index"])
-            return ready
-
+        does the bridge forward through it: wait for that (the port forwarding, its operstate
+        up), so a link is usable on return. Usually nothing is left to wait for by the time
+        this is called; the check is one dump, parsed by topology.rtnl in a few ms."""
         deadline = time.monotonic() + timeout
         while True:
-            pending = indices - self.worker.call(forwarding)
+            ports = rtnl.bridge_ports(self.worker.nl)
+            pending = {
+                i for i in indices
+                if ports.get(i, ("", -1, -1))[1:] != (rtnl.BR_STATE_FORWARDING, rtnl.IF_OPER_UP)
+            }  # fmt: skip
             if not pending:
                 return
             if time.monotonic() > deadline:
                 raise TimeoutError(f"{len(pending)} new link ends did not start forwarding")
+            indices = pending
             time.sleep(0.01)  # a dump is not free: leave the CPU to the kernel meanwhile
 
     def set_links(self, add: list[tuple[int, int]], remove: list[tuple[int, int]]) -> None:
@@ -267,18 +263,12 @@ class Medium:
     def kernel_links(self) -> set[tuple[int, int]]:
         """The links as the kernel has them: pairs (i, j), i < j, whose near end forwards.
         Also records which veth pairs exist, for a process that attaches to the testbed."""
-
-        def work(ipr) -> tuple[set, set]:
-            pairs, up = set(), set()
-            for port in ipr.get_links(family=socket.AF_BRIDGE):
-                parsed = names.parse_link_end(port.get_attr("IFLA_IFNAME"))
-                if parsed and parsed[0] < parsed[1]:
-                    pairs.add(parsed)
-                    info = port.get_attr("IFLA_PROTINFO")
-                    if info is not None and info.get_attr("IFLA_BRPORT_STATE") == 3:
-                        up.add(parsed)
-            return pairs, up
-
-        pairs, up = self.worker.call(work)
+        pairs, up = set(), set()
+        for name, port_state, _ in rtnl.bridge_ports(self.worker.nl).values():
+            parsed = names.parse_link_end(name)
+            if parsed and parsed[0] < parsed[1]:
+                pairs.add(parsed)
+                if port_state == rtnl.BR_STATE_FORWARDING:
+                    up.add(parsed)
         self.pairs |= pairs
         return up
