@@ -51,6 +51,7 @@ WLAN_SYSCTLS = (
 # Interface indices are ours to choose (per namespace): no request ever looks a name up.
 LO_INDEX = 1
 WLAN_INDEX = 10
+ASK_PORTS_UP_TO = 512  # new link ends checked one by one below this, by one dump above
 
 
 def bridge_index(k: int) -> int:
@@ -66,7 +67,7 @@ def end_index(i: int, j: int) -> int:
 
 
 _ENSLAVE = rtnl.Template(rtnl.link, ints=("index", "master"))
-_ISOLATE = rtnl.Template(rtnl.link, isolated=True)
+_ISOLATE_UP = rtnl.Template(rtnl.link, isolated=True, up=True)
 _UP = rtnl.Template(rtnl.link, up=True)
 _PORT_ON = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_FORWARDING)
 _PORT_OFF = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_DISABLED)
@@ -202,15 +203,17 @@ class Medium:
         for i, j in new:
             a, b = end_index(i, j), end_index(j, i)
             what = f"link {i}-{j}"
+            # Four requests, each end isolated before it goes up: the link carries no frame
+            # before both ends are isolated (the carrier comes with the far end's up). The
+            # bridge applies slave data before flags, so isolating and raising share one
+            # request; only the far end's enslaving must come before its own.
             reqs += [
                 (_veth(a, names.link_end(i, j), bridge_index(i), names.link_end(j, i), b),
                  f"create {what}"),
+                (_ISOLATE_UP(index=a), f"{what}: isolate near end, up"),
                 (_ENSLAVE(index=b, master=bridge_index(j)),
                  f"{what}: far end into {names.bridge(j)}"),
-                (_ISOLATE(index=a), f"{what}: isolate near end"),
-                (_ISOLATE(index=b), f"{what}: isolate far end"),
-                (_UP(index=b), f"{what}: far end up"),
-                (_UP(index=a), f"{what}: near end up"),
+                (_ISOLATE_UP(index=b), f"{what}: isolate far end, up"),
             ]  # fmt: skip
         self._send(reqs)
         self.pairs.update(new)
@@ -220,10 +223,14 @@ class Medium:
         """The kernel brings a new veth's carrier up asynchronously (linkwatch), and only then
         does the bridge forward through it: wait for that (the port forwarding, its operstate
         up), so a link is usable on return. Usually nothing is left to wait for by the time
-        this is called; the check is one dump, parsed by topology.rtnl in a few ms."""
+        this is called; the check is one dump, parsed by topology.rtnl in a few ms, or for a
+        few ends (a feed's new links) a request per end."""
         deadline = time.monotonic() + timeout
         while True:
-            ports = rtnl.bridge_ports(self.worker.nl)
+            if len(indices) <= ASK_PORTS_UP_TO:  # a few: ask for them, not the thousands
+                ports = rtnl.port_states(self.worker.nl, indices)
+            else:
+                ports = rtnl.bridge_ports(self.worker.nl)
             pending = {
                 i for i in indices
                 if ports.get(i, ("", -1, -1))[1:] != (rtnl.BR_STATE_FORWARDING, rtnl.IF_OPER_UP)

@@ -65,3 +65,20 @@ def test_bridge_ports_raises_on_an_error_answer():
     sock = FakeSocket([struct.pack("=LHHLLi", 36, ERROR, 0, 1, 0, -1) + b"\0" * 16])
     with pytest.raises(rtnl.NetlinkBatchError, match="bridge port dump"):
         rtnl.bridge_ports(sock)
+
+
+def _answer(seq: int, index: int, state: int) -> bytes:
+    slave = _nla(rtnl.IFLA_INFO_SLAVE_DATA, _nla(rtnl.IFLA_BRPORT_STATE, bytes([state])))
+    attrs = _nla(rtnl.IFLA_IFNAME, b"l1x2\0") + _nla(
+        rtnl.IFLA_LINKINFO, _nla(4, b"bridge\0") + slave
+    )
+    attrs += _nla(rtnl.IFLA_OPERSTATE, bytes([rtnl.IF_OPER_UP]))
+    body = struct.pack("=BxHiII", socket.AF_UNSPEC, 1, index, 0, 0) + attrs
+    return struct.pack("=LHHLL", 16 + len(body), NEWLINK, 0, seq, 0) + body
+
+
+def test_port_states_reads_the_bridge_slave_data_and_skips_absent_interfaces():
+    missing = struct.pack("=LHHLLi", 36, ERROR, 0, 2, 0, -19) + b"\0" * 16  # ENODEV
+    sock = FakeSocket([_answer(1, 10001002, 3) + missing])
+    assert rtnl.port_states(sock, [10001002, 77]) == {10001002: ("l1x2", 3, rtnl.IF_OPER_UP)}
+    assert len(sock.sent[0]) == 2 * 32
