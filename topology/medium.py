@@ -42,10 +42,14 @@ ROBOT_SYSCTLS = (
     ("net.ipv4.conf.default.rp_filter", 0),
     ("net.ipv6.conf.default.accept_dad", 0),
 )
+# wlan0 exists by then (add_robot_ports makes it before configure_robots runs), so it did
+# not inherit the defaults above: its own keys too, before it goes up (accept_dad=0 then
+# keeps its link-local address from being "tentative" for a second).
 WLAN_SYSCTLS = (
     "net.ipv4.conf.wlan0.send_redirects",
     "net.ipv4.conf.wlan0.accept_redirects",
     "net.ipv4.conf.wlan0.rp_filter",
+    "net.ipv6.conf.wlan0.accept_dad",
 )
 
 # Interface indices are ours to choose (per namespace): no request ever looks a name up.
@@ -109,7 +113,7 @@ def _configure_robot(k: int) -> None:
     """Runs inside robot k's namespace: sysctls first, then address and state of wlan0, lo."""
     for key, value in ROBOT_SYSCTLS:
         netns.write_sysctl(key, value)
-    for key in WLAN_SYSCTLS:  # inherited from conf.default already; made explicit for wlan0
+    for key in WLAN_SYSCTLS:
         netns.write_sysctl(key, 0)
     batch = rtnl.Batch()
     batch.add(_UP(index=LO_INDEX), f"r{k}: lo up")
