@@ -21,7 +21,6 @@ dumps), where speed does not matter.
 
 import logging
 import os
-import socket
 import time
 
 from topology import names, netns, rtnl
@@ -43,15 +42,20 @@ ROBOT_SYSCTLS = (
     ("net.ipv4.conf.default.rp_filter", 0),
     ("net.ipv6.conf.default.accept_dad", 0),
 )
+# wlan0 exists by then (add_robot_ports makes it before configure_robots runs), so it did
+# not inherit the defaults above: its own keys too, before it goes up (accept_dad=0 then
+# keeps its link-local address from being "tentative" for a second).
 WLAN_SYSCTLS = (
     "net.ipv4.conf.wlan0.send_redirects",
     "net.ipv4.conf.wlan0.accept_redirects",
     "net.ipv4.conf.wlan0.rp_filter",
+    "net.ipv6.conf.wlan0.accept_dad",
 )
 
 # Interface indices are ours to choose (per namespace): no request ever looks a name up.
 LO_INDEX = 1
 WLAN_INDEX = 10
+ASK_PORTS_UP_TO = 512  # new link ends checked one by one below this, by one dump above
 
 
 def bridge_index(k: int) -> int:
@@ -67,7 +71,7 @@ def end_index(i: int, j: int) -> int:
 
 
 _ENSLAVE = rtnl.Template(rtnl.link, ints=("index", "master"))
-_ISOLATE = rtnl.Template(rtnl.link, isolated=True)
+_ISOLATE_UP = rtnl.Template(rtnl.link, isolated=True, up=True)
 _UP = rtnl.Template(rtnl.link, up=True)
 _PORT_ON = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_FORWARDING)
 _PORT_OFF = rtnl.Template(rtnl.port_state, state=rtnl.BR_STATE_DISABLED)
@@ -109,7 +113,7 @@ def _configure_robot(k: int) -> None:
     """Runs inside robot k's namespace: sysctls first, then address and state of wlan0, lo."""
     for key, value in ROBOT_SYSCTLS:
         netns.write_sysctl(key, value)
-    for key in WLAN_SYSCTLS:  # inherited from conf.default already; made explicit for wlan0
+    for key in WLAN_SYSCTLS:
         netns.write_sysctl(key, 0)
     batch = rtnl.Batch()
     batch.add(_UP(index=LO_INDEX), f"r{k}: lo up")
@@ -203,15 +207,17 @@ class Medium:
         for i, j in new:
             a, b = end_index(i, j), end_index(j, i)
             what = f"link {i}-{j}"
+            # Four requests, each end isolated before it goes up: the link carries no frame
+            # before both ends are isolated (the carrier comes with the far end's up). The
+            # bridge applies slave data before flags, so isolating and raising share one
+            # request; only the far end's enslaving must come before its own.
             reqs += [
                 (_veth(a, names.link_end(i, j), bridge_index(i), names.link_end(j, i), b),
                  f"create {what}"),
+                (_ISOLATE_UP(index=a), f"{what}: isolate near end, up"),
                 (_ENSLAVE(index=b, master=bridge_index(j)),
                  f"{what}: far end into {names.bridge(j)}"),
-                (_ISOLATE(index=a), f"{what}: isolate near end"),
-                (_ISOLATE(index=b), f"{what}: isolate far end"),
-                (_UP(index=b), f"{what}: far end up"),
-                (_UP(index=a), f"{what}: near end up"),
+                (_ISOLATE_UP(index=b), f"{what}: isolate far end, up"),
             ]  # fmt: skip
         self._send(reqs)
         self.pairs.update(new)
@@ -219,24 +225,25 @@ class Medium:
 
     def _wait_forwarding(self, indices: set[int], timeout: float = 5.0) -> None:
         """The kernel brings a new veth's carrier up asynchronously (linkwatch), and only then
-        does the bridge forward through it: wait for that, so a link is usable on return."""
-
-        def forwarding(ipr) -> set[int]:
-            ready = set()
-            for port in ipr.get_links(family=socket.AF_BRIDGE):
-                if port["index"] in indices:
-                    info = port.get_attr("IFLA_PROTINFO")
-                    if info is not None and info.get_attr("IFLA_BRPORT_STATE") == 3:
-                        ready.add(port["index"])
-            return ready
-
+        does the bridge forward through it: wait for that (the port forwarding, its operstate
+        up), so a link is usable on return. Usually nothing is left to wait for by the time
+        this is called; the check is one dump, parsed by topology.rtnl in a few ms, or for a
+        few ends (a feed's new links) a request per end."""
         deadline = time.monotonic() + timeout
         while True:
-            pending = indices - self.worker.call(forwarding)
+            if len(indices) <= ASK_PORTS_UP_TO:  # a few: ask for them, not the thousands
+                ports = rtnl.port_states(self.worker.nl, indices)
+            else:
+                ports = rtnl.bridge_ports(self.worker.nl)
+            pending = {
+                i for i in indices
+                if ports.get(i, ("", -1, -1))[1:] != (rtnl.BR_STATE_FORWARDING, rtnl.IF_OPER_UP)
+            }  # fmt: skip
             if not pending:
                 return
             if time.monotonic() > deadline:
                 raise TimeoutError(f"{len(pending)} new link ends did not start forwarding")
+            indices = pending
             time.sleep(0.01)  # a dump is not free: leave the CPU to the kernel meanwhile
 
     def set_links(self, add: list[tuple[int, int]], remove: list[tuple[int, int]]) -> None:
@@ -267,18 +274,12 @@ class Medium:
     def kernel_links(self) -> set[tuple[int, int]]:
         """The links as the kernel has them: pairs (i, j), i < j, whose near end forwards.
         Also records which veth pairs exist, for a process that attaches to the testbed."""
-
-        def work(ipr) -> tuple[set, set]:
-            pairs, up = set(), set()
-            for port in ipr.get_links(family=socket.AF_BRIDGE):
-                parsed = names.parse_link_end(port.get_attr("IFLA_IFNAME"))
-                if parsed and parsed[0] < parsed[1]:
-                    pairs.add(parsed)
-                    info = port.get_attr("IFLA_PROTINFO")
-                    if info is not None and info.get_attr("IFLA_BRPORT_STATE") == 3:
-                        up.add(parsed)
-            return pairs, up
-
-        pairs, up = self.worker.call(work)
+        pairs, up = set(), set()
+        for name, port_state, _ in rtnl.bridge_ports(self.worker.nl).values():
+            parsed = names.parse_link_end(name)
+            if parsed and parsed[0] < parsed[1]:
+                pairs.add(parsed)
+                if port_state == rtnl.BR_STATE_FORWARDING:
+                    up.add(parsed)
         self.pairs |= pairs
         return up

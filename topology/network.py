@@ -28,6 +28,7 @@ import os
 import shutil
 import subprocess
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 
 from topology import capture, names, netns, processes, ranges, routing, state
@@ -138,13 +139,18 @@ class Network:
                 raise UsageError(str(exc)) from None
             if not self.medium.impairer.netem and shutil.which("nft") is None:
                 raise UsageError("loss without sch_netem needs nftables: `nft` is not installed")
-        # The kernel brings new veths' carriers up in the background (linkwatch), which at 50
-        # robots takes longer than all the rest: links first, then the robots' namespaces and
-        # interfaces meanwhile; _apply_positions waits for the links before switching them on.
-        self.medium.add_bridges(robots)
-        self.medium.create_pairs(sorted(self.wanted()))
-        for k in robots:
-            self._create_namespace(names.robot_ns(self.name, k))
+        # The kernel brings new veths' carriers up in the background (linkwatch): links first,
+        # then the robots' interfaces meanwhile; _apply_positions waits for the links before
+        # switching them on. The robots' namespaces are made in a thread meanwhile: both are
+        # kernel work (the thread runs while the other waits in a netlink send), and on two
+        # cores this saves ~a third of the namespaces' cost (~1 ms a robot).
+        with ThreadPoolExecutor(1) as pool:
+            made = pool.submit(
+                lambda: [self._create_namespace(names.robot_ns(self.name, k)) for k in robots]
+            )
+            self.medium.add_bridges(robots)
+            self.medium.create_pairs(sorted(self.wanted()))
+            made.result()
         self.medium.add_robot_ports(robots)
         self.medium.configure_robots(robots)
         if self.spec.medium == "ns3-wifi":

@@ -6,15 +6,18 @@ robots (pairs reached, memory, idle CPU), and the position feed's rate.
   The kernel frees a namespace's devices in the background after teardown (cleanup_net) and
   new namespaces are slow to create meanwhile: `kernel_cleanup_s` is how long after down()
   returned that lasted (measured with a probe namespace), and each bring-up waits for it.
-- 500 AODV robots on the same grid: PAIRS random pairs, each pinged until it answers or
-  PING_WAIT_S pass (a route across the grid is up to 43 hops, and RFC 3561's NET_DIAMETER
-  is 35: the failures are listed with their hop counts); the daemons' memory (RSS and PSS
-  per daemon, PSS in total); their CPU while idle (no traffic) over IDLE_S, in cores.
+- 500 AODV robots on a grid of spacing 8 and range AODV_RANGE = 12, which covers the
+  diagonals (eight neighbours): a route across the 23 x 22 grid is then at most 22 hops.
+  With range 10 (four neighbours) it is up to 43 hops, beyond RFC 3561's NET_DIAMETER of
+  35, so some pairs are out of AODV's reach by design, which no researcher would choose.
+  PAIRS random pairs, each pinged until it answers or PING_WAIT_S pass (the failures are
+  listed with their hop counts); the daemons' memory (RSS and PSS per daemon, PSS in
+  total); their CPU while idle (no traffic) over IDLE_S, in cores.
 - feed: a 1000-robot testbed, a FeedServer on it, FEED_UPDATES moves (a random robot, a
   step of up to STEP_M metres each way) written to its socket as fast as one client can:
   updates applied (links updated) per second; and the latency of one move_many of one robot
-  (the cost of an unbatched update). A link met for the first time costs a veth pair and
-  the kernel's carrier delay (topology.medium), so teleports anywhere would be much slower.
+  (the cost of an unbatched update). A link met for the first time costs a veth pair (a few
+  ms of kernel work, topology.medium), so teleports anywhere would be slower.
 Goals (issue 23): bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardown of 1000
 <= 10 s, every pair reached, >= 1000 feed updates per second.
 """
@@ -33,20 +36,22 @@ from topology.network import Network
 from topology.spec import NetworkSpec, layout_positions
 
 PROBE_MS = 10.0
+SETTLED_PROBES = 3
 PAIRS = 20
 PING_WAIT_S = 30.0
 IDLE_S = 10.0
-FEED_UPDATES = 5000
+FEED_UPDATES = 20000  # a few seconds of feed at the rate reached
 STEP_M = 1.0
+AODV_RANGE = 12.0
 
 
 def _name() -> str:
     return "sc" + uuid.uuid4().hex[:6]
 
 
-def _spec(n: int, routing: str = "none") -> NetworkSpec:
+def _spec(n: int, routing: str = "none", comm_range: float = 10.0) -> NetworkSpec:
     return NetworkSpec(name=_name(), positions=tuple(layout_positions("grid", n, 8.0)),
-                       comm_range=10.0, routing=routing)  # fmt: skip
+                       comm_range=comm_range, routing=routing)  # fmt: skip
 
 
 def bring_up(n: int) -> dict:
@@ -69,17 +74,22 @@ def bring_up(n: int) -> dict:
 def settle(limit_s: float = 120.0) -> float:
     """Wait until the kernel has freed the namespaces of earlier testbeds (it does so in the
     background after teardown, and creating a namespace waits for it meanwhile): until a
-    probe namespace is created in under PROBE_MS. Returns the seconds waited."""
+    probe namespace is created in under PROBE_MS, SETTLED_PROBES times in a row 0.2 s apart
+    (one fast probe right after a teardown may come before the kernel's cleanup started).
+    Returns the seconds until the last slow probe ended (0 if none was slow)."""
     t0 = time.perf_counter()
-    while time.perf_counter() - t0 < limit_s:
+    fast, slow_until = 0, 0.0
+    while time.perf_counter() - t0 < limit_s and fast < SETTLED_PROBES:
         probe = f"tb-{_name()}-m"
         t = time.perf_counter()
         netns.create(probe)
         netns.remove(probe)
         if (time.perf_counter() - t) * 1000 < PROBE_MS:
-            break
+            fast += 1
+        else:
+            fast, slow_until = 0, time.perf_counter() - t0
         time.sleep(0.2)
-    return time.perf_counter() - t0
+    return slow_until
 
 
 def _mem_kb(pid: int) -> tuple[int, int]:
@@ -99,8 +109,9 @@ def _mem_kb(pid: int) -> tuple[int, int]:
 
 
 def _grid_hops(a: int, b: int, n: int) -> int:
+    """Fewest hops from a to b on the grid when diagonal neighbours are linked."""
     cols = math.ceil(math.sqrt(n))
-    return abs((a - 1) % cols - (b - 1) % cols) + abs((a - 1) // cols - (b - 1) // cols)
+    return max(abs((a - 1) % cols - (b - 1) % cols), abs((a - 1) // cols - (b - 1) // cols))
 
 
 def _cpu_ticks(pid: int) -> int:
@@ -114,7 +125,7 @@ def _cpu_ticks(pid: int) -> int:
 
 def aodv(n: int = 500) -> dict:
     settle()
-    net = Network(_spec(n, "aodv"))
+    net = Network(_spec(n, "aodv", AODV_RANGE))
     t0 = time.perf_counter()
     net.up()
     up_s = time.perf_counter() - t0
@@ -127,9 +138,10 @@ def aodv(n: int = 500) -> dict:
         mem = [_mem_kb(p) for p in pids]
         rss, pss = [m[0] for m in mem], [m[1] for m in mem]
         rng = random.Random(23)
-        reached, times, failed = 0, [], []
+        reached, times, failed, hops = 0, [], [], []
         for _ in range(PAIRS):
             a, b = rng.sample(range(1, n + 1), 2)
+            hops.append(_grid_hops(a, b, n))
             t0 = time.monotonic()
             while time.monotonic() - t0 < PING_WAIT_S:
                 r = net.exec(a, ["ping", "-c1", "-W2", names.robot_addr(b)],
@@ -140,7 +152,10 @@ def aodv(n: int = 500) -> dict:
                     break
             else:
                 failed.append([a, b, _grid_hops(a, b, n)])
-        return {"robots": n, "up_s": round(up_s, 3), "pairs_tried": PAIRS,
+        cols = math.ceil(math.sqrt(n))
+        return {"robots": n, "comm_range": AODV_RANGE, "up_s": round(up_s, 3),
+                "grid_diameter_hops": max(cols, math.ceil(n / cols)) - 1,
+                "max_pair_hops": max(hops), "pairs_tried": PAIRS,
                 "pairs_reached": reached, "median_s_to_first_reply": round(median(times), 3)
                 if times else None, "daemons": len(pids),
                 "failed_pairs_with_grid_hops": failed,
