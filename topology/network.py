@@ -565,7 +565,7 @@ def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> N
         if last:
             time.sleep(CAPTURE_DRAIN_S)
             processes.stop(last, children)
-    stray = [pid for pid in _pids_in(namespaces) if pid != os.getpid()]
+    stray = [pid for pid in processes.pids_in_namespaces(namespaces) if pid != os.getpid()]
     if stray:
         processes.stop(
             [state.ProcessRecord(pid, state.proc_start_time(pid), 0, "stray") for pid in stray],
@@ -583,31 +583,6 @@ def _mtime(name: str) -> int | None:
         return os.stat(state.state_path(name)).st_mtime_ns
     except FileNotFoundError:
         return None
-
-
-def _pids_in(namespaces: list[str]) -> list[int]:
-    """Every process inside one of `namespaces`, in one pass over /proc (one pass per
-    namespace, as processes.pids_in_namespace does, costs seconds at 1000 robots)."""
-    wanted = set()
-    for ns in namespaces:
-        try:
-            st = os.stat(netns.path(ns))
-        except FileNotFoundError:
-            continue
-        wanted.add((st.st_dev, st.st_ino))
-    if not wanted:
-        return []
-    found = []
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            st = os.stat(f"/proc/{entry}/ns/net")
-        except (FileNotFoundError, PermissionError, ProcessLookupError):
-            continue
-        if (st.st_dev, st.st_ino) in wanted:
-            found.append(int(entry))
-    return found
 
 
 def _keep_logs(name: str, st: state.TestbedState | None) -> None:

@@ -59,9 +59,20 @@ def _signal(pid: int, sig: int) -> None:
 
 def pids_in_namespace(ns: str) -> list[int]:
     """Every process whose network namespace is `ns` (what `ip netns pids` reports)."""
-    try:
-        target = os.stat(netns.path(ns))
-    except FileNotFoundError:
+    return pids_in_namespaces([ns])
+
+
+def pids_in_namespaces(namespaces: list[str]) -> list[int]:
+    """Every process inside one of `namespaces`, in one pass over /proc (a pass per
+    namespace costs seconds at 1000 robots)."""
+    wanted = set()
+    for ns in namespaces:
+        try:
+            st = os.stat(netns.path(ns))
+        except FileNotFoundError:
+            continue
+        wanted.add((st.st_dev, st.st_ino))
+    if not wanted:
         return []
     found = []
     for entry in os.listdir("/proc"):
@@ -71,6 +82,6 @@ def pids_in_namespace(ns: str) -> list[int]:
             st = os.stat(f"/proc/{entry}/ns/net")
         except (FileNotFoundError, PermissionError, ProcessLookupError):
             continue
-        if (st.st_dev, st.st_ino) == (target.st_dev, target.st_ino):
+        if (st.st_dev, st.st_ino) in wanted:
             found.append(int(entry))
     return found
