@@ -37,6 +37,7 @@ from topology.medium import WLAN_INDEX, Medium, port_index
 from topology.spec import Impairment, NetworkSpec, Position
 
 ROLE = "ns3-wifi"
+NS3_HEADER = "/usr/include/ns3/wifi-module.h"  # installed with Debian's libns3-dev
 BINARY_ENV = "TESTBED_NS3_WIFI"  # another build of tb-ns3-wifi (tests, development)
 START_TIMEOUT_S = 20.0
 # SCHED_RR priority of the ns-3 process: the robots' motion-control threads have 1 and the

@@ -14,10 +14,12 @@ from testbed.analysis import figures, media
 from testbed.analysis.runs import load_run
 from testbed.run import RunConfig, run
 from topology import netns, state
-from topology.ns3medium import binary
+from topology.ns3medium import NS3_HEADER
 
+# Skipped only where the distribution has no ns-3 (Debian's libns3-dev): where it is installed,
+# `make setup` builds the medium, and a missing build is a failure, not a skip.
 pytestmark = pytest.mark.skipif(
-    not os.access(binary(), os.X_OK), reason="build/tb-ns3-wifi is not built (make setup)"
+    not os.path.exists(NS3_HEADER), reason="ns-3 is not installed (Debian's libns3-dev)"
 )
 
 STEPS = 150  # 15 s of robot time: maps are flooded every 10 steps, goals sent at the start

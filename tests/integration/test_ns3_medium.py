@@ -13,13 +13,15 @@ import pytest
 from topology import names, netns, state
 from topology.errors import TestbedError
 from topology.network import Network, destroy
-from topology.ns3medium import binary
+from topology.ns3medium import NS3_HEADER
 from topology.spec import NetworkSpec
 
 from .test_medium import _neighbour_routes, _received, _start_listeners
 
+# Skipped only where the distribution has no ns-3 (Debian's libns3-dev): where it is installed,
+# `make setup` builds the medium, and a missing build is a failure, not a skip.
 pytestmark = pytest.mark.skipif(
-    not os.access(binary(), os.X_OK), reason="build/tb-ns3-wifi is not built (make setup)"
+    not os.path.exists(NS3_HEADER), reason="ns-3 is not installed (Debian's libns3-dev)"
 )
 
 PORT = 47000
