@@ -42,14 +42,30 @@ def results(out: Path) -> dict:
     return {p.parent.name: json.loads(p.read_text()) for p in out.glob("runs/*/result.json")}
 
 
+def report_all(out: Path):
+    """The report with every run counted: these tests check that each figure and section is
+    made from every run's files. Whether a run kept faithful to its time scale depends on
+    the machine's load (tests/integration/test_fidelity.py tests the verdict); here every
+    run carries one, and the report names the unfaithful ones, however many."""
+    r = run_testbed("report", out, "--include-unfaithful", timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    res = results(out)
+    assert all(isinstance(d["fidelity"]["ok"], bool) for d in res.values())
+    unfaithful = [rid for rid, d in res.items() if not d["fidelity"]["ok"]]
+    text = (out / "report.md").read_text()
+    assert (f"Not faithful to their time scale: {len(unfaithful)} run(s)" in text) == bool(
+        unfaithful
+    )
+    return r
+
+
 def test_short_profile_end_to_end(tmp_path):
     if importlib.util.find_spec("aodv.__main__") is None:
         pytest.skip("the AODV daemon (python -m aodv) is not built yet")
     out = tmp_path / "short"
     r = run_testbed("sweep", SHORT, "--out", out)
     assert r.returncode == 0, r.stderr[-2000:]
-    r = run_testbed("report", out, timeout=900)
-    assert r.returncode == 0, r.stderr[-2000:]
+    report_all(out)
     figs = out / "figures"
     for name in ("fig2a", "fig4", "routing"):
         assert (figs / f"{name}.png").is_file() and (figs / f"{name}.pdf").is_file()
@@ -202,8 +218,7 @@ def test_protocols_short_sweep_fills_the_protocols_section(tmp_path):
     out = tmp_path / "protocols"
     r = run_testbed("sweep", PROTOCOLS_SHORT, "--out", out)
     assert r.returncode == 0, r.stderr[-2000:]
-    r = run_testbed("report", out, timeout=900)
-    assert r.returncode == 0, r.stderr[-2000:]
+    report_all(out)
     res = results(out)
     assert len(res) == 8 and all(d["status"] in ("complete", "step_cap") for d in res.values())
     rows = json.loads((out / "figures" / "protocols.json").read_text())
