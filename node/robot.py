@@ -168,6 +168,11 @@ class Robot:
         )
         self.lock = threading.Lock()
         self.tick = threading.Condition()
+        # Step order (see _keep_step_order): the timer and the planner say on this condition
+        # that they finished a step's work; timer_seen is the last step the timer handled.
+        self.caught_up = threading.Condition(self.lock)
+        self.timer_seen = -1
+        self.order_timeouts = 0
         self.requests: queue.Queue[str] = queue.Queue()
         self.inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(INBOX_LIMIT)
         self.wake_r, self.wake_w = os.pipe()  # stop() wakes the inbox's select through it
@@ -196,6 +201,8 @@ class Robot:
             "plan_timer_steps": Lateness(),
             "map_timer_steps": Lateness(),
             "frame_answer_ms": Lateness(MS_BOUNDS),
+            # emulated ms a frame was held for the timer or the planner (_keep_step_order)
+            "order_wait_ms": Lateness(MS_BOUNDS),
         }
         self.threads: list[threading.Thread] = []
 
@@ -246,6 +253,7 @@ class Robot:
             flood=dict(self.flooder.counts),
             frames=self.frames,
             frames_skipped=self.skipped,
+            order_timeouts=self.order_timeouts,
             inbox_dropped=self.inbox_dropped,
             plan_ms_median=float(np.median(self.plan_ms)) if self.plan_ms else None,
             cpu_s=round(time.process_time(), 3),
@@ -289,6 +297,7 @@ class Robot:
                 continue
             f: body.Frame = msg[1]
             self.frames += 1
+            self._keep_step_order(f)
             t_frame = time.thread_time()
             t_in = time.monotonic()
             # A robot standing still sees nothing new (the world is static): skip the update.
@@ -326,6 +335,37 @@ class Robot:
             if not started:
                 started = True
                 self.request("start")
+
+    def _keep_step_order(self, f: body.Frame) -> None:
+        """Hold frame `f` until the robot's other threads finished the previous step's work.
+
+        At time scale 1 a robot's timer has handled step s, and the plan asked for at step s
+        is installed, long before frame s + 1 arrives (a plan takes 1-2 ms of a 100 ms step).
+        Dilated, a step lasts a few wall milliseconds and those threads may not have run yet;
+        acting on frame s + 1 without them applies the plan a step late, from another pose,
+        and the robot's path changes (docs/architecture.md, "Time dilation and fidelity").
+        So motion control waits for them, but only until half a step after the world sent the
+        frame (RobotTimings.step_order_wait_s), keeping the world's deadline: past that it
+        goes on as it would have, and the plan or the timer counts as late, which the
+        fidelity verdict sees. Each wait is recorded (`order_wait_ms`, emulated ms)."""
+        s = self.s
+
+        def caught_up() -> bool:
+            if self.stopping.is_set() or s.step < 0:
+                return True
+            return self.timer_seen >= s.step and not (s.plan_pending and s.plan_asked < f.step)
+
+        with self.lock:
+            if caught_up():
+                return
+            t0 = time.monotonic()
+            until = (f.sent if f.sent > 0 else t0) + self.cfg.timing.step_order_wait_s
+            ok = self.caught_up.wait_for(caught_up, timeout=max(0.0, until - t0))
+        self.lateness["order_wait_ms"].add(
+            (time.monotonic() - t0) * 1000 * self.cfg.timing.time_scale
+        )
+        if not ok:
+            self.order_timeouts += 1
 
     def _put_scan(self, f: body.Frame, r0: int, c0: int, free, occ) -> None:
         """Put one scan (as Laser.scan_window gives it) into the map and the local map."""
@@ -418,6 +458,7 @@ class Robot:
                 s.plan_pending = False
                 if p.status == "done":
                     s.finished = True
+                self.caught_up.notify_all()
             goal = [round(v, 3) for v in p.goal] if p.goal else None
             self.events.write(
                 "plan", step, cause=cause, status=p.status, goal=goal, cost=round(p.cost, 3),
@@ -459,7 +500,10 @@ class Robot:
         next_tick: int | None = None  # the timer's own schedule (coordination "paper")
         while not self.stopping.is_set():
             with self.tick:
-                self.tick.wait(0.5)
+                # A tick notified while this thread was busy (a map flood) is not missed: the
+                # step is looked at before waiting (motion control sets it, then notifies).
+                if self.s.step == seen_step:
+                    self.tick.wait(0.5)
             with self.lock:
                 step = self.s.step
                 # The first timer period is longer by the robot's phase: robots booted in
@@ -496,6 +540,9 @@ class Robot:
                     self.lateness["map_timer_steps"].add(step - last_map - cfg.map_period)
                 last_map = step
                 self._share_map(step)
+            with self.lock:
+                self.timer_seen = step
+                self.caught_up.notify_all()
 
     def _share_map(self, step: int) -> None:
         t_cpu = time.thread_time()

@@ -20,6 +20,7 @@ GOAL_SEND_TIMEOUT_EMULATED_MS = 50  # half a step: a goal not sent by then is gi
 GOAL_SEND_TIMEOUT_MIN_MS = 2  # nng's send timeout in whole ms; below 2 it gives up at once
 FLOOD_LINGER_MAX_S = 0.001  # wait at most this long for more copies of a flood burst
 FLOOD_LINGER_EMULATED_S = 0.01  # ... and at most a tenth of a step
+STEP_ORDER_WAIT_STEPS = 0.5  # a frame waits at most this much of a step for the robot's threads
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,13 @@ class RobotTimings:
     def step_s(self) -> float:
         """Wall seconds per step."""
         return STEP_S / self.time_scale
+
+    @property
+    def step_order_wait_s(self) -> float:
+        """Wall seconds after the world sent a frame until which motion control may hold it
+        for the timer and the planner to finish the previous step's work (node.robot): half
+        a step, so that the answer still makes the world's deadline one step after the send."""
+        return STEP_ORDER_WAIT_STEPS * STEP_S / self.time_scale
 
     @property
     def neighbour_hold_s(self) -> float:

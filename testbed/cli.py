@@ -354,6 +354,11 @@ DELEGATED = {
     "sweep": ("testbed.sweep", "run a sweep of experiments from a TOML file"),
     "report": ("testbed.analysis.report", "figures and a report from a sweep's results"),
     "view": ("testbed.view.server", "replay a finished run in the browser"),
+    "compare": (
+        "testbed.analysis.scalecompare",
+        "two sweeps of the same points side by side "
+        "(e.g. time scale 1 against a dilated one): within the noise or not",
+    ),
 }
 
 

@@ -57,13 +57,14 @@ def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(
 
 
 def test_plans_that_come_late_make_a_run_unfaithful_and_testbed_run_says_so(tmp_path, tb_name):
-    # 60 ms of wall time is 3 steps at time scale 5: every plan is applied 3 steps late.
+    # 60 ms of wall time is 3 steps at time scale 5: every plan is applied two or three steps
+    # late (the frame that comes as it is installed may have waited for it, node.robot).
     r, res, _ = lone_run(tmp_path / "late", tb_name, 5, NODE_PLAN_DELAY_MS="60")
     f = res["fidelity"]
     assert f["ok"] is False, f
     assert "plans applied a step or more late (100.0%, limit 1.0%)" in f["reason"]
     assert f["measures"]["late_plans"] == f["measures"]["plans"] > 0
-    assert f["measures"]["plan_age_max_steps"] >= 3
+    assert f["measures"]["plan_age_max_steps"] >= 2
     warnings = [line for line in r.stderr.splitlines() if "warning: not faithful" in line]
     assert len(warnings) == 1, r.stderr
     assert "at time scale 5:" in warnings[0] and f["reason"] in warnings[0]

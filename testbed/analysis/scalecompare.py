@@ -1,0 +1,185 @@
+"""Does time dilation change the answer? Two sweeps of the same points, side by side.
+
+Theory of operation
+-------------------
+A lone robot is deterministic, so its invariance across time scales is exact or not at all
+(docs/architecture.md, "Time dilation and fidelity"). A team is not: which robot hears what
+first is decided by real timing, so the same seed gives different steps from run to run even
+at one time scale. Invariance for a team is therefore statistical: the same points run many
+times at time scale 1 (emulated time is the wall clock, nothing is late for dilation's sake)
+and at a dilated scale, on the same seeds (a run's seed leaves the time scale out), and each
+measure's two 95% intervals must overlap (the report's rule for a difference beyond noise,
+testbed.analysis.stats).
+
+`compare(dir_a, dir_b)` reads both sweep directories through the typed loader
+(testbed.analysis.runs), takes per run the exploration steps (Fig. 2's number), the plans
+made on a teammate's request (Fig. 4's), and from the captures (testbed.analysis.pcapmetrics)
+the packet delivery fraction, the median delay in emulated ms and the routing control packets
+and bytes per robot per second of robot time (the same per-run numbers as the media section,
+testbed.analysis.media.run_row). `section` writes the table and one sentence per measure:
+at which points the two sweeps agree within the noise, and at which they do not.
+Unfaithful runs are left out unless asked for, as in the report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+from testbed.analysis import media, pcapmetrics, stats
+from testbed.analysis.runs import ResultError, RunRecord, load_runs
+from testbed.errors import UsageError
+
+# (key, name, format)
+MEASURES = (
+    ("steps", "exploration steps", ".0f"),
+    ("requests", "plans on request per robot", ".2f"),
+    ("pdf", "packet delivery fraction", ".3f"),
+    ("delay_ms", "median delay (emulated ms)", ".2f"),
+    ("control_pkts_per_robot_s", "control packets per robot per second", ".2f"),
+    ("control_bytes_per_robot_s", "control bytes per robot per second", ".0f"),
+)
+RULE = (
+    "the two sweeps agree at a point when the 95% intervals of a measure's means overlap "
+    "(Student t; the report's rule for a difference beyond noise)."
+)
+
+
+def run_row(run: RunRecord, metrics: dict | None) -> dict:
+    """One run's measures."""
+    row = media.run_row(run, metrics)
+    plans = [p for r in run.robots for p in r.plans]
+    row["requests"] = (
+        sum(1 for p in plans if p.cause == "request") / len(run.robots) if run.robots else None
+    )
+    row["time_scale"] = run.time_scale_achieved or run.config.time_scale
+    return row
+
+
+def rows_of(sweep_dir: str | Path, unfaithful: bool = False) -> tuple[list[dict], int]:
+    """Per-run rows of a sweep directory, and how many finished runs were left out as not
+    faithful to their time scale."""
+    every = load_runs(sweep_dir, unfaithful=True)
+    kept = [r for r in every if r.usable and (unfaithful or r.faithful is not False)]
+    dropped = sum(1 for r in every if r.faithful is False) if not unfaithful else 0
+    return [run_row(r, pcapmetrics.run_metrics(r.path, run=r)) for r in kept], dropped
+
+
+def points(rows: list[dict]) -> dict[tuple, dict]:
+    """{(routing, range, robots): {n, time scale, KEY: (mean, low, high) or (mean,) }}."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["routing"], r["comm_range"], r["robots"]), []).append(r)
+    out = {}
+    for key, items in sorted(groups.items()):
+        p: dict = {"n": len(items)}
+        scales = [i["time_scale"] for i in items if i.get("time_scale")]
+        p["time_scale"] = statistics.median(scales) if scales else None
+        for k, _, _ in MEASURES:
+            vals = [i[k] for i in items if i.get(k) is not None]
+            p[k] = stats.mean_ci(vals) or ((statistics.fmean(vals),) if vals else None)
+        out[key] = p
+    return out
+
+
+def _cell(v, spec: str) -> str:
+    if v is None:
+        return "–"
+    if len(v) == 1:
+        return format(v[0], spec)
+    return f"{format(v[0], spec)} [{format(v[1], spec)}, {format(v[2], spec)}]"
+
+
+def _label(point: tuple) -> str:
+    routing, comm, robots = point
+    return f"{routing}, {comm:g} m, {robots} robots"
+
+
+def sentence(key: str, name: str, spec: str, a: dict, b: dict, names: tuple[str, str]) -> str:
+    """At which common points `key` agrees within the noise, at which not (and which way)."""
+    within, beyond, unknown = [], [], 0
+    for point in sorted(set(a) & set(b)):
+        va, vb = a[point].get(key), b[point].get(key)
+        if va is None or vb is None:
+            continue
+        if len(va) < 3 or len(vb) < 3:
+            unknown += 1
+        elif stats.separated(va, vb):
+            way = "above" if vb[0] > va[0] else "below"
+            beyond.append(
+                f"{_label(point)}: {names[1]} {format(vb[0], spec)} {way} "
+                f"{names[0]}'s {format(va[0], spec)}"
+            )
+        else:
+            within.append(point)
+    judged = len(within) + len(beyond)
+    head = f"- {name[0].upper()}{name[1:]}: "
+    if not judged:
+        return head + ("not judged: one run on a side." if unknown else "no common point has it.")
+    text = head + f"within the noise at {len(within)} of {judged} points"
+    text += f"; beyond it at {'; '.join(beyond)}" if beyond else ""
+    return text + (f"; {unknown} not judged (one run on a side)." if unknown else ".")
+
+
+def section(
+    a_rows: list[dict], b_rows: list[dict], names: tuple[str, str], dropped: tuple[int, int]
+) -> list[str]:
+    """Markdown: each point's measures in both sweeps, and one sentence per measure."""
+    a, b = points(a_rows), points(b_rows)
+    out = [
+        f"Every cell: the mean over the point's runs with its 95% interval (Student t). "
+        f"Runs left out as not faithful to their time scale: {dropped[0]} in {names[0]}, "
+        f"{dropped[1]} in {names[1]}.",
+        "",
+        "| point | sweep | runs | time scale | " + " | ".join(n for _, n, _ in MEASURES) + " |",
+        "|---|---|---|---|" + "---|" * len(MEASURES),
+    ]
+    for point in sorted(set(a) | set(b)):
+        for name, side in zip(names, (a, b), strict=True):
+            p = side.get(point)
+            if p is None:
+                continue
+            cells = " | ".join(_cell(p[k], spec) for k, _, spec in MEASURES)
+            scale = "–" if p["time_scale"] is None else f"{p['time_scale']:g}"
+            out.append(f"| {_label(point)} | {name} | {p['n']} | {scale} | {cells} |")
+    out += ["", f"**Rule.** {RULE}", ""]
+    out += [sentence(k, n, spec, a, b, names) for k, n, spec in MEASURES]
+    return out + [""]
+
+
+def compare(dir_a: str | Path, dir_b: str | Path, unfaithful: bool = False) -> list[str]:
+    a_rows, a_dropped = rows_of(dir_a, unfaithful)
+    b_rows, b_dropped = rows_of(dir_b, unfaithful)
+    names = (Path(dir_a).name, Path(dir_b).name)
+    return section(a_rows, b_rows, names, (a_dropped, b_dropped))
+
+
+# ---------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("a", metavar="DIR_A", help="a sweep directory (testbed sweep --out)")
+    parser.add_argument("b", metavar="DIR_B", help="another, of the same points")
+    parser.add_argument("--out", metavar="FILE", help="also write the markdown to FILE")
+    parser.add_argument(
+        "--include-unfaithful",
+        action="store_true",
+        help="count runs whose fidelity verdict is false (left out by default)",
+    )
+
+
+def main(args: argparse.Namespace) -> int:
+    for d in (args.a, args.b):
+        if not (Path(d) / "runs").is_dir():
+            raise UsageError(f"{d}: not a sweep directory (no runs/ in it)")
+    try:
+        lines = compare(args.a, args.b, args.include_unfaithful)
+    except ResultError as e:
+        raise UsageError(str(e)) from None
+    text = "\n".join(lines)
+    sys.stdout.write(text)
+    if args.out:
+        Path(args.out).write_text(text)
+    return 0

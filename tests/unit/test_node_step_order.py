@@ -1,0 +1,92 @@
+"""node.robot's step order: motion control holds a frame until the timer and the planner
+finished the previous step's work, for at most half a step of wall time."""
+
+import threading
+import time
+
+from node import body
+from node.robot import Robot, RobotConfig
+from node.timing import RobotTimings
+
+
+def _robot(time_scale: float = 10.0) -> Robot:
+    cfg = RobotConfig(robot=1, robots=1, shape=(40, 40), timing=RobotTimings(time_scale))
+    return Robot(cfg, link=None, flooder=None, goals=None, events=None)
+
+
+def _frame(step: int, sent: float) -> body.Frame:
+    return body.Frame(step, 1.0, 1.0, 0.0, None, sent)
+
+
+def _at_step(r: Robot, step: int, timer_seen: int) -> None:
+    r.s.step = step
+    r.timer_seen = timer_seen
+
+
+def test_a_frame_waits_for_the_plan_asked_at_the_step_before():
+    r = _robot(time_scale=0.1)  # half a step: 0.5 s of wall time, plenty under any load
+    _at_step(r, 3, timer_seen=3)
+    r.s.plan_pending, r.s.plan_asked = True, 3
+
+    def install():
+        time.sleep(0.01)
+        with r.lock:
+            r.s.plan_pending = False
+            r.caught_up.notify_all()
+
+    t = threading.Thread(target=install)
+    t0 = time.monotonic()
+    t.start()
+    r._keep_step_order(_frame(4, time.monotonic()))
+    waited = time.monotonic() - t0
+    t.join()
+    assert 0.009 <= waited < 0.5
+    assert r.order_timeouts == 0
+    assert r.lateness["order_wait_ms"].n == 1
+
+
+def test_a_frame_waits_for_the_timer_to_handle_the_step_before():
+    r = _robot(time_scale=0.1)
+    _at_step(r, 7, timer_seen=6)
+
+    def timer():
+        time.sleep(0.01)
+        with r.lock:
+            r.timer_seen = 7
+            r.caught_up.notify_all()
+
+    t = threading.Thread(target=timer)
+    t.start()
+    r._keep_step_order(_frame(8, time.monotonic()))
+    t.join()
+    assert r.order_timeouts == 0
+    assert r.lateness["order_wait_ms"].n == 1
+
+
+def test_nothing_pending_means_no_wait_and_no_record():
+    r = _robot()
+    _at_step(r, 5, timer_seen=5)
+    r.s.plan_pending, r.s.plan_asked = True, 6  # asked at this frame's own step: not owed yet
+    r._keep_step_order(_frame(6, time.monotonic()))
+    assert r.lateness["order_wait_ms"].n == 0
+
+
+def test_the_wait_ends_half_a_step_after_the_world_sent_the_frame():
+    r = _robot(time_scale=10.0)  # a step is 10 ms of wall time: at most 5 ms after the send
+    _at_step(r, 3, timer_seen=3)
+    r.s.plan_pending, r.s.plan_asked = True, 3  # a planner that never answers
+    sent = time.monotonic()
+    r._keep_step_order(_frame(4, sent))
+    assert time.monotonic() - sent < 0.5
+    assert r.order_timeouts == 1
+    # recorded in emulated ms: about half a step (50 ms), however late the thread woke
+    assert r.lateness["order_wait_ms"].max >= 40
+
+
+def test_a_frame_already_past_its_wait_does_not_wait():
+    r = _robot(time_scale=10.0)
+    _at_step(r, 3, timer_seen=2)
+    t0 = time.monotonic()
+    r._keep_step_order(_frame(4, t0 - 1.0))  # sent a second ago
+    assert time.monotonic() - t0 < 0.5  # not the half step of a frame sent now
+    assert r.order_timeouts == 1
