@@ -291,7 +291,8 @@ class AodvCore:
 
     def next_deadline(self) -> float:
         t = self.next_hello
-        for c in (self.table.next_deadline(), self.neighbors.next_deadline(), self.reboot_until):
+        neighbors = self.neighbors.next_deadline(self.p.delete_period)
+        for c in (self.table.next_deadline(), neighbors, self.reboot_until):
             if c is not None and c < t:
                 t = c
         for d in self.discoveries.values():

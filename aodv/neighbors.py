@@ -61,20 +61,34 @@ class Neighbors:
         self._n.pop(addr, None)
 
     def lost(self, now: float, delete_period: float) -> list[str]:
-        """Monitored neighbours silent for longer than their timeout; they are forgotten."""
+        """Monitored neighbours silent for longer than their timeout; they are forgotten.
+
+        Whether a neighbour was monitored is judged when its allowed silence ended, not when
+        the timer is handled: a daemon that handles it late (descheduled) must not find the
+        neighbour unmonitored by then, keep it, and be woken for it again at once."""
         out = []
         for n in list(self._n.values()):
-            monitored = n.last_hello is not None and n.last_hello >= now - delete_period
-            if monitored and now >= n.last_heard + n.timeout:
-                out.append(n.addr)
-                del self._n[n.addr]
-            elif not monitored and now > n.last_heard + delete_period:
+            if n.last_hello is not None and _monitored_at_break(n, delete_period):
+                if now >= n.last_heard + n.timeout:
+                    out.append(n.addr)
+                    del self._n[n.addr]
+            elif now > n.last_heard + delete_period:
                 del self._n[n.addr]
         return out
 
-    def next_deadline(self) -> float | None:
+    def next_deadline(self, delete_period: float) -> float | None:
+        """When lost() has something to do next for a neighbour that sent a HELLO: its
+        allowed silence ends (if it is monitored then), else it is forgotten. The same
+        rule as lost(), so a deadline that has passed is always cleared by handling it
+        (a deadline lost() ignored would wake the daemon's loop again and again)."""
         return min(
-            (n.last_heard + n.timeout for n in self._n.values() if n.last_hello is not None),
+            (
+                n.last_heard + n.timeout
+                if _monitored_at_break(n, delete_period)
+                else n.last_heard + delete_period
+                for n in self._n.values()
+                if n.last_hello is not None
+            ),
             default=None,
         )
 
@@ -93,3 +107,9 @@ class Neighbors:
             del self._blacklist[addr]
             return False
         return True
+
+
+def _monitored_at_break(n: Neighbor, delete_period: float) -> bool:
+    """RFC 6.10's condition at the moment the neighbour's allowed silence ends: a HELLO came
+    from it within DELETE_PERIOD before that moment."""
+    return n.last_hello is not None and n.last_hello >= n.last_heard + n.timeout - delete_period

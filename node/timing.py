@@ -20,7 +20,7 @@ GOAL_SEND_TIMEOUT_EMULATED_MS = 50  # half a step: a goal not sent by then is gi
 GOAL_SEND_TIMEOUT_MIN_MS = 2  # nng's send timeout in whole ms; below 2 it gives up at once
 FLOOD_LINGER_MAX_S = 0.001  # wait at most this long for more copies of a flood burst
 FLOOD_LINGER_EMULATED_S = 0.01  # ... and at most a tenth of a step
-STEP_ORDER_WAIT_STEPS = 0.5  # a frame waits at most this much of a step for the robot's threads
+STEP_ORDER_WAIT_STEPS = 0.75  # a frame waits at most this much of a step for the robot's threads
 
 
 @dataclass(frozen=True)

@@ -114,3 +114,26 @@ def test_ns3_profile_matches_ns3_defaults():
 
 def test_lifetime_field_is_clamped_to_32_bits():
     assert Params().ms(1e12) == 0xFFFFFFFF
+
+
+def test_a_neighbour_no_longer_monitored_has_no_past_deadline():
+    """A neighbour whose last HELLO is older than DELETE_PERIOD but which was heard otherwise
+    is not lost when its silence ends; its deadline must then be when it is forgotten, not
+    the passed end of its silence (a daemon's loop spun on that deadline, 90,000 times in a
+    run, each firing counted as a late expiry timer)."""
+    n = Neighbors()
+    n.hello("10.0.0.3", 0.0, timeout=2.0)
+    n.heard("10.0.0.3", 20.0)  # data, no HELLO: silence ends at 22, last HELLO 22 s before
+    assert n.next_deadline(delete_period=15) == 35.0
+    assert n.lost(23.0, delete_period=15) == []
+    assert n.next_deadline(delete_period=15) == 35.0  # still: nothing to do before 35
+    assert n.lost(35.5, delete_period=15) == [] and n.next_deadline(delete_period=15) is None
+
+
+def test_a_neighbour_monitored_when_its_silence_ended_is_lost_however_late_the_timer():
+    n = Neighbors()
+    n.hello("10.0.0.3", 0.0, timeout=2.0)
+    assert n.next_deadline(delete_period=15) == 2.0
+    # handled 20 s late (a stalled daemon): the link broke at 2, while monitored
+    assert n.lost(22.0, delete_period=15) == ["10.0.0.3"]
+    assert n.next_deadline(delete_period=15) is None
