@@ -55,6 +55,7 @@ def run_row(run: RunRecord, metrics: dict | None) -> dict:
         sum(1 for p in plans if p.cause == "request") / len(run.robots) if run.robots else None
     )
     row["time_scale"] = run.time_scale_achieved or run.config.time_scale
+    row["laser_range"] = run.config.laser_range
     return row
 
 
@@ -68,10 +69,11 @@ def rows_of(sweep_dir: str | Path, unfaithful: bool = False) -> tuple[list[dict]
 
 
 def points(rows: list[dict]) -> dict[tuple, dict]:
-    """{(routing, range, robots): {n, time scale, KEY: (mean, low, high) or (mean,) }}."""
+    """{(routing, laser, range, robots): {n, time scale, KEY: (mean, low, high) or (mean,)}}."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
-        groups.setdefault((r["routing"], r["comm_range"], r["robots"]), []).append(r)
+        key = (r["routing"], r["laser_range"], r["comm_range"], r["robots"])
+        groups.setdefault(key, []).append(r)
     out = {}
     for key, items in sorted(groups.items()):
         p: dict = {"n": len(items)}
@@ -93,8 +95,8 @@ def _cell(v, spec: str) -> str:
 
 
 def _label(point: tuple) -> str:
-    routing, comm, robots = point
-    return f"{routing}, {comm:g} m, {robots} robots"
+    routing, laser, comm, robots = point
+    return f"{routing}, laser {laser:g} m, range {comm:g} m, {robots} robots"
 
 
 def sentence(key: str, name: str, spec: str, a: dict, b: dict, names: tuple[str, str]) -> str:

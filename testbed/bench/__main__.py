@@ -21,6 +21,7 @@ BENCHMARKS = (
     "node",
     "ns3wifi",
     "scale",
+    "fidelity",
 )
 
 

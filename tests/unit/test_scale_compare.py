@@ -7,7 +7,7 @@ def _row(steps, comm=20, robots=10, pdf=0.99, scale=1.0, requests=2.0):
     return {
         "routing": "aodv", "comm_range": comm, "robots": robots, "steps": steps,
         "requests": requests, "pdf": pdf, "delay_ms": 0.3, "control_pkts_per_robot_s": 1.0,
-        "control_bytes_per_robot_s": 70.0, "time_scale": scale,
+        "control_bytes_per_robot_s": 70.0, "time_scale": scale, "laser_range": 2.0,
     }  # fmt: skip
 
 
@@ -19,7 +19,7 @@ def test_overlapping_intervals_agree_and_separated_ones_do_not():
     )
     line = sc.sentence("steps", "exploration steps", ".0f", a, b, ("rt", "dil"))
     assert "within the noise at 1 of 2 points" in line
-    assert "aodv, 5 m, 10 robots: dil 505 above rt's 410" in line
+    assert "aodv, laser 2 m, range 5 m, 10 robots: dil 505 above rt's 410" in line
 
 
 def test_one_run_on_a_side_is_not_judged():
@@ -33,7 +33,7 @@ def test_the_section_lists_both_sweeps_per_point_with_their_scales_and_what_was_
     a = [_row(s) for s in (360, 370, 380)]
     b = [_row(s, scale=8) for s in (365, 375)]
     text = "\n".join(sc.section(a, b, ("rt", "dil"), (0, 2)))
-    assert "| aodv, 20 m, 10 robots | rt | 3 | 1 | 370 [" in text
-    assert "| aodv, 20 m, 10 robots | dil | 2 | 8 | 370 [" in text
+    assert "| aodv, laser 2 m, range 20 m, 10 robots | rt | 3 | 1 | 370 [" in text
+    assert "| aodv, laser 2 m, range 20 m, 10 robots | dil | 2 | 8 | 370 [" in text
     assert "0 in rt, 2 in dil" in text
     assert text.count("\n- ") == len(sc.MEASURES)
