@@ -153,17 +153,16 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: {args.dir} is not a directory")
     if not any(re.fullmatch(r"r\d+\.pcap", e) for e in os.listdir(d)):
         raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
-    routing = "aodv"
+    routing, scale = "aodv", None
     try:
         with open(os.path.join(d, "daemons", "network.json")) as f:
-            routing = json.load(f)["routing"]
+            net = json.load(f)
+        routing, scale = net["routing"], net.get("time_scale")
     except (OSError, ValueError, KeyError, TypeError):
         pass
     with tempfile.TemporaryDirectory(prefix="tb-metrics-") as tmp:
-        os.symlink(d, os.path.join(tmp, "pcaps"))
-        with open(os.path.join(tmp, "result.json"), "w") as f:
-            json.dump({"config": {"routing": routing}}, f)
-        m = pcapmetrics.run_metrics(tmp, use_cache=False)
+        os.symlink(d, os.path.join(tmp, "pcaps"))  # laid out as a run's directory
+        m = pcapmetrics.run_metrics(tmp, use_cache=False, network=(routing, scale))
     if m is None:
         raise UsageError(f"metrics: no captures in {args.dir}")
     m = {k: v for k, v in m.items() if k not in ("pcaps",)}

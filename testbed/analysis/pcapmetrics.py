@@ -495,11 +495,15 @@ def _pcaps(run_dir: Path) -> dict[int, Path]:
 
 
 def run_metrics(
-    run_dir: str | Path, use_cache: bool = True, run: runs.RunRecord | None = None
+    run_dir: str | Path,
+    use_cache: bool = True,
+    run: runs.RunRecord | None = None,
+    network: tuple[str, float | None] | None = None,
 ) -> dict | None:
     """Routing metrics of one run directory (None if it has no captures), cached in its
     routing.json. `run` (its routing says whose control port to count, its time scale turns
-    delays into emulated time) is read from the directory when not given."""
+    delays into emulated time) is read from the directory when not given; `network`, the
+    (routing, time scale) of a `net up --capture` network, stands in for a run that has none."""
     run_dir = Path(run_dir)
     pcaps = _pcaps(run_dir)
     if not pcaps:
@@ -513,12 +517,12 @@ def run_metrics(
                 return doc
         except (OSError, ValueError):
             pass
-    if run is None:
+    if run is None and network is None:
         try:
             run = runs.load_run(run_dir)
         except runs.ResultError as e:
             log.warning("%s; counting AODV's port, wall-clock time only", e)
-    routing = run.config.routing if run else runs.DEFAULT_ROUTING
+    routing = run.config.routing if run else (network or (runs.DEFAULT_ROUTING,))[0]
     captures = read_pcaps(pcaps)
     metrics = compute(
         captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
@@ -527,7 +531,10 @@ def run_metrics(
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
-    scale = run and (run.time_scale_achieved or run.time_scale_requested or run.config.time_scale)
+    if run is not None:
+        scale = run.time_scale_achieved or run.time_scale_requested or run.config.time_scale
+    else:
+        scale = network[1] if network else None
     metrics["emulated"] = routingnotes.emulated(metrics, scale)
     metrics["about"] = routingnotes.ABOUT
     try:

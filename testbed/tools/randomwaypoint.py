@@ -36,12 +36,17 @@ def trace(nodes: int, width: float, height: float, duration: float, speed: tuple
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m testbed.tools.randomwaypoint")
-    p.add_argument("--nodes", type=int, default=100)
-    p.add_argument("--size", type=float, nargs=2, default=(200.0, 200.0), metavar=("W", "H"))
-    p.add_argument("--duration", type=float, default=300.0)
-    p.add_argument("--speed", type=float, nargs=2, default=(0.5, 2.0), metavar=("MIN", "MAX"))
-    p.add_argument("--pause", type=float, default=5.0)
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--nodes", type=int, default=100, help="nodes (default 100)")
+    p.add_argument("--size", type=float, nargs=2, default=(200.0, 200.0), metavar=("W", "H"),
+                   help="the area (metres; default 200 200)")  # fmt: skip
+    p.add_argument("--duration", type=float, default=300.0,
+                   help="a node starts no new leg after this (seconds; default 300); the leg "
+                        "under way is finished, so the trace ends somewhat later")  # fmt: skip
+    p.add_argument("--speed", type=float, nargs=2, default=(0.5, 2.0), metavar=("MIN", "MAX"),
+                   help="speed of a leg, uniform in [MIN, MAX] (m/s; default 0.5 2)")  # fmt: skip
+    p.add_argument("--pause", type=float, default=5.0,
+                   help="pause at each destination (seconds; default 5)")  # fmt: skip
+    p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     a = p.parse_args(argv)
     if a.nodes < 1 or min(a.size) <= 0 or a.duration <= 0 or not 0 < a.speed[0] <= a.speed[1]:
         print("randomwaypoint: need nodes >= 1, a positive size and duration, "
