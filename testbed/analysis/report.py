@@ -143,6 +143,12 @@ def _routing_section(tables: dict) -> list[str]:
         "x K (each run's `routing.json` has both, and says what PDF, segment delivery and the "
         "mean and median delay mean; `testbed report RUN_DIR` sums one run up).",
         "",
+        "PDF and delay are the kernel's TCP over the emulated links, whose timers and "
+        "forwarding run on the wall clock, not scaled with the robots: they are not invariant "
+        "under time dilation (ten robots at 5 m: PDF 0.68 at time scale 1, 0.78 at 6; "
+        'docs/architecture.md, "Invariance for teams"). Compare them between runs at one '
+        "time scale; steps, plans and control overhead agreed within the noise.",
+        "",
     ]
     return out
 
