@@ -68,7 +68,7 @@ class Neighbors:
         neighbour unmonitored by then, keep it, and be woken for it again at once."""
         out = []
         for n in list(self._n.values()):
-            if n.last_hello is not None and _monitored_at_break(n, delete_period):
+            if _monitored_at_break(n, delete_period):
                 if now >= n.last_heard + n.timeout:
                     out.append(n.addr)
                     del self._n[n.addr]

@@ -344,10 +344,11 @@ class Robot:
         Dilated, a step lasts a few wall milliseconds and those threads may not have run yet;
         acting on frame s + 1 without them applies the plan a step late, from another pose,
         and the robot's path changes (docs/architecture.md, "Time dilation and fidelity").
-        So motion control waits for them, but only until half a step after the world sent the
-        frame (RobotTimings.step_order_wait_s), keeping the world's deadline: past that it
-        goes on as it would have, and the plan or the timer counts as late, which the
-        fidelity verdict sees. Each wait is recorded (`order_wait_ms`, emulated ms)."""
+        So motion control waits for them, but only until three quarters of a step after the
+        world sent the frame (RobotTimings.step_order_wait_s), so that its answer can still
+        make the world's deadline: past that it goes on as it would have, and the plan or the
+        timer counts as late, which the fidelity verdict sees. Each wait is recorded
+        (`order_wait_ms`, emulated ms)."""
         s = self.s
 
         def caught_up() -> bool:

@@ -42,8 +42,9 @@ class RobotTimings:
     @property
     def step_order_wait_s(self) -> float:
         """Wall seconds after the world sent a frame until which motion control may hold it
-        for the timer and the planner to finish the previous step's work (node.robot): half
-        a step, so that the answer still makes the world's deadline one step after the send."""
+        for the timer and the planner to finish the previous step's work (node.robot): three
+        quarters of a step, leaving the rest for the answer to make the world's deadline one
+        step after the send."""
         return STEP_ORDER_WAIT_STEPS * STEP_S / self.time_scale
 
     @property

@@ -522,7 +522,11 @@ def run_metrics(
             run = runs.load_run(run_dir)
         except runs.ResultError as e:
             log.warning("%s; counting AODV's port, wall-clock time only", e)
-    routing = run.config.routing if run else (network or (runs.DEFAULT_ROUTING,))[0]
+    if run is not None:
+        routing = run.config.routing
+        scale = run.time_scale_achieved or run.time_scale_requested or run.config.time_scale
+    else:
+        routing, scale = network or (runs.DEFAULT_ROUTING, None)
     captures = read_pcaps(pcaps)
     metrics = compute(
         captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
@@ -531,10 +535,6 @@ def run_metrics(
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
-    if run is not None:
-        scale = run.time_scale_achieved or run.time_scale_requested or run.config.time_scale
-    else:
-        scale = network[1] if network else None
     metrics["emulated"] = routingnotes.emulated(metrics, scale)
     metrics["about"] = routingnotes.ABOUT
     try:

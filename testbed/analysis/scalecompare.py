@@ -62,9 +62,9 @@ def run_row(run: RunRecord, metrics: dict | None) -> dict:
 def rows_of(sweep_dir: str | Path, unfaithful: bool = False) -> tuple[list[dict], int]:
     """Per-run rows of a sweep directory, and how many finished runs were left out as not
     faithful to their time scale."""
-    every = load_runs(sweep_dir, unfaithful=True)
-    kept = [r for r in every if r.usable and (unfaithful or r.faithful is not False)]
-    dropped = sum(1 for r in every if r.faithful is False) if not unfaithful else 0
+    every = load_runs(sweep_dir, unfaithful=unfaithful)
+    kept = [r for r in every if r.usable]
+    dropped = sum(1 for r in every if r.faithful is False and not r.usable)
     return [run_row(r, pcapmetrics.run_metrics(r.path, run=r)) for r in kept], dropped
 
 

@@ -11,7 +11,6 @@ highest time scale used (paper.toml: 30 for one robot, 3.33 ms of wall time) and
 robots (6: 16.7 ms), the whole team's cost against the step (CPU on any core).
 """
 
-import threading
 import time
 
 from node import body
@@ -43,12 +42,11 @@ def run() -> None:
     check_us = _per_call_us(lambda: robot._keep_step_order(frame))
     lateness = Lateness(MS_BOUNDS)
     add_us = _per_call_us(lambda: lateness.add(3.2))
-    cond = threading.Condition(threading.Lock())
 
-    def timer_mark():
-        with cond:
+    def timer_mark():  # what the timer thread does after each step (node.robot._timer)
+        with robot.lock:
             robot.timer_seen = 10
-            cond.notify_all()
+            robot.caught_up.notify_all()
 
     mark_us = _per_call_us(timer_mark)
     per_step_us = check_us + 3 * add_us + mark_us

@@ -1,5 +1,5 @@
 """node.robot's step order: motion control holds a frame until the timer and the planner
-finished the previous step's work, for at most half a step of wall time."""
+finished the previous step's work, for at most three quarters of a step of wall time."""
 
 import threading
 import time
@@ -24,7 +24,9 @@ def _at_step(r: Robot, step: int, timer_seen: int) -> None:
 
 
 def test_a_frame_waits_for_the_plan_asked_at_the_step_before():
-    r = _robot(time_scale=0.1)  # half a step: 0.5 s of wall time, plenty under any load
+    r = _robot(
+        time_scale=0.1
+    )  # three quarters of a step: 0.75 s of wall time, plenty under any load
     _at_step(r, 3, timer_seen=3)
     r.s.plan_pending, r.s.plan_asked = True, 3
 
@@ -71,15 +73,15 @@ def test_nothing_pending_means_no_wait_and_no_record():
     assert r.lateness["order_wait_ms"].n == 0
 
 
-def test_the_wait_ends_half_a_step_after_the_world_sent_the_frame():
-    r = _robot(time_scale=10.0)  # a step is 10 ms of wall time: at most 5 ms after the send
+def test_the_wait_ends_three_quarters_of_a_step_after_the_world_sent_the_frame():
+    r = _robot(time_scale=10.0)  # a step is 10 ms of wall time: at most 7.5 ms after the send
     _at_step(r, 3, timer_seen=3)
     r.s.plan_pending, r.s.plan_asked = True, 3  # a planner that never answers
     sent = time.monotonic()
     r._keep_step_order(_frame(4, sent))
     assert time.monotonic() - sent < 0.5
     assert r.order_timeouts == 1
-    # recorded in emulated ms: about half a step (50 ms), however late the thread woke
+    # recorded in emulated ms: about three quarters of a step (75 ms), however late it woke
     assert r.lateness["order_wait_ms"].max >= 40
 
 
@@ -88,5 +90,5 @@ def test_a_frame_already_past_its_wait_does_not_wait():
     _at_step(r, 3, timer_seen=2)
     t0 = time.monotonic()
     r._keep_step_order(_frame(4, t0 - 1.0))  # sent a second ago
-    assert time.monotonic() - t0 < 0.5  # not the half step of a frame sent now
+    assert time.monotonic() - t0 < 0.5  # not the wait of a frame sent now
     assert r.order_timeouts == 1
