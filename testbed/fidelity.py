@@ -40,8 +40,11 @@ The verdict: a run is faithful when, over all its robots and daemons,
   for teams", measures it).
   A calibration trial (300 steps, ~15 plans a robot) must have none;
 - no AODV HELLO timer fired more than HELLO_LATE_LIMIT_MS emulated ms late, and no expiry
-  timer more than EXPIRY_LATE_LIMIT_MS: a HELLO later than the neighbour's allowance
-  (ALLOWED_HELLO_LOSS x HELLO_INTERVAL, 2 s) breaks a link that exists;
+  timer more than EXPIRY_LATE_LIMIT_MS. A neighbour drops a link after ALLOWED_HELLO_LOSS x
+  HELLO_INTERVAL (2 s) of silence, so a HELLO breaks a link that exists only when it comes
+  one HELLO_INTERVAL (1 s) late; the limit is half that. An expiry timer that fires late
+  detects a true break, or drops a dead route, that much later (against 2-3 s): its limit
+  is a quarter of HELLO_INTERVAL;
 - the display handled at most DISPLAY_LATE_LIMIT of its frames more than two steps late
   (its beacons, which tell robots it is back in reach, follow its frames).
 
@@ -54,9 +57,13 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
+from aodv.params import Params as AodvParams
+
 DEADLINE_MISS_LIMIT = 0.01
 LATE_PLAN_LIMIT = 0.01
-HELLO_LATE_LIMIT_MS = 250.0
+_RFC = AodvParams()  # both AODV profiles send a HELLO every 1 s and allow 2 to be lost
+# Half of how late a HELLO must come to break a link: (ALLOWED_HELLO_LOSS - 1) x HELLO_INTERVAL.
+HELLO_LATE_LIMIT_MS = 0.5 * (_RFC.allowed_hello_loss - 1) * _RFC.hello_interval_ms
 EXPIRY_LATE_LIMIT_MS = 250.0
 DISPLAY_LATE_LIMIT = 0.05
 DISPLAY_LATE_MS = 200  # "more than two steps late": a bound of node.lateness.MS_BOUNDS

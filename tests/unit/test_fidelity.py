@@ -106,3 +106,13 @@ def test_is_faithful_reads_a_result():
     assert fidelity.is_faithful({"fidelity": {"ok": True}}) is True
     assert fidelity.is_faithful({}) is None
     assert fidelity.is_faithful({"fidelity": "yes"}) is None
+
+
+def test_hello_limit_is_half_the_lateness_that_breaks_a_link_in_every_aodv_profile():
+    from aodv.params import PROFILES, profile
+    from testbed.fidelity import HELLO_LATE_LIMIT_MS
+
+    for name in PROFILES:
+        p = profile(name)
+        breaks_at_ms = (p.allowed_hello_loss - 1) * p.hello_interval_ms
+        assert breaks_at_ms / 2 >= HELLO_LATE_LIMIT_MS, name
