@@ -22,7 +22,7 @@ import numpy as np
 from node import render
 from testbed import fidelity
 from testbed.world.world import World
-from topology.jsonfile import write_json_atomic
+from topology.jsonfile import read_json, write_json_atomic
 
 if TYPE_CHECKING:
     from testbed.runrecord import RobotOutcome, RunRecord
@@ -150,6 +150,7 @@ def contents(rec: RunRecord) -> dict:
             [sm.get("lateness") for sm in summaries],
             display.get("lateness"),
             [d.get("timer_lateness_ms") for d in daemons],
+            channel_relay_lag(rec.out),
         )
     )
     result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
@@ -172,6 +173,12 @@ def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: l
         round(sum(parts.values()) / robot_steps * 1000, 3) if robot_steps else None
     )
     return out
+
+
+def channel_relay_lag(out: str) -> dict | None:
+    """The ns3-wifi channel's `relay_lag` counters (medium.json), None without that channel."""
+    counters = read_json(os.path.join(out, "medium.json"))
+    return counters.get("relay_lag") if isinstance(counters, dict) else None
 
 
 def display_summary(out: str) -> dict:
