@@ -108,7 +108,7 @@ def test_relative_map_path_is_relative_to_the_file(tmp_path):
         ("protocols", 3 * 3 * 4 * 2 * 3),
         ("protocols-short", 4 * 2),
         ("media", 3 * 2 * 2 * 5),
-        ("media-protocols", 2 * 3 * 2 * 5),
+        ("media-protocols", 2 * 3 * 2 * 3),
         ("media-rise", 6 * 2 * 3),
         ("media-rise-slow", 6 * 2 * 3),
     ],  # fmt: skip
