@@ -26,13 +26,23 @@ NS3_MEDIUM := build/tb-ns3-wifi
 NS3_LIBS := -lns3-wifi -lns3-fd-net-device -lns3-mobility -lns3-propagation -lns3-network \
 	-lns3-core -lpthread
 
+STEPCORE := build/libstepcore.so
+
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
 	experiment-protocols experiment-media experiment-media-rise \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test clean
 
-setup: apt venv $(NS3_MEDIUM)
+setup: apt venv $(NS3_MEDIUM) $(STEPCORE)
+
+# The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
+# numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
+# float rounds as in numpy and the two agree cell for cell.
+$(STEPCORE): node/native/stepcore.cc
+	@command -v g++ >/dev/null || { echo "g++ not found: the per-step work runs in numpy (slower); install g++ and run make setup"; exit 0; }
+	@mkdir -p $(@D)
+	g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<
 
 $(NS3_MEDIUM): medium/ns3/wifi-medium.cc | apt
 	@[ -e /usr/include/ns3/wifi-module.h ] || { echo "ns3-wifi medium not built: this distribution has no libns3-dev (--medium ns3-wifi will say so)"; exit 0; }
@@ -68,7 +78,7 @@ test: setup
 	@$(VENV)/bin/testbed clean   # leftovers of an earlier run that was killed, and only those
 	$(PY) -m pytest -q tests/unit tests/integration
 
-unit: venv
+unit: venv $(STEPCORE)
 	$(PY) -m pytest -q tests/unit
 
 integration: setup

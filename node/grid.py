@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from node import stepcore
 from node.rays import Laser
 
 UNKNOWN = np.uint8(0)
@@ -94,6 +95,8 @@ class OccupancyGrid:
         return free, occ
 
     def ternary(self) -> np.ndarray:
+        if stepcore.NATIVE:
+            return stepcore.classify(self.L, self.params.threshold)
         return classify(self.L, self.params.threshold)
 
     def merge_ternary(self, t: np.ndarray, r0: int = 0, c0: int = 0) -> int:
@@ -102,6 +105,8 @@ class OccupancyGrid:
         if r0 < 0 or c0 < 0 or r0 + h > self.shape[0] or c0 + w > self.shape[1]:
             raise ValueError("ternary map does not fit the grid")
         view = self.L[r0 : r0 + h, c0 : c0 + w]
+        if stepcore.NATIVE:
+            return stepcore.merge_ternary(view, t, self.params.threshold, self.params.merged)
         learn = np.abs(view) < self.params.threshold  # unknown here...
         learn &= t != UNKNOWN  # ...and known there
         n = int(np.count_nonzero(learn))

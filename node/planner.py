@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from node import stepcore
 from node.grid import FREE, OCC, UNKNOWN
 
 _CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=np.uint8)
@@ -292,7 +293,30 @@ def plan(
 ) -> Plan:
     """The goal rule and a path to it, from a ternary map and the robot's (x, y). When every
     reachable frontier is within `exclusion_radius` of a teammate's goal, the nearest one is
-    the goal ("fallback") if `fallback`, else there is none ("blocked": node.coordination)."""
+    the goal ("fallback") if `fallback`, else there is none ("blocked": node.coordination).
+
+    Compiled (node.stepcore) where it was built; `plan_reference` is the same in numpy."""
+    if not stepcore.NATIVE:
+        return plan_reference(t, pose, teammate_goals, exclusion_radius, params, fallback)
+    prm = params or PlannerParams()
+    pc = prm.plan_cell
+    status, cells = stepcore.plan_cells(t, pose, teammate_goals, exclusion_radius, prm.factor,
+                                        prm.inflate_cells, pc, fallback)  # fmt: skip
+    if not cells:
+        return Plan(status)
+    waypoints = [((c + 0.5) * pc, (r + 0.5) * pc) for r, c in cells]
+    return Plan(status, waypoints[-1], waypoints, path_length(cells, pc))
+
+
+def plan_reference(
+    t: np.ndarray,
+    pose: tuple[float, float],
+    teammate_goals: list[tuple[float, float]],
+    exclusion_radius: float,
+    params: PlannerParams | None = None,
+    fallback: bool = True,
+) -> Plan:
+    """`plan` in numpy: the reference the compiled planner is held equal to."""
     prm = params or PlannerParams()
     p = pool(t, prm.factor)
     h, w = p.shape

@@ -39,13 +39,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from node import body, coordination, planner, sched, wire
+from node import body, coordination, planner, sched, stepcore, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.goalnet import GoalNet
 from node.grid import FREE, OCC, OccupancyGrid
 from node.lateness import MS_BOUNDS, Lateness
-from node.rays import Laser
+from node.rays import _BIAS, Laser
 from node.timing import RobotTimings
 
 log = logging.getLogger(__name__)
@@ -303,12 +303,14 @@ class Robot:
             # A robot standing still sees nothing new (the world is static): skip the update.
             moved = (f.x, f.y) != last_xy
             last_xy = (f.x, f.y)
-            if moved:
+            if moved and not stepcore.NATIVE:
                 r0, c0, free, occ = self.laser.scan_window(f.x, f.y, f.ranges)
             behind = self.link.pending()
             with self.lock:
                 s = self.s
-                if moved:
+                if moved and stepcore.NATIVE:
+                    self._put_scan_native(f)
+                elif moved:
                     self._put_scan(f, r0, c0, free, occ)
                     s.dirty = _grow_box(s.dirty, self._footprint(f.x, f.y))
                 s.pose = (f.x, f.y)
@@ -367,6 +369,13 @@ class Robot:
         )
         if not ok:
             self.order_timeouts += 1
+
+    def _put_scan_native(self, f: body.Frame) -> None:
+        """`_put_scan` in compiled code (node.stepcore), the same cells; numpy at the edge."""
+        s = self.s
+        if not stepcore.scan_into(self.laser, f.x, f.y, f.ranges, s.grid.Lp, s.own,
+                                  s.grid.params, _BIAS):  # fmt: skip
+            self._put_scan(f, *self.laser.scan_window(f.x, f.y, f.ranges))
 
     def _put_scan(self, f: body.Frame, r0: int, c0: int, free, occ) -> None:
         """Put one scan (as Laser.scan_window gives it) into the map and the local map."""

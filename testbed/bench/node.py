@@ -30,7 +30,8 @@ import numpy as np
 
 from node.grid import OccupancyGrid
 from node.planner import PlannerParams, plan
-from node.rays import Laser
+from node import stepcore
+from node.rays import _BIAS, Laser
 from testbed.bench.common import median, write
 from testbed.world.world import World
 from testbed.world.worldmap import empty_terrain, free_space, start_positions
@@ -43,22 +44,27 @@ SCALES = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
 MAX_SIM_STEPS = 6000
 
 
-def simulate_exploration(seed: int = 1) -> dict:
-    """One robot, in-process: the robot's own loop without threads or network."""
+def simulate_exploration(seed: int = 1, positions: bool = False) -> dict:
+    """One robot, in-process: the robot's own loop without threads or network, with the
+    per-step work the robot runs (compiled where node.stepcore is built). `positions`: the
+    result also has the robot's position after every step."""
     truth = empty_terrain()
     laser = Laser(2.0, 360, truth.cell)
     starts = start_positions(truth, 1, np.random.default_rng(seed), 0.15)
     world = World(truth, starts, laser, free_space(truth, starts), 0.1, 0.15)
     grid = OccupancyGrid(truth.shape, truth.cell, pad=laser.pad)
+    own = np.zeros(grid.Lp.shape, dtype=np.uint8)  # the robot's local map
     prm = PlannerParams(truth.cell, 2, 0.15)
-    plan_ms, update_ms = [], []
+    plan_ms, update_ms, track = [], [], []
     path, i, status, step = [], 0, "ok", 0
     for step in range(MAX_SIM_STEPS):
         b = world.bodies[0]
         ranges = world.scan(0)
         t0 = time.perf_counter()
-        r0, c0, free, occ = laser.scan_window(b.x, b.y, ranges)  # as node.robot does
-        grid.update_window(r0, c0, free, occ)
+        if not (stepcore.NATIVE and stepcore.scan_into(laser, b.x, b.y, ranges, grid.Lp, own,
+                                                       grid.params, _BIAS)):  # fmt: skip
+            r0, c0, free, occ = laser.scan_window(b.x, b.y, ranges)  # as node.robot does
+            grid.update_window(r0, c0, free, occ)
         update_ms.append((time.perf_counter() - t0) * 1000)
         if step % 20 == 0:
             t0 = time.perf_counter()
@@ -71,14 +77,20 @@ def simulate_exploration(seed: int = 1) -> dict:
             i += 1
         world.command(0, path[i] if i < len(path) else None)
         world.move()
-    return {
+        if positions:
+            track.append((b.x, b.y))
+    out = {
         "steps": step,
         "finished": status == "done",
         "coverage": round(world.coverage(), 4),
         "plans": len(plan_ms),
         "plan_ms": _stats(plan_ms),
         "map_update_ms": _stats(update_ms),
+        "step_core": stepcore.kind(),
     }
+    if positions:
+        out["positions"] = track
+    return out
 
 
 def _stats(v: list[float]) -> dict:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from node import stepcore
 from node.rays import _BIAS, Laser, pad
 from testbed.world.worldmap import GroundTruth
 
@@ -54,10 +55,15 @@ class World:
         self.step_no = 0
         self.occ_padded = pad(truth.occupied, laser.pad, True)
         self.seen_padded = np.zeros(self.occ_padded.shape, dtype=bool)
+        # The same arrays as bytes, for the compiled cast (node.stepcore).
+        self._occ_u8 = self.occ_padded.view(np.uint8)
+        self._seen_u8 = self.seen_padded.view(np.uint8)
         p = laser.pad
         self.seen = self.seen_padded[p : p + truth.shape[0], p : p + truth.shape[1]]
         self.free_space = free_space
         self.free_total = max(1, int(free_space.sum()))
+        free_padded = pad(free_space.astype(bool), laser.pad, False)
+        self._seen_free = (self._seen_u8, free_padded.view(np.uint8))  # coverage's operands
         self.paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
         self._rays = np.arange(laser.n_rays)
         self._last_scan: list = [None] * len(self.bodies)
@@ -139,7 +145,15 @@ class World:
         if cached is not None and cached[0] == (b.x, b.y):
             return cached[1]  # it did not move: same scan, nothing new seen
         r, c = int(b.y / self.truth.cell), int(b.x / self.truth.cell)
-        if self.open_space[r, c]:
+        if stepcore.NATIVE:
+            s0 = self.laser.n_samples if self.open_space[r, c] else int(self._skip[r, c])
+            cast = stepcore.cast_window(self.laser, self._occ_u8, self._seen_u8, b.x, b.y, s0,
+                                        _BIAS)  # fmt: skip
+            if cast is not None:
+                ranges = cast[0] if cast[1] else self._no_returns
+                self._last_scan[k] = ((b.x, b.y), ranges)
+                return ranges
+        elif self.open_space[r, c]:
             # No obstacle within laser range: every ray runs out, the cast is skipped and the
             # seen cells are the robot's own free cells for a scan without returns.
             r0, c0, free, _ = self.laser.window_marks(b.x, b.y, None)
@@ -219,4 +233,6 @@ class World:
 
     def coverage(self) -> float:
         """Fraction of the free space the team's lasers have seen."""
+        if stepcore.NATIVE:
+            return stepcore.count_and(self._seen_free[0], self._seen_free[1]) / self.free_total
         return float(np.count_nonzero(self.seen & self.free_space)) / self.free_total

@@ -1,0 +1,560 @@
+// The robots' and the world's per-step work in compiled code: the laser cast, the scan into
+// the map, map classification and merges, and the planner (pool, inflation, frontiers,
+// wavefront, path). Each function is the twin of a numpy function named in its comment and
+// computes the same result cell for cell: the same float32 and float64 operations in the same
+// order (built with -ffp-contract=off, so no fused multiply-add changes a rounding), the same
+// tie-breaking order in the wavefront. tests/unit/test_stepcore.py holds the two equal on
+// random maps, poses and scans. A plain C ABI, loaded with ctypes (node/stepcore.py): no
+// Python headers are needed to build it, only g++.
+//
+// Arrays are C-contiguous; booleans are one byte, 0 or 1, as numpy stores them.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+namespace {
+
+constexpr uint8_t UNKNOWN = 0, FREE = 1, OCC = 2;
+
+// node.rays: per-ray hit sample from a scan's ranges (Laser.hit_index); float32 arithmetic.
+inline int32_t hit_index(float range, float step, int n_samples) {
+    if (!std::isfinite(range)) return n_samples;
+    int32_t i = (int32_t)std::nearbyintf(range / step) - 1;
+    return std::min(std::max(i, 0), n_samples);
+}
+
+}  // namespace
+
+extern "C" {
+
+int sc_version(void) { return 1; }
+
+// Laser.window_marks: the window cells (w x w, row-major) of the marked samples before each
+// ray's hit, and each hit sample's cell. idx: per-ray hit sample (n_samples: none) or null for
+// a scan without hits. occ_out gets at most n_rays entries; returns their count.
+int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
+                    int n_samples, int w, float fx, float fy, int off, const int32_t* idx,
+                    uint8_t* free_out, int64_t* occ_out) {
+    std::memset(free_out, 0, (size_t)w * w);
+    for (int k = 0; k < n_rays; ++k) {
+        int lim = idx ? idx[k] : n_samples;
+        const float* rx = dx + (size_t)k * n_samples;
+        const float* ry = dy + (size_t)k * n_samples;
+        const uint8_t* mk = mark + (size_t)k * n_samples;
+        for (int s = 0; s < lim; ++s) {
+            if (!mk[s]) continue;
+            int32_t r = (int32_t)(ry[s] + fy);
+            int32_t c = (int32_t)(rx[s] + fx);
+            free_out[r * w + c + off] = 1;
+        }
+    }
+    int n = 0;
+    if (idx) {
+        for (int k = 0; k < n_rays; ++k) {
+            int s = idx[k];
+            if (s >= n_samples) continue;
+            size_t at = (size_t)k * n_samples + s;
+            int64_t r = (int64_t)(dy[at] + fy);
+            int64_t c = (int64_t)(dx[at] + fx);
+            occ_out[n++] = r * w + c + off;
+        }
+    }
+    return n;
+}
+
+// World._cast_window + window_marks: cast a laser from (fx, fy) (float32 cell coordinates
+// plus the bias) on the w x w window at (r0, c0) of the padded obstacle grid, samples s0..
+// only; ranges_out gets each ray's range (+inf: none) and the window of `seen` (same shape
+// as the obstacle grid, row length `stride`) is marked with what the scan saw. Returns 1 when
+// some ray hit, 0 when none did.
+int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
+                   int n_samples, double step, int w, float fx, float fy, int off,
+                   const uint8_t* occ, uint8_t* seen, int64_t stride, int s0,
+                   float* ranges_out, int32_t* idx_tmp) {
+    bool any = false;
+    for (int k = 0; k < n_rays; ++k) {
+        int first = n_samples;
+        const float* rx = dx + (size_t)k * n_samples;
+        const float* ry = dy + (size_t)k * n_samples;
+        for (int s = s0; s < n_samples; ++s) {
+            int32_t r = (int32_t)(ry[s] + fy);
+            int32_t c = (int32_t)(rx[s] + fx);
+            int32_t cell = r * w + c + off;
+            if (occ[(int64_t)(cell / w) * stride + cell % w]) {
+                first = s;
+                break;
+            }
+        }
+        idx_tmp[k] = first;
+        if (first < n_samples) {
+            any = true;
+            ranges_out[k] = (float)((double)(first + 1) * step);  // float64, as numpy
+        } else {
+            ranges_out[k] = INFINITY;
+        }
+    }
+    for (int k = 0; k < n_rays; ++k) {
+        int lim = any ? idx_tmp[k] : n_samples;
+        const float* rx = dx + (size_t)k * n_samples;
+        const float* ry = dy + (size_t)k * n_samples;
+        const uint8_t* mk = mark + (size_t)k * n_samples;
+        for (int s = 0; s < lim; ++s) {
+            if (!mk[s]) continue;
+            int32_t cell = (int32_t)(ry[s] + fy) * w + (int32_t)(rx[s] + fx) + off;
+            seen[(int64_t)(cell / w) * stride + cell % w] = 1;
+        }
+        if (any && lim < n_samples) {
+            size_t at = (size_t)k * n_samples + lim;
+            int64_t cell = (int64_t)(dy[at] + fy) * w + (int64_t)(dx[at] + fx) + off;
+            seen[(cell / w) * stride + cell % w] = 1;
+        }
+    }
+    return any ? 1 : 0;
+}
+
+// Robot._put_scan with Laser.scan_window and OccupancyGrid.update_window: one scan into the
+// log-odds map `lp` and the ternary local map `own` (both padded, row length `stride`), on
+// the window whose top-left cell is (r0, c0). Free cells first (each once), then the hit
+// cells (each once, however many rays hit it), as numpy's buffered fancy indexing does.
+void sc_scan_into(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
+                  int n_samples, float step, int w, float fx, float fy, int off,
+                  const float* ranges, float* lp, uint8_t* own, int64_t stride, int64_t r0,
+                  int64_t c0, float l_free, float l_occ, float l_max, uint8_t* free_tmp,
+                  int64_t* occ_tmp) {
+    std::vector<int32_t> idx(n_rays);
+    bool any = false;
+    for (int k = 0; k < n_rays; ++k) {
+        idx[k] = hit_index(ranges[k], step, n_samples);
+        any = any || std::isfinite(ranges[k]);
+    }
+    int n_occ = sc_window_marks(dx, dy, mark, n_rays, n_samples, w, fx, fy, off,
+                                any ? idx.data() : nullptr, free_tmp, occ_tmp);
+    const float lo = -l_max;
+    for (int r = 0; r < w; ++r) {
+        float* row = lp + (r0 + r) * stride + c0;
+        uint8_t* orow = own + (r0 + r) * stride + c0;
+        const uint8_t* fr = free_tmp + (size_t)r * w;
+        for (int c = 0; c < w; ++c) {
+            if (!fr[c]) continue;
+            float v = row[c] + l_free;
+            row[c] = v > lo ? v : lo;
+            orow[c] = FREE;
+        }
+    }
+    // Hit cells: every new value from the values before any of them was written.
+    std::sort(occ_tmp, occ_tmp + n_occ);
+    int64_t* end = std::unique(occ_tmp, occ_tmp + n_occ);
+    for (int64_t* p = occ_tmp; p != end; ++p) {
+        int64_t at = (r0 + *p / w) * stride + c0 + *p % w;
+        float v = lp[at] + l_occ;
+        lp[at] = v < l_max ? v : l_max;
+        own[at] = OCC;
+    }
+}
+
+// node.grid.classify: UNKNOWN, FREE below -threshold, OCC above +threshold (float32 compares).
+// The map may be a strided view: rows of `stride` floats. Branch-free, so it vectorises.
+void sc_classify(const float* l, int h, int w, int64_t stride, float threshold, uint8_t* out) {
+    const float neg = -threshold;
+    for (int r = 0; r < h; ++r) {
+        const float* row = l + (int64_t)r * stride;
+        uint8_t* o = out + (size_t)r * w;
+        for (int c = 0; c < w; ++c) {
+            float v = row[c];
+            o[c] = (uint8_t)((v < neg) | ((v > threshold) << 1));
+        }
+    }
+}
+
+// OccupancyGrid.merge_ternary: cells unknown here and known in `t` take +-merged; returns how
+// many. `l` points at the map's cell (r0, c0); rows of `stride` floats.
+int64_t sc_merge_ternary(float* l, int64_t stride, const uint8_t* t, int h, int w,
+                         float threshold, float merged) {
+    int64_t n = 0;
+    for (int r = 0; r < h; ++r) {
+        float* row = l + (int64_t)r * stride;
+        const uint8_t* tr = t + (size_t)r * w;
+        for (int c = 0; c < w; ++c) {
+            if (tr[c] != UNKNOWN && std::fabs(row[c]) < threshold) {
+                row[c] = tr[c] == FREE ? -merged : merged;
+                ++n;
+            }
+        }
+    }
+    return n;
+}
+
+// World.coverage: cells set in both arrays (0/1 bytes), summed in blocks that vectorise.
+int64_t sc_count_and(const uint8_t* a, const uint8_t* b, int64_t n) {
+    int64_t k = 0, i = 0;
+    while (i < n) {
+        int64_t e = std::min(n, i + 8192);
+        uint32_t s = 0;
+        for (; i < e; ++i) s += (uint8_t)(a[i] & b[i]);
+        k += s;
+    }
+    return k;
+}
+
+// node.planner.pool: planning cells of factor x factor map cells (OCC if any, FREE if all).
+void sc_pool(const uint8_t* t, int h, int w, int factor, uint8_t* out) {
+    int ph = h / factor, pw = w / factor;
+    if (factor == 2) {  // the default, branch-free
+        for (int r = 0; r < ph; ++r) {
+            const uint8_t* a = t + (size_t)(2 * r) * w;
+            const uint8_t* b = a + w;
+            uint8_t* o = out + (size_t)r * pw;
+            for (int c = 0; c < pw; ++c) {
+                uint8_t x0 = a[2 * c], x1 = a[2 * c + 1], x2 = b[2 * c], x3 = b[2 * c + 1];
+                uint8_t mx = std::max(std::max(x0, x1), std::max(x2, x3));
+                uint8_t mn = std::min(std::min(x0, x1), std::min(x2, x3));
+                o[c] = mx == OCC ? OCC : (uint8_t)(mn == FREE);
+            }
+        }
+        return;
+    }
+    for (int r = 0; r < ph; ++r)
+        for (int c = 0; c < pw; ++c) {
+            uint8_t mx = 0, mn = 255;
+            for (int i = 0; i < factor; ++i) {
+                const uint8_t* row = t + (size_t)(r * factor + i) * w + c * factor;
+                for (int j = 0; j < factor; ++j) {
+                    mx = std::max(mx, row[j]);
+                    mn = std::min(mn, row[j]);
+                }
+            }
+            out[(size_t)r * pw + c] = mx == OCC ? OCC : (mn == FREE ? FREE : UNKNOWN);
+        }
+}
+
+// node.planner.dilate of `mask` by a kernel symmetric about its centre that is, row dy of
+// 2r + 1, the span |dx| <= half[dy]: each row of the kernel is a horizontal dilation (OR of
+// shifted rows), and the rows are OR-ed in at their offsets. Outside counts as false.
+static void dilate_spans(const uint8_t* mask, int h, int w, int r, const int* half,
+                         uint8_t* out) {
+    size_t n = (size_t)h * w;
+    std::memset(out, 0, n);
+    std::vector<uint8_t> rows(n);
+    int done = -1;
+    for (int dy = -r; dy <= r; ++dy) {
+        int hw = half[dy + r];
+        if (hw < 0) continue;
+        if (hw != done) {  // rows: the horizontal dilation by hw
+            std::memcpy(rows.data(), mask, n);
+            for (int d = 1; d <= hw; ++d)
+                for (int y = 0; y < h; ++y) {
+                    uint8_t* dst = rows.data() + (size_t)y * w;
+                    const uint8_t* src = mask + (size_t)y * w;
+                    for (int x = 0; x < w - d; ++x) dst[x] |= src[x + d];
+                    for (int x = d; x < w; ++x) dst[x] |= src[x - d];
+                }
+            done = hw;
+        }
+        int y0 = std::max(0, -dy), y1 = std::min(h, h - dy);
+        for (int y = y0; y < y1; ++y) {
+            uint8_t* dst = out + (size_t)y * w;
+            const uint8_t* src = rows.data() + (size_t)(y + dy) * w;
+            for (int x = 0; x < w; ++x) dst[x] |= src[x];
+        }
+    }
+}
+
+// node.planner.traversable: FREE planning cells not within `inflate` cells of an OCC one.
+void sc_traversable(const uint8_t* p, int h, int w, int inflate, uint8_t* out) {
+    size_t n = (size_t)h * w;
+    std::vector<uint8_t> occ(n), grown(n);
+    for (size_t i = 0; i < n; ++i) occ[i] = p[i] == OCC;
+    if (inflate > 0) {  // node.planner.disc: dy * dy + dx * dx <= inflate * inflate
+        std::vector<int> half(2 * inflate + 1);
+        for (int dy = -inflate; dy <= inflate; ++dy) {
+            int hw = -1;
+            while ((hw + 1) * (hw + 1) + dy * dy <= inflate * inflate) ++hw;
+            half[dy + inflate] = hw;
+        }
+        dilate_spans(occ.data(), h, w, inflate, half.data(), grown.data());
+    } else {
+        grown = occ;
+    }
+    for (size_t i = 0; i < n; ++i) out[i] = (uint8_t)(p[i] == FREE) & (uint8_t)(grown[i] ^ 1);
+}
+
+// node.planner.frontier_goals: traversable cells with an UNKNOWN 8-neighbour.
+void sc_frontier_goals(const uint8_t* p, const uint8_t* trav, int h, int w, uint8_t* out) {
+    size_t n = (size_t)h * w;
+    std::vector<uint8_t> unk(n), near(n);
+    for (size_t i = 0; i < n; ++i) unk[i] = p[i] == UNKNOWN;
+    static const int half[3] = {1, 1, 1};
+    dilate_spans(unk.data(), h, w, 1, half, near.data());
+    for (size_t i = 0; i < n; ++i) out[i] = trav[i] & near[i];
+}
+
+// node.planner.exclusion_mask: cells whose centre is within `radius` of a goal (OR-ed in).
+void sc_exclusion(int h, int w, double plan_cell, const double* goals, int n_goals,
+                  double radius, uint8_t* mask) {
+    double r = radius / plan_cell;
+    for (int g = 0; g < n_goals; ++g) {
+        double gc = goals[2 * g] / plan_cell - 0.5, gr = goals[2 * g + 1] / plan_cell - 0.5;
+        int r0 = std::max(0, (int)std::floor(gr - r)), r1 = std::min(h, (int)std::ceil(gr + r) + 1);
+        int c0 = std::max(0, (int)std::floor(gc - r)), c1 = std::min(w, (int)std::ceil(gc + r) + 1);
+        for (int y = r0; y < r1; ++y)
+            for (int x = c0; x < c1; ++x) {
+                double a = (double)y - gr, b = (double)x - gc;
+                if (a * a + b * b <= r * r) mask[(size_t)y * w + x] = 1;
+            }
+    }
+}
+
+static void closest(const std::vector<int64_t>& flat, int64_t W, int sr, int sc, int* cell) {
+    int64_t best = -1, bd = 0;
+    for (int64_t f : flat) {
+        int64_t r = f / W - 1, c = f % W - 1;
+        int64_t d = (r - sr) * (r - sr) + (c - sc) * (c - sc);
+        if (best < 0 || d < bd) {
+            best = f;
+            bd = d;
+        }
+    }
+    cell[0] = (int)(best / W - 1);
+    cell[1] = (int)(best % W - 1);
+}
+
+// node.planner.wavefront: rings from (sr, sc) alternating 4- and 8-neighbour growth, in the
+// numpy version's order (ring-major candidates, each index kept at its last occurrence), so
+// that ties go the same way. dist_out (h x w) gets ring numbers, -1 unreached; cell_out the
+// goal cell. Returns 1 "ok", 2 "fallback", 0 "done".
+int sc_wavefront(const uint8_t* passable, const uint8_t* wanted, const uint8_t* fallback,
+                 int h, int w, int sr, int sc, int32_t* dist_out, int* cell_out) {
+    const int64_t W = w + 2, N = (int64_t)(h + 2) * W;
+    std::vector<uint8_t> open(N, 0), want(N, 0), fall(N, 0);
+    for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c) {
+            int64_t i = (int64_t)(r + 1) * W + c + 1, j = (int64_t)r * w + c;
+            open[i] = passable[j];
+            want[i] = wanted[j];
+            fall[i] = fallback[j];
+        }
+    std::vector<int32_t> dist(N, -1);
+    // last[q]: the position of q's last occurrence among the kept candidates; written for
+    // every kept candidate before it is read, so it needs no initial value.
+    std::unique_ptr<int64_t[]> last(new int64_t[N]);
+    int64_t s = (int64_t)(sr + 1) * W + sc + 1;
+    dist[s] = 0;
+    open[s] = 0;
+    auto finish = [&](int kind) {
+        for (int r = 0; r < h; ++r)
+            std::memcpy(dist_out + (size_t)r * w, dist.data() + (r + 1) * W + 1, sizeof(int32_t) * w);
+        return kind;
+    };
+    if (want[s]) {
+        cell_out[0] = sr;
+        cell_out[1] = sc;
+        return finish(1);
+    }
+    bool have_fb = fall[s];
+    int fb_cell[2] = {sr, sc};
+    const int64_t cross[4] = {-W, W, -1, 1};
+    const int64_t diag[4] = {-W - 1, -W + 1, W - 1, W + 1};
+    std::vector<int64_t> ring{s}, prev, cand, kept, hit;
+    for (int k = 1;; ++k) {
+        cand.clear();
+        if (k % 2) {
+            for (int64_t q : ring)
+                for (int64_t o : cross) cand.push_back(q + o);
+        } else {
+            for (int64_t q : ring) {
+                for (int64_t o : cross) cand.push_back(q + o);
+                for (int64_t o : diag) cand.push_back(q + o);
+            }
+            for (int64_t q : prev)
+                for (int64_t o : diag) cand.push_back(q + o);
+        }
+        kept.clear();
+        for (int64_t q : cand)
+            if (open[q]) kept.push_back(q);
+        for (size_t i = 0; i < kept.size(); ++i) last[kept[i]] = (int64_t)i;
+        cand.clear();
+        for (size_t i = 0; i < kept.size(); ++i)
+            if (last[kept[i]] == (int64_t)i) cand.push_back(kept[i]);
+        std::swap(prev, ring);
+        std::swap(ring, cand);
+        if (ring.empty()) {
+            if (k % 2 && !prev.empty()) continue;
+            break;
+        }
+        hit.clear();
+        for (int64_t q : ring) {
+            open[q] = 0;
+            dist[q] = k;
+            if (want[q]) hit.push_back(q);
+        }
+        if (!hit.empty()) {
+            closest(hit, W, sr, sc, cell_out);
+            return finish(1);
+        }
+        if (!have_fb) {
+            for (int64_t q : ring)
+                if (fall[q]) hit.push_back(q);
+            if (!hit.empty()) {
+                closest(hit, W, sr, sc, fb_cell);
+                have_fb = true;
+            }
+        }
+    }
+    if (have_fb) {
+        cell_out[0] = fb_cell[0];
+        cell_out[1] = fb_cell[1];
+        return finish(2);
+    }
+    return finish(0);
+}
+
+// node.planner.trace_back: from the goal, to the neighbour nearest the start, until dist 0.
+// path_out gets (row, col) pairs from the start to the goal; returns how many.
+int sc_trace_back(const int32_t* dist, int h, int w, int gr, int gc, int* path_out, int max_n) {
+    static const int nb[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1},
+                                 {-1, -1}, {-1, 1}, {1, -1}, {1, 1}};
+    std::vector<int> p{gr, gc};
+    int r = gr, c = gc, d = dist[(size_t)r * w + c];
+    while (d > 0) {
+        int br = -1, bc = -1, bd = d;
+        for (const auto& o : nb) {
+            int rr = r + o[0], cc = c + o[1];
+            if (rr >= 0 && rr < h && cc >= 0 && cc < w) {
+                int v = dist[(size_t)rr * w + cc];
+                if (v >= 0 && v < bd) {
+                    br = rr;
+                    bc = cc;
+                    bd = v;
+                }
+            }
+        }
+        if (br < 0) break;
+        r = br;
+        c = bc;
+        d = bd;
+        p.push_back(r);
+        p.push_back(c);
+    }
+    int n = (int)p.size() / 2;
+    if (n > max_n) return -n;
+    for (int i = 0; i < n; ++i) {
+        path_out[2 * i] = p[2 * (n - 1 - i)];
+        path_out[2 * i + 1] = p[2 * (n - 1 - i) + 1];
+    }
+    return n;
+}
+
+// node.planner.line_clear: np.linspace's float64 samples (i * step + start, the last one
+// exactly the end), rounded half to even as np.rint does.
+static double lin(int a, int b, int n, int i) {
+    if (n == 1) return (double)a;
+    if (i == n - 1) return (double)b;
+    double delta = (double)b - (double)a, div = n - 1, step = delta / div;
+    double y = (double)i;
+    if (step == 0) {
+        y /= div;
+        y *= delta;
+    } else {
+        y *= step;
+    }
+    return y + (double)a;
+}
+
+static bool line_clear(const uint8_t* ok, int w, const int* a, const int* b) {
+    int n = 2 * std::max(std::abs(b[0] - a[0]), std::abs(b[1] - a[1])) + 1;
+    for (int i = 0; i < n; ++i) {
+        int64_t r = (int64_t)std::nearbyint(lin(a[0], b[0], n, i));
+        int64_t c = (int64_t)std::nearbyint(lin(a[1], b[1], n, i));
+        if (!ok[r * w + c]) return false;
+    }
+    return true;
+}
+
+// node.planner.smooth: greedy string pulling, doubling then bisection from each anchor.
+int sc_smooth(const int* cells, int n, const uint8_t* ok, int w, int* out) {
+    if (n <= 2) {
+        std::memcpy(out, cells, sizeof(int) * 2 * n);
+        return n;
+    }
+    int m = 0;
+    out[m * 2] = cells[0];
+    out[m * 2 + 1] = cells[1];
+    ++m;
+    int i = 0;
+    while (i < n - 1) {
+        int step = 1, good = i + 1;
+        while (good + step < n && line_clear(ok, w, cells + 2 * i, cells + 2 * (good + step))) {
+            good += step;
+            step *= 2;
+        }
+        int lo = good, hi = std::min(good + step, n);
+        while (hi - lo > 1) {
+            int mid = (lo + hi) / 2;
+            if (line_clear(ok, w, cells + 2 * i, cells + 2 * mid))
+                lo = mid;
+            else
+                hi = mid;
+        }
+        out[m * 2] = cells[2 * lo];
+        out[m * 2 + 1] = cells[2 * lo + 1];
+        ++m;
+        i = lo;
+    }
+    return m;
+}
+
+// node.planner.plan after the ternary map: pool, traversable, the start cell's neighbourhood
+// made passable, frontier goals, the exclusion of teammates' goals, the wavefront, the path
+// and its smoothing. status_out: 0 "done", 1 "ok", 2 "fallback", 3 "blocked". path_out gets
+// the smoothed cells (row, col), at most max_n of them; returns their count (negative: the
+// buffer was too small, by that many).
+int sc_plan(const uint8_t* t, int th, int tw, int factor, int inflate, double px, double py,
+            double plan_cell, const double* goals, int n_goals, double radius, int fallback_ok,
+            int* status_out, int* path_out, int max_n) {
+    int h = th / factor, w = tw / factor;
+    size_t n = (size_t)h * w;
+    std::vector<uint8_t> p(n), trav(n), pass, goalm(n), excl(n, 0), wanted(n);
+    sc_pool(t, th, tw, factor, p.data());
+    int sr = std::min(std::max((int)(py / plan_cell), 0), h - 1);
+    int sc = std::min(std::max((int)(px / plan_cell), 0), w - 1);
+    sc_traversable(p.data(), h, w, inflate, trav.data());
+    pass = trav;
+    int rr = inflate + 1;
+    int r0 = std::max(sr - rr, 0), r1 = std::min(sr + rr + 1, h);
+    int c0 = std::max(sc - rr, 0), c1 = std::min(sc + rr + 1, w);
+    for (int y = r0; y < r1; ++y)
+        for (int x = c0; x < c1; ++x)
+            if ((y - sr) * (y - sr) + (x - sc) * (x - sc) <= rr * rr && p[(size_t)y * w + x] == FREE)
+                pass[(size_t)y * w + x] = 1;
+    pass[(size_t)sr * w + sc] = 1;
+    sc_frontier_goals(p.data(), trav.data(), h, w, goalm.data());
+    bool any = false;
+    for (size_t i = 0; i < n && !any; ++i) any = goalm[i];
+    *status_out = 0;
+    if (!any) return 0;
+    sc_exclusion(h, w, plan_cell, goals, n_goals, radius, excl.data());
+    for (size_t i = 0; i < n; ++i) wanted[i] = goalm[i] && !excl[i];
+    std::vector<int32_t> dist(n);
+    int cell[2];
+    int kind = sc_wavefront(pass.data(), wanted.data(), goalm.data(), h, w, sr, sc, dist.data(), cell);
+    if (kind == 0) return 0;
+    if (kind == 2 && !fallback_ok) {
+        *status_out = 3;
+        return 0;
+    }
+    *status_out = kind;
+    std::vector<int> raw(2 * (size_t)n);
+    int m = sc_trace_back(dist.data(), h, w, cell[0], cell[1], raw.data(), (int)n);
+    std::vector<int> sm(2 * (size_t)m);
+    int k = sc_smooth(raw.data(), m, pass.data(), w, sm.data());
+    if (k > max_n) return -k;
+    std::memcpy(path_out, sm.data(), sizeof(int) * 2 * k);
+    return k;
+}
+
+}  // extern "C"

@@ -1,0 +1,221 @@
+"""The per-step work in compiled code, loaded when it was built, numpy otherwise.
+
+Theory of operation: node/native/stepcore.cc holds compiled twins of the functions that run
+every step or every plan (the world's laser cast, a scan into the robot's maps, classifying
+and merging maps, and the planner). `make setup` builds it with g++ into
+build/libstepcore.so; this module loads it with ctypes (a plain C ABI: no Python headers, no
+binding library, no compiler at run time) and wraps each function so that it takes and
+returns what its numpy twin does. The numpy functions stay the reference: the unit tests
+hold the two equal cell for cell, and the callers (node.grid, node.planner, node.robot,
+testbed.world) use the compiled one only when `NATIVE` is set.
+
+`TESTBED_STEPCORE=numpy` in the environment makes every process of a run use numpy (to
+compare the two, or where the library cannot be built); `kind()` says which one runs, and
+a run records it.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+from pathlib import Path
+
+import numpy as np
+
+LIBRARY = Path(__file__).resolve().parent.parent / "build" / "libstepcore.so"
+VERSION = 1  # sc_version() of the source this wrapper was written for
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int
+_L = ctypes.c_int64
+_F = ctypes.c_float
+_D = ctypes.c_double
+
+_SIGNATURES = {
+    "sc_version": (_I, []),
+    "sc_window_marks": (_I, [_P, _P, _P, _I, _I, _I, _F, _F, _I, _P, _P, _P]),
+    "sc_cast_window": (_I, [_P, _P, _P, _I, _I, _D, _I, _F, _F, _I, _P, _P, _L, _I, _P, _P]),
+    "sc_scan_into": (
+        None,
+        [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P],
+    ),  # fmt: skip
+    "sc_classify": (None, [_P, _I, _I, _L, _F, _P]),
+    "sc_merge_ternary": (_L, [_P, _L, _P, _I, _I, _F, _F]),
+    "sc_count_and": (_L, [_P, _P, _L]),
+    "sc_pool": (None, [_P, _I, _I, _I, _P]),
+    "sc_traversable": (None, [_P, _I, _I, _I, _P]),
+    "sc_frontier_goals": (None, [_P, _P, _I, _I, _P]),
+    "sc_wavefront": (_I, [_P, _P, _P, _I, _I, _I, _I, _P, _P]),
+    "sc_plan": (_I, [_P, _I, _I, _I, _I, _D, _D, _D, _P, _I, _D, _I, _P, _P, _I]),
+}
+
+
+def _load() -> ctypes.CDLL | None:
+    if os.environ.get("TESTBED_STEPCORE", "").lower() == "numpy":
+        return None
+    try:
+        lib = ctypes.CDLL(str(LIBRARY))
+    except OSError:
+        return None
+    for name, (res, args) in _SIGNATURES.items():
+        fn = getattr(lib, name, None)
+        if fn is None:
+            return None
+        fn.restype, fn.argtypes = res, args
+    if lib.sc_version() != VERSION:
+        return None
+    return lib
+
+
+lib = _load()
+NATIVE = lib is not None
+
+
+def kind() -> str:
+    """Which implementation of the per-step work this process runs: native or numpy."""
+    return "native" if NATIVE else "numpy"
+
+
+def ptr(a: np.ndarray) -> int:
+    """The address of an array's first element (the array must stay alive during the call)."""
+    return a.ctypes.data
+
+
+def classify(logodds: np.ndarray, threshold: float) -> np.ndarray:
+    """node.grid.classify, compiled; `logodds` may be a view with strided rows."""
+    a = logodds
+    if a.dtype != np.float32 or a.strides[1] != 4:
+        a = np.ascontiguousarray(a, dtype=np.float32)
+    h, w = a.shape
+    out = np.empty((h, w), dtype=np.uint8)
+    lib.sc_classify(ptr(a), h, w, a.strides[0] // 4, threshold, ptr(out))
+    return out
+
+
+def merge_ternary(view: np.ndarray, t: np.ndarray, threshold: float, merged: float) -> int:
+    """OccupancyGrid.merge_ternary's cell update on `view` (float32, unit column stride)."""
+    t = np.ascontiguousarray(t, dtype=np.uint8)
+    h, w = t.shape
+    return int(lib.sc_merge_ternary(ptr(view), view.strides[0] // 4, ptr(t), h, w,
+                                    threshold, merged))  # fmt: skip
+
+
+def count_and(a: np.ndarray, b: np.ndarray) -> int:
+    """Cells set in both of two contiguous boolean arrays of one shape."""
+    return int(lib.sc_count_and(ptr(a), ptr(b), a.size))
+
+
+def pool(t: np.ndarray, factor: int) -> np.ndarray:
+    t = np.ascontiguousarray(t, dtype=np.uint8)
+    out = np.empty((t.shape[0] // factor, t.shape[1] // factor), dtype=np.uint8)
+    lib.sc_pool(ptr(t), t.shape[0], t.shape[1], factor, ptr(out))
+    return out
+
+
+def traversable(p: np.ndarray, inflate: int) -> np.ndarray:
+    p = np.ascontiguousarray(p, dtype=np.uint8)
+    out = np.empty(p.shape, dtype=bool)
+    lib.sc_traversable(ptr(p), p.shape[0], p.shape[1], inflate, ptr(out))
+    return out
+
+
+def frontier_goals(p: np.ndarray, trav: np.ndarray) -> np.ndarray:
+    p = np.ascontiguousarray(p, dtype=np.uint8)
+    trav = np.ascontiguousarray(trav, dtype=bool)
+    out = np.empty(p.shape, dtype=bool)
+    lib.sc_frontier_goals(ptr(p), ptr(trav), p.shape[0], p.shape[1], ptr(out))
+    return out
+
+
+_KINDS = {0: "done", 1: "ok", 2: "fallback"}
+
+
+def wavefront(passable, start, wanted, fallback):
+    """node.planner.wavefront, compiled: (dist, cell or None, kind)."""
+    arrs = [np.ascontiguousarray(a, dtype=bool) for a in (passable, wanted, fallback)]
+    h, w = arrs[0].shape
+    dist = np.empty((h, w), dtype=np.int32)
+    cell = np.zeros(2, dtype=np.intc)
+    k = lib.sc_wavefront(*(ptr(a) for a in arrs), h, w, int(start[0]), int(start[1]),
+                         ptr(dist), ptr(cell))  # fmt: skip
+    return dist, ((int(cell[0]), int(cell[1])) if k else None), _KINDS[k]
+
+
+_STATUS = {0: "done", 1: "ok", 2: "fallback", 3: "blocked"}
+
+
+def plan_cells(t, pose, goals, radius, factor, inflate, plan_cell, fallback):
+    """node.planner.plan up to the smoothed cell path: (status, [(row, col), ...])."""
+    t = np.ascontiguousarray(t, dtype=np.uint8)
+    g = np.ascontiguousarray(np.asarray(goals, dtype=np.float64).reshape(-1, 2))
+    status = ctypes.c_int(0)
+    cap = 256
+    while True:
+        out = np.empty((cap, 2), dtype=np.intc)
+        n = lib.sc_plan(ptr(t), t.shape[0], t.shape[1], factor, inflate, float(pose[0]),
+                        float(pose[1]), plan_cell, ptr(g), len(g), float(radius),
+                        1 if fallback else 0, ctypes.byref(status), ptr(out), cap)  # fmt: skip
+        if n >= 0:
+            return _STATUS[status.value], [(int(r), int(c)) for r, c in out[:n]]
+        cap = -n
+
+
+def _laser_tables(laser) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The laser's sample offsets and marks as the compiled functions take them (cached)."""
+    t = getattr(laser, "_native_tables", None)
+    if t is None:
+        t = (
+            np.ascontiguousarray(laser.dx, dtype=np.float32),
+            np.ascontiguousarray(laser.dy, dtype=np.float32),
+            np.ascontiguousarray(laser.mark, dtype=np.uint8),
+        )
+        laser._native_tables = t
+    return t
+
+
+def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float32, int, int, int]:
+    """(fx, fy, r0, c0, off) of a laser at (x, y): node.rays' float32 cell coordinates, the
+    window's top-left cell in the padded grid and the window offset of the laser's cell."""
+    fx = np.float32(x / laser.cell + bias)
+    fy = np.float32(y / laser.cell + bias)
+    cb, rb = int(fx), int(fy)
+    w = laser.window
+    return fx, fy, rb - bias, cb - bias, (laser.pad - rb) * w + (laser.pad - cb)
+
+
+def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: int) -> bool:
+    """Laser.scan_window, OccupancyGrid.update_window and the local map's update in one call:
+    one scan from (x, y) into the log-odds map `lp` and the ternary local map `own` (both
+    padded, contiguous, one shape). False (nothing done) where the window does not fit."""
+    fx, fy, r0, c0, off = _window(laser, x, y, bias)
+    w = laser.window
+    if r0 < 0 or c0 < 0 or r0 + w > lp.shape[0] or c0 + w > lp.shape[1]:
+        return False
+    dx, dy, mark = _laser_tables(laser)
+    r = np.ascontiguousarray(ranges, dtype=np.float32)
+    free = np.empty(w * w, dtype=np.uint8)
+    occ = np.empty(laser.n_rays, dtype=np.int64)
+    lib.sc_scan_into(ptr(dx), ptr(dy), ptr(mark), laser.n_rays, laser.n_samples,
+                     np.float32(laser.step), w, fx, fy, off, ptr(r), ptr(lp), ptr(own),
+                     lp.shape[1], r0, c0, lo.l_free, lo.l_occ, lo.l_max, ptr(free),
+                     ptr(occ))  # fmt: skip
+    return True
+
+
+def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: int):
+    """testbed.world's cast from (x, y) on the padded obstacle grid `occ`, samples s0.. only,
+    marking what it saw in `seen` (same shape): (ranges, any ray hit), or None where the
+    window does not fit."""
+    fx, fy, r0, c0, off = _window(laser, x, y, bias)
+    w = laser.window
+    if r0 < 0 or c0 < 0 or r0 + w > occ.shape[0] or c0 + w > occ.shape[1]:
+        return None
+    dx, dy, mark = _laser_tables(laser)
+    ranges = np.empty(laser.n_rays, dtype=np.float32)
+    idx = np.empty(laser.n_rays, dtype=np.int32)
+    at = r0 * occ.shape[1] + c0
+    hit = lib.sc_cast_window(ptr(dx), ptr(dy), ptr(mark), laser.n_rays, laser.n_samples,
+                             laser.step, w, fx, fy, off, ptr(occ) + at,
+                             ptr(seen) + at, occ.shape[1], min(s0, laser.n_samples),
+                             ptr(ranges), ptr(idx))  # fmt: skip
+    return ranges, bool(hit)
