@@ -28,9 +28,9 @@ import uuid
 
 import numpy as np
 
+from node import stepcore
 from node.grid import OccupancyGrid
 from node.planner import PlannerParams, plan
-from node import stepcore
 from node.rays import _BIAS, Laser
 from testbed.bench.common import median, write
 from testbed.world.world import World

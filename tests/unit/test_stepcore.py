@@ -127,7 +127,7 @@ def test_cast_and_scan_into(seed, geometry, s0):
     # Reference: every sample, first hit per ray, from node.rays' own arithmetic.
     flat = laser.flat_cells(x, y, occ.shape[1])
     hit = occ.reshape(-1)[flat]
-    any_hit, first = hit.any(axis=1), hit.argmax(axis=1)
+    any_hit = hit.any(axis=1)
     s0 = min(s0, laser.n_samples)
     clear = ~hit[:, :s0].any()
     ranges = laser.cast(occ, x, y)
