@@ -33,11 +33,11 @@ _D = ctypes.c_double
 
 _SIGNATURES = {
     "sc_version": (_I, []),
-    "sc_window_marks": (_I, [_P, _P, _P, _I, _I, _I, _F, _F, _I, _P, _P, _P]),
-    "sc_cast_window": (_I, [_P, _P, _P, _I, _I, _D, _I, _F, _F, _I, _P, _P, _L, _I, _P, _P]),
+    "sc_window_marks": (_I, [_P, _P, _P, _I, _I, _I, _F, _F, _I, _I, _P, _P, _P]),
+    "sc_cast_window": (_I, [_P, _P, _P, _I, _I, _D, _F, _F, _I, _I, _P, _P, _L, _I, _P, _P]),
     "sc_scan_into": (
         None,
-        [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P],
+        [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P],
     ),  # fmt: skip
     "sc_classify": (None, [_P, _I, _I, _L, _F, _P]),
     "sc_merge_ternary": (_L, [_P, _L, _P, _I, _I, _F, _F]),
@@ -160,43 +160,44 @@ def plan_cells(t, pose, goals, radius, factor, inflate, plan_cell, fallback):
         cap = -n
 
 
-def _laser_tables(laser) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The laser's sample offsets and marks as the compiled functions take them (cached)."""
+def _laser_tables(laser) -> tuple:
+    """The laser's sample offsets and marks as the compiled functions take them: the arrays
+    and their addresses (cached on the laser)."""
     t = getattr(laser, "_native_tables", None)
     if t is None:
-        t = (
+        arrays = (
             np.ascontiguousarray(laser.dx, dtype=np.float32),
             np.ascontiguousarray(laser.dy, dtype=np.float32),
             np.ascontiguousarray(laser.mark, dtype=np.uint8),
         )
+        t = (arrays, tuple(ptr(a) for a in arrays))
         laser._native_tables = t
     return t
 
 
-def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float32, int, int, int]:
-    """(fx, fy, r0, c0, off) of a laser at (x, y): node.rays' float32 cell coordinates, the
-    window's top-left cell in the padded grid and the window offset of the laser's cell."""
+def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float32, int, int]:
+    """(fx, fy, r0, c0) of a laser at (x, y): node.rays' float32 cell coordinates and the
+    top-left cell in the padded grid of the laser's window."""
     fx = np.float32(x / laser.cell + bias)
     fy = np.float32(y / laser.cell + bias)
-    cb, rb = int(fx), int(fy)
-    w = laser.window
-    return fx, fy, rb - bias, cb - bias, (laser.pad - rb) * w + (laser.pad - cb)
+    return fx, fy, int(fy) - bias, int(fx) - bias
 
 
 def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: int) -> bool:
     """Laser.scan_window, OccupancyGrid.update_window and the local map's update in one call:
     one scan from (x, y) into the log-odds map `lp` and the ternary local map `own` (both
     padded, contiguous, one shape). False (nothing done) where the window does not fit."""
-    fx, fy, r0, c0, off = _window(laser, x, y, bias)
+    fx, fy, r0, c0 = _window(laser, x, y, bias)
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > lp.shape[0] or c0 + w > lp.shape[1]:
         return False
-    dx, dy, mark = _laser_tables(laser)
+    _, (dx, dy, mark) = _laser_tables(laser)
     r = np.ascontiguousarray(ranges, dtype=np.float32)
     free = np.empty(w * w, dtype=np.uint8)
     occ = np.empty(laser.n_rays, dtype=np.int64)
-    lib.sc_scan_into(ptr(dx), ptr(dy), ptr(mark), laser.n_rays, laser.n_samples,
-                     np.float32(laser.step), w, fx, fy, off, ptr(r), ptr(lp), ptr(own),
+    roff, coff = laser.pad - int(fy), laser.pad - int(fx)
+    lib.sc_scan_into(dx, dy, mark, laser.n_rays, laser.n_samples, np.float32(laser.step), w,
+                     fx, fy, roff, coff, ptr(r), ptr(lp), ptr(own),
                      lp.shape[1], r0, c0, lo.l_free, lo.l_occ, lo.l_max, ptr(free),
                      ptr(occ))  # fmt: skip
     return True
@@ -206,16 +207,17 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
     """testbed.world's cast from (x, y) on the padded obstacle grid `occ`, samples s0.. only,
     marking what it saw in `seen` (same shape): (ranges, any ray hit), or None where the
     window does not fit."""
-    fx, fy, r0, c0, off = _window(laser, x, y, bias)
+    fx, fy, r0, c0 = _window(laser, x, y, bias)
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > occ.shape[0] or c0 + w > occ.shape[1]:
         return None
-    dx, dy, mark = _laser_tables(laser)
+    _, (dx, dy, mark) = _laser_tables(laser)
+    roff, coff = laser.pad - int(fy), laser.pad - int(fx)
     ranges = np.empty(laser.n_rays, dtype=np.float32)
     idx = np.empty(laser.n_rays, dtype=np.int32)
     at = r0 * occ.shape[1] + c0
-    hit = lib.sc_cast_window(ptr(dx), ptr(dy), ptr(mark), laser.n_rays, laser.n_samples,
-                             laser.step, w, fx, fy, off, ptr(occ) + at,
+    hit = lib.sc_cast_window(dx, dy, mark, laser.n_rays, laser.n_samples, laser.step,
+                             fx, fy, roff, coff, ptr(occ) + at,
                              ptr(seen) + at, occ.shape[1], min(s0, laser.n_samples),
                              ptr(ranges), ptr(idx))  # fmt: skip
     return ranges, bool(hit)

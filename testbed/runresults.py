@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from node import render
+from node import render, stepcore
 from testbed import fidelity
 from testbed.world.world import World
 from topology.jsonfile import read_json, write_json_atomic
@@ -131,6 +131,7 @@ def contents(rec: RunRecord) -> dict:
         "step_loop_wall_s": round(clock.loop_wall_s, 2),
         "wall_parts_s": dict(rec.parts),
         "world_priority": rec.priority,
+        "step_core": stepcore.kind(),
         "display": {
             "robot": len(rec.robots) + 1,
             "coverage_final": display_coverage(rec.out, rec.world),

@@ -38,8 +38,8 @@ int sc_version(void) { return 1; }
 // ray's hit, and each hit sample's cell. idx: per-ray hit sample (n_samples: none) or null for
 // a scan without hits. occ_out gets at most n_rays entries; returns their count.
 int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
-                    int n_samples, int w, float fx, float fy, int off, const int32_t* idx,
-                    uint8_t* free_out, int64_t* occ_out) {
+                    int n_samples, int w, float fx, float fy, int roff, int coff,
+                    const int32_t* idx, uint8_t* free_out, int64_t* occ_out) {
     std::memset(free_out, 0, (size_t)w * w);
     for (int k = 0; k < n_rays; ++k) {
         int lim = idx ? idx[k] : n_samples;
@@ -48,9 +48,9 @@ int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n
         const uint8_t* mk = mark + (size_t)k * n_samples;
         for (int s = 0; s < lim; ++s) {
             if (!mk[s]) continue;
-            int32_t r = (int32_t)(ry[s] + fy);
-            int32_t c = (int32_t)(rx[s] + fx);
-            free_out[r * w + c + off] = 1;
+            int32_t r = (int32_t)(ry[s] + fy) + roff;
+            int32_t c = (int32_t)(rx[s] + fx) + coff;
+            free_out[r * w + c] = 1;
         }
     }
     int n = 0;
@@ -59,9 +59,9 @@ int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n
             int s = idx[k];
             if (s >= n_samples) continue;
             size_t at = (size_t)k * n_samples + s;
-            int64_t r = (int64_t)(dy[at] + fy);
-            int64_t c = (int64_t)(dx[at] + fx);
-            occ_out[n++] = r * w + c + off;
+            int64_t r = (int64_t)(dy[at] + fy) + roff;
+            int64_t c = (int64_t)(dx[at] + fx) + coff;
+            occ_out[n++] = r * w + c;
         }
     }
     return n;
@@ -73,7 +73,7 @@ int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n
 // as the obstacle grid, row length `stride`) is marked with what the scan saw. Returns 1 when
 // some ray hit, 0 when none did.
 int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
-                   int n_samples, double step, int w, float fx, float fy, int off,
+                   int n_samples, double step, float fx, float fy, int roff, int coff,
                    const uint8_t* occ, uint8_t* seen, int64_t stride, int s0,
                    float* ranges_out, int32_t* idx_tmp) {
     bool any = false;
@@ -82,10 +82,9 @@ int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_
         const float* rx = dx + (size_t)k * n_samples;
         const float* ry = dy + (size_t)k * n_samples;
         for (int s = s0; s < n_samples; ++s) {
-            int32_t r = (int32_t)(ry[s] + fy);
-            int32_t c = (int32_t)(rx[s] + fx);
-            int32_t cell = r * w + c + off;
-            if (occ[(int64_t)(cell / w) * stride + cell % w]) {
+            int64_t r = (int32_t)(ry[s] + fy) + roff;
+            int64_t c = (int32_t)(rx[s] + fx) + coff;
+            if (occ[r * stride + c]) {
                 first = s;
                 break;
             }
@@ -105,13 +104,13 @@ int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_
         const uint8_t* mk = mark + (size_t)k * n_samples;
         for (int s = 0; s < lim; ++s) {
             if (!mk[s]) continue;
-            int32_t cell = (int32_t)(ry[s] + fy) * w + (int32_t)(rx[s] + fx) + off;
-            seen[(int64_t)(cell / w) * stride + cell % w] = 1;
+            int64_t r = (int32_t)(ry[s] + fy) + roff;
+            seen[r * stride + (int32_t)(rx[s] + fx) + coff] = 1;
         }
         if (any && lim < n_samples) {
             size_t at = (size_t)k * n_samples + lim;
-            int64_t cell = (int64_t)(dy[at] + fy) * w + (int64_t)(dx[at] + fx) + off;
-            seen[(cell / w) * stride + cell % w] = 1;
+            int64_t r = (int64_t)(dy[at] + fy) + roff;
+            seen[r * stride + (int64_t)(dx[at] + fx) + coff] = 1;
         }
     }
     return any ? 1 : 0;
@@ -122,7 +121,7 @@ int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_
 // the window whose top-left cell is (r0, c0). Free cells first (each once), then the hit
 // cells (each once, however many rays hit it), as numpy's buffered fancy indexing does.
 void sc_scan_into(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
-                  int n_samples, float step, int w, float fx, float fy, int off,
+                  int n_samples, float step, int w, float fx, float fy, int roff, int coff,
                   const float* ranges, float* lp, uint8_t* own, int64_t stride, int64_t r0,
                   int64_t c0, float l_free, float l_occ, float l_max, uint8_t* free_tmp,
                   int64_t* occ_tmp) {
@@ -132,7 +131,7 @@ void sc_scan_into(const float* dx, const float* dy, const uint8_t* mark, int n_r
         idx[k] = hit_index(ranges[k], step, n_samples);
         any = any || std::isfinite(ranges[k]);
     }
-    int n_occ = sc_window_marks(dx, dy, mark, n_rays, n_samples, w, fx, fy, off,
+    int n_occ = sc_window_marks(dx, dy, mark, n_rays, n_samples, w, fx, fy, roff, coff,
                                 any ? idx.data() : nullptr, free_tmp, occ_tmp);
     const float lo = -l_max;
     for (int r = 0; r < w; ++r) {

@@ -22,6 +22,7 @@ BENCHMARKS = (
     "ns3wifi",
     "scale",
     "fidelity",
+    "cost",
 )
 
 
