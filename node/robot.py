@@ -308,10 +308,11 @@ class Robot:
             behind = self.link.pending()
             with self.lock:
                 s = self.s
-                if moved and stepcore.NATIVE:
-                    self._put_scan_native(f)
-                elif moved:
-                    self._put_scan(f, r0, c0, free, occ)
+                if moved:
+                    if stepcore.NATIVE:
+                        self._put_scan_native(f)
+                    else:
+                        self._put_scan(f, r0, c0, free, occ)
                     s.dirty = _grow_box(s.dirty, self._footprint(f.x, f.y))
                 s.pose = (f.x, f.y)
                 s.step = f.step
