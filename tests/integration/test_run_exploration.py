@@ -79,6 +79,9 @@ def check_exploration(out: str, result: dict, robots: int, comm_range: float) ->
         heard = runcheck.heard_from(out, robots)
         for k in range(1, robots + 1):
             assert heard[k] == set(range(1, robots + 1)) - {k}, f"r{k} heard only {heard[k]}"
+        # The display knows the map only from the robots' local-map floods: what they flood
+        # must be what they saw.
+        assert result["display"]["coverage_final"] >= 0.95 * result["coverage_final"]
 
 
 @pytest.mark.parametrize("robots", [1, 3])
