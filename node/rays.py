@@ -50,6 +50,7 @@ class Laser:
         self.n_rays = int(n_rays)
         self.cell = float(cell)
         self.step = self.cell / 2.0
+        self.step32 = np.float32(self.step)  # the sample spacing as float32 arithmetic uses it
         self.n_samples = int(math.floor(self.max_range / self.step + 1e-9))
         self.pad = int(math.ceil(self.max_range / self.cell)) + 2
         self.window = 2 * self.pad + 1  # side of the square around the laser (window_cells)

@@ -34,7 +34,7 @@ import queue
 import resource
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -106,6 +106,27 @@ class Shared:
     teammates: dict[int, Teammate] = field(default_factory=dict)
 
 
+@dataclass
+class TimerState:
+    """The timer's own schedule: whether it asked for a plan yet, its next tick (coordination
+    "paper"), the step of its last map flood."""
+
+    fired: bool = False
+    next_tick: int | None = None
+    last_map: int = -(10**9)
+
+
+@dataclass(frozen=True)
+class TimerWork:
+    """The timer's work at one step: a plan to ask for (due since `due_step`), a map to
+    flood (`map_late` steps after its period, None for the first)."""
+
+    plan: bool
+    due_step: int
+    flood: bool
+    map_late: int | None
+
+
 THREAD_CPU: dict[str, float] = {}  # CPU seconds of each part's thread, when it ended
 
 
@@ -167,7 +188,13 @@ class Robot:
             teammates={j: Teammate() for j in range(1, cfg.robots + 1) if j != cfg.robot},
         )
         self.lock = threading.Lock()
-        self.tick = threading.Condition()
+        # Motion control counts the steps and evaluates the timer's rule (_tick); the timer
+        # thread is woken on this condition only for a step with work: a plan to ask for or a
+        # map to flood. timer_work holds those steps in order.
+        self.tick = threading.Condition(self.lock)
+        self.timer_work: deque[tuple[int, TimerWork]] = deque()
+        self.timer_busy = False
+        self.timer_state = TimerState()
         # Step order (see _keep_step_order): the timer and the planner say on this condition
         # that they finished a step's work; timer_seen is the last step the timer handled.
         self.caught_up = threading.Condition(self.lock)
@@ -333,8 +360,7 @@ class Robot:
                     lag_ms = (t_out - f.sent) * 1000 * self.cfg.timing.time_scale
                     self.lateness["frame_answer_ms"].add(lag_ms)
             self.latency["answer"].append(t_out - t_in)
-            with self.tick:
-                self.tick.notify_all()
+            self._tick(f.step)
             if not started:
                 started = True
                 self.request("start")
@@ -503,56 +529,75 @@ class Robot:
         s = self.s
         return [j for j, tm in s.teammates.items() if s.step - tm.heard <= self.cfg.reach_steps]
 
+    def _tick(self, step: int) -> None:
+        """Count step `step` for the timer, once motion control has answered its frame.
+
+        The timer's rule (a plan due, a map flood due) is evaluated here, on motion
+        control's thread, and the timer thread is woken only for a step with work: most
+        steps have none, and a thread woken every step to find nothing to do costs more than
+        the rule. A step without work counts as handled at once, unless earlier work is
+        still queued (the timer handles steps in order)."""
+        with self.lock:
+            work = self._timer_rule(step)
+            if work is None and not self.timer_busy and not self.timer_work:
+                self.timer_seen = step
+                return
+            self.timer_work.append((step, work))
+            self.tick.notify_all()
+
+    def _timer_rule(self, step: int) -> TimerWork | None:
+        """What the timer does at `step` (lock held): ask for a plan when its period passed
+        (node.coordination), flood the local map every `map_period` steps."""
+        cfg, s, st = self.cfg, self.s, self.timer_state
+        # The first timer period is longer by the robot's phase: robots booted in the same
+        # step would otherwise plan (and flood) in lock-step forever.
+        period = cfg.plan_period + (cfg.phase if not st.fired else 0)
+        started = s.last_plan_step >= 0  # the first plan is motion control's
+        if started and st.next_tick is None:
+            st.next_tick = s.last_plan_step + period
+        due_step = coordination.timer_due_step(
+            cfg.coordination, s.last_plan_step, st.next_tick, period
+        )
+        plan = step >= 0 and started and not s.finished and not s.plan_pending
+        plan = plan and step >= due_step
+        while st.next_tick is not None and st.next_tick <= step:
+            st.next_tick += cfg.plan_period
+        if plan:
+            st.fired = True
+        flood = step >= 0 and step - st.last_map >= cfg.map_period
+        flood = flood and step >= cfg.phase % cfg.map_period
+        map_late = None
+        if flood:
+            if st.last_map >= 0:
+                map_late = step - st.last_map - cfg.map_period
+            st.last_map = step
+        if not plan and not flood:
+            return None
+        return TimerWork(plan, due_step, flood, map_late)
+
     def _timer(self) -> None:
-        cfg = self.cfg
-        last_map = -(10**9)
-        seen_step = -1
-        timer_fired = False
-        next_tick: int | None = None  # the timer's own schedule (coordination "paper")
+        """The timer part: asks for the plans and floods the maps that _tick found due, in
+        step order; its lateness (the step it acted at against the step the work was due) is
+        what the fidelity verdict reads."""
         while not self.stopping.is_set():
-            with self.tick:
-                # A tick notified while this thread was busy (a map flood) is not missed: the
-                # step is looked at before waiting (motion control sets it, then notifies).
-                if self.s.step == seen_step:
-                    self.tick.wait(0.5)
             with self.lock:
-                step = self.s.step
-                # The first timer period is longer by the robot's phase: robots booted in
-                # the same step would otherwise plan (and flood) in lock-step forever.
-                period = cfg.plan_period + (cfg.phase if not timer_fired else 0)
-                started = self.s.last_plan_step >= 0  # the first plan is motion control's
-                if started and next_tick is None:
-                    next_tick = self.s.last_plan_step + period
-                due_step = coordination.timer_due_step(
-                    cfg.coordination, self.s.last_plan_step, next_tick, period
-                )
-                due = (
-                    step >= 0
-                    and started
-                    and not self.s.finished
-                    and not self.s.plan_pending
-                    and step >= due_step
-                )
-                while next_tick is not None and next_tick <= step:
-                    next_tick += cfg.plan_period
-            if step == seen_step:
-                continue
-            seen_step = step
-            if due:
-                timer_fired = True
-                self.lateness["plan_timer_steps"].add(step - due_step)
+                while not self.timer_work and not self.stopping.is_set():
+                    self.tick.wait(0.5)
+                if not self.timer_work:
+                    continue
+                step, work = self.timer_work.popleft()
+                self.timer_busy = True
+                now = self.s.step
+            if work is not None and work.plan:
+                self.lateness["plan_timer_steps"].add(now - work.due_step)
                 self.request("timer")
-            if (
-                step >= 0
-                and step - last_map >= cfg.map_period
-                and step >= cfg.phase % cfg.map_period
-            ):
-                if last_map >= 0:
-                    self.lateness["map_timer_steps"].add(step - last_map - cfg.map_period)
-                last_map = step
+            if work is not None and work.flood:
+                if work.map_late is not None:
+                    self.lateness["map_timer_steps"].add(work.map_late + now - step)
                 self._share_map(step)
             with self.lock:
-                self.timer_seen = step
+                self.timer_busy = False
+                self.timer_seen = max(self.timer_seen, step)
                 self.caught_up.notify_all()
 
     def _share_map(self, step: int) -> None:

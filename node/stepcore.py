@@ -81,6 +81,20 @@ def ptr(a: np.ndarray) -> int:
     return a.ctypes.data
 
 
+_ADDRESSES: dict[int, tuple[np.ndarray, int]] = {}
+
+
+def address(a: np.ndarray) -> int:
+    """`ptr` of an array that lives for the whole run (a map, the world's grids), looked up
+    once: asking numpy costs more than a scan's compiled work."""
+    hit = _ADDRESSES.get(id(a))
+    if hit is None or hit[0] is not a:
+        if len(_ADDRESSES) > 64:
+            _ADDRESSES.clear()
+        hit = _ADDRESSES[id(a)] = (a, a.ctypes.data)
+    return hit[1]
+
+
 def classify(logodds: np.ndarray, threshold: float) -> np.ndarray:
     """node.grid.classify, compiled; `logodds` may be a view with strided rows."""
     a = logodds
@@ -161,14 +175,18 @@ def plan_cells(t, pose, goals, radius, factor, inflate, plan_cell, fallback):
 
 
 def _laser_tables(laser) -> tuple:
-    """The laser's sample offsets and marks as the compiled functions take them: the arrays
-    and their addresses (cached on the laser)."""
+    """The laser's sample offsets and marks as the compiled functions take them, and scratch
+    buffers for one scan: the arrays and their addresses (cached on the laser; a laser
+    belongs to one thread, the world's step loop or a robot's motion control)."""
     t = getattr(laser, "_native_tables", None)
     if t is None:
         arrays = (
             np.ascontiguousarray(laser.dx, dtype=np.float32),
             np.ascontiguousarray(laser.dy, dtype=np.float32),
             np.ascontiguousarray(laser.mark, dtype=np.uint8),
+            np.empty(laser.window * laser.window, dtype=np.uint8),  # a scan's free cells
+            np.empty(laser.n_rays, dtype=np.int64),  # its hit cells
+            np.empty(laser.n_rays, dtype=np.int32),  # each ray's hit sample
         )
         t = (arrays, tuple(ptr(a) for a in arrays))
         laser._native_tables = t
@@ -186,38 +204,35 @@ def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float3
 def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: int) -> bool:
     """Laser.scan_window, OccupancyGrid.update_window and the local map's update in one call:
     one scan from (x, y) into the log-odds map `lp` and the ternary local map `own` (both
-    padded, contiguous, one shape). False (nothing done) where the window does not fit."""
+    padded, contiguous, one shape, alive for the run). False (nothing done) where the window
+    does not fit."""
     fx, fy, r0, c0 = _window(laser, x, y, bias)
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > lp.shape[0] or c0 + w > lp.shape[1]:
         return False
-    _, (dx, dy, mark) = _laser_tables(laser)
-    r = np.ascontiguousarray(ranges, dtype=np.float32)
-    free = np.empty(w * w, dtype=np.uint8)
-    occ = np.empty(laser.n_rays, dtype=np.int64)
+    _, (dx, dy, mark, free, occ, _idx) = _laser_tables(laser)
+    if ranges.dtype != np.float32 or not ranges.flags.c_contiguous:
+        ranges = np.ascontiguousarray(ranges, dtype=np.float32)
     roff, coff = laser.pad - int(fy), laser.pad - int(fx)
-    lib.sc_scan_into(dx, dy, mark, laser.n_rays, laser.n_samples, np.float32(laser.step), w,
-                     fx, fy, roff, coff, ptr(r), ptr(lp), ptr(own),
-                     lp.shape[1], r0, c0, lo.l_free, lo.l_occ, lo.l_max, ptr(free),
-                     ptr(occ))  # fmt: skip
+    lib.sc_scan_into(dx, dy, mark, laser.n_rays, laser.n_samples, laser.step32, w, fx, fy,
+                     roff, coff, ranges.ctypes.data, address(lp), address(own), lp.shape[1],
+                     r0, c0, lo.l_free, lo.l_occ, lo.l_max, free, occ)  # fmt: skip
     return True
 
 
 def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: int):
     """testbed.world's cast from (x, y) on the padded obstacle grid `occ`, samples s0.. only,
-    marking what it saw in `seen` (same shape): (ranges, any ray hit), or None where the
-    window does not fit."""
+    marking what it saw in `seen` (same shape; both alive for the run): (ranges, any ray
+    hit), or None where the window does not fit."""
     fx, fy, r0, c0 = _window(laser, x, y, bias)
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > occ.shape[0] or c0 + w > occ.shape[1]:
         return None
-    _, (dx, dy, mark) = _laser_tables(laser)
+    _, (dx, dy, mark, _free, _occ, idx) = _laser_tables(laser)
     roff, coff = laser.pad - int(fy), laser.pad - int(fx)
     ranges = np.empty(laser.n_rays, dtype=np.float32)
-    idx = np.empty(laser.n_rays, dtype=np.int32)
     at = r0 * occ.shape[1] + c0
-    hit = lib.sc_cast_window(dx, dy, mark, laser.n_rays, laser.n_samples, laser.step,
-                             fx, fy, roff, coff, ptr(occ) + at,
-                             ptr(seen) + at, occ.shape[1], min(s0, laser.n_samples),
-                             ptr(ranges), ptr(idx))  # fmt: skip
+    hit = lib.sc_cast_window(dx, dy, mark, laser.n_rays, laser.n_samples, laser.step, fx, fy,
+                             roff, coff, address(occ) + at, address(seen) + at, occ.shape[1],
+                             min(s0, laser.n_samples), ranges.ctypes.data, idx)  # fmt: skip
     return ranges, bool(hit)

@@ -1,0 +1,42 @@
+"""A lone robot is deterministic: at time scale 5 it takes exactly the steps and the path it
+took before the per-step work was compiled and the timer woken only for work (seeds 1, 2, 3:
+1901, 1989 and 1964 steps; tests/data/lone-k5 holds the positions.csv each run wrote then).
+
+A run's answer is only exact when it was faithful to its time scale (the fidelity verdict): a
+run judged unfaithful is redone once, and at least one of the two must be faithful; every
+faithful run must be exact."""
+
+import os
+import uuid
+
+import pytest
+
+from testbed.run import RunConfig, run
+from topology.network import destroy
+
+DATA = os.path.join(os.path.dirname(__file__), "..", "data", "lone-k5")
+STEPS = {1: 1901, 2: 1989, 3: 1964}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", sorted(STEPS))
+def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed):
+    with open(os.path.join(DATA, f"seed{seed}.positions.csv")) as f:
+        expected = f.read()
+    faithful = 0
+    for attempt in range(2):
+        name = "tx" + uuid.uuid4().hex[:6]
+        out = str(tmp_path / f"run{attempt}")
+        cfg = RunConfig(robots=1, comm_range=20.0, laser_range=2.0, seed=seed, time_scale=5.0)
+        try:
+            result = run(cfg, out, name, progress=False)
+        finally:
+            destroy(name)
+        if not result["fidelity"]["ok"]:
+            continue
+        faithful += 1
+        assert result["steps"] == STEPS[seed]
+        with open(os.path.join(out, "positions.csv")) as f:
+            assert f.read() == expected, "the path differs"
+        break
+    assert faithful, "neither run was faithful at time scale 5"
