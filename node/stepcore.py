@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from node.rays import _BUCKETS, _FRAC
+
 LIBRARY = Path(__file__).resolve().parent.parent / "build" / "libstepcore.so"
 VERSION = 1  # sc_version() of the source this wrapper was written for
 
@@ -37,8 +39,10 @@ _SIGNATURES = {
     "sc_cast_window": (_I, [_P, _P, _P, _I, _I, _D, _F, _F, _I, _I, _P, _P, _L, _I, _P, _P]),
     "sc_scan_into": (
         None,
-        [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P],
+        [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P]
+        + [_P, _P, _P, _I],
     ),  # fmt: skip
+    "sc_mark_table": (None, [_P, _I, _P, _P, _I, _F, _F, _I, _I, _P, _L, _I]),
     "sc_classify": (None, [_P, _I, _I, _L, _F, _P]),
     "sc_merge_ternary": (_L, [_P, _L, _P, _I, _I, _F, _F]),
     "sc_count_and": (_L, [_P, _P, _L]),
@@ -201,6 +205,25 @@ def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float3
     return fx, fy, int(fy) - bias, int(fx) - bias
 
 
+def _table(laser, fx: np.float32, fy: np.float32, bias: int):
+    """Laser.window_marks' table for a scan without hits from (fx, fy), as addresses: (sure
+    mask, open dx, open dy, how many open), or None where window_marks would not use one."""
+    cb, rb = int(fx), int(fy)
+    if not bias <= min(cb, rb) - laser.pad - 1 < max(cb, rb) + laser.pad + 1 < 2 * bias:
+        return None
+    size = _FRAC // _BUCKETS
+    key = (int((float(fx) - cb) * _FRAC) // size, int((float(fy) - rb) * _FRAC) // size)
+    cache = laser.__dict__.setdefault("_native_marks", {})
+    t = cache.get(key)
+    if t is None:
+        sure, odx, ody = laser._table(*key)
+        arrays = (np.ascontiguousarray(sure, dtype=np.uint8),
+                  np.ascontiguousarray(odx, dtype=np.float32),
+                  np.ascontiguousarray(ody, dtype=np.float32))  # fmt: skip
+        t = cache[key] = (arrays, ptr(arrays[0]), ptr(arrays[1]), ptr(arrays[2]), len(odx))
+    return t[1:]
+
+
 def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: int) -> bool:
     """Laser.scan_window, OccupancyGrid.update_window and the local map's update in one call:
     one scan from (x, y) into the log-odds map `lp` and the ternary local map `own` (both
@@ -214,9 +237,10 @@ def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: in
     if ranges.dtype != np.float32 or not ranges.flags.c_contiguous:
         ranges = np.ascontiguousarray(ranges, dtype=np.float32)
     roff, coff = laser.pad - int(fy), laser.pad - int(fx)
+    table = _table(laser, fx, fy, bias) or (None, None, None, 0)
     lib.sc_scan_into(dx, dy, mark, laser.n_rays, laser.n_samples, laser.step32, w, fx, fy,
                      roff, coff, ranges.ctypes.data, address(lp), address(own), lp.shape[1],
-                     r0, c0, lo.l_free, lo.l_occ, lo.l_max, free, occ)  # fmt: skip
+                     r0, c0, lo.l_free, lo.l_occ, lo.l_max, free, occ, *table)  # fmt: skip
     return True
 
 
@@ -230,8 +254,14 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
         return None
     _, (dx, dy, mark, _free, _occ, idx) = _laser_tables(laser)
     roff, coff = laser.pad - int(fy), laser.pad - int(fx)
-    ranges = np.empty(laser.n_rays, dtype=np.float32)
     at = r0 * occ.shape[1] + c0
+    if s0 >= laser.n_samples:  # nothing within range, no ray can hit: the table marks
+        table = _table(laser, fx, fy, bias)
+        if table is not None:
+            lib.sc_mark_table(table[0], w, table[1], table[2], table[3], fx, fy, roff, coff,
+                              address(seen) + at, seen.shape[1], 1)  # fmt: skip
+            return None, False
+    ranges = np.empty(laser.n_rays, dtype=np.float32)
     hit = lib.sc_cast_window(dx, dy, mark, laser.n_rays, laser.n_samples, laser.step, fx, fy,
                              roff, coff, address(occ) + at, address(seen) + at, occ.shape[1],
                              min(s0, laser.n_samples), ranges.ctypes.data, idx)  # fmt: skip

@@ -67,6 +67,28 @@ int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n
     return n;
 }
 
+// Laser.window_marks' table path for a scan without hits: the cells every marked sample
+// falls in for any laser position in its sub-cell class (`sure`, a w x w mask), and the few
+// samples whose cell depends on the exact position (odx, ody), computed. The result goes into
+// the w x w window of `dst` (rows of `stride`): copied (`or_into` 0) or OR-ed in.
+void sc_mark_table(const uint8_t* sure, int w, const float* odx, const float* ody, int n_open,
+                   float fx, float fy, int roff, int coff, uint8_t* dst, int64_t stride,
+                   int or_into) {
+    for (int r = 0; r < w; ++r) {
+        uint8_t* d = dst + (int64_t)r * stride;
+        const uint8_t* s = sure + (size_t)r * w;
+        if (or_into) {
+            for (int c = 0; c < w; ++c) d[c] |= s[c];
+        } else {
+            std::memcpy(d, s, w);
+        }
+    }
+    for (int i = 0; i < n_open; ++i) {
+        int64_t r = (int32_t)(ody[i] + fy) + roff;
+        dst[r * stride + (int32_t)(odx[i] + fx) + coff] = 1;
+    }
+}
+
 // World._cast_window + window_marks: cast a laser from (fx, fy) (float32 cell coordinates
 // plus the bias) on the w x w window at (r0, c0) of the padded obstacle grid, samples s0..
 // only; ranges_out gets each ray's range (+inf: none) and the window of `seen` (same shape
@@ -124,14 +146,19 @@ void sc_scan_into(const float* dx, const float* dy, const uint8_t* mark, int n_r
                   int n_samples, float step, int w, float fx, float fy, int roff, int coff,
                   const float* ranges, float* lp, uint8_t* own, int64_t stride, int64_t r0,
                   int64_t c0, float l_free, float l_occ, float l_max, uint8_t* free_tmp,
-                  int64_t* occ_tmp) {
+                  int64_t* occ_tmp, const uint8_t* sure, const float* odx, const float* ody,
+                  int n_open) {
     std::vector<int32_t> idx(n_rays);
     bool any = false;
     for (int k = 0; k < n_rays; ++k) {
         idx[k] = hit_index(ranges[k], step, n_samples);
         any = any || std::isfinite(ranges[k]);
     }
-    int n_occ = sc_window_marks(dx, dy, mark, n_rays, n_samples, w, fx, fy, roff, coff,
+    int n_occ = 0;
+    if (!any && sure)  // no hits: the laser's table for its sub-cell position
+        sc_mark_table(sure, w, odx, ody, n_open, fx, fy, roff, coff, free_tmp, w, 0);
+    else
+        n_occ = sc_window_marks(dx, dy, mark, n_rays, n_samples, w, fx, fy, roff, coff,
                                 any ? idx.data() : nullptr, free_tmp, occ_tmp);
     const float lo = -l_max;
     for (int r = 0; r < w; ++r) {
