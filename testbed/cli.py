@@ -43,10 +43,12 @@ def _robot_count(text: str) -> int:
 
 
 def _robot_ref(text: str) -> int:
-    body = text[1:] if text[:1] in ("r", "R") else text
-    if not body.isdigit() or int(body) < 1:
-        raise argparse.ArgumentTypeError(f"robot must be written rK with K >= 1, not {text!r}")
-    return int(body)
+    from topology.names import parse_robot_ref
+
+    try:
+        return parse_robot_ref(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _positions(text: str) -> list[tuple[float, float]]:

@@ -164,7 +164,7 @@ def _check_wifi(spec: NetworkSpec) -> None:
             f"unknown wifi standard {spec.wifi_standard!r} "
             f"(choose from {', '.join(WIFI_STANDARDS)})"
         )
-    if not all(c.isalnum() for c in spec.wifi_rate):
+    if not (spec.wifi_rate.isascii() and all(c.isalnum() for c in spec.wifi_rate)):
         raise ValueError(f"wifi rate {spec.wifi_rate!r} is not an ns-3 WifiMode name")
     if spec.range_model != "disc":
         raise ValueError("the ns3-wifi medium decides reception itself: range model disc only")
