@@ -18,7 +18,7 @@ from testbed import netextra, runoptions
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from testbed.runconfig import NET_OPTIONS, network_fields
 from topology.argtypes import number
-from topology.spec import LAYOUTS, LOS_MODELS
+from topology.spec import LAYOUTS, LOS_MODELS, MAX_COORD_M
 
 log = logging.getLogger("testbed")
 
@@ -52,13 +52,16 @@ def _robot_ref(text: str) -> int:
 
 
 def _positions(text: str) -> list[tuple[float, float]]:
+    from topology.spec import check_position
+
     out = []
     for item in text.replace(";", " ").split():
         try:
-            x, y = (float(v) for v in item.split(","))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"position {item!r} is not X,Y") from None
-        out.append((x, y))
+            out.append(check_position(item.split(","), f"position {item[:40]!r}"))
+        except ValueError as exc:
+            if "," not in item or item.count(",") > 1:
+                raise argparse.ArgumentTypeError(f"position {item[:40]!r} is not X,Y") from None
+            raise argparse.ArgumentTypeError(str(exc)) from None
     if not out:
         raise argparse.ArgumentTypeError("--positions is empty")
     return out
@@ -119,8 +122,8 @@ def _add_net(sub) -> None:
     mv = nsub.add_parser("move", help="move a robot; links follow before this returns")
     mv.add_argument("name", type=_name, help=NAME_HELP)
     mv.add_argument("robot", type=_robot_ref, help=ROBOT_HELP)
-    mv.add_argument("x", type=number(float, "x"), help="new x (metres)")
-    mv.add_argument("y", type=number(float, "y"), help="new y (metres)")
+    mv.add_argument("x", type=number(float, "x", magnitude=MAX_COORD_M), help="new x (metres)")
+    mv.add_argument("y", type=number(float, "y", magnitude=MAX_COORD_M), help="new y (metres)")
 
     im = nsub.add_parser("impair", help="impair one link (both directions), or clear it")
     im.add_argument("name", type=_name, help=NAME_HELP)

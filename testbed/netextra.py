@@ -32,7 +32,19 @@ def add_up_arguments(up) -> None:
 
 def add_parsers(nsub, sub, name_type) -> None:
     """`net feed` (and its siblings to come) under `net`; top-level commands under `sub`."""
-    fd = nsub.add_parser("feed", help="move robots from lines 'ID X Y' or 'T ID X Y' on stdin")
+    from topology import feed
+    from topology.spec import MAX_COORD_M
+
+    fd = nsub.add_parser(
+        "feed",
+        help="move robots from lines 'ID X Y' or 'T ID X Y' on stdin",
+        description="Move robots from lines 'ID X Y' (at once) or 'T ID X Y' (at emulated "
+        "time T s after the feed started) on standard input. Limits: a line is at most "
+        f"{feed.MAX_LINE_BYTES} bytes; |X|, |Y| <= {MAX_COORD_M:,.0f} m; "
+        f"0 <= T <= {feed.MAX_TIME_S:,.0f} s; at most {feed.MAX_PENDING} timed updates wait at "
+        "once. A last line without a newline is that line; a bad line ends the feed "
+        "(exit 2).",
+    )
     fd.add_argument("name", type=name_type)
     fd.add_argument("--no-stdin", action="store_true", help=argparse.SUPPRESS)
     fd.set_defaults(handler=net_feed)
@@ -129,10 +141,11 @@ def _feed_client(path: str) -> int:
         while chunk := os.read(0, 1 << 16):
             s.sendall(chunk)
         s.shutdown(socket.SHUT_WR)
-        answer = b""
+        first = bytearray()  # the server's first answer line: the first bad line's error
         while data := s.recv(1 << 16):
-            answer += data
-    errors = answer.decode(errors="replace").strip()
+            if len(first) < 1024:
+                first += data[: 1024 - len(first)]
+    errors = first.decode(errors="replace").strip()
     if errors:
         print(f"testbed: net feed: {errors.splitlines()[0]}", file=sys.stderr)
         return 2

@@ -39,7 +39,7 @@ def parse_robot_ref(text: str) -> int:
     """Robot K from `K` or `rK` (ASCII digits, 1..MAX_ROBOTS), else ValueError saying so."""
     m = ROBOT_REF_PATTERN.fullmatch(text)
     if m is None or not 1 <= int(m[1]) <= MAX_ROBOTS:
-        raise ValueError(f"robot {text[:20]!r} must be K or rK with K in 1..{MAX_ROBOTS}")
+        raise ValueError(f"robot {text[:20]!r} must be K or rK with K >= 1 and <= {MAX_ROBOTS}")
     return int(m[1])
 
 
