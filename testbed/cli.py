@@ -304,7 +304,7 @@ def _net_down(args) -> int:
     from topology.network import destroy
 
     _require_root()
-    if state.read(args.name) is None and not netns.exists(names.medium_ns(args.name)):
+    if not state.exists(args.name) and not netns.exists(names.medium_ns(args.name)):
         raise UsageError(f"no testbed named {args.name!r} is up")
     with state.locked(args.name):
         destroy(args.name)
@@ -316,7 +316,11 @@ def _net_list(args) -> int:
     from topology import state
 
     for name in state.names():
-        st = state.read(name)
+        try:
+            st = state.read(name)
+        except state.UntrustedState as exc:
+            print(f"testbed: warning: {exc}", file=sys.stderr)
+            continue
         if st is None:
             continue
         kind = "persistent" if st.persistent else f"owned by pid {st.owner_pid}"

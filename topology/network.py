@@ -126,7 +126,7 @@ class Network:
 
     def _build(self) -> None:
         t0 = time.perf_counter()
-        os.makedirs(self.state_dir, exist_ok=True)
+        state.make_run_dir(self.name)
         robots = list(self.spec.robot_ids())
         forkable = routing.FORKABLE.get(self.spec.routing)
         if forkable is not None:
@@ -566,8 +566,14 @@ def our_namespaces(name: str) -> list[str]:
 
 
 def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> None:
-    """Remove everything testbed `name` made: processes, namespaces, run dir, state."""
-    st = state.read(name)
+    """Remove everything testbed `name` made: processes, namespaces, run dir, state. A state
+    file another user could have written is ignored (one warning): none of the processes it
+    names is signalled, only those the kernel shows inside the testbed's namespaces."""
+    try:
+        st = state.read(name)
+    except state.UntrustedState as exc:
+        log.warning("%s; signalling only the processes inside tb-%s-* namespaces", exc, name)
+        st = None
     namespaces = our_namespaces(name)
     if st is not None:
         # Captures last: what the daemons send as they stop belongs in the pcaps.
