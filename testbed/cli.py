@@ -145,18 +145,33 @@ def _add_net(sub) -> None:
     nsub.add_parser("list", help="list the testbeds that are up")
 
 
-def _start_net_view(net, bind: str) -> None:
-    """The view of a `net up` network: a process of its own (testbed.view.netview), recorded
-    with the testbed so that `net down` stops it."""
-    import subprocess
+VIEW_READY_TIMEOUT_S = 10.0
 
-    log = open(os.path.join(net.state_dir, "view.log"), "w")  # noqa: SIM115 (the child's)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "testbed.view.netview", net.name, bind],
-        stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-    )  # fmt: skip
+
+def _start_net_view(net, bind: str) -> str:
+    """The view of a `net up` network: a process of its own (testbed.view.netview), recorded
+    with the testbed so that `net down` stops it. Returns its address once it listens;
+    UsageError (its own line) if it does not."""
+    import subprocess
+    import time
+
+    from testbed.view.netview import ready_path
+
+    logp = os.path.join(net.state_dir, "view.log")
+    with open(logp, "w") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "testbed.view.netview", net.name, bind],
+            stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
     net.adopt_host_process(proc, "view")
-    print(f"  live view: http://{bind if ':' in bind else '127.0.0.1:' + bind}/")
+    deadline = time.monotonic() + VIEW_READY_TIMEOUT_S
+    while not os.path.exists(ready_path(net.name)):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            with open(logp, errors="replace") as f:
+                last = (f.read().strip().splitlines() or ["(no output)"])[-1]
+            raise UsageError(f"the live view did not start: {last.removeprefix('netview: ')}")
+        time.sleep(0.02)
+    return f"http://{bind if ':' in bind else '127.0.0.1:' + bind}/"
 
 
 def _start_positions(args) -> list:
@@ -198,22 +213,30 @@ def _net_up(args) -> int:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.view:
-        from testbed.view.server import parse_bind
+        from testbed.view.server import check_bind
 
         try:
-            parse_bind(args.view)
+            check_bind(args.view)  # a busy port is refused before anything is made
         except ValueError as exc:
             raise UsageError(str(exc)) from None
+    extras = netextra.check_up(args, trace)
     net = Network(spec, persistent=True)
     net.up()
-    links = net.links()
-    if args.view:
-        _start_net_view(net, args.view)
-    netextra.after_up(net, args, trace)
+    try:  # what runs beside the network: all of it starts, or the network goes down again
+        links = net.links()
+        view = _start_net_view(net, args.view) if args.view else None
+        started = netextra.after_up(net, args, trace, extras)
+    except BaseException:
+        net.down()
+        raise
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
           f"testbed net exec {spec.name} r1 -- ping 10.0.0.{min(2, spec.robots)}")  # fmt: skip
+    if view:
+        print(f"  live view: {view}")
+    for line in started:
+        print(f"  {line}")
     return 0
 
 
