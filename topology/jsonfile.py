@@ -35,9 +35,10 @@ def write_json_atomic(path, obj, *, sort_keys: bool = False, mode: int | None = 
 
 
 def read_json(path):
-    """The JSON in `path`, or None when it is missing, unreadable or not valid JSON."""
+    """The JSON in `path`, or None when it is missing, unreadable or not valid JSON (nested
+    deeper than the parser's recursion allows included)."""
     try:
         with open(path) as f:
             return json.load(f)
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None

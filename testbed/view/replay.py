@@ -140,7 +140,7 @@ def load(run_dir: str | Path) -> dict:
     def link_row(row: list[str]) -> list:
         if len(row) != 4 or row[1] not in ("add", "remove"):
             raise ValueError("not step,add|remove,i,j")
-        i, j = (_whole(v, 1, MAX_ROBOTS + 1) for v in row[2:])
+        i, j = (_whole(v, 1, n + 1) for v in row[2:])  # n + 1: the display robot
         return [_whole(row[0], 0, MAX_STEP), row[1] == "add", i, j]
 
     def coverage_row(row: list[str]) -> float:
