@@ -95,7 +95,8 @@ def _add_net(sub) -> None:
     up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0, metavar="M",
                     help="distance between neighbours of --layout (metres; default 8)")  # fmt: skip
     up.add_argument("--positions", type=_positions, metavar='"X,Y X,Y ..."',
-                    help="where the robots stand (metres; instead of --layout)")  # fmt: skip
+                    help="where the robots stand (metres, each within 10,000,000 of 0; "
+                         "instead of --layout)")  # fmt: skip
     up.add_argument(
         "--map",
         metavar="PNG",
@@ -109,7 +110,8 @@ def _add_net(sub) -> None:
     up.add_argument(
         "--view",
         metavar="[HOST:]PORT",
-        help="serve a live view of the network (127.0.0.1 unless a host is given; default none)",
+        help="serve a live view of the network (127.0.0.1 unless a host is given; default "
+        "none; a port in use is refused before anything is made)",
     )
     netextra.add_up_arguments(up)
     netextra.add_parsers(nsub, sub, _name)
