@@ -33,5 +33,5 @@ def test_a_spec_refuses_a_position_that_is_not_finite_or_absurd(position):
 def test_positions_at_the_limit_are_accepted():
     spec = NetworkSpec(name="pos", positions=((-MAX_COORD_M, MAX_COORD_M),), comm_range=5.0)
     assert spec.positions == ((-MAX_COORD_M, MAX_COORD_M),)
-    argv = ["net", "up", "pos", "--robots", "1", "--positions=-1e7,1e7"]
+    argv = ["net", "up", "pos", "--robots", "1", "--comm-range", "5", "--positions=-1e7,1e7"]
     assert build_parser(argv).parse_args(argv).positions == [(-1e7, 1e7)]
