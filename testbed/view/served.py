@@ -70,8 +70,9 @@ def is_png(path: Path) -> bool:
 def map_picture(run_dir: Path, named) -> tuple[Path | None, str | None]:
     """(the map picture to serve, None) or (None, why the map that config.json names is not
     served); (None, None) for a run on the empty terrain. The run's own copy (map.png in
-    its directory) first, then what config.json names (relative to the run directory),
-    if inside the run directory or one of the packaged maps."""
+    its directory) first, then what config.json names (a relative name from the run
+    directory or the working directory), if inside the run directory or one of the
+    packaged maps."""
     root = Path(os.path.realpath(run_dir))
     own = in_run(root, RUN_MAP)
     if own is not None and is_png(own):
@@ -80,7 +81,12 @@ def map_picture(run_dir: Path, named) -> tuple[Path | None, str | None]:
         return None, None
     if not isinstance(named, str):
         return None, "config.json's map is not a path"
-    found = regular_file(root / named, (root, PACKAGED_MAPS))
+    # A relative name as the run was given it (from its working directory, most often the
+    # repository's root for a packaged map), or from the run directory: either way only
+    # what lies in the run directory or among the packaged maps is taken.
+    found = None
+    for base in (root, Path.cwd()):
+        found = found or regular_file(base / named, (root, PACKAGED_MAPS))
     if found is None:
         return None, (
             f"the run's map {named[:200]!r} is neither in the run directory nor one of the "

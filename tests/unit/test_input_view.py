@@ -76,12 +76,18 @@ def test_a_symlink_out_of_the_run_is_not_followed(tmp_path):
     assert (status, snap1, snap2) == (404, 404, 404) and b"root:" not in body
 
 
-def test_the_runs_own_map_and_the_packaged_maps_are_served_and_only_real_pngs(tmp_path):
+def test_the_runs_own_map_and_the_packaged_maps_are_served_and_only_real_pngs(
+    tmp_path, monkeypatch
+):
     run = write_run(tmp_path / "own")
     (run / "map.png").write_bytes(OFFICE.read_bytes())
     assert get(server.make_app(run), "/map.png")[0] == (200, OFFICE.read_bytes())
     run = write_run(tmp_path / "pkg", {"robots": 1, "comm_range": 5.0, "map": str(OFFICE)})
     assert get(server.make_app(run), "/map.png")[0][0] == 200
+    # A packaged map named as the run was given it, from the repository's root.
+    monkeypatch.chdir(OFFICE.parent.parent.parent.parent)
+    rel = {"robots": 1, "comm_range": 5.0, "map": "testbed/experiments/maps/office.png"}
+    assert get(server.make_app(write_run(tmp_path / "rel", rel)), "/map.png")[0][0] == 200
     run = write_run(tmp_path / "fake", {"robots": 1, "comm_range": 5.0, "map": "notes.png"})
     (run / "notes.png").write_text("a text file named .png")
     assert get(server.make_app(run), "/map.png")[0][0] == 404
