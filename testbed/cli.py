@@ -283,6 +283,7 @@ def _net_exec(args) -> int:
 def _net_move(args) -> int:
     from topology import state
 
+    _require_root()
     with state.locked(args.name):
         pass  # wait for any change in progress before attaching
     net = _attach(args.name)
