@@ -18,7 +18,7 @@ from testbed import netextra, runoptions
 from testbed.errors import EXIT_USAGE, TestbedError, UsageError
 from testbed.runconfig import NET_OPTIONS, network_fields
 from topology.argtypes import number
-from topology.spec import LAYOUTS, LOS_MODELS
+from topology.spec import LAYOUTS, LOS_MODELS, MAX_COORD_M
 
 log = logging.getLogger("testbed")
 
@@ -43,20 +43,25 @@ def _robot_count(text: str) -> int:
 
 
 def _robot_ref(text: str) -> int:
-    body = text[1:] if text[:1] in ("r", "R") else text
-    if not body.isdigit() or int(body) < 1:
-        raise argparse.ArgumentTypeError(f"robot must be written rK with K >= 1, not {text!r}")
-    return int(body)
+    from topology.names import parse_robot_ref
+
+    try:
+        return parse_robot_ref(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _positions(text: str) -> list[tuple[float, float]]:
+    from topology.spec import check_position
+
     out = []
     for item in text.replace(";", " ").split():
         try:
-            x, y = (float(v) for v in item.split(","))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"position {item!r} is not X,Y") from None
-        out.append((x, y))
+            out.append(check_position(item.split(","), f"position {item[:40]!r}"))
+        except ValueError as exc:
+            if "," not in item or item.count(",") > 1:
+                raise argparse.ArgumentTypeError(f"position {item[:40]!r} is not X,Y") from None
+            raise argparse.ArgumentTypeError(str(exc)) from None
     if not out:
         raise argparse.ArgumentTypeError("--positions is empty")
     return out
@@ -90,7 +95,8 @@ def _add_net(sub) -> None:
     up.add_argument("--spacing", type=number(float, "spacing", above=0), default=8.0, metavar="M",
                     help="distance between neighbours of --layout (metres; default 8)")  # fmt: skip
     up.add_argument("--positions", type=_positions, metavar='"X,Y X,Y ..."',
-                    help="where the robots stand (metres; instead of --layout)")  # fmt: skip
+                    help="where the robots stand (metres, each within 10,000,000 of 0; "
+                         "instead of --layout)")  # fmt: skip
     up.add_argument(
         "--map",
         metavar="PNG",
@@ -104,7 +110,8 @@ def _add_net(sub) -> None:
     up.add_argument(
         "--view",
         metavar="[HOST:]PORT",
-        help="serve a live view of the network (127.0.0.1 unless a host is given; default none)",
+        help="serve a live view of the network (127.0.0.1 unless a host is given; default "
+        "none; a port in use is refused before anything is made)",
     )
     netextra.add_up_arguments(up)
     netextra.add_parsers(nsub, sub, _name)
@@ -117,8 +124,8 @@ def _add_net(sub) -> None:
     mv = nsub.add_parser("move", help="move a robot; links follow before this returns")
     mv.add_argument("name", type=_name, help=NAME_HELP)
     mv.add_argument("robot", type=_robot_ref, help=ROBOT_HELP)
-    mv.add_argument("x", type=number(float, "x"), help="new x (metres)")
-    mv.add_argument("y", type=number(float, "y"), help="new y (metres)")
+    mv.add_argument("x", type=number(float, "x", magnitude=MAX_COORD_M), help="new x (metres)")
+    mv.add_argument("y", type=number(float, "y", magnitude=MAX_COORD_M), help="new y (metres)")
 
     im = nsub.add_parser("impair", help="impair one link (both directions), or clear it")
     im.add_argument("name", type=_name, help=NAME_HELP)
@@ -140,18 +147,33 @@ def _add_net(sub) -> None:
     nsub.add_parser("list", help="list the testbeds that are up")
 
 
-def _start_net_view(net, bind: str) -> None:
-    """The view of a `net up` network: a process of its own (testbed.view.netview), recorded
-    with the testbed so that `net down` stops it."""
-    import subprocess
+VIEW_READY_TIMEOUT_S = 10.0
 
-    log = open(os.path.join(net.state_dir, "view.log"), "w")  # noqa: SIM115 (the child's)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "testbed.view.netview", net.name, bind],
-        stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-    )  # fmt: skip
+
+def _start_net_view(net, bind: str) -> str:
+    """The view of a `net up` network: a process of its own (testbed.view.netview), recorded
+    with the testbed so that `net down` stops it. Returns its address once it listens;
+    UsageError (its own line) if it does not."""
+    import subprocess
+    import time
+
+    from testbed.view.netview import ready_path
+
+    logp = os.path.join(net.state_dir, "view.log")
+    with open(logp, "w") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "testbed.view.netview", net.name, bind],
+            stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
     net.adopt_host_process(proc, "view")
-    print(f"  live view: http://{bind if ':' in bind else '127.0.0.1:' + bind}/")
+    deadline = time.monotonic() + VIEW_READY_TIMEOUT_S
+    while not os.path.exists(ready_path(net.name)):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            with open(logp, errors="replace") as f:
+                last = (f.read().strip().splitlines() or ["(no output)"])[-1]
+            raise UsageError(f"the live view did not start: {last.removeprefix('netview: ')}")
+        time.sleep(0.02)
+    return f"http://{bind if ':' in bind else '127.0.0.1:' + bind}/"
 
 
 def _start_positions(args) -> list:
@@ -193,22 +215,30 @@ def _net_up(args) -> int:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.view:
-        from testbed.view.server import parse_bind
+        from testbed.view.server import check_bind
 
         try:
-            parse_bind(args.view)
+            check_bind(args.view)  # a busy port is refused before anything is made
         except ValueError as exc:
             raise UsageError(str(exc)) from None
+    extras = netextra.check_up(args, trace)
     net = Network(spec, persistent=True)
     net.up()
-    links = net.links()
-    if args.view:
-        _start_net_view(net, args.view)
-    netextra.after_up(net, args, trace)
+    try:  # what runs beside the network: all of it starts, or the network goes down again
+        links = net.links()
+        view = _start_net_view(net, args.view) if args.view else None
+        started = netextra.after_up(net, args, trace, extras)
+    except BaseException:
+        net.down()
+        raise
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
           f"testbed net exec {spec.name} r1 -- ping 10.0.0.{min(2, spec.robots)}")  # fmt: skip
+    if view:
+        print(f"  live view: {view}")
+    for line in started:
+        print(f"  {line}")
     return 0
 
 
@@ -253,6 +283,7 @@ def _net_exec(args) -> int:
 def _net_move(args) -> int:
     from topology import state
 
+    _require_root()
     with state.locked(args.name):
         pass  # wait for any change in progress before attaching
     net = _attach(args.name)
@@ -299,7 +330,7 @@ def _net_down(args) -> int:
     from topology.network import destroy
 
     _require_root()
-    if state.read(args.name) is None and not netns.exists(names.medium_ns(args.name)):
+    if not state.exists(args.name) and not netns.exists(names.medium_ns(args.name)):
         raise UsageError(f"no testbed named {args.name!r} is up")
     with state.locked(args.name):
         destroy(args.name)
@@ -311,7 +342,11 @@ def _net_list(args) -> int:
     from topology import state
 
     for name in state.names():
-        st = state.read(name)
+        try:
+            st = state.read(name)
+        except state.UntrustedState as exc:
+            print(f"testbed: warning: {exc}", file=sys.stderr)
+            continue
         if st is None:
             continue
         kind = "persistent" if st.persistent else f"owned by pid {st.owner_pid}"

@@ -1,6 +1,10 @@
 """Command-line pieces for bringing your own robots: `net up --mobility FILE` (a trace
 player), `net up --feed` and `net feed NAME` (a live position feed). testbed.cli calls
-add_up_arguments, add_parsers, up_positions and after_up; everything else is here.
+add_up_arguments, add_parsers, up_positions, check_up and after_up; everything else is here.
+
+Where a trace's link timeline goes: `--links-out CSV`, else links.csv in `--capture DIR`,
+else NAME-links.csv in the directory `net up` runs in. Never in the testbed's run dir, which
+`net down` deletes; a default that would overwrite an earlier timeline is refused.
 """
 
 import argparse
@@ -24,15 +28,28 @@ def add_up_arguments(up) -> None:
     up.add_argument("--tick", type=number(float, "tick", above=0), default=0.1, metavar="S",
                     help="with --mobility: emulated s between samples (default 0.1)")  # fmt: skip
     up.add_argument("--links-out", metavar="CSV",
-                    help="with --mobility: where the applied link timeline goes "
-                         "(default: links.csv in the capture dir, else the state dir)")  # fmt: skip
+                    help="with --mobility: where the applied link timeline goes (default: "
+                         "links.csv in the --capture dir, else NAME-links.csv here; kept after "
+                         "net down, never overwritten by default)")  # fmt: skip
     up.add_argument("--feed", action="store_true",
                     help="open the position feed socket (see `testbed net feed`)")  # fmt: skip
 
 
 def add_parsers(nsub, sub, name_type) -> None:
     """`net feed` (and its siblings to come) under `net`; top-level commands under `sub`."""
-    fd = nsub.add_parser("feed", help="move robots from lines 'ID X Y' or 'T ID X Y' on stdin")
+    from topology import feed
+    from topology.spec import MAX_COORD_M
+
+    fd = nsub.add_parser(
+        "feed",
+        help="move robots from lines 'ID X Y' or 'T ID X Y' on stdin",
+        description="Move robots from lines 'ID X Y' (at once) or 'T ID X Y' (at emulated "
+        "time T s after the feed started) on standard input. Limits: a line is at most "
+        f"{feed.MAX_LINE_BYTES} bytes; |X|, |Y| <= {MAX_COORD_M:,.0f} m; "
+        f"0 <= T <= {feed.MAX_TIME_S:,.0f} s; at most {feed.MAX_PENDING} timed updates wait at "
+        "once. A last line without a newline is that line; a bad line ends the feed "
+        "(exit 2).",
+    )
     fd.add_argument("name", type=name_type)
     fd.add_argument("--no-stdin", action="store_true", help=argparse.SUPPRESS)
     fd.set_defaults(handler=net_feed)
@@ -64,15 +81,44 @@ def up_positions(args):
     return trace, trace.positions(0.0, args.robots)
 
 
-def after_up(net, args, trace) -> None:
-    """Start what runs beside the network: the trace player, the feed server."""
+def links_out(args) -> str | None:
+    """Where the trace player writes its link timeline (None without --mobility); a
+    UsageError if a default place already holds one or cannot be written."""
+    if not args.mobility:
+        return None
+    if args.links_out:
+        out = os.path.abspath(args.links_out)
+    else:
+        where = args.capture or os.getcwd()
+        out = os.path.abspath(os.path.join(where, "links.csv" if args.capture else
+                                           f"{args.name}-links.csv"))  # fmt: skip
+        if os.path.lexists(out):
+            raise UsageError(f"{out} holds an earlier link timeline: move it, or give "
+                             "--links-out CSV")  # fmt: skip
+    parent = os.path.dirname(out)
+    if args.capture and parent == os.path.abspath(args.capture):
+        return out  # net up makes the capture dir
+    if not os.path.isdir(parent) or not os.access(parent, os.W_OK):
+        raise UsageError(f"--links-out {out}: cannot write in {parent}")
+    return out
+
+
+def check_up(args, trace) -> dict:
+    """What after_up needs, checked before the network is made (UsageError if not)."""
+    return {"links_out": links_out(args) if trace is not None else None}
+
+
+def after_up(net, args, trace, extras: dict) -> list[str]:
+    """Start what runs beside the network: the trace player, the feed server. Returns the
+    lines that tell the user where their output and input go."""
+    lines = []
     if trace is not None:
-        out = args.links_out or os.path.join(args.capture or net.state_dir, "links.csv")
-        out = os.path.abspath(out)
+        out = extras["links_out"]
         argv = [sys.executable, "-m", "topology.player", net.name, os.path.abspath(args.mobility),
                 "--tick", repr(args.tick), "--links-out", out]  # fmt: skip
         _start(net, argv, "mobility")
-        print(f"  trace: {trace.nodes} nodes, {trace.end:g} s emulated; links to {out}")
+        lines.append(f"trace: {trace.nodes} nodes, {trace.end:g} s emulated; links to {out} "
+                     "(kept after net down)")  # fmt: skip
     if args.feed:
         from topology import feed
 
@@ -82,9 +128,12 @@ def after_up(net, args, trace) -> None:
         deadline = time.monotonic() + READY_TIMEOUT_S
         while not os.path.exists(path):
             if proc.poll() is not None or time.monotonic() > deadline:
-                raise TestbedError("the feed server did not start (see feed.log in the state dir)")
+                with open(os.path.join(net.state_dir, "feed.log"), errors="replace") as f:
+                    last = (f.read().strip().splitlines() or ["(no output)"])[-1]
+                raise TestbedError(f"the feed server did not start: {last}")
             time.sleep(0.02)
-        print(f"  feed: {path}")
+        lines.append(f"feed: {path}")
+    return lines
 
 
 def _start(net, argv: list[str], role: str):
@@ -129,10 +178,11 @@ def _feed_client(path: str) -> int:
         while chunk := os.read(0, 1 << 16):
             s.sendall(chunk)
         s.shutdown(socket.SHUT_WR)
-        answer = b""
+        first = bytearray()  # the server's first answer line: the first bad line's error
         while data := s.recv(1 << 16):
-            answer += data
-    errors = answer.decode(errors="replace").strip()
+            if len(first) < 1024:
+                first += data[: 1024 - len(first)]
+    errors = first.decode(errors="replace").strip()
     if errors:
         print(f"testbed: net feed: {errors.splitlines()[0]}", file=sys.stderr)
         return 2

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import socket
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,6 +97,8 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     prepared = PreparedRun(cfg, out, name, truth, world, phases, display_pos, spec, config)
     try:
         write_json_atomic(prepared.path("config.json"), prepared.config)
+        if cfg.map:  # the replay shows the run's own copy (testbed.view.served)
+            shutil.copyfile(cfg.map, prepared.path("map.png"))
     except OSError as e:
         raise UsageError(f"--out {out}: cannot write there: {e.strerror}") from None
     return prepared
@@ -141,15 +142,9 @@ def check_machine(spec: NetworkSpec) -> None:
 
 def check_view(bind: str) -> None:
     """UsageError unless the live view can listen at `bind` ([HOST:]PORT) now."""
-    from testbed.view.server import parse_bind
+    from testbed.view.server import check_bind
 
     try:
-        host, port = parse_bind(bind)
-        family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
-        with socket.socket(family, kind, proto) as s:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the view's server does
-            s.bind(addr)
+        check_bind(bind)
     except ValueError as e:
         raise UsageError(str(e)) from None
-    except OSError as e:
-        raise UsageError(f"--view {bind}: cannot listen there: {e.strerror or e}") from None

@@ -13,10 +13,16 @@ from collections.abc import Callable
 
 
 def number(
-    kind: type, what: str, *, minimum: float | None = None, above: float | None = None
+    kind: type,
+    what: str,
+    *,
+    minimum: float | None = None,
+    above: float | None = None,
+    magnitude: float | None = None,
 ) -> Callable[[str], int | float]:
-    """An argparse type for a finite `kind` (int or float) that is at least `minimum` and
-    greater than `above` (each when given): e.g. `number(float, "comm range", above=0)`."""
+    """An argparse type for a finite `kind` (int or float) that is at least `minimum`,
+    greater than `above` and at most `magnitude` in absolute value (each when given): e.g.
+    `number(float, "comm range", above=0)`."""
 
     def parse(text: str) -> int | float:
         try:
@@ -31,6 +37,10 @@ def number(
         if minimum is not None and value < minimum:
             least = "not be negative" if minimum == 0 else f"be at least {minimum:g}"
             raise argparse.ArgumentTypeError(f"{what} must {least}, not {text}")
+        if magnitude is not None and abs(value) > magnitude:
+            raise argparse.ArgumentTypeError(
+                f"{what} must be within {magnitude:,.0f} of 0, not {text}"
+            )
         return value
 
     return parse

@@ -24,7 +24,10 @@ def leftovers(everything: bool = False) -> list[str]:
     found = set()
     recorded = set(state.names())
     for name in recorded:
-        st = state.read(name)
+        try:
+            st = state.read(name)
+        except state.UntrustedState:
+            st = None  # removed; destroy says why and signals none of its records
         stale = st is not None and st.persistent and not netns.exists(names.medium_ns(name))
         if everything or st is None or st.abandoned() or stale:
             found.add(name)

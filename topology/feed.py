@@ -8,7 +8,9 @@ the Unix socket `feed.sock` in the testbed's run directory):
 
 Blank lines and lines starting with # are skipped. The server answers nothing on success;
 a bad line gets `error: line N: what` back (socket) or ends the feed with exit status 2
-(standard input).
+(standard input). A last line without a newline is that line. Limits: a line is at most
+MAX_LINE_BYTES (4096) bytes, X and Y are within MAX_COORD_M (1e7 m) of 0, T is at most
+MAX_TIME_S (1e6 s), and at most MAX_PENDING (100000) timed updates wait at once.
 
 Theory of operation. One thread, one selector over standard input, the listening socket and
 its clients. Everything readable is read, parsed and merged into one batch of moves (the last
@@ -30,10 +32,22 @@ import socket
 import time
 
 from topology import state
+from topology.linebuffer import TOO_LONG, LineBuffer
+from topology.names import parse_robot_ref
+from topology.spec import check_position
 
 SOCKET_NAME = "feed.sock"
+SOCKET_MODE = 0o600  # root's alone: nobody else may move the robots
 SAVE_EVERY_S = 1.0
 IDLE_SAVE_S = 0.05  # a pause this long in the feed saves the positions
+MAX_WAIT_S = 1.0  # the longest the loop sleeps in one select (a far timed update waits on)
+# PIPE_BUF: a line no longer than this reaches a pipe in one piece, never interleaved with
+# another writer's; a valid line is under 100 bytes, so the rest is room for comments.
+MAX_LINE_BYTES = 4096
+# The latest emulated time an update may name (11.6 days): later than any testbed is up.
+MAX_TIME_S = 1e6
+# Timed updates waiting at once (each ~200 bytes in the heap: ~20 MB at most).
+MAX_PENDING = 100_000
 
 
 def socket_path(name: str) -> str:
@@ -55,19 +69,12 @@ def parse_line(line: str) -> tuple[float | None, int, float, float] | None:
             t = float(parts[0])
         except ValueError:
             raise ValueError(f"time {parts[0]!r} is not a number") from None
-        if not (math.isfinite(t) and t >= 0):
-            raise ValueError(f"time {parts[0]} must be a finite number >= 0")
+        if not (math.isfinite(t) and 0 <= t <= MAX_TIME_S):
+            raise ValueError(f"time {parts[0][:40]} must be a number >= 0 and <= {MAX_TIME_S:,.0f}")
         parts = parts[1:]
-    ref = parts[0][1:] if parts[0][:1] in ("r", "R") else parts[0]
-    if not ref.isdigit() or int(ref) < 1:
-        raise ValueError(f"robot {parts[0]!r} must be a number >= 1 (or rK)")
-    try:
-        x, y = float(parts[1]), float(parts[2])
-    except ValueError:
-        raise ValueError(f"position {parts[1]} {parts[2]} is not two numbers") from None
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise ValueError("position must be finite")
-    return t, int(ref), x, y
+    k = parse_robot_ref(parts[0])
+    x, y = check_position(parts[1:])
+    return t, k, x, y
 
 
 class _Source:
@@ -76,7 +83,7 @@ class _Source:
     def __init__(self, fileobj, is_stdin: bool):
         self.fileobj = fileobj
         self.is_stdin = is_stdin
-        self.buf = b""
+        self.lines = LineBuffer(MAX_LINE_BYTES)
         self.lineno = 0
 
 
@@ -99,9 +106,13 @@ class FeedServer:
         self.start = time.monotonic()
         self._ended: list[_Source] = []
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        if os.path.exists(path):
+        if os.path.lexists(path):
             os.unlink(path)
+        # The mode before bind is the mode bind gives the file (less the umask), so the
+        # socket is never connectable by others, not even between bind and chmod.
+        os.fchmod(self.listener.fileno(), SOCKET_MODE)
         self.listener.bind(path)
+        os.chmod(path, SOCKET_MODE)
         self.listener.listen(16)
         self.listener.setblocking(False)
         self.sel.register(self.listener, selectors.EVENT_READ, None)
@@ -117,7 +128,7 @@ class FeedServer:
             if isinstance(src, _Source):
                 self._drop(src)
         self.listener.close()
-        if os.path.exists(self.path):
+        if os.path.lexists(self.path):
             os.unlink(self.path)
         self.net.save()
 
@@ -137,21 +148,22 @@ class FeedServer:
         except OSError:
             chunk = b""
         if not chunk:
-            if src.buf.strip():
-                self._lines(src, src.buf + b"\n", moves)
+            self._lines(src, src.lines.end(), moves)  # a last line without its newline
             self._ended.append(src)  # dropped once its last moves are applied
             return
-        self._lines(src, chunk, moves)
+        self._lines(src, src.lines.feed(chunk), moves)
 
-    def _lines(self, src: _Source, chunk: bytes, moves: dict) -> None:
-        data = src.buf + chunk
-        *lines, src.buf = data.split(b"\n")
+    def _lines(self, src: _Source, lines: list[bytes | None], moves: dict) -> None:
         for raw in lines:
             src.lineno += 1
             try:
+                if raw is TOO_LONG:
+                    raise ValueError(f"longer than {MAX_LINE_BYTES} bytes")
                 parsed = parse_line(raw.decode(errors="replace"))
                 if parsed is not None and parsed[1] > self.robots:
                     raise ValueError(f"robot {parsed[1]} is not one of r1..r{self.robots}")
+                if parsed is not None and parsed[0] is not None and len(self.timed) >= MAX_PENDING:
+                    raise ValueError(f"{MAX_PENDING} timed updates are waiting already")
             except ValueError as exc:
                 message = f"line {src.lineno}: {exc}"
                 if src.is_stdin:
@@ -185,7 +197,7 @@ class FeedServer:
             timeout = IDLE_SAVE_S if dirty or stop is not None else None
             if self.timed:
                 due = max(0.0, self.timed[0][0] / self.scale - (time.monotonic() - self.start))
-                timeout = due if timeout is None else min(timeout, due)
+                timeout = min(due, MAX_WAIT_S) if timeout is None else min(timeout, due)
             moves: dict[int, tuple[float, float]] = {}
             for key, _ in self.sel.select(timeout):
                 if key.data is None:

@@ -9,8 +9,10 @@ the host), so their names need no run id; they fit in 15 characters for up to 10
 import re
 
 PREFIX = "tb"
-NAME_PATTERN = re.compile(r"^[a-z][a-z0-9]{0,9}$")
-NAMESPACE_PATTERN = re.compile(rf"^{PREFIX}-(?P<name>[a-z][a-z0-9]{{0,9}})-(?P<role>m|r\d+)$")
+# Matched whole (fullmatch), never with `^...$`: `$` also matches before a final newline, so
+# "pqn\n" would pass and make namespaces that `testbed clean` cannot see. ASCII digits only.
+NAME_PATTERN = re.compile(r"[a-z][a-z0-9]{0,9}")
+NAMESPACE_PATTERN = re.compile(rf"{PREFIX}-(?P<name>[a-z][a-z0-9]{{0,9}})-(?P<role>m|r[0-9]+)")
 MAX_ROBOTS = 1000
 
 # The ad hoc network every robot address is in (robot_addr).
@@ -22,12 +24,23 @@ ROBOT_IFACE = "wlan0"
 
 def check_name(name: str) -> str:
     """Return `name` if it is a valid testbed name, else raise ValueError."""
-    if not NAME_PATTERN.match(name):
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         raise ValueError(
-            f"testbed name {name!r} must be 1-10 characters, lowercase letters and digits, "
-            "starting with a letter"
+            f"testbed name {str(name)[:40]!r} must be 1-10 characters, lowercase letters and "
+            "digits, starting with a letter"
         )
     return name
+
+
+ROBOT_REF_PATTERN = re.compile(r"[rR]?([0-9]{1,4})")
+
+
+def parse_robot_ref(text: str) -> int:
+    """Robot K from `K` or `rK` (ASCII digits, 1..MAX_ROBOTS), else ValueError saying so."""
+    m = ROBOT_REF_PATTERN.fullmatch(text)
+    if m is None or not 1 <= int(m[1]) <= MAX_ROBOTS:
+        raise ValueError(f"robot {text[:20]!r} must be K or rK with K >= 1 and <= {MAX_ROBOTS}")
+    return int(m[1])
 
 
 def medium_ns(name: str) -> str:
@@ -40,7 +53,7 @@ def robot_ns(name: str, k: int) -> str:
 
 def parse_ns(ns: str) -> tuple[str, str] | None:
     """(testbed name, role) of one of our namespaces, or None for anything else."""
-    m = NAMESPACE_PATTERN.match(ns)
+    m = NAMESPACE_PATTERN.fullmatch(ns)
     return (m["name"], m["role"]) if m else None
 
 
@@ -81,9 +94,9 @@ def link_end(i: int, j: int) -> str:
     return f"l{i}x{j}"
 
 
-LINK_END_PATTERN = re.compile(r"^l(\d+)x(\d+)$")
+LINK_END_PATTERN = re.compile(r"l([0-9]+)x([0-9]+)")
 
 
 def parse_link_end(ifname: str) -> tuple[int, int] | None:
-    m = LINK_END_PATTERN.match(ifname)
+    m = LINK_END_PATTERN.fullmatch(ifname)
     return (int(m[1]), int(m[2])) if m else None

@@ -23,7 +23,6 @@ Moving robots recomputes the wanted links and applies only the difference.
 
 import contextlib
 import logging
-import math
 import os
 import shutil
 import subprocess
@@ -40,7 +39,14 @@ from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX
 from topology.ns3medium import medium_for
 from topology.oracle import OracleRouter
-from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, NetworkSpec, Position
+from topology.spec import (
+    LOS_MODELS,
+    NO_IMPAIRMENT,
+    Impairment,
+    NetworkSpec,
+    Position,
+    check_position,
+)
 
 log = logging.getLogger(__name__)
 
@@ -120,7 +126,7 @@ class Network:
 
     def _build(self) -> None:
         t0 = time.perf_counter()
-        os.makedirs(self.state_dir, exist_ok=True)
+        state.make_run_dir(self.name)
         robots = list(self.spec.robot_ids())
         forkable = routing.FORKABLE.get(self.spec.routing)
         if forkable is not None:
@@ -416,17 +422,22 @@ class Network:
             self.refresh()
         for k, xy in moves.items():
             self._check_robot(k)
-            x, y = float(xy[0]), float(xy[1])
-            if not (math.isfinite(x) and math.isfinite(y)):
-                raise UsageError(f"position of r{k} must be finite, not ({x}, {y})")
-            self.positions[k - 1] = (x, y)
+            try:
+                self.positions[k - 1] = check_position(xy, f"position of r{k}")
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
         return self._moved(set(moves), save=save)
 
     def set_positions(self, positions: list[Position]) -> tuple[list[Pair], list[Pair]]:
         """Move every robot at once (one world step). Returns (added, removed) links."""
         if len(positions) != self.spec.robots:
             raise ValueError(f"{len(positions)} positions for {self.spec.robots} robots")
-        self.positions = [(float(x), float(y)) for x, y in positions]
+        try:
+            self.positions = [
+                check_position(p, f"position of r{k}") for k, p in enumerate(positions, 1)
+            ]
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
         return self._moved()
 
     def _moved(
@@ -555,8 +566,14 @@ def our_namespaces(name: str) -> list[str]:
 
 
 def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> None:
-    """Remove everything testbed `name` made: processes, namespaces, run dir, state."""
-    st = state.read(name)
+    """Remove everything testbed `name` made: processes, namespaces, run dir, state. A state
+    file another user could have written is ignored (one warning): none of the processes it
+    names is signalled, only those the kernel shows inside the testbed's namespaces."""
+    try:
+        st = state.read(name)
+    except state.UntrustedState as exc:
+        log.warning("%s; signalling only the processes inside tb-%s-* namespaces", exc, name)
+        st = None
     namespaces = our_namespaces(name)
     if st is not None:
         # Captures last: what the daemons send as they stop belongs in the pcaps.

@@ -35,6 +35,8 @@ def stop(
     `children` are the Popen objects of the processes this process started itself: they are
     reaped through their Popen, so whoever holds it still reads the true exit status."""
     children = children or {}
+    # Never a pid that names a group or everyone (0, -1, ...), init, or this process.
+    records = [r for r in records if type(r.pid) is int and r.pid > 1 and r.pid != os.getpid()]
 
     def alive(r: ProcessRecord) -> bool:
         if r.pid in children:

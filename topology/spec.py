@@ -83,6 +83,27 @@ NO_IMPAIRMENT = Impairment()
 
 Position = tuple[float, float]
 
+# Coordinates are metres, at most this far from the origin on either axis: 10,000 km holds
+# any projected coordinate on Earth (UTM eastings and northings included) at a resolution of
+# nanometres, and keeps every difference, square and sum that the range models, the view and
+# the ns-3 medium compute from positions finite (1e308 would overflow to infinity there).
+MAX_COORD_M = 1e7
+
+
+def check_position(xy, what: str = "position") -> Position:
+    """`xy` as (x, y) floats if it is two finite numbers within MAX_COORD_M, else ValueError."""
+    try:
+        x, y = xy
+        fx, fy = float(x), float(y)
+    except (TypeError, ValueError):
+        shown = " ".join(str(v)[:40] for v in xy) if isinstance(xy, list | tuple) else "?"
+        raise ValueError(f"{what} ({shown}) is not two numbers") from None
+    if not (math.isfinite(fx) and math.isfinite(fy)):
+        raise ValueError(f"{what} ({fx:g}, {fy:g}) must be finite")
+    if abs(fx) > MAX_COORD_M or abs(fy) > MAX_COORD_M:
+        raise ValueError(f"{what} ({fx:g}, {fy:g}) is beyond {MAX_COORD_M:,.0f} m of 0")
+    return fx, fy
+
 
 @dataclass(frozen=True)
 class NetworkSpec:
@@ -114,7 +135,9 @@ class NetworkSpec:
         if len(self.positions) > names.MAX_ROBOTS:
             raise ValueError(f"at most {names.MAX_ROBOTS} robots")
         object.__setattr__(
-            self, "positions", tuple((float(x), float(y)) for x, y in self.positions)
+            self,
+            "positions",
+            tuple(check_position(p, f"position of r{k}") for k, p in enumerate(self.positions, 1)),
         )
         if not (self.comm_range > 0 and math.isfinite(self.comm_range)):
             raise ValueError(
@@ -164,7 +187,7 @@ def _check_wifi(spec: NetworkSpec) -> None:
             f"unknown wifi standard {spec.wifi_standard!r} "
             f"(choose from {', '.join(WIFI_STANDARDS)})"
         )
-    if not all(c.isalnum() for c in spec.wifi_rate):
+    if not (spec.wifi_rate.isascii() and all(c.isalnum() for c in spec.wifi_rate)):
         raise ValueError(f"wifi rate {spec.wifi_rate!r} is not an ns-3 WifiMode name")
     if spec.range_model != "disc":
         raise ValueError("the ns3-wifi medium decides reception itself: range model disc only")

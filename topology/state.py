@@ -7,6 +7,13 @@ spec, the current positions, who owns the testbed and every process started in i
 names are a contract with clean-up; processes are stopped by the pids recorded, never by
 name).
 
+Who may write: only the user who runs the testbeds (root). Whatever the caller's umask, the
+state dir is 0755, each state file 0644, each lock file 0600 and each run dir 0700 (it holds
+the control sockets: the feed, the body link, the ns-3 medium; others cannot even reach
+them). A state file someone else could have written (not ours, or writable by group or
+others, or a symlink) is not trusted: `read` raises UntrustedState, and teardown then
+signals none of the processes it names (topology.network.destroy).
+
 Ownership: a testbed built inside a `with Network(...)` block is owned by that process; when
 the owner dies without tearing down, the testbed is abandoned and `testbed clean` removes it.
 `testbed net up` hands the testbed over to nobody (persistent) once it is fully built, and only
@@ -17,13 +24,24 @@ import contextlib
 import fcntl
 import json
 import os
+import stat
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from topology.errors import UsageError
 from topology.jsonfile import write_json_atomic
+from topology.names import NAME_PATTERN
 from topology.spec import Impairment, NetworkSpec
 
 DEFAULT_STATE_DIR = "/run/testbed"
+STATE_DIR_MODE = 0o755
+RUN_DIR_MODE = 0o700
+STATE_FILE_MODE = 0o644
+LOCK_FILE_MODE = 0o600
+
+
+class UntrustedState(UsageError):
+    """A state file that someone other than this user could have written."""
 
 
 def state_dir() -> str:
@@ -37,6 +55,50 @@ def state_path(name: str) -> str:
 def run_dir(name: str) -> str:
     """A per-testbed directory for pid files, daemon state and statistics."""
     return os.path.join(state_dir(), name)
+
+
+def _own_dir(path: str, mode: int) -> None:
+    """`path` is a directory of this user's with exactly `mode`, whatever the umask (an
+    existing one with a laxer mode is set right); UsageError for a symlink, a file or a
+    directory of someone else's there."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    try:
+        os.mkdir(path, mode)
+    except FileExistsError:
+        pass
+    st = os.lstat(path)
+    if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.geteuid():
+        raise UsageError(
+            f"{path} is not a directory of uid {os.geteuid()} (owner uid {st.st_uid}, "
+            f"mode {stat.filemode(st.st_mode)}): not using it; remove it by hand"
+        )
+    if stat.S_IMODE(st.st_mode) != mode:
+        os.chmod(path, mode)
+
+
+def make_state_dir() -> None:
+    _own_dir(state_dir(), STATE_DIR_MODE)
+
+
+def make_run_dir(name: str) -> str:
+    """The testbed's run dir, made (or set right) 0700: for root alone."""
+    make_state_dir()
+    _own_dir(run_dir(name), RUN_DIR_MODE)
+    return run_dir(name)
+
+
+def _check_trusted(path: str, st: os.stat_result) -> None:
+    """UntrustedState unless `st` (of `path`) is a regular file of this user's (or root's)
+    that nobody else may write."""
+    if (
+        not stat.S_ISREG(st.st_mode)
+        or st.st_uid not in (0, os.geteuid())
+        or st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+    ):
+        raise UntrustedState(
+            f"{path} (owner uid {st.st_uid}, mode {stat.filemode(st.st_mode)}) may have been "
+            "written by another user: its records are not trusted"
+        )
 
 
 def proc_start_time(pid: int) -> int | None:
@@ -130,26 +192,43 @@ def spec_from_dict(d: dict[str, Any]) -> NetworkSpec:
 
 
 def write(name: str, st: TestbedState) -> None:
-    os.makedirs(state_dir(), exist_ok=True)
-    write_json_atomic(state_path(name), asdict(st))
+    make_state_dir()
+    write_json_atomic(state_path(name), asdict(st), mode=STATE_FILE_MODE)
 
 
 def create(name: str, st: TestbedState) -> None:
     """Claim `name`: raise FileExistsError if another testbed holds it."""
-    os.makedirs(state_dir(), exist_ok=True)
-    fd = os.open(state_path(name), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    make_state_dir()
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+    fd = os.open(state_path(name), flags, STATE_FILE_MODE)
+    os.fchmod(fd, STATE_FILE_MODE)  # the umask does not decide who may write it
     with os.fdopen(fd, "w") as f:
         f.write(st.to_json())
 
 
+def exists(name: str) -> bool:
+    """Whether a state file (trusted or not) is there for `name`."""
+    return os.path.lexists(state_path(name))
+
+
 def read(name: str) -> TestbedState | None:
+    """The state of testbed `name`; None if it has none (or a torn or foreign one);
+    UntrustedState if its file may have been written by another user."""
+    path = state_path(name)
     try:
-        with open(state_path(name)) as f:
-            return TestbedState.from_json(f.read())
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
     except FileNotFoundError:
         return None
-    except (ValueError, TypeError, KeyError):
-        return None  # a torn or foreign file: treated as no state (clean may remove it)
+    except OSError as exc:  # ELOOP: a symlink
+        raise UntrustedState(
+            f"{path} is not a regular file ({exc.strerror}): its records are not trusted"
+        ) from None
+    with os.fdopen(fd) as f:
+        _check_trusted(path, os.fstat(fd))
+        try:
+            return TestbedState.from_json(f.read())
+        except (ValueError, TypeError, KeyError):
+            return None  # a torn or foreign file: treated as no state (clean may remove it)
 
 
 def remove(name: str) -> None:
@@ -164,13 +243,20 @@ def names() -> list[str]:
         entries = os.listdir(state_dir())
     except FileNotFoundError:
         return []
-    return sorted(e[: -len(".json")] for e in entries if e.endswith(".json"))
+    found = (e[: -len(".json")] for e in entries if e.endswith(".json"))
+    return sorted(n for n in found if NAME_PATTERN.fullmatch(n))  # nothing else is ours
 
 
 @contextlib.contextmanager
 def locked(name: str):
     """Serialise changes to one testbed between processes (`net move` racing `net down`)."""
-    os.makedirs(state_dir(), exist_ok=True)
-    with open(os.path.join(state_dir(), f".{name}.lock"), "w") as lockf:
-        fcntl.flock(lockf, fcntl.LOCK_EX)
+    make_state_dir()
+    path = os.path.join(state_dir(), f".{name}.lock")
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, LOCK_FILE_MODE)
+    try:
+        if os.fstat(fd).st_uid == os.geteuid():
+            os.fchmod(fd, LOCK_FILE_MODE)  # nobody else may open it (and hold the lock)
+        fcntl.flock(fd, fcntl.LOCK_EX)
         yield
+    finally:
+        os.close(fd)

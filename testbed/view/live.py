@@ -20,7 +20,7 @@ import time
 from aiohttp import web
 
 from testbed.view import server
-from testbed.view.replay import snapshot_steps
+from testbed.view.served import snapshot_steps
 from topology.jsonfile import read_json
 
 FRAME_S = 0.1  # 10 frames a second at most
@@ -94,7 +94,7 @@ class LiveFeed:
 
 def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
     async def run(_request):
-        return web.json_response({**feed.meta, "live": True, "map": server.has_map(map_png)})
+        return server.json_response({**feed.meta, "live": True, "map": server.has_map(map_png)})
 
     async def live(request):
         resp = web.StreamResponse(headers={"Content-Type": "text/event-stream",
@@ -102,7 +102,7 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
         await resp.prepare(request)
 
         async def send() -> None:
-            event = f"data: {json.dumps(feed.frame())}\n\n".encode()
+            event = f"data: {server.json_text(feed.frame())}\n\n".encode()
             await asyncio.wait_for(resp.write(event), SEND_TIMEOUT_S)
 
         sent = None
@@ -121,11 +121,11 @@ def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
         return resp
 
     async def routes(request):
-        to = request.query.get("to", "")
-        if feed.routes is None or not to.isdigit():
-            raise web.HTTPNotFound()
-        hops = await asyncio.get_running_loop().run_in_executor(None, feed.routes, int(to))
-        return web.json_response({str(k): nh for k, nh in hops.items()})
+        to = server.query_index(request, "to", 1, feed.meta["robots"])  # else HTTP 400
+        if feed.routes is None:
+            raise web.HTTPNotFound()  # no network to ask
+        hops = await asyncio.get_running_loop().run_in_executor(None, feed.routes, to)
+        return server.json_response({str(k): nh for k, nh in hops.items()})
 
     app = web.Application()
     app.add_routes([

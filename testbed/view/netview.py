@@ -11,6 +11,7 @@ has (testbed.view.live); a click on a robot draws the routes the robots' kernels
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
@@ -22,6 +23,11 @@ from topology.ns3medium import medium_for
 from topology.spec import LOS_MODELS
 
 POLL_S = 0.2
+READY_FILE = "view.ready"  # in the testbed's run dir, once the view listens
+
+
+def ready_path(name: str) -> str:
+    return os.path.join(state.run_dir(name), READY_FILE)
 
 
 class Extent:
@@ -66,7 +72,11 @@ def main(argv: list[str]) -> int:
         print("usage: python -m testbed.view.netview NAME [HOST:]PORT", file=sys.stderr)
         return 2
     name, bind = argv
-    st = state.read(name)
+    try:
+        st = state.read(name)
+    except state.UntrustedState as exc:
+        print(f"netview: {exc}", file=sys.stderr)
+        return 2
     if st is None:
         print(f"netview: no testbed named {name!r} is up", file=sys.stderr)
         return 2
@@ -83,14 +93,26 @@ def main(argv: list[str]) -> int:
             "steps": 0, "positions": [], "links": [], "coverage": []}  # fmt: skip
     routes = KernelRoutes(name, spec.robots)
     feed = LiveFeed(meta, routes)
-    server = LiveServer(feed, bind, map_png)
+    try:
+        server = LiveServer(feed, bind, map_png)
+    except OSError as exc:
+        print(
+            f"netview: --view {bind}: cannot listen there: {exc.strerror or exc}", file=sys.stderr
+        )
+        return 2
+    with open(ready_path(name), "w"):
+        pass  # `net up` waits for this before it prints the view's address
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     tick = 0
     try:
         while not stop:
-            now = state.read(name)
+            try:
+                now = state.read(name)
+            except state.UntrustedState as exc:
+                print(f"netview: {exc}", file=sys.stderr)
+                break
             if now is None:
                 break  # the testbed went down
             links = dict.fromkeys(medium.kernel_links())

@@ -4,68 +4,167 @@
 positions.csv (every robot at every step), links.csv (every link change) and coverage.csv,
 and returns one JSON-able dict: the page replays it with a time slider. Nothing here
 touches a process or a network: a run's files are its whole record (docs/run-results.md).
+
+The files may come from anyone (docs/security.md): each is read only as testbed.view.served
+allows, and every value is checked (numbers finite and within bounds, counts that agree); a
+file that fails is a NotARun saying which file and line, never a traceback or a value the
+page or JSON cannot hold.
 """
 
 from __future__ import annotations
 
 import csv
+import json
+import math
 from pathlib import Path
 
-from topology.jsonfile import read_json
+from testbed.view.served import in_run, snapshot, snapshot_steps
+from topology.names import MAX_ROBOTS
+from topology.spec import MAX_COORD_M
+
+__all__ = ["NotARun", "load", "read_config", "snapshot_path", "snapshot_steps"]
+
+MAX_MAP_CELLS = 1 << 20  # cells along one side of the map (a run's maps have hundreds)
+MAX_STEP = 10**9
 
 
 class NotARun(ValueError):
     """The directory holds no finished run the view can replay."""
 
 
-def _rows(path: Path) -> list[list[str]]:
-    with open(path, newline="") as f:
-        return list(csv.reader(f))[1:]
+def _json_object(d: Path, name: str, required: bool) -> dict:
+    path = in_run(d, name)
+    if path is None:
+        if required:
+            raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
+        return {}
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (OSError, ValueError, RecursionError):
+        doc = None
+    if not isinstance(doc, dict):
+        if required:
+            raise NotARun(f"{d}/{name}: not a JSON object")
+        return {}
+    return doc
 
 
-def snapshot_steps(run_dir: Path) -> list[int]:
-    """The steps at which the display robot saved its merged map (display/step-NNNNN.png)."""
-    steps = []
-    for p in (Path(run_dir) / "display").glob("step-*.png"):
-        digits = p.stem.removeprefix("step-")
-        if digits.isdigit():
-            steps.append(int(digits))
-    return sorted(steps)
+def _number(doc: dict, key: str, where: str, lo: float, hi: float, default=None) -> float:
+    value = doc.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise NotARun(f"{where}: {key} is not a number")
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise NotARun(f"{where}: {key} {value:g} is not in {lo:g}..{hi:g}")
+    return value
 
 
-def snapshot_path(run_dir: Path, step: int) -> Path | None:
-    """The display's snapshot of `step`, if the run saved one (looked up, never built from
-    what a request says)."""
-    if step not in snapshot_steps(run_dir):
-        return None
-    return Path(run_dir) / "display" / f"step-{step:05d}.png"
+def read_config(d: Path) -> dict:
+    """What the view takes from config.json, checked: robots, comm_range, map_m, map_cell,
+    display (a position or nothing) and map (what it names, unchecked: testbed.view.served
+    decides whether to serve it)."""
+    config = _json_object(d, "config.json", required=True)
+    where = f"{d}/config.json"
+    robots = _number(config, "robots", where, 1, MAX_ROBOTS)
+    if robots != int(robots):
+        raise NotARun(f"{where}: robots {robots:g} is not a whole number")
+    comm_range = float(_number(config, "comm_range", where, 0, MAX_COORD_M))
+    cell = float(_number(config, "map_cell", where, 1e-6, 1e3, default=0.05))
+    size = config.get("map_size")
+    if size is None:
+        map_m = [20.0, 20.0]
+    else:
+        if not (isinstance(size, list) and len(size) == 2):
+            raise NotARun(f"{where}: map_size is not [rows, cols]")
+        rows, cols = (_number({"map_size": v}, "map_size", where, 1, MAX_MAP_CELLS) for v in size)
+        map_m = [int(cols) * 0.05, int(rows) * 0.05]
+    display = config.get("display_pos") or []
+    if display:
+        if not (isinstance(display, list) and len(display) == 2):
+            raise NotARun(f"{where}: display_pos is not [x, y]")
+        display = [float(_number({"display_pos": v}, "display_pos", where, -MAX_COORD_M,
+                                 MAX_COORD_M)) for v in display]  # fmt: skip
+    return {"robots": int(robots), "comm_range": comm_range, "map_m": map_m, "map_cell": cell,
+            "display": display, "map": config.get("map")}  # fmt: skip
+
+
+def _rows(d: Path, name: str, parse, required: bool = False) -> list:
+    """The rows after the header of the run's CSV file `name`, each through `parse(row)`
+    (which raises ValueError for a bad one)."""
+    path = in_run(d, name)
+    if path is None:
+        if required:
+            raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
+        return []
+    try:
+        f = open(path, newline="", encoding="utf-8")
+    except OSError as e:
+        raise NotARun(f"{d}/{name}: {e.strerror}") from None
+    with f:
+        reader = csv.reader(f)
+        try:
+            next(reader, None)
+            return [parse(row) for row in reader]
+        except (ValueError, csv.Error) as e:  # UnicodeDecodeError is a ValueError
+            why = (str(e).splitlines() or ["unreadable"])[0][:200]
+            raise NotARun(f"{d}/{name} line {reader.line_num}: {why}") from None
+
+
+def _finite(text: str, lo: float, hi: float) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(f"{text[:40]!r} is not a number in {lo:g}..{hi:g}")
+    return value
+
+
+def _whole(text: str, lo: int, hi: int) -> int:
+    if not (text.isascii() and text.isdigit() and len(text) <= 10 and lo <= int(text) <= hi):
+        raise ValueError(f"{text[:40]!r} is not a whole number in {lo}..{hi}")
+    return int(text)
 
 
 def load(run_dir: str | Path) -> dict:
     d = Path(run_dir)
-    config = read_json(d / "config.json")
-    if config is None or not (d / "positions.csv").is_file():
-        raise NotARun(f"{d}: not a run directory with positions.csv (runs made since 2026-11-24)")
-    result = read_json(d / "result.json") or {}
-    n = int(config["robots"])
-    positions = [[round(float(v), 3) for v in row[1:]] for row in _rows(d / "positions.csv")]
-    links = [[int(row[0]), row[1] == "add", int(row[2]), int(row[3])]
-             for row in _rows(d / "links.csv")] if (d / "links.csv").is_file() else []  # fmt: skip
-    coverage = [float(row[1]) for row in _rows(d / "coverage.csv")] if (
-        d / "coverage.csv").is_file() else []  # fmt: skip
-    cell = float(config.get("map_cell", 0.05))
-    rows, cols = config.get("map_size") or [400, 400]
+    config = read_config(d)
+    result = _json_object(d, "result.json", required=False)
+    status = result.get("status", "running")
+    if not (isinstance(status, str) and len(status) <= 40):
+        status = "unknown"
+    n = config["robots"]
+
+    def position_row(row: list[str]) -> list[float]:
+        if len(row) != 1 + 2 * n:
+            raise ValueError(f"{len(row)} columns, not {1 + 2 * n} (step, x and y of {n})")
+        return [round(_finite(v, -MAX_COORD_M, MAX_COORD_M), 3) for v in row[1:]]
+
+    def link_row(row: list[str]) -> list:
+        if len(row) != 4 or row[1] not in ("add", "remove"):
+            raise ValueError("not step,add|remove,i,j")
+        i, j = (_whole(v, 1, n + 1) for v in row[2:])  # n + 1: the display robot
+        return [_whole(row[0], 0, MAX_STEP), row[1] == "add", i, j]
+
+    def coverage_row(row: list[str]) -> float:
+        if len(row) != 2:
+            raise ValueError("not step,coverage")
+        return _finite(row[1], 0.0, 1.0)
+
+    positions = _rows(d, "positions.csv", position_row, required=True)
     return {
         "run": d.name,
         "robots": n,
-        "comm_range": float(config["comm_range"]),
-        "map_m": [cols * 0.05, rows * 0.05] if config.get("map_size") else [20.0, 20.0],
-        "map_cell": cell,
-        "display": list(config.get("display_pos") or []),
-        "status": result.get("status", "running"),
+        "comm_range": config["comm_range"],
+        "map_m": config["map_m"],
+        "map_cell": config["map_cell"],
+        "display": config["display"],
+        "status": status,
         "steps": len(positions) - 1,
         "positions": positions,  # per step: x1, y1, x2, y2, ...
-        "links": links,  # [step, added?, i, j]
-        "coverage": coverage,
+        "links": _rows(d, "links.csv", link_row),  # [step, added?, i, j]
+        "coverage": _rows(d, "coverage.csv", coverage_row),
         "snapshots": snapshot_steps(d),
     }
+
+
+def snapshot_path(run_dir: Path, step: int) -> Path | None:
+    """The display's snapshot of `step` that may be served (testbed.view.served.snapshot)."""
+    return snapshot(run_dir, step)

@@ -88,7 +88,7 @@ def test_a_long_trace_is_stopped_by_net_down(tb_name, tmp_path):
     trace = tmp_path / "slow.ns2"
     trace.write_text(TRACE.replace('20.0"', '0.01"'))  # r2 would take an hour
     assert tb("net", "up", tb_name, "--mobility", str(trace), "--comm-range", "10",
-              "--robots", "2").returncode == 0  # fmt: skip
+              "--robots", "2", cwd=tmp_path).returncode == 0  # fmt: skip
     st = state.read(tb_name)
     (player,) = [p for p in st.processes if p.role == "mobility"]
     assert tb("net", "down", tb_name).returncode == 0

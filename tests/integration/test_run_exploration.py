@@ -157,6 +157,8 @@ def test_png_map_with_walls_and_a_door(tmp_path, tn_name):
     assert result["coverage_final"] >= 0.99
     with open(os.path.join(out, "config.json")) as f:
         assert json.load(f)["map_size"] == [200, 300]
+    with open(os.path.join(out, "map.png"), "rb") as f:  # the replay's picture, kept with it
+        assert f.read() == png.read_bytes()
 
 
 def test_live_view_streams_the_run_as_it_happens(tmp_path, tn_name):

@@ -6,7 +6,7 @@ import csv
 import pytest
 from aiohttp.test_utils import TestClient, TestServer
 
-from testbed.view import replay, server
+from testbed.view import replay, served, server
 
 
 def write_run(d, steps=3):
@@ -23,7 +23,10 @@ def write_run(d, steps=3):
     (d / "coverage.csv").write_text("step,coverage\n0,0.1\n1,0.2\n2,0.3\n3,0.4\n")
     (d / "result.json").write_text('{"status": "complete"}')
     (d / "display").mkdir()
-    (d / "display" / "step-00002.png").write_bytes(b"\x89PNG not really")
+    (d / "display" / "step-00002.png").write_bytes(
+        served.PACKAGED_MAPS.joinpath("office.png").read_bytes()
+    )
+    (d / "display" / "step-00003.png").write_bytes(b"\x89PNG not really")  # not served
 
 
 def test_load_reads_what_the_run_wrote(tmp_path):
@@ -54,10 +57,12 @@ def test_server_serves_the_page_and_the_run_and_no_other_path(tmp_path):
             # Empty terrain: no picture, and the page is told not to ask for one.
             assert data["map"] is False
             assert (await client.get("/map.png")).status == 404
-            assert data["snapshots"] == [2]
+            assert data["snapshots"] == [2, 3]
             assert (await client.get("/display.png?step=2")).status == 200
-            for bad in ("3", "..%2Fconfig.json", "-1", ""):
-                assert (await client.get("/display.png?step=" + bad)).status == 404, bad
+            for missing in ("3", "4"):  # not a PNG; no such snapshot
+                assert (await client.get("/display.png?step=" + missing)).status == 404
+            for bad in ("..%2Fconfig.json", "-1", "", "²", "1" * 12):
+                assert (await client.get("/display.png?step=" + bad)).status == 400, bad
 
     asyncio.run(go())
 
