@@ -119,8 +119,8 @@ def merge_ternary(view: np.ndarray, t: np.ndarray, threshold: float, merged: flo
 
 
 def count_and(a: np.ndarray, b: np.ndarray) -> int:
-    """Cells set in both of two contiguous boolean arrays of one shape."""
-    return int(lib.sc_count_and(ptr(a), ptr(b), a.size))
+    """Cells set in both of two contiguous boolean arrays of one shape (alive for the run)."""
+    return int(lib.sc_count_and(address(a), address(b), a.size))
 
 
 def pool(t: np.ndarray, factor: int) -> np.ndarray:
