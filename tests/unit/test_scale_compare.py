@@ -37,3 +37,30 @@ def test_the_section_lists_both_sweeps_per_point_with_their_scales_and_what_was_
     assert "| aodv, laser 2 m, range 20 m, 10 robots | dil | 2 | 8 | 370 [" in text
     assert "0 in rt, 2 in dil" in text
     assert text.count("\n- ") == len(sc.MEASURES)
+
+
+def test_tcps_measures_across_scales_are_compared_only_where_tcp_kept_emulated_time():
+    def rows(pdfs, scale, tcp):
+        return [{**_row(360, pdf=p, scale=scale), "tcp_emulated": tcp} for p in pdfs]
+
+    real = sc.points(rows((0.67, 0.68, 0.69), 1.0, True))
+    undilated = sc.points(rows((0.77, 0.78, 0.79), 6.0, False))
+    dilated = sc.points(rows((0.77, 0.78, 0.79), 6.0, True))
+    line = sc.sentence("pdf", "packet delivery fraction", ".3f", real, undilated, ("rt", "dil"))
+    assert line == (
+        "- Packet delivery fraction: not compared at 1 point, where the time scales differ "
+        "and TCP's timers were not dilated (result.json's fidelity.network)."
+    )
+    # With TCP dilated the same numbers are compared, and differ beyond the noise.
+    line = sc.sentence("pdf", "packet delivery fraction", ".3f", real, dilated, ("rt", "dil"))
+    assert "within the noise at 0 of 1 points; beyond it at" in line
+    # The robots' own measures are compared whatever TCP did.
+    line = sc.sentence("steps", "exploration steps", ".0f", real, undilated, ("rt", "dil"))
+    assert "within the noise at 1 of 1 points" in line
+    # At one time scale TCP's measures are comparable, dilated or not.
+    same = sc.points(rows((0.76, 0.77, 0.78), 6.0, False))
+    line = sc.sentence("pdf", "PDF", ".3f", same, undilated, ("a", "b"))
+    assert "within the noise at 1 of 1" in line
+    a, b = rows((0.67, 0.68, 0.69), 1.0, True), rows((0.77, 0.78, 0.79), 6.0, False)
+    text = "\n".join(sc.section(a, b, ("rt", "dil"), (0, 0)))
+    assert "| dil | 3 | 6 (TCP undilated) |" in text
