@@ -14,18 +14,19 @@ testbed.analysis.stats).
 `compare(dir_a, dir_b)` reads both sweep directories through the typed loader
 (testbed.analysis.runs), takes per run the exploration steps (Fig. 2's number), the plans
 made on a teammate's request (Fig. 4's), and from the captures (testbed.analysis.pcapmetrics)
-the packet delivery fraction, the median delay in emulated ms and the routing control packets
-and bytes per robot per second of robot time (the same per-run numbers as the media section,
-testbed.analysis.media.run_row). `section` writes the table and one sentence per measure:
-at which points the two sweeps agree within the noise, and at which they do not.
-Unfaithful runs are left out unless asked for, as in the report.
+the packet delivery fraction, the median and mean delay in emulated ms, TCP's retransmissions
+per flow (transmissions of a segment after its first, per direction of a connection that sent
+data) and the routing control packets and bytes per robot per second of robot time (the same
+per-run numbers as the media section, testbed.analysis.media.run_row). `section` writes the
+table and one sentence per measure: at which points the two sweeps agree within the noise, and
+at which they do not. Unfaithful runs are left out unless asked for, as in the report.
 
 PDF and delay are the kernel's TCP. Its timers keep emulated time only where the robots'
 namespaces had them divided by the time scale (topology.nettimers; result.json's
 `fidelity.network`): at a point whose two sides ran at different scales and where a dilated
 run's TCP did not keep emulated time (a kernel before 6.11, a scale past its jiffy, or a run
-made before the timers were dilated), those two measures are not compared, and the table
-marks that side's time scale "TCP undilated".
+made before the timers were dilated), TCP's measures (PDF, delays, retransmissions) are not
+compared, and the table marks that side's time scale "TCP undilated".
 """
 
 from __future__ import annotations
@@ -45,10 +46,13 @@ MEASURES = (
     ("requests", "plans on request per robot", ".2f"),
     ("pdf", "packet delivery fraction", ".3f"),
     ("delay_ms", "median delay (emulated ms)", ".2f"),
+    ("delay_mean_ms", "mean delay (emulated ms)", ".1f"),
+    ("retrans_per_flow", "TCP retransmissions per flow", ".2f"),
     ("control_pkts_per_robot_s", "control packets per robot per second", ".2f"),
     ("control_bytes_per_robot_s", "control bytes per robot per second", ".0f"),
 )
-NETWORK_MEASURES = ("pdf", "delay_ms")  # TCP's: compared across scales only when dilated
+# TCP's: compared across time scales only where TCP kept emulated time
+NETWORK_MEASURES = ("pdf", "delay_ms", "delay_mean_ms", "retrans_per_flow")
 RULE = (
     "the two sweeps agree at a point when the 95% intervals of a measure's means overlap "
     "(Student t; the report's rule for a difference beyond noise)."
@@ -65,6 +69,11 @@ def run_row(run: RunRecord, metrics: dict | None) -> dict:
     row["time_scale"] = run.time_scale_achieved or run.config.time_scale
     row["laser_range"] = run.config.laser_range
     row["tcp_emulated"] = run.tcp_in_emulated_time
+    m = metrics or {}
+    mean = m.get("delay_ms_mean")
+    row["delay_mean_ms"] = None if mean is None else mean * (row["time_scale"] or 1.0)
+    flows, tx, segments = m.get("tcp_flows"), m.get("tcp_transmissions"), m.get("tcp_segments_sent")
+    row["retrans_per_flow"] = (tx - segments) / flows if flows and tx is not None else None
     return row
 
 

@@ -1,6 +1,11 @@
 """testbed.analysis.scalecompare: two sweeps of the same points, within the noise or not."""
 
+import dataclasses
+
+from testbed import sweepfile
 from testbed.analysis import scalecompare as sc
+from testbed.analysis.runs import load_run
+from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 
 def _row(steps, comm=20, robots=10, pdf=0.99, scale=1.0, requests=2.0):
@@ -64,3 +69,16 @@ def test_tcps_measures_across_scales_are_compared_only_where_tcp_kept_emulated_t
     a, b = rows((0.67, 0.68, 0.69), 1.0, True), rows((0.77, 0.78, 0.79), 6.0, False)
     text = "\n".join(sc.section(a, b, ("rt", "dil"), (0, 0)))
     assert "| dil | 3 | 6 (TCP undilated) |" in text
+
+
+def test_a_runs_mean_delay_is_emulated_and_its_retransmissions_are_counted_per_flow(tmp_path):
+    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    planned = sweepfile.expand(spec)[0]
+    c = dataclasses.replace(planned.config, time_scale=6.0)
+    run = load_run(write_run(tmp_path, planned, result_doc(c, [90, 100], 100)))
+    metrics = {"pdf": 0.9, "delay_ms_median": 0.01, "delay_ms_mean": 0.5, "tcp_flows": 4,
+               "tcp_transmissions": 130, "tcp_segments_sent": 100}  # fmt: skip
+    row = sc.run_row(run, metrics)
+    assert row["delay_mean_ms"] == 0.5 * 6  # wall ms x the time scale
+    assert row["retrans_per_flow"] == 30 / 4
+    assert sc.run_row(run, None)["retrans_per_flow"] is None
