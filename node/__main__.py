@@ -74,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         goals = GoalNet(
             me, args.bind or robot_addr(me), args.goal_port, robot_addr,
             send_timeout_ms=timing.goal_send_timeout_ms,
+            reconnect_ms=(timing.goal_reconnect_min_ms, timing.goal_reconnect_max_ms),
         )  # fmt: skip
         r = Robot(cfg, link, flooder, goals, events)
         stop["robot"] = r

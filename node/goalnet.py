@@ -5,6 +5,10 @@ sockets (tests/integration/test_nanomsg_interop.py). Dialers connect in the back
 reconnect on their own; a send waits at most `send_timeout_ms` for a connected peer and then
 gives up, so an unreachable teammate never blocks the robot. Routes to teammates more than
 one hop away come from the robot's routing daemon, like any other traffic.
+
+Every interval nng keeps here is in wall ms and comes from node.timing, divided by the time
+scale there: the send timeout and the redial backoff (`reconnect_ms`: the first wait, and the
+ceiling it doubles up to). A PUSH socket has no resend timer, and TCP keepalives stay off.
 """
 
 from __future__ import annotations
@@ -26,11 +30,14 @@ class GoalNet:
         port: int,
         addr_of: Callable[[int], str],
         send_timeout_ms: int = 20,
+        reconnect_ms: tuple[int, int] = (50, 500),
     ):
         self.me = me
         self.port = port
         self.addr_of = addr_of
         self.send_timeout_ms = max(1, int(send_timeout_ms))
+        lo, hi = (max(1, int(v)) for v in reconnect_ms)
+        self.reconnect_ms = (lo, max(lo, hi))
         self.pull = pynng.Pull0()
         self.pull.listen(f"tcp://{bind_addr}:{port}")
         self.push: dict[int, pynng.Push0] = {}
@@ -43,8 +50,8 @@ class GoalNet:
         if s is None:
             s = pynng.Push0(
                 send_timeout=self.send_timeout_ms,
-                reconnect_time_min=50,
-                reconnect_time_max=500,
+                reconnect_time_min=self.reconnect_ms[0],
+                reconnect_time_max=self.reconnect_ms[1],
                 send_buffer_size=8,
             )
             s.dial(f"tcp://{self.addr_of(j)}:{self.port}", block=False)

@@ -18,6 +18,11 @@ STEP_S = 0.1  # emulated seconds per step: the one definition of the project
 NEIGHBOUR_HOLD_MAP_PERIODS = 1.5  # a flood neighbour is forgotten after this many map periods
 GOAL_SEND_TIMEOUT_EMULATED_MS = 50  # half a step: a goal not sent by then is given up
 GOAL_SEND_TIMEOUT_MIN_MS = 2  # nng's send timeout in whole ms; below 2 it gives up at once
+# nng redials a teammate it lost after reconnect_time_min, doubling up to reconnect_time_max:
+# how long a robot goes without a connection to a teammate it can reach again.
+GOAL_RECONNECT_MIN_EMULATED_MS = 50
+GOAL_RECONNECT_MAX_EMULATED_MS = 500
+NNG_MIN_MS = 1  # nng's durations are whole ms
 FLOOD_LINGER_MAX_S = 0.001  # wait at most this long for more copies of a flood burst
 FLOOD_LINGER_EMULATED_S = 0.01  # ... and at most a tenth of a step
 STEP_ORDER_WAIT_STEPS = 0.75  # a frame waits at most this much of a step for the robot's threads
@@ -57,6 +62,16 @@ class RobotTimings:
     def goal_send_timeout_ms(self) -> int:
         """How long sending a goal to an unreachable teammate may block (node.goalnet)."""
         return max(GOAL_SEND_TIMEOUT_MIN_MS, round(GOAL_SEND_TIMEOUT_EMULATED_MS / self.time_scale))
+
+    @property
+    def goal_reconnect_min_ms(self) -> int:
+        """nng's first wait before redialling a teammate (node.goalnet), in wall ms."""
+        return max(NNG_MIN_MS, round(GOAL_RECONNECT_MIN_EMULATED_MS / self.time_scale))
+
+    @property
+    def goal_reconnect_max_ms(self) -> int:
+        """nng's longest wait between redials (its backoff's ceiling), in wall ms."""
+        return max(NNG_MIN_MS, round(GOAL_RECONNECT_MAX_EMULATED_MS / self.time_scale))
 
     @property
     def flood_linger_s(self) -> float:

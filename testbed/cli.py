@@ -235,6 +235,8 @@ def _net_up(args) -> int:
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
           f"testbed net exec {spec.name} r1 -- ping 10.0.0.{min(2, spec.robots)}")  # fmt: skip
+    if spec.time_scale != 1 and net.timers is not None:
+        print(f"  {net.timers.summary()}")
     if view:
         print(f"  live view: {view}")
     for line in started:

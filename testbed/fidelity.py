@@ -55,6 +55,15 @@ The verdict: a run is faithful when, over all its robots and daemons,
 
 `measures(...)` folds the per-process records (node.lateness dicts, the AODV daemons'
 `timer_lateness_ms`) into one `Measures`; `verdict(...)` judges them; both are pure.
+
+The network has its own verdict (`network_verdict`, result.json's `fidelity.network`): the
+kernel's TCP timers are divided by the time scale where the kernel lets them be
+(topology.nettimers), and a dilated run whose kernel could not dilate TCP's retransmission
+timeout (no `tcp_rto_min_us` before Linux 6.11, or a time scale past its jiffy) says so. Its
+PDF and delay then mean something else than at another time scale, and the report does not
+set them beside another scale's; its exploration does not depend on it (steps, plans and
+control overhead agreed within the noise with TCP undilated: docs/architecture.md), so it
+leaves `ok` alone.
 """
 
 from __future__ import annotations
@@ -64,6 +73,7 @@ from dataclasses import asdict, dataclass
 
 from aodv.params import Params as AodvParams
 from node.timing import STEP_S
+from topology.nettimers import NetworkTimers
 
 DEADLINE_MISS_LIMIT = 0.01
 LATE_PLAN_LIMIT = 0.01
@@ -218,6 +228,37 @@ def verdict(m: Measures, th: Thresholds = Thresholds()) -> dict:
     out["measures"] = values
     out["thresholds"] = asdict(th)
     return out
+
+
+def network_verdict(timers: dict | None, time_scale: float) -> dict:
+    """result.json's `fidelity.network` from its `network_timers` (topology.nettimers'
+    record): {ok, reason (when not ok)}. At time scale 1 the network is in emulated time by
+    definition; dilated, when TCP's retransmission timeout was dilated."""
+    if time_scale == 1:
+        return {"ok": True}
+    if not isinstance(timers, dict):
+        return {"ok": False, "reason": "no record of the network's timers: TCP's ran on the "
+                "wall clock"}  # fmt: skip
+    try:
+        record = NetworkTimers.from_dict(timers)
+    except ValueError as e:
+        return {"ok": False, "reason": f"the network timers' record is unreadable ({e})"}
+    if record.tcp_dilated:
+        return {"ok": True}
+    return {"ok": False, "reason": record.tcp_reason}
+
+
+def tcp_in_emulated_time(result: dict) -> bool | None:
+    """Whether a result.json's TCP ran in emulated time: True at time scale 1 or with TCP's
+    timers dilated, False for a dilated run without (and any dilated run made before they
+    were), None when the file does not say its time scale."""
+    scale = result.get("time_scale_requested") or (result.get("config") or {}).get("time_scale")
+    if not isinstance(scale, (int, float)):
+        return None
+    if scale == 1:
+        return True
+    network = (result.get("fidelity") or {}).get("network")
+    return bool(isinstance(network, dict) and network.get("ok") is True)
 
 
 def is_faithful(result: dict) -> bool | None:

@@ -89,9 +89,9 @@ def main(args: argparse.Namespace) -> int:
     replace = getattr(args, "replace", False)
     result = run(cfg, args.out, name, progress=not args.quiet, replace=replace)
     print(summary_line(result, args.out), flush=True)
-    warning = fidelity_warning(result)
-    if warning:
-        sys.stderr.write(warning + "\n")
+    for line in (fidelity_warning(result), network_note(result)):
+        if line:
+            sys.stderr.write(line + "\n")
     if result["status"] != "complete":
         sys.stderr.write(f"testbed run: {result['status']}: {result['status_detail']}\n")
         return 1
@@ -108,6 +108,19 @@ def fidelity_warning(result: dict) -> str | None:
     return (
         f"testbed run: warning: not faithful at time scale {scale:g}: {f.get('reason')}; "
         "its results may differ from a slower run's (a lower --time-scale)"
+    )
+
+
+def network_note(result: dict) -> str | None:
+    """The one line `testbed run` prints for a dilated run whose TCP could not be dilated
+    (testbed.fidelity.network_verdict); None otherwise."""
+    network = (result.get("fidelity") or {}).get("network") or {}
+    if network.get("ok", True):
+        return None
+    scale = result.get("time_scale_requested")
+    return (
+        f"testbed run: note: {network.get('reason')}; compare its PDF and delay only with "
+        f"runs at time scale {scale:g}"
     )
 
 
@@ -129,6 +142,12 @@ class Started:
     display_proc: subprocess.Popen
     live: object | None  # --view: testbed.view.live.LiveServer
 
+    @property
+    def network_timers(self) -> dict | None:
+        """The robot namespaces' network timers (topology.nettimers), as result.json has them."""
+        timers = self.net.timers
+        return None if timers is None else timers.to_dict()
+
 
 class Run:
     """One prepared run: `execute()` starts it, steps it and returns its record."""
@@ -148,9 +167,11 @@ class Run:
         status = ("error", "the run did not start")
         loop: StepLoop | None = None
         priority = None
+        network_timers = None
         try:
             with contextlib.ExitStack() as stack:  # routing logs kept, network down, closed
                 started = self.start(stack)
+                network_timers = started.network_timers
                 with deadline_priority(WORLD_RT_PRIORITY, WORLD_NICE) as priority:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
@@ -162,7 +183,7 @@ class Run:
             log.info("run failed: %s", status[1])  # `testbed run` prints the status
         except KeyboardInterrupt:
             status = ("interrupted", "interrupted (SIGINT or SIGTERM) before the end")
-        return self.finish(status, loop, priority)
+        return self.finish(status, loop, priority, network_timers)
 
     # -- start --------------------------------------------------------------------------------
 
@@ -314,7 +335,9 @@ class Run:
         if counters is not None:
             write_json_atomic(self.prep.path("medium.json"), counters())
 
-    def finish(self, status: tuple[str, str], loop: StepLoop | None, priority) -> RunRecord:
+    def finish(
+        self, status: tuple[str, str], loop: StepLoop | None, priority, network_timers=None
+    ) -> RunRecord:
         """The run's frozen record, for testbed.runresults to write."""
         return RunRecord(
             out=self.prep.out, config=self.prep.config, time_scale=self.cfg.time_scale,
@@ -323,6 +346,7 @@ class Run:
             clock=loop.clock.summary() if loop else no_clock(self.n),
             world_timing=loop.timing.seconds() if loop else {},
             parts=dict(self.parts.parts), priority=priority, t_start=self.parts.t_start,
+            network_timers=network_timers,
         )  # fmt: skip
 
 

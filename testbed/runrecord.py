@@ -107,6 +107,7 @@ class RunRecord:
     parts: dict
     priority: str | None  # what the step loop's thread got
     t_start: float  # CLOCK_MONOTONIC when the run began
+    network_timers: dict | None = None  # topology.nettimers' record; None: no network came up
 
     @property
     def steps(self) -> int:

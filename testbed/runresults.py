@@ -154,6 +154,9 @@ def contents(rec: RunRecord) -> dict:
             channel_relay_lag(rec.out),
         )
     )
+    # The robots' network timers (topology.nettimers) and whether TCP kept emulated time.
+    result["network_timers"] = rec.network_timers
+    result["fidelity"]["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
     result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
     return result
 

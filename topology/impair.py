@@ -18,7 +18,9 @@ tree. `Impairer` is the thin loop that sends a plan's requests and records what 
   delay and jitter are refused with an error that names the missing module.
 
 Delays scale with the run's time scale like every other timer (Impairment.scaled), and rates
-with it (a link K times faster in emulated time carries K times the bits per wall second).
+with it (a link K times faster in emulated time carries K times the bits per wall second); so
+does the longest a frame may queue in a rate limit (tbf's latency, TBF_LATENCY_US of emulated
+time), so that the queue holds as many emulated milliseconds at every scale.
 """
 
 import errno
@@ -138,15 +140,17 @@ def tc_rate(rate_kbit: float) -> str:
     return f"{max(1, round(rate_kbit * 1000))}bit"
 
 
-def _tbf(handle: str, parent: str | None, rate_kbit: float) -> Qdisc:
-    params = (("rate", tc_rate(rate_kbit)), ("burst", TBF_BURST), ("latency", TBF_LATENCY_US))
+def _tbf(handle: str, parent: str | None, rate_kbit: float, time_scale: float) -> Qdisc:
+    latency_us = max(1, round(TBF_LATENCY_US / time_scale))
+    params = (("rate", tc_rate(rate_kbit)), ("burst", TBF_BURST), ("latency", latency_us))
     return Qdisc("tbf", handle, parent, params)
 
 
-def wanted_qdiscs(imp: Impairment, netem: bool) -> tuple[Qdisc, ...]:
-    """The egress qdisc tree, root first, that gives a link end `imp` (already scaled)."""
+def wanted_qdiscs(imp: Impairment, netem: bool, time_scale: float = 1.0) -> tuple[Qdisc, ...]:
+    """The egress qdisc tree, root first, that gives a link end `imp` (already scaled to
+    `time_scale`, which also divides the rate limit's queueing latency)."""
     if not netem:
-        return (_tbf("1:", None, imp.rate_kbit),) if imp.rate_kbit > 0 else ()
+        return (_tbf("1:", None, imp.rate_kbit, time_scale),) if imp.rate_kbit > 0 else ()
     if imp.is_none:
         return ()
     root = Qdisc(
@@ -159,7 +163,7 @@ def wanted_qdiscs(imp: Impairment, netem: bool) -> tuple[Qdisc, ...]:
             ("loss", imp.loss_pct),
         ),
     )
-    return (root, _tbf("10:", "1:1", imp.rate_kbit)) if imp.rate_kbit > 0 else (root,)
+    return (root, _tbf("10:", "1:1", imp.rate_kbit, time_scale)) if imp.rate_kbit > 0 else (root,)
 
 
 def nft_commands(ifname: str, have: Impairment, want: Impairment, netem: bool) -> str:
@@ -220,7 +224,7 @@ def plan(ifname: str, have: Impairment, want: Impairment, netem: bool, time_scal
     emulated time: scaled here)."""
     h, w = have.scaled(time_scale), want.scaled(time_scale)
     return Plan(
-        tc_diff(wanted_qdiscs(h, netem), wanted_qdiscs(w, netem)),
+        tc_diff(wanted_qdiscs(h, netem, time_scale), wanted_qdiscs(w, netem, time_scale)),
         nft_commands(ifname, h, w, netem),
     )
 
@@ -261,7 +265,7 @@ class Impairer:
         self.check(imp)
         p = plan(ifname, old, imp, self.netem, self.time_scale)
         if p.tc:
-            want = wanted_qdiscs(imp.scaled(self.time_scale), self.netem)
+            want = wanted_qdiscs(imp.scaled(self.time_scale), self.netem, self.time_scale)
             self.worker.call(lambda ipr: _send(ipr, ifname, p.tc, want))
         if p.nft:
             self._nft(p.nft)

@@ -17,13 +17,19 @@ Requests go out in batches through topology.rtnl (a raw rtnetlink socket of the 
 namespace, held by an NsWorker); robot-side configuration (sysctls, address) runs in one
 thread that visits each robot's namespace in turn. pyroute2's IPRoute serves the rest (tc,
 dumps), where speed does not matter.
+
+The robots' network timers follow the time scale (topology.nettimers): the first robot's
+namespace is probed for the timer sysctls it has and for the kernel's jiffy, the plan's values
+are written there (a value the kernel refuses is recorded, not fatal) and then in every other
+robot's namespace. `Medium.timers` is the record, whichever routing daemon installs the routes.
 """
 
+import errno
 import logging
 import os
 import time
 
-from topology import names, netns, rtnl
+from topology import names, netns, nettimers, rtnl
 from topology.impair import Impairer
 from topology.spec import Impairment
 
@@ -109,12 +115,58 @@ def _veth(index: int, ifname: str, master: int, peer_name: str, peer_index: int)
                       peer_index=peer_index)  # fmt: skip
 
 
-def _configure_robot(k: int) -> None:
+def read_sysctl(key: str) -> int | None:
+    """A sysctl of the calling thread's namespace as an integer; None if it has no such key.
+    (/proc/sys/net is the calling thread's namespace's, unlike /proc/net.)"""
+    try:
+        with open("/proc/sys/" + key.replace(".", "/")) as f:
+            return int(f.read().split()[0])
+    except FileNotFoundError:
+        return None
+
+
+def jiffy_us() -> int:
+    """The kernel's jiffy in microseconds, as the kernel rounds a millisecond sysctl kept in
+    jiffies: lo's ARP retransmit time (lo does no ARP) set to 1 ms reads back as one jiffy,
+    then is put back. Exact at HZ 100, 250 and 1000."""
+    key = "net.ipv4.neigh.lo.retrans_time_ms"
+    before = read_sysctl(key)
+    try:
+        netns.write_sysctl(key, 1)
+        return 1000 * (read_sysctl(key) or 1)
+    finally:
+        if before is not None:
+            netns.write_sysctl(key, before)
+
+
+def plan_timers(time_scale: float) -> nettimers.NetworkTimers:
+    """Runs inside a fresh robot namespace: the timer sysctls it has, read, and the plan for
+    this time scale; its values are written here, those the kernel refuses recorded as such."""
+    dev = names.ROBOT_IFACE
+    defaults = {}
+    for knob in nettimers.KNOBS:
+        value = read_sysctl(knob.sysctl(dev))
+        if value is not None:
+            defaults[knob.sysctl(dev)] = value
+    timers = nettimers.plan(time_scale, defaults, jiffy_us(), os.uname().release, dev)
+    for key, value in timers.writes():
+        try:
+            netns.write_sysctl(key, value)
+        except OSError as e:
+            if e.errno not in (errno.EINVAL, errno.ERANGE):
+                raise
+            timers = nettimers.refused(timers, key, os.strerror(e.errno))
+    return timers
+
+
+def _configure_robot(k: int, timer_writes: list[tuple[str, int]] | None = None) -> None:
     """Runs inside robot k's namespace: sysctls first, then address and state of wlan0, lo."""
     for key, value in ROBOT_SYSCTLS:
         netns.write_sysctl(key, value)
     for key in WLAN_SYSCTLS:
         netns.write_sysctl(key, 0)
+    for key, value in timer_writes or ():
+        netns.write_sysctl(key, value)
     batch = rtnl.Batch()
     batch.add(_UP(index=LO_INDEX), f"r{k}: lo up")
     # A /32 and no subnet route: every route belongs to the routing daemon.
@@ -134,6 +186,7 @@ class Medium:
         self.impairer: Impairer | None = None
         self.time_scale = time_scale
         self.pairs: set[tuple[int, int]] = set()  # veth pairs that exist (on or off)
+        self.timers: nettimers.NetworkTimers | None = None  # set by configure_robots
         self._pending: set[int] = set()  # new link ends the bridges may not forward through yet
 
     # -- life cycle -------------------------------------------------------------------------
@@ -188,9 +241,14 @@ class Medium:
         self._pending |= {port_index(k) for k in ks}
 
     def configure_robots(self, ks: list[int]) -> None:
-        """Each robot's own side (sysctls, address, up), all robots in one thread."""
+        """Each robot's own side (sysctls, network timers, address, up), all robots in one
+        thread; the timers are planned in the first robot's namespace (`self.timers`)."""
         robot_ns = [names.robot_ns(self.testbed, k) for k in ks]
-        netns.run_in_each(robot_ns, lambda ns: _configure_robot(int(ns.rsplit("-r", 1)[1])))
+        if not robot_ns:
+            return
+        self.timers = netns.run_in(robot_ns[0], lambda: plan_timers(self.time_scale))
+        writes = self.timers.writes()
+        netns.run_in_each(robot_ns, lambda ns: _configure_robot(int(ns.rsplit("-r", 1)[1]), writes))
 
     # -- links ------------------------------------------------------------------------------
 

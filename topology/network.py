@@ -6,7 +6,9 @@ Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kerne
    crash at any later point leaves a record that `testbed clean` can act on;
 2. create the medium namespace and one namespace per robot (names from topology.names);
 3. per robot, a bridge in the medium and a veth whose far end is the robot's wlan0
-   (topology.medium), addressed 10.0.0.K/32 with the sysctls docs/architecture.md lists;
+   (topology.medium), addressed 10.0.0.K/32 with the sysctls docs/architecture.md lists, and
+   the network timers of its namespace divided by the time scale (topology.nettimers;
+   `Network.timers` is the record of what was dilated, to what, and what could not be);
 4. the links the range model wants for the initial positions, with their impairments;
 5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing); a
    daemon written in Python is forked from a fork server started at step 1, whose imports
@@ -89,6 +91,12 @@ class Network:
     def robot_ns(self, k: int) -> str:
         self._check_robot(k)
         return names.robot_ns(self.name, k)
+
+    @property
+    def timers(self):
+        """The robot namespaces' network timers (topology.nettimers.NetworkTimers), None
+        before they are made and for a testbed taken up by `attach`."""
+        return self.medium.timers
 
     @property
     def state_dir(self) -> str:
@@ -187,9 +195,10 @@ class Network:
         # What the captures are of (the routing protocol, for `testbed metrics`), next to the
         # daemons' logs that teardown keeps (_keep_logs).
         os.makedirs(os.path.join(cdir, "daemons"), exist_ok=True)
-        write_json_atomic(
-            os.path.join(cdir, "daemons", "network.json"), state.spec_to_dict(self.spec)
-        )
+        about = state.spec_to_dict(self.spec)
+        if self.timers is not None:
+            about["network_timers"] = self.timers.to_dict()
+        write_json_atomic(os.path.join(cdir, "daemons", "network.json"), about)
         started = []
         for k in self.spec.robot_ids():
             logp = os.path.join(self.state_dir, f"r{k}.tcpdump.log")

@@ -60,7 +60,7 @@ CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracl
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
-CACHE_FORMAT = 3  # 3: "emulated" and "about"
+CACHE_FORMAT = 4  # 3: "emulated" and "about"; 4: "tcp_flows"
 
 _FIELDS = (
     "frame.time_epoch",
@@ -362,6 +362,7 @@ def _delivery_metrics(traffic: _Traffic, d: _Delivery, duration: float) -> dict:
         "tcp_segments_delivered": d.delivered,
         "segment_delivery": d.delivered / len(sent) if sent else None,
         "tcp_transmissions": sum(v[2] for v in sent.values()),
+        "tcp_flows": len({key[:4] for key in sent}),  # connection directions that sent data
         "tcp_transmissions_delivered": d.delivered_tx,
         "tcp_payload_bytes_transmitted": traffic.tx_payload,
         "tcp_payload_bytes_received": traffic.rx_payload,

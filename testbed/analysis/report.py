@@ -128,12 +128,18 @@ def _routing_section(tables: dict) -> list[str]:
         "delay median (ms, emulated) | throughput (kbit/s, wall) |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for r in tables["routing"]:
+    rows = tables["routing"]
+    # PDF and delay of rows at different time scales are set side by side only where TCP
+    # kept emulated time (testbed.fidelity.network_verdict): else their cells are marked.
+    mixed = len({s for r in rows for s in r.get("time_scales", [])}) > 1
+    marked = [r for r in rows if mixed and not r.get("tcp_emulated", True)]
+    for r in rows:
+        mark = " †" if r in marked else ""
         out.append(
             f"| {_f(r['comm_range'])} | {r['robots']} | {r['n']} | "
-            f"{_num(r['overhead_packets_mean'], '.3f')} | {_num(r['pdf_mean'], '.3f')} | "
+            f"{_num(r['overhead_packets_mean'], '.3f')} | {_num(r['pdf_mean'], '.3f')}{mark} | "
             f"{_num(r['delay_ms_median_mean'], '.3f')} | "
-            f"{_num(r['delay_ms_median_emulated_mean'], '.3f')} | "
+            f"{_num(r['delay_ms_median_emulated_mean'], '.3f')}{mark} | "
             f"{_num(r['throughput_bps_mean'] and r['throughput_bps_mean'] / 1000, '.1f')} |"
         )
     out += [""] + _daemon_section(tables["routing_runs"]) + [""]
@@ -143,14 +149,34 @@ def _routing_section(tables: dict) -> list[str]:
         "x K (each run's `routing.json` has both, and says what PDF, segment delivery and the "
         "mean and median delay mean; `testbed report RUN_DIR` sums one run up).",
         "",
-        "PDF and delay are the kernel's TCP over the emulated links, whose timers and "
-        "forwarding run on the wall clock, not scaled with the robots: they are not invariant "
-        "under time dilation (ten robots at 5 m: PDF 0.68 at time scale 1, 0.78 at 6; "
-        'docs/architecture.md, "Invariance for teams"). Compare them between runs at one '
-        "time scale; steps, plans and control overhead agreed within the noise.",
-        "",
+        *_tcp_time_note(rows, marked),
     ]
     return out
+
+
+def _tcp_time_note(rows: list[dict], marked: list[dict]) -> list[str]:
+    """What the PDF and delay of rows at different time scales can be compared for."""
+    if marked:
+        which = ", ".join(f"{r['robots']} robots at {_f(r['comm_range'])} m" for r in marked)
+        return [
+            f"† Ran dilated without TCP's retransmission timer dilated (the kernel lacks "
+            f"`tcp_rto_min_us`, Linux 6.11, or the time scale is past its jiffy; result.json's "
+            f"`fidelity.network` says which): {which}. A retransmission there waited K times "
+            "longer in emulated time than at time scale 1, so compare their PDF and delay only "
+            "with runs at the same time scale; steps, plans and control overhead do not "
+            'depend on it (docs/architecture.md, "Invariance for teams").',
+            "",
+        ]
+    if len({s for r in rows for s in r.get("time_scales", [])}) > 1:
+        return [
+            "TCP's timers were dilated with each run's time scale (result.json's "
+            "`network_timers`); what the kernel cannot dilate (a SYN's first timeout, the "
+            "delayed ACK's floor, the millisecond clock of TCP timestamps) and how far PDF and "
+            'delay then agree across time scales: docs/architecture.md, "Time dilation and '
+            'fidelity".',
+            "",
+        ]
+    return []
 
 
 def _num(x, spec: str) -> str:

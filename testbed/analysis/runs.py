@@ -24,6 +24,11 @@ Which runs count (`RunRecord.usable`): status `complete` or `step_cap`, and fait
 time scale (result.json's `fidelity`, testbed.fidelity; a run written before verdicts
 counts) unless `load_runs(..., unfaithful=True)` keeps those too; a run that hit the step
 cap counts its unfinished robots at the final step (`exploration_steps`).
+
+Whether a run's TCP kept emulated time (`RunRecord.tcp_in_emulated_time`: at time scale 1,
+or with its network verdict `fidelity.network` ok) decides whether its PDF and delay may be
+set beside another time scale's; a dilated run written before the network's timers were
+dilated did not keep it.
 """
 
 from __future__ import annotations
@@ -191,11 +196,21 @@ class RunRecord:
     channel: ChannelRecord | None = None  # medium.json: the ns3-wifi channel's counters
     faithful: bool | None = None  # its fidelity verdict (None: written before verdicts)
     fidelity_reason: str = ""  # why not, when not
+    network_faithful: bool | None = None  # fidelity.network's ok (None: written before it)
+    network_reason: str = ""  # why not, when not
     count_unfaithful: bool = False  # usable even if not faithful (load_runs(unfaithful=True))
 
     @property
     def usable(self) -> bool:
         return self.status in USABLE and (self.faithful is not False or self.count_unfaithful)
+
+    @property
+    def tcp_in_emulated_time(self) -> bool:
+        """Whether TCP's timers kept emulated time: at time scale 1 they are the wall clock's,
+        dilated only when the network's verdict says they were divided (a dilated run made
+        before that was not)."""
+        scale = self.time_scale_requested or self.config.time_scale
+        return scale in (None, 1) or self.network_faithful is True
 
     @property
     def unimpaired(self) -> bool:
@@ -390,6 +405,8 @@ def parse_result(doc, run_dir: Path, channel: ChannelRecord | None = None) -> Ru
         channel=channel,
         faithful=_get(fidelity, "ok", (bool,)),
         fidelity_reason=_get(fidelity, "reason", (str,), ""),
+        network_faithful=_get(_mapping(fidelity, "network"), "ok", (bool,)),
+        network_reason=_get(_mapping(fidelity, "network"), "reason", (str,), ""),
     )
 
 

@@ -14,11 +14,19 @@ testbed.analysis.stats).
 `compare(dir_a, dir_b)` reads both sweep directories through the typed loader
 (testbed.analysis.runs), takes per run the exploration steps (Fig. 2's number), the plans
 made on a teammate's request (Fig. 4's), and from the captures (testbed.analysis.pcapmetrics)
-the packet delivery fraction, the median delay in emulated ms and the routing control packets
-and bytes per robot per second of robot time (the same per-run numbers as the media section,
-testbed.analysis.media.run_row). `section` writes the table and one sentence per measure:
-at which points the two sweeps agree within the noise, and at which they do not.
-Unfaithful runs are left out unless asked for, as in the report.
+the packet delivery fraction, the median and mean delay in emulated ms, TCP's retransmissions
+per flow (transmissions of a segment after its first, per direction of a connection that sent
+data) and the routing control packets and bytes per robot per second of robot time (the same
+per-run numbers as the media section, testbed.analysis.media.run_row). `section` writes the
+table and one sentence per measure: at which points the two sweeps agree within the noise, and
+at which they do not. Unfaithful runs are left out unless asked for, as in the report.
+
+PDF and delay are the kernel's TCP. Its timers keep emulated time only where the robots'
+namespaces had them divided by the time scale (topology.nettimers; result.json's
+`fidelity.network`): at a point whose two sides ran at different scales and where a dilated
+run's TCP did not keep emulated time (a kernel before 6.11, a scale past its jiffy, or a run
+made before the timers were dilated), TCP's measures (PDF, delays, retransmissions) are not
+compared, and the table marks that side's time scale "TCP undilated".
 """
 
 from __future__ import annotations
@@ -38,9 +46,13 @@ MEASURES = (
     ("requests", "plans on request per robot", ".2f"),
     ("pdf", "packet delivery fraction", ".3f"),
     ("delay_ms", "median delay (emulated ms)", ".2f"),
+    ("delay_mean_ms", "mean delay (emulated ms)", ".1f"),
+    ("retrans_per_flow", "TCP retransmissions per flow", ".2f"),
     ("control_pkts_per_robot_s", "control packets per robot per second", ".2f"),
     ("control_bytes_per_robot_s", "control bytes per robot per second", ".0f"),
 )
+# TCP's: compared across time scales only where TCP kept emulated time
+NETWORK_MEASURES = ("pdf", "delay_ms", "delay_mean_ms", "retrans_per_flow")
 RULE = (
     "the two sweeps agree at a point when the 95% intervals of a measure's means overlap "
     "(Student t; the report's rule for a difference beyond noise)."
@@ -56,6 +68,12 @@ def run_row(run: RunRecord, metrics: dict | None) -> dict:
     )
     row["time_scale"] = run.time_scale_achieved or run.config.time_scale
     row["laser_range"] = run.config.laser_range
+    row["tcp_emulated"] = run.tcp_in_emulated_time
+    m = metrics or {}
+    mean = m.get("delay_ms_mean")
+    row["delay_mean_ms"] = None if mean is None else mean * (row["time_scale"] or 1.0)
+    flows, tx, segments = m.get("tcp_flows"), m.get("tcp_transmissions"), m.get("tcp_segments_sent")
+    row["retrans_per_flow"] = (tx - segments) / flows if flows and tx is not None else None
     return row
 
 
@@ -79,6 +97,7 @@ def points(rows: list[dict]) -> dict[tuple, dict]:
         p: dict = {"n": len(items)}
         scales = [i["time_scale"] for i in items if i.get("time_scale")]
         p["time_scale"] = statistics.median(scales) if scales else None
+        p["tcp_emulated"] = all(i.get("tcp_emulated", True) for i in items)
         for k, _, _ in MEASURES:
             vals = [i[k] for i in items if i.get(k) is not None]
             p[k] = stats.mean_ci(vals) or ((statistics.fmean(vals),) if vals else None)
@@ -99,14 +118,24 @@ def _label(point: tuple) -> str:
     return f"{routing}, laser {laser:g} m, range {comm:g} m, {robots} robots"
 
 
+def comparable(key: str, pa: dict, pb: dict) -> bool:
+    """Whether a point's measure `key` may be set beside the other sweep's: always, but for
+    TCP's measures across time scales where a side's TCP did not keep emulated time."""
+    if key not in NETWORK_MEASURES or pa.get("time_scale") == pb.get("time_scale"):
+        return True
+    return pa.get("tcp_emulated", True) and pb.get("tcp_emulated", True)
+
+
 def sentence(key: str, name: str, spec: str, a: dict, b: dict, names: tuple[str, str]) -> str:
     """At which common points `key` agrees within the noise, at which not (and which way)."""
-    within, beyond, unknown = [], [], 0
+    within, beyond, unknown, undilated = [], [], 0, 0
     for point in sorted(set(a) & set(b)):
         va, vb = a[point].get(key), b[point].get(key)
         if va is None or vb is None:
             continue
-        if len(va) < 3 or len(vb) < 3:
+        if not comparable(key, a[point], b[point]):
+            undilated += 1
+        elif len(va) < 3 or len(vb) < 3:
             unknown += 1
         elif stats.separated(va, vb):
             way = "above" if vb[0] > va[0] else "below"
@@ -118,10 +147,17 @@ def sentence(key: str, name: str, spec: str, a: dict, b: dict, names: tuple[str,
             within.append(point)
     judged = len(within) + len(beyond)
     head = f"- {name[0].upper()}{name[1:]}: "
+    not_compared = (
+        f"not compared at {undilated} point{'s' if undilated != 1 else ''}, where the time "
+        "scales differ and TCP's timers were not dilated (result.json's fidelity.network)"
+    )
     if not judged:
+        if undilated:
+            return head + not_compared + "."
         return head + ("not judged: one run on a side." if unknown else "no common point has it.")
     text = head + f"within the noise at {len(within)} of {judged} points"
     text += f"; beyond it at {'; '.join(beyond)}" if beyond else ""
+    text += f"; {not_compared}" if undilated else ""
     return text + (f"; {unknown} not judged (one run on a side)." if unknown else ".")
 
 
@@ -145,6 +181,8 @@ def section(
                 continue
             cells = " | ".join(_cell(p[k], spec) for k, _, spec in MEASURES)
             scale = "–" if p["time_scale"] is None else f"{p['time_scale']:g}"
+            if not p.get("tcp_emulated", True):
+                scale += " (TCP undilated)"
             out.append(f"| {_label(point)} | {name} | {p['n']} | {scale} | {cells} |")
     out += ["", f"**Rule.** {RULE}", ""]
     out += [sentence(k, n, spec, a, b, names) for k, n, spec in MEASURES]

@@ -196,6 +196,8 @@ def routing_per_run(runs: list[RunRecord], metrics_of: MetricsOf) -> list[dict]:
             "laser_range": c.laser_range,
             "loss_pct": c.loss_pct,
             "delay_ms": c.delay_ms,
+            "time_scale": run.time_scale_requested or c.time_scale,
+            "tcp_emulated": run.tcp_in_emulated_time,  # may PDF and delay meet other scales'
         }
         for key, _ in ROUTING_METRICS:
             row[key] = m.get(key)
@@ -231,10 +233,17 @@ def aggregate(rows: list[dict], keys: tuple[str, ...], metrics: list[str]) -> li
 
 
 def routing_rows(per_run: list[dict]) -> list[dict]:
-    """Routing metrics per (range, team size) over the unimpaired runs, lasers pooled."""
+    """Routing metrics per (range, team size) over the unimpaired runs, lasers pooled; with
+    the time scales they ran at and whether TCP kept emulated time in every one of them."""
     base = [r for r in per_run if not r["loss_pct"] and not r["delay_ms"]]
     metrics = [k for k, _ in ROUTING_METRICS] + ["delay_ms_median_emulated"]
-    return aggregate(base, ("comm_range", "robots"), metrics)
+    rows = aggregate(base, ("comm_range", "robots"), metrics)
+    for row in rows:
+        runs = [r for r in base if (r["comm_range"], r["robots"]) == (row["comm_range"],
+                                                                      row["robots"])]  # fmt: skip
+        row["time_scales"] = sorted({r["time_scale"] for r in runs if r.get("time_scale")})
+        row["tcp_emulated"] = all(r.get("tcp_emulated", True) for r in runs)
+    return rows
 
 
 def impairment_rows(runs: list[RunRecord], per_run: list[dict]) -> list[dict]:

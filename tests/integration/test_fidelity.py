@@ -1,7 +1,8 @@
 """Time dilation against its ground truth (testbed.fidelity): a lone robot is
 deterministic, so at two time scales where its verdict says faithful it must drive exactly
 the same path; a run whose plans come late (the planner held back by a test hook) must be
-judged unfaithful, and `testbed run` must say so in one line."""
+judged unfaithful, and `testbed run` must say so in one line; and the network's timers are
+recorded with the network's own verdict."""
 
 import json
 import os
@@ -71,3 +72,14 @@ def test_plans_that_come_late_make_a_run_unfaithful_and_testbed_run_says_so(tmp_
     with open(tmp_path / "late" / "robots" / "r1.json") as fh:
         lateness = json.load(fh)["lateness"]
     assert lateness["plan_age_steps"]["hist"]["<=0"] == 0
+    # The network's own verdict (fidelity.network): TCP's timers divided by 5 where the
+    # kernel can, as the robot's namespace had them (result.json's network_timers).
+    timers = res["network_timers"]
+    assert timers["time_scale"] == 5
+    rto = next(s for s in timers["settings"] if s["name"] == "tcp_rto_min")
+    if os.path.exists("/proc/sys/net/ipv4/tcp_rto_min_us"):
+        assert rto["status"] == "dilated" and rto["value"] < rto["default"]
+        assert f["network"] == {"ok": True} and "note:" not in r.stderr
+    else:
+        assert rto["status"] == "missing" and f["network"]["ok"] is False
+        assert "compare its PDF and delay only with runs at time scale 5" in r.stderr

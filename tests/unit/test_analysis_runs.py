@@ -42,6 +42,27 @@ def test_results_from_before_a_key_existed_get_its_default(tmp_path):
     assert run.unimpaired
 
 
+def test_whether_tcp_kept_emulated_time_is_read_from_the_networks_verdict(tmp_path):
+    cases = [
+        (1.0, None, True),  # the wall clock is emulated time
+        (6.0, {"ok": True}, True),  # the network's timers dilated
+        (6.0, {"ok": False, "reason": "no tcp_rto_min_us"}, False),
+        (6.0, None, False),  # a dilated run made before the timers were dilated
+    ]
+    for i, (scale, network, want) in enumerate(cases):
+        d = one_run(tmp_path / str(i), time_scale=scale)
+        doc = json.loads((d / "result.json").read_text())
+        doc["fidelity"] = {"ok": True}
+        if network is not None:
+            doc["fidelity"]["network"] = network
+        (d / "result.json").write_text(json.dumps(doc))
+        run = load_run(d)
+        assert run.tcp_in_emulated_time is want, (scale, network)
+        assert run.usable  # the exploration's verdict is apart from the network's
+    assert run.network_faithful is None
+    assert load_run(tmp_path / "2" / "runs" / d.name).network_reason == "no tcp_rto_min_us"
+
+
 @pytest.mark.parametrize(
     "text, says",
     [

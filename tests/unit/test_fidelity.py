@@ -5,6 +5,7 @@ import pytest
 from node.lateness import MS_BOUNDS, Lateness
 from testbed import fidelity
 from testbed.fidelity import Measures, Thresholds, measures, verdict
+from topology import nettimers
 
 
 def robot(plans: int, late: int, timers: int = 0, late_timers: int = 0, age_max: int = 1):
@@ -140,3 +141,57 @@ def test_a_run_without_the_channel_or_with_a_malformed_counter_is_not_judged_on_
         m = measures(0.0, [], None, [], channel)
         assert (m.channel_frames, m.channel_lag_mean_ms) == (0, None)
         assert verdict(m)["ok"] is True
+
+
+# -- the network's verdict: TCP's timers in emulated time (topology.nettimers) --------------
+
+JIFFY = 4000
+KERNEL_618 = {"net.ipv4.tcp_rto_min_us": 200_000, "net.ipv4.tcp_rto_max_ms": 120_000}
+KERNEL_68 = {"net.ipv4.neigh.wlan0.retrans_time_ms": 1000}  # no tcp_rto_min_us
+
+
+def test_the_network_is_in_emulated_time_at_time_scale_1_whatever_the_kernel():
+    record = nettimers.plan(1, KERNEL_68, JIFFY).to_dict()
+    assert fidelity.network_verdict(record, 1.0) == {"ok": True}
+    assert fidelity.network_verdict(None, 1.0) == {"ok": True}
+
+
+def test_a_dilated_run_with_tcps_timer_dilated_is_ok():
+    record = nettimers.plan(10, KERNEL_618, JIFFY, "6.18").to_dict()
+    assert fidelity.network_verdict(record, 10.0) == {"ok": True}
+
+
+def test_a_dilated_run_whose_kernel_has_no_rto_floor_says_so():
+    record = nettimers.plan(6, KERNEL_68, JIFFY, "6.8.0").to_dict()
+    v = fidelity.network_verdict(record, 6.0)
+    assert v["ok"] is False
+    assert v["reason"] == (
+        "TCP's retransmission timeout is not dilated at time scale 6: this kernel has no "
+        "net.ipv4.tcp_rto_min_us (Linux 6.11 and later)"
+    )
+
+
+def test_a_time_scale_past_the_kernels_jiffy_says_so():
+    v = fidelity.network_verdict(nettimers.plan(30, KERNEL_618, JIFFY).to_dict(), 30.0)
+    assert v["ok"] is False and "the kernel's floor of 4000 us (one jiffy" in v["reason"]
+
+
+def test_a_dilated_run_without_a_record_or_with_a_bad_one_is_not_in_emulated_time():
+    assert fidelity.network_verdict(None, 6.0)["ok"] is False
+    bad = fidelity.network_verdict({"time_scale": 6}, 6.0)
+    assert bad["ok"] is False and "unreadable" in bad["reason"]
+
+
+def test_which_results_ran_tcp_in_emulated_time():
+    def result(scale, network=None):
+        out = {"time_scale_requested": scale, "fidelity": {"ok": True}}
+        if network is not None:
+            out["fidelity"]["network"] = network
+        return out
+
+    assert fidelity.tcp_in_emulated_time(result(1)) is True
+    assert fidelity.tcp_in_emulated_time(result(6, {"ok": True})) is True
+    assert fidelity.tcp_in_emulated_time(result(6, {"ok": False, "reason": "x"})) is False
+    assert fidelity.tcp_in_emulated_time(result(6)) is False  # made before TCP was dilated
+    assert fidelity.tcp_in_emulated_time({"config": {"time_scale": 1}}) is True
+    assert fidelity.tcp_in_emulated_time({}) is None

@@ -96,3 +96,17 @@ def test_the_time_scale_scales_delays_and_rates():
 def test_tc_diff_of_equal_trees_is_empty():
     tree = wanted_qdiscs(Impairment(rate_kbit=5), False)
     assert tc_diff(tree, tree) == () and tc_diff((), ()) == ()
+
+
+def test_a_rate_limits_queue_holds_the_same_emulated_time_at_every_scale():
+    # At time scale K the rate is K times the bits per wall second; tbf's latency (how long a
+    # frame may wait in its queue) is 50 emulated ms, i.e. 50 / K wall ms, so the queue holds
+    # the same bytes and the same emulated time.
+    imp = Impairment(rate_kbit=100)
+    for netem in (False, True):
+        slow = wanted_qdiscs(imp.scaled(1.0), netem, 1.0)[-1].kwargs()
+        fast = wanted_qdiscs(imp.scaled(10.0), netem, 10.0)[-1].kwargs()
+        assert (slow["latency"], fast["latency"]) == (50_000, 5_000)
+        assert fast["rate"] == "1000000bit"
+    tc = plan("l1x2", Impairment(), imp, False, 10.0).tc
+    assert tc[-1].qdisc.kwargs()["latency"] == 5_000

@@ -12,6 +12,7 @@ def test_values_at_time_scale_1_are_the_emulated_ones():
     assert t.step_s == STEP_S == 0.1
     assert t.neighbour_hold_s == pytest.approx(1.5)  # 1.5 map periods of 10 steps
     assert t.goal_send_timeout_ms == 50
+    assert (t.goal_reconnect_min_ms, t.goal_reconnect_max_ms) == (50, 500)
     assert t.flood_linger_s == 0.001  # capped at 1 ms
 
 
@@ -20,11 +21,14 @@ def test_every_derived_value_follows_the_time_scale():
     assert fast.step_s == pytest.approx(slow.step_s / 5)
     assert fast.neighbour_hold_s == pytest.approx(slow.neighbour_hold_s / 5)
     assert fast.goal_send_timeout_ms == 10
+    assert (fast.goal_reconnect_min_ms, fast.goal_reconnect_max_ms) == (10, 100)
     assert RobotTimings(time_scale=20.0).flood_linger_s == pytest.approx(0.0005)
 
 
 def test_floors_hold_at_high_time_scales():
     assert RobotTimings(time_scale=100.0).goal_send_timeout_ms == 2
+    t = RobotTimings(time_scale=1000.0)
+    assert (t.goal_reconnect_min_ms, t.goal_reconnect_max_ms) == (1, 1)  # nng's whole ms
 
 
 def test_the_map_period_sets_the_neighbour_hold():

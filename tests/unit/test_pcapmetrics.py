@@ -104,6 +104,7 @@ def test_retransmissions_and_resegmentation():
     }
     m = pm.compute(caps, {1: A1, 2: A2})
     assert m["tcp_segments_sent"] == 3 and m["tcp_transmissions"] == 4
+    assert m["tcp_flows"] == 1  # one direction of one connection sent data
     assert m["segment_delivery"] == 1.0
     assert m["pdf"] == pytest.approx(300 / 400)
     assert m["tcp_transmissions_delivered"] == 3

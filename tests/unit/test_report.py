@@ -277,3 +277,45 @@ def test_sweep_section_gives_short_stalls_in_their_own_precision(tmp_path):
     assert [sweepinfo.seconds(x) for x in (0.0, 0.076, 1.234, 9.94, 12.6, 130.2)] == [
         "0", "0.076", "1.2", "9.9", "13", "130",
     ]  # fmt: skip
+
+
+def test_routing_rows_carry_their_time_scales_and_whether_tcp_kept_emulated_time():
+    def run(robots, scale, tcp, pdf):
+        return {"run": f"{robots}-{scale}", "robots": robots, "comm_range": 5.0,
+                "laser_range": 2.0, "loss_pct": 0, "delay_ms": 0, "time_scale": scale,
+                "tcp_emulated": tcp, "pdf": pdf}  # fmt: skip
+
+    rows = tables.routing_rows([run(1, 30, True, 1.0), run(10, 6, False, 0.78),
+                                run(10, 6, True, 0.7)])  # fmt: skip
+    by = {r["robots"]: r for r in rows}
+    assert by[1]["time_scales"] == [30] and by[1]["tcp_emulated"] is True
+    assert by[10]["time_scales"] == [6] and by[10]["tcp_emulated"] is False
+
+
+def _routing_row(robots, scale, tcp):
+    row = {"comm_range": 5.0, "robots": robots, "n": 3, "time_scales": [scale],
+           "tcp_emulated": tcp}  # fmt: skip
+    for m in ("overhead_packets", "pdf", "delay_ms_median", "delay_ms_median_emulated",
+              "throughput_bps"):  # fmt: skip
+        row[f"{m}_mean"] = 1.0
+    return row
+
+
+def test_the_routing_table_marks_pdf_and_delay_of_runs_whose_tcp_was_not_dilated():
+    rows = [_routing_row(1, 30.0, True), _routing_row(10, 6.0, False)]
+    text = "\n".join(report._routing_section({"routing": rows, "routing_runs": []}))
+    lines = [line for line in text.splitlines() if line.startswith("| 5 |")]
+    assert "†" not in lines[0] and lines[1].count("†") == 2  # PDF and emulated delay
+    assert "† Ran dilated without TCP's retransmission timer dilated" in text
+    assert ": 10 robots at 5 m. A retransmission there waited K times longer" in text
+
+
+def test_the_routing_table_says_tcp_was_dilated_when_it_was_at_every_scale():
+    rows = [_routing_row(1, 30.0, True), _routing_row(10, 6.0, True)]
+    text = "\n".join(report._routing_section({"routing": rows, "routing_runs": []}))
+    assert "†" not in text
+    assert "TCP's timers were dilated with each run's time scale" in text
+    # One time scale: nothing to say about comparing across scales.
+    rows = [_routing_row(1, 6.0, False), _routing_row(10, 6.0, False)]
+    text = "\n".join(report._routing_section({"routing": rows, "routing_runs": []}))
+    assert "†" not in text and "dilated" not in text

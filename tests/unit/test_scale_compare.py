@@ -1,6 +1,11 @@
 """testbed.analysis.scalecompare: two sweeps of the same points, within the noise or not."""
 
+import dataclasses
+
+from testbed import sweepfile
 from testbed.analysis import scalecompare as sc
+from testbed.analysis.runs import load_run
+from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 
 def _row(steps, comm=20, robots=10, pdf=0.99, scale=1.0, requests=2.0):
@@ -37,3 +42,43 @@ def test_the_section_lists_both_sweeps_per_point_with_their_scales_and_what_was_
     assert "| aodv, laser 2 m, range 20 m, 10 robots | dil | 2 | 8 | 370 [" in text
     assert "0 in rt, 2 in dil" in text
     assert text.count("\n- ") == len(sc.MEASURES)
+
+
+def test_tcps_measures_across_scales_are_compared_only_where_tcp_kept_emulated_time():
+    def rows(pdfs, scale, tcp):
+        return [{**_row(360, pdf=p, scale=scale), "tcp_emulated": tcp} for p in pdfs]
+
+    real = sc.points(rows((0.67, 0.68, 0.69), 1.0, True))
+    undilated = sc.points(rows((0.77, 0.78, 0.79), 6.0, False))
+    dilated = sc.points(rows((0.77, 0.78, 0.79), 6.0, True))
+    line = sc.sentence("pdf", "packet delivery fraction", ".3f", real, undilated, ("rt", "dil"))
+    assert line == (
+        "- Packet delivery fraction: not compared at 1 point, where the time scales differ "
+        "and TCP's timers were not dilated (result.json's fidelity.network)."
+    )
+    # With TCP dilated the same numbers are compared, and differ beyond the noise.
+    line = sc.sentence("pdf", "packet delivery fraction", ".3f", real, dilated, ("rt", "dil"))
+    assert "within the noise at 0 of 1 points; beyond it at" in line
+    # The robots' own measures are compared whatever TCP did.
+    line = sc.sentence("steps", "exploration steps", ".0f", real, undilated, ("rt", "dil"))
+    assert "within the noise at 1 of 1 points" in line
+    # At one time scale TCP's measures are comparable, dilated or not.
+    same = sc.points(rows((0.76, 0.77, 0.78), 6.0, False))
+    line = sc.sentence("pdf", "PDF", ".3f", same, undilated, ("a", "b"))
+    assert "within the noise at 1 of 1" in line
+    a, b = rows((0.67, 0.68, 0.69), 1.0, True), rows((0.77, 0.78, 0.79), 6.0, False)
+    text = "\n".join(sc.section(a, b, ("rt", "dil"), (0, 0)))
+    assert "| dil | 3 | 6 (TCP undilated) |" in text
+
+
+def test_a_runs_mean_delay_is_emulated_and_its_retransmissions_are_counted_per_flow(tmp_path):
+    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    planned = sweepfile.expand(spec)[0]
+    c = dataclasses.replace(planned.config, time_scale=6.0)
+    run = load_run(write_run(tmp_path, planned, result_doc(c, [90, 100], 100)))
+    metrics = {"pdf": 0.9, "delay_ms_median": 0.01, "delay_ms_mean": 0.5, "tcp_flows": 4,
+               "tcp_transmissions": 130, "tcp_segments_sent": 100}  # fmt: skip
+    row = sc.run_row(run, metrics)
+    assert row["delay_mean_ms"] == 0.5 * 6  # wall ms x the time scale
+    assert row["retrans_per_flow"] == 30 / 4
+    assert sc.run_row(run, None)["retrans_per_flow"] is None
