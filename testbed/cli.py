@@ -202,9 +202,13 @@ def _net_up(args) -> int:
     net = Network(spec, persistent=True)
     net.up()
     links = net.links()
-    if args.view:
-        _start_net_view(net, args.view)
-    netextra.after_up(net, args, trace)
+    try:  # what runs beside the network: if any of it fails, nothing is left up
+        if args.view:
+            _start_net_view(net, args.view)
+        netextra.after_up(net, args, trace)
+    except BaseException:
+        net.down()
+        raise
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
