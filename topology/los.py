@@ -14,9 +14,10 @@ one numpy evaluation, which keeps a 10-robot step's check well under a milliseco
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
+
+from topology import pngmap
 
 Position = tuple[float, float]
 
@@ -36,13 +37,12 @@ class Walls:
 
     @classmethod
     def from_png(cls, path: str, cell: float) -> Walls:
-        import cv2  # only the los models need it; the rest of topology starts without it
-
-        if not os.path.isfile(path):
-            raise MapError(f"map file {path} does not exist")
-        img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise MapError(f"map file {path} is not an image OpenCV can read")
+        """The walls of a PNG map at its own resolution, one pixel `cell` metres; its size
+        is checked from its header before it is decoded (topology.pngmap)."""
+        try:
+            img = pngmap.read_gray(path)
+        except pngmap.PngError as exc:
+            raise MapError(str(exc)) from None
         return cls(img < 128, cell)
 
     @property
