@@ -252,3 +252,18 @@ def test_a_config_records_the_laser_bound_for_sweeps():
         check_value(BY_NAME["laser_range"], 31) == "value 31 out of range (must be > 0 and <= 30)"
     )
     assert RunConfig(robots=1, comm_range=1.0, laser_range=30.0).laser_range == 30.0
+
+
+def test_line_of_sight_between_far_robots_costs_what_the_map_costs():
+    """Robots 1e9 m apart (a feed, a trace, --positions) across a 10 m map: the segment is
+    cut to the map first, so its walls are counted in microseconds, not 2e10 samples."""
+    from topology.los import crossings
+
+    occ = np.zeros((100, 100), dtype=bool)
+    occ[:, 30:32] = occ[:, 60:62] = True  # two walls, at 3 m and 6 m
+    walls = Walls(occ, 0.1)
+    far = [((-1e9, 5.0), (1e9, 5.0)), ((1.0, 5.0), (1e12, 5.0)), ((1.0, -1e9), (1.0, 1e9)),
+           ((-5.0, -5.0), (-1e6, -1e6)), ((4.5, 5.0), (4.5, 5.0))]  # fmt: skip
+    t = time.perf_counter()
+    assert crossings(walls, far) == [2, 2, 0, 0, 0]
+    assert time.perf_counter() - t < 0.5
