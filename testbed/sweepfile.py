@@ -153,7 +153,13 @@ class PlannedRun:
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
-    return UsageError(f"sweep file {path}: {key}: {message}")
+    return UsageError(f"sweep file {path}: {_printable(key)}: {message}")
+
+
+def _printable(text: str) -> str:
+    """A key from the file as a message shows it: a quoted key may hold a newline or a
+    terminal's escape sequence, shown escaped so that the message stays one line."""
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
 
 
 def _is_int(v) -> bool:
@@ -207,7 +213,7 @@ def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int,
     """`time_scale = { 1 = 12.0, 2 = 10.0 }`: a time scale for each team size of the grid."""
     out = {}
     for key, v in table.items():
-        if not key.isdigit() or int(key) < 1:
+        if not (key.isascii() and key.isdigit()) or int(key) < 1:
             raise _fail(path, f"run.time_scale.{key}", "keys are team sizes (1, 2, ...)")
         out[int(key)] = _value(path, f"run.time_scale.{key}", BY_NAME["time_scale"], v)
     missing = [n for n in robots if n not in out]

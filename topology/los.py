@@ -55,7 +55,7 @@ def _clipped(a: np.ndarray, d: np.ndarray, w: int, h: int) -> tuple[np.ndarray, 
     """Segments a + t d, t in [0, 1] (cells), cut to the box [-1, w + 1] x [-1, h + 1]
     (Liang-Barsky); one that misses the box becomes the point (-1, -1), a free cell."""
     t0, t1 = np.zeros(len(a)), np.ones(len(a))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for axis, hi in ((0, w + 1.0), (1, h + 1.0)):
             p, lo_q, hi_q = d[:, axis], -1.0 - a[:, axis], hi - a[:, axis]
             still = p == 0

@@ -141,7 +141,10 @@ def _finite(value: str, where: str, n: int, what: str) -> float:
 
 
 def _shown(text: str, width: int = 40) -> str:
-    return text if len(text) <= width else text[: width - 3] + "..."
+    """A piece of the file as an error message quotes it: at most `width` characters, and
+    anything unprintable (a terminal's escape sequences) as a \\x or \\u escape."""
+    cut = text if len(text) <= width else text[: width - 3] + "..."
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in cut)
 
 
 def _time(value: str, where: str, n: int, what: str = "time") -> float:
@@ -205,10 +208,9 @@ def parse_ns2(text: str, where: str = "trace") -> Trace:
                 raise _fail(where, n, f"speed {_shown(m[5])} is negative")
             legs.append((t, n, node, x, y, speed))
         else:
-            shown = line if len(line) <= 60 else line[:57] + "..."
             raise _fail(
                 where, n, f"not an ns-2 movement line ('$node_(i) set X_ x' or "
-                f"'$ns_ at T \"$node_(i) setdest X Y SPEED\"'): {shown}",
+                f"'$ns_ at T \"$node_(i) setdest X Y SPEED\"'): {_shown(line, 60)}",
             )  # fmt: skip
     if not initial:
         raise TraceError(f"{where}: no node has an initial position ($node_(i) set X_ ...)")
