@@ -113,7 +113,7 @@ def _last_line(path: str) -> str:
     except OSError:
         return ""
     last = lines[-1] if lines else ""
-    return last.split(" player ", 1)[-1][:200]
+    return last.split(" player ", 1)[-1].removeprefix("error: ")[:200]
 
 
 def _start(net, argv: list[str], role: str):

@@ -87,7 +87,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         late = play(net, trace, args.tick, args.links_out, args.ready)
-    except (TestbedError, OSError, ValueError) as exc:
+    except OSError as exc:  # links_out, the state file
+        where = f"{exc.filename}: " if exc.filename else ""
+        log.error("error: %s%s", where, exc.strerror or exc)
+        return 1
+    except (TestbedError, ValueError) as exc:
         log.error("error: %s", str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
         return 1
     finally:
