@@ -100,7 +100,8 @@ RUN = ["run", "--robots", "1", "--comm-range", "5", "--name", "{name}", "--out",
 #  a word the one line must hold)
 ROWS = [
     ("8-ns2-node-id-1e11", [*NET_UP, "--mobility", "{x}"],
-     lambda t: write(t, "id.ns2", ns2('$ns_ at 1 "$node_(100000000000) setdest 1 1 1"')), 2,
+     lambda t: write(t, "id.ns2", "$node_(100000000000) set X_ 1\n"
+                                   "$node_(100000000000) set Y_ 1\n"), 2,
      "node id 100000000000"),
     ("8-one-id-1e15", [*NET_UP, "--mobility", "{x}"],
      lambda t: write(t, "id.one", "0 0 0 0\n1 1e15 3 3\n"), 2, "node id 1e15"),
