@@ -42,7 +42,9 @@ def _jobs(text: str) -> int | str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "file", metavar="FILE", nargs="?",
-        help="sweep file (TOML), e.g. testbed/experiments/paper.toml",
+        help="sweep file (TOML), e.g. testbed/experiments/paper.toml; at most "
+        f"{sweepfile.MAX_RUNS:,} runs (the grid's lists times runs), its maps and lasers are "
+        "checked before the first run",
     )  # fmt: skip
     parser.add_argument("--out", metavar="DIR", help="sweep directory")
     parser.add_argument(
@@ -69,7 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--resume",
         action="store_true",
-        help="continue a sweep in DIR: skip finished runs, redo partial ones",
+        help="continue the sweep in DIR: skip finished runs, redo partial ones; FILE must "
+        "plan every run DIR holds, with the same settings (it may add runs)",
     )
     parser.add_argument(
         "--slurm",
