@@ -29,6 +29,14 @@ _NO_CELLS.flags.writeable = False
 # a table is kept for each of _BUCKETS x _BUCKETS classes of those.
 _FRAC = 2048
 _BUCKETS = 16
+# The pose-fraction tables of one geometry take _BUCKETS**2 windows of window**2 bytes; they
+# are built only within this budget (lasers up to 12.6 m at 5 cm cells), and a longer laser
+# marks its scans without them (the way a scan with hits always does). Without the budget a
+# 30 m laser's tables took 370 MB in the world and again in every robot's fork server.
+_TABLE_BUDGET_BYTES = 64 << 20
+# The longest laser a run may have: the range class of 2-D lidars (30 m, e.g. Hokuyo's
+# UTM-30LX); a robot's scan without tables takes about 3 ms here at that range.
+MAX_RANGE_M = 30.0
 
 
 _SHARED_TABLES: dict[tuple[float, int, float], dict] = {}  # geometry -> pose-fraction tables
@@ -76,6 +84,7 @@ class Laser:
         # builds them once for every robot it forks, see warm()).
         key = (self.max_range, self.n_rays, self.cell)
         self._tables: dict[tuple[int, int], tuple] = _SHARED_TABLES.setdefault(key, {})
+        self.tabled = _BUCKETS * _BUCKETS * self.window * self.window <= _TABLE_BUDGET_BYTES
         if (2 * self.pad + 4096) ** 2 > 2**31:
             raise ValueError("laser range too long for int32 cell indices")
 
@@ -150,6 +159,7 @@ class Laser:
         # position lies in [_BIAS, 2 * _BIAS) (see _table).
         if (
             idx is None
+            and self.tabled
             and _BIAS <= min(cb, rb) - self.pad - 1 < max(cb, rb) + self.pad + 1 < 2 * _BIAS
         ):
             size = _FRAC // _BUCKETS
@@ -184,7 +194,10 @@ class Laser:
 
     def prepare_tables(self) -> None:
         """Build every pose-fraction table now (~0.2 s for a 2 m laser) rather than each on
-        its first use (~1 ms), so that no later scan pays for one."""
+        its first use (~1 ms), so that no later scan pays for one. None for a laser whose
+        tables would not fit in _TABLE_BUDGET_BYTES (it does without)."""
+        if not self.tabled:
+            return
         for bx in range(_BUCKETS):
             for by in range(_BUCKETS):
                 self._table(bx, by)

@@ -16,6 +16,7 @@ import time
 
 from testbed.errors import TestbedError, UsageError
 from topology.argtypes import number
+from topology.mobility import LIMITS_TEXT, MIN_TICK_S
 
 READY_TIMEOUT_S = 10.0
 
@@ -24,9 +25,11 @@ def add_up_arguments(up) -> None:
     """The options of `net up` that belong here."""
     up.add_argument("--mobility", metavar="FILE",
                     help="play an ns-2 movement file (BonnMotion NSFile, CORE) or a ONE trace; "
-                         "node i is robot i+1, --robots defaults to the file's nodes")  # fmt: skip
-    up.add_argument("--tick", type=number(float, "tick", above=0), default=0.1, metavar="S",
-                    help="with --mobility: emulated s between samples (default 0.1)")  # fmt: skip
+                         "node i is robot i+1, --robots defaults to the file's nodes; limits: "
+                         f"{LIMITS_TEXT}")  # fmt: skip
+    up.add_argument("--tick", type=number(float, "tick", minimum=MIN_TICK_S), default=0.1,
+                    metavar="S", help=f"with --mobility: emulated s between samples, at least "
+                    f"{MIN_TICK_S:g} (default 0.1)")  # fmt: skip
     up.add_argument("--links-out", metavar="CSV",
                     help="with --mobility: where the applied link timeline goes (default: "
                          "links.csv in the --capture dir, else NAME-links.csv here; kept after "
@@ -114,9 +117,11 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
     lines = []
     if trace is not None:
         out = extras["links_out"]
+        ready = os.path.join(net.state_dir, "mobility.ready")
         argv = [sys.executable, "-m", "topology.player", net.name, os.path.abspath(args.mobility),
-                "--tick", repr(args.tick), "--links-out", out]  # fmt: skip
-        _start(net, argv, "mobility")
+                "--tick", repr(args.tick), "--links-out", out, "--ready", ready]  # fmt: skip
+        proc = _start(net, argv, "mobility")
+        _wait_ready(proc, ready, os.path.join(net.state_dir, "mobility.log"), "the trace player")
         lines.append(f"trace: {trace.nodes} nodes, {trace.end:g} s emulated; links to {out} "
                      "(kept after net down)")  # fmt: skip
     if args.feed:
@@ -134,6 +139,30 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
             time.sleep(0.02)
         lines.append(f"feed: {path}")
     return lines
+
+
+def _wait_ready(proc, ready: str, log_path: str, what: str) -> None:
+    """Until `ready` exists; TestbedError with the last line of the process's log when it
+    exits first or does not get there in READY_TIMEOUT_S."""
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    while not os.path.exists(ready):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            last = _last_line(log_path)
+            how = f"exited with status {proc.returncode}" if proc.poll() is not None else (
+                f"did not start in {READY_TIMEOUT_S:g} s")  # fmt: skip
+            raise TestbedError(f"{what} {how}" + (f": {last}" if last else ""))
+        time.sleep(0.02)
+
+
+def _last_line(path: str) -> str:
+    """The last line of a log, without its time stamp and process name."""
+    try:
+        with open(path, errors="replace") as f:
+            lines = [ln.strip() for ln in f if ln.strip()]
+    except OSError:
+        return ""
+    last = lines[-1] if lines else ""
+    return last.split(" player ", 1)[-1].removeprefix("error: ")[:200]
 
 
 def _start(net, argv: list[str], role: str):

@@ -83,7 +83,8 @@ __all__ = [
 
 
 def main(args: argparse.Namespace) -> int:
-    """`testbed run`: 0 when the run completed, 1 when it ended badly (see result.json)."""
+    """`testbed run`: 0 when the run completed, 130 when it was interrupted (SIGINT or
+    SIGTERM), 1 when it ended badly otherwise (see result.json)."""
     cfg = config_from_args(args)
     name = args.name or "run" + secrets.token_hex(2)
     replace = getattr(args, "replace", False)
@@ -94,7 +95,7 @@ def main(args: argparse.Namespace) -> int:
             sys.stderr.write(line + "\n")
     if result["status"] != "complete":
         sys.stderr.write(f"testbed run: {result['status']}: {result['status_detail']}\n")
-        return 1
+        return 130 if result["status"] == "interrupted" else 1
     return 0
 
 

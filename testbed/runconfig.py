@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 
 from node import coordination
 from node.flood import MODES as FLOOD_MODES
+from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
 from testbed.errors import UsageError
@@ -70,8 +71,9 @@ class RunConfig:
                          sweep={GRID})  # fmt: skip
     comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
                                sweep={GRID}, net=True)  # fmt: skip
-    laser_range: float = option(float, "laser range", 2.0, unit="metres", above=0, metavar="M",
-                                sweep={GRID})  # fmt: skip
+    laser_range: float = option(float, f"laser range, at most {MAX_LASER_RANGE_M:g} m and the "
+                                "map's diagonal", 2.0, unit="metres", above=0,
+                                maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID})  # fmt: skip
     seed: int = option(int, SEED_HELP, 1, minimum=0, metavar="S")
     time_scale: float = option(
         float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "

@@ -15,6 +15,7 @@ and returns a frozen `PreparedRun`, which the next stage (testbed.run.Run) takes
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 from dataclasses import dataclass
@@ -76,6 +77,7 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     is created then)."""
     out = os.path.abspath(out)
     truth = load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
+    check_laser(cfg.laser_range, truth.size_m)
     rng = np.random.default_rng(cfg.seed)
     starts = start_positions(truth, cfg.robots, rng, cfg.radius, cfg.start)
     phases = tuple(int(v) for v in rng.integers(0, cfg.plan_period, size=cfg.robots))
@@ -102,6 +104,17 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     except OSError as e:
         raise UsageError(f"--out {out}: cannot write there: {e.strerror}") from None
     return prepared
+
+
+def check_laser(laser_range: float, size_m: tuple[float, float]) -> None:
+    """UsageError for a laser longer than the map's diagonal: it could see nothing more (the
+    map is walled), and its geometry would only cost memory and time."""
+    diagonal = math.hypot(*size_m)
+    if laser_range > diagonal:
+        raise UsageError(
+            f"--laser-range {laser_range:g} is longer than the map's diagonal ({diagonal:.1f} m "
+            f"on {size_m[0]:g} x {size_m[1]:g} m): a laser sees no farther than the map"
+        )
 
 
 def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> NetworkSpec:

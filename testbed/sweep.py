@@ -21,9 +21,10 @@ from pathlib import Path
 
 from testbed import sweepfile
 from testbed.errors import UsageError
+from testbed.runconfig import RunConfig
 from testbed.rundir import is_done, run_dir
 from testbed.sweepfile import PlannedRun
-from testbed.sweepplan import Plan, auto_jobs, config_mismatch, default_jobs, plan
+from testbed.sweepplan import Plan, auto_jobs, config_mismatch, default_jobs, other_sweep, plan
 from testbed.sweeprunner import Sweep, wait_for_orphans
 from topology.argtypes import number
 from topology.impair import kernel_has_netem
@@ -41,7 +42,9 @@ def _jobs(text: str) -> int | str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "file", metavar="FILE", nargs="?",
-        help="sweep file (TOML), e.g. testbed/experiments/paper.toml",
+        help="sweep file (TOML), e.g. testbed/experiments/paper.toml; at most "
+        f"{sweepfile.MAX_RUNS:,} runs (the grid's lists times runs), its maps and lasers are "
+        "checked before the first run",
     )  # fmt: skip
     parser.add_argument("--out", metavar="DIR", help="sweep directory")
     parser.add_argument(
@@ -68,7 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--resume",
         action="store_true",
-        help="continue a sweep in DIR: skip finished runs, redo partial ones",
+        help="continue the sweep in DIR: skip finished runs, redo partial ones; FILE must "
+        "plan every run DIR holds, with the same settings (it may add runs)",
     )
     parser.add_argument(
         "--slurm",
@@ -148,6 +152,38 @@ def _submit(args, spec, runs: list[PlannedRun], out: Path, p: Plan) -> int:
     return 0
 
 
+def _check_maps(spec: sweepfile.SweepSpec) -> None:
+    """Every map of the sweep, and every laser on it, as a run would check them, before the
+    first run: a map that is missing, not a PNG or too large, or a laser longer than a map's
+    diagonal, stops the sweep now instead of failing each of its runs."""
+    from testbed.runprepare import check_laser
+    from testbed.world.worldmap import CELL, empty_terrain, png_cells
+
+    for m in dict.fromkeys(spec.maps or (spec.map,)):
+        if m is None:
+            size_m = empty_terrain().size_m
+        else:
+            cols, rows = png_cells(m, RunConfig.map_cell)
+            size_m = (cols * CELL, rows * CELL)
+        for laser in spec.laser_range:
+            try:
+                check_laser(laser, size_m)
+            except UsageError as exc:
+                where = "the empty terrain" if m is None else f"map {m}"
+                raise UsageError(f"sweep: grid.laser_range on {where}: {exc}") from None
+
+
+def _check_same_sweep(out: Path, runs: list[PlannedRun], sweep_file: str) -> None:
+    """--resume continues the sweep that made `out`, never another one into it."""
+    diff = other_sweep(out, runs)
+    if diff:
+        made_by = (read_json(out / "sweep.json") or {}).get("sweep_file") or "another sweep file"
+        raise UsageError(
+            f"--out {out} is the sweep of {made_by}, not of {sweep_file}: {diff}; resume it "
+            "with its own sweep file, or give this one a new --out"
+        )
+
+
 def main(args: argparse.Namespace) -> int:
     if args.status:
         return _print_status(Path(args.status))
@@ -165,7 +201,27 @@ def main(args: argparse.Namespace) -> int:
     spec = sweepfile.load(args.file)
     out = Path(args.out)
     runs = sweepfile.expand(spec)
+    # Everything that can refuse the sweep comes before anything is made or locked.
+    _check_maps(spec)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a directory")
+    existing = sorted(p.name for p in (out / "runs").iterdir()) if (out / "runs").is_dir() else []
+    if existing and not args.resume:
+        raise UsageError(
+            f"--out {out}: holds runs of an earlier sweep; pass --resume to continue it "
+            "or choose another directory"
+        )
+    if args.resume:
+        _check_same_sweep(out, runs, args.file)
+        for r in runs:
+            diff = config_mismatch(out, r) if is_done(out, r.run_id) else None
+            if diff:
+                raise UsageError(
+                    f"--out {out}: run {r.run_id} was made with other settings ({diff}); "
+                    "use a new directory"
+                )
     jobs = auto_jobs(runs) if args.jobs == "auto" else args.jobs or default_jobs()
+    netem = kernel_has_netem() if any(d > 0 for d in spec.delay_ms) else False
     out.mkdir(parents=True, exist_ok=True)
     (out / "runs").mkdir(exist_ok=True)
     lock = open(out / ".sweep.lock", "w")  # noqa: SIM115 (held for the process lifetime)
@@ -173,23 +229,9 @@ def main(args: argparse.Namespace) -> int:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         raise UsageError(f"--out {out}: another sweep is running in this directory") from None
-    existing = [p.name for p in (out / "runs").iterdir()]
-    if existing and not args.resume:
-        raise UsageError(
-            f"--out {out}: holds runs of an earlier sweep; pass --resume to continue it "
-            "or choose another directory"
-        )
     if args.resume and not args.slurm:
         wait_for_orphans(out)
-    netem = kernel_has_netem() if any(d > 0 for d in spec.delay_ms) else False
     p = plan(runs, out, netem)
-    for r in p.done:
-        diff = config_mismatch(out, r)
-        if diff:
-            raise UsageError(
-                f"--out {out}: run {r.run_id} was made with other settings ({diff}); "
-                "use a new directory"
-            )
     if p.skipped:
         log.warning("skipping %d run(s): %s", len(p.skipped), next(iter(p.skipped.values())))
     if args.slurm:

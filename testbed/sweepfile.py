@@ -44,6 +44,14 @@ bounds, choices), the same as `testbed run` checks the flag. Validation is stric
 unknown key, a value of the wrong type or an empty grid list is a `UsageError` whose
 one-line message names the key (`grid.robots`, `run.time_scale`, ...).
 
+Size: a sweep has at most MAX_RUNS runs, checked from the lengths of the grid's lists and
+`runs` before any run is expanded. Why 10,000: `DIR/sweep.json` holds about 380 bytes a run
+and is rewritten whenever a run starts or ends (47 us a run here, so 0.5 s at 10,000 runs,
+under 2% of a one-minute run), and the planned runs take about 6 kB each in memory; at
+100,000 runs sweep.json was 38 MB, rewritten after every run, and a grid of a million runs
+took 6.2 GB before its first run. The largest shipped sweep has 600 runs; a larger study is
+several sweep files. The file itself is a regular UTF-8 file of at most MAX_FILE_BYTES.
+
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
 its parameters and run index only, so they are the same every time the file is expanded
 (a routing, map or medium grid names its value in every id, `-aodv`, `-moffice`,
@@ -58,6 +66,9 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import math
+import os
+import stat
 import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -79,6 +90,8 @@ _GRID_REQUIRED = ("robots", "comm_range", "laser_range")
 _GRID_FIELD = {"routing": "routings", "map": "maps", "medium": "media"}
 EMPTY_MAP = "empty"  # grid.map: the paper's empty terrain
 _DEFAULT = RunConfig(robots=1, comm_range=1.0)
+MAX_RUNS = 10_000
+MAX_FILE_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -140,7 +153,13 @@ class PlannedRun:
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
-    return UsageError(f"sweep file {path}: {key}: {message}")
+    return UsageError(f"sweep file {path}: {_printable(key)}: {message}")
+
+
+def _printable(text: str) -> str:
+    """A key from the file as a message shows it: a quoted key may hold a newline or a
+    terminal's escape sequence, shown escaped so that the message stays one line."""
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in text)
 
 
 def _is_int(v) -> bool:
@@ -194,7 +213,7 @@ def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int,
     """`time_scale = { 1 = 12.0, 2 = 10.0 }`: a time scale for each team size of the grid."""
     out = {}
     for key, v in table.items():
-        if not key.isdigit() or int(key) < 1:
+        if not (key.isascii() and key.isdigit()) or int(key) < 1:
             raise _fail(path, f"run.time_scale.{key}", "keys are team sizes (1, 2, ...)")
         out[int(key)] = _value(path, f"run.time_scale.{key}", BY_NAME["time_scale"], v)
     missing = [n for n in robots if n not in out]
@@ -210,8 +229,24 @@ def _description(path, data: dict) -> str:
     return description
 
 
+def _check_size(path, grid: dict) -> None:
+    """At most MAX_RUNS runs, from the lengths of the grid's lists and `runs` alone (before
+    any value is checked or any run expanded)."""
+    lengths = {k: len(v) for k, v in grid.items() if isinstance(v, list)}
+    runs = grid.get("runs", 1)
+    total = math.prod(lengths.values()) * (runs if _is_int(runs) and runs > 0 else 1)
+    if total > MAX_RUNS:
+        sizes = " x ".join(f"{n} {k}" for k, n in lengths.items() if n > 1)
+        raise _fail(
+            path, "grid", f"{total:,} runs ({sizes or 'one point'}"
+            f"{f' x {runs} runs' if _is_int(runs) and runs > 1 else ''}); a sweep has at most "
+            f"{MAX_RUNS:,}: split it into several sweep files",
+        )  # fmt: skip
+
+
 def _grid(path, grid: dict, run: dict) -> dict:
     """The SweepSpec fields of [grid]."""
+    _check_size(path, grid)
     for key in _GRID_REQUIRED:
         if key not in grid:
             raise _fail(path, f"grid.{key}", "missing (the grid needs at least one value)")
@@ -293,15 +328,44 @@ def medium_label(medium: str) -> str:
 def load(path: str | Path) -> SweepSpec:
     """Read and validate a sweep file (UsageError with one line if it is bad)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise UsageError(f"sweep file {path}: cannot read: {e.strerror}") from None
+    text = _read_text(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise UsageError(f"sweep file {path}: invalid TOML: {e}") from None
+    except RecursionError:
+        raise UsageError(f"sweep file {path}: invalid TOML: nested too deeply") from None
     return parse(data, path)
+
+
+def _read_text(path: Path) -> str:
+    """The file's text: a regular UTF-8 file of at most MAX_FILE_BYTES (a FIFO or a device
+    is refused without waiting on it)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as e:
+        raise UsageError(f"sweep file {path}: cannot read: {e.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise UsageError(f"sweep file {path}: is a directory")
+        if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FILE_BYTES:
+            raise UsageError(f"sweep file {path}: not a regular file of at most "
+                             f"{MAX_FILE_BYTES >> 20} MiB")  # fmt: skip
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as e:
+        raise UsageError(f"sweep file {path}: cannot read: {e.strerror}") from None
+    finally:
+        os.close(fd)
+    try:
+        text = data.decode()
+    except UnicodeDecodeError as e:
+        raise UsageError(f"sweep file {path}: not a text file (UTF-8 TOML): byte "
+                         f"{e.start} is 0x{data[e.start]:02x}") from None  # fmt: skip
+    if len(data) > MAX_FILE_BYTES:
+        raise UsageError(f"sweep file {path}: more than {MAX_FILE_BYTES >> 20} MiB")
+    return text
 
 
 def fmt(x: float) -> str:

@@ -11,6 +11,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from testbed.runconfig import RunConfig
 from testbed.rundir import is_done, plan_dict, run_dir
 from testbed.sweepfile import PlannedRun
 from topology.jsonfile import read_json
@@ -57,6 +58,50 @@ def config_mismatch(out: Path, run: PlannedRun) -> str | None:
             continue  # how fast, not what: the sweep may have run it slower (sweeprunner)
         if key in recorded and recorded[key] != want:
             return f"{key} is {recorded[key]!r} there, {want!r} in the sweep file"
+    return None
+
+
+def other_sweep(out: Path, runs: list[PlannedRun]) -> str | None:
+    """What in sweep directory `out` belongs to another sweep than `runs`, or None.
+
+    A directory belongs to one sweep: every run its sweep.json plans, and every run
+    directory it holds, must be a run of `runs` with the same config (its time scale aside:
+    a sweep may run slower, testbed.sweeprunner). A plan that only adds runs (more `runs`
+    per point, a value more in a list) extends the sweep and is the same one."""
+    planned = {r.run_id: r.config for r in runs}
+    state = read_json(out / "sweep.json")
+    recorded = state.get("runs") if isinstance(state, dict) else None
+    for entry in recorded if isinstance(recorded, list) else []:
+        rid = entry.get("id") if isinstance(entry, dict) else None
+        if not isinstance(rid, str):
+            continue
+        if rid not in planned:
+            return f"its sweep.json plans run {rid}, which this sweep file does not"
+        config = entry.get("config")
+        differs = _plan_difference(config, planned[rid]) if isinstance(config, dict) else None
+        if differs:
+            return f"run {rid} has {differs}"
+    runs_dir = out / "runs"
+    held = sorted(p.name for p in runs_dir.iterdir()) if runs_dir.is_dir() else []
+    stray = [rid for rid in held if rid not in planned]
+    if stray:
+        return f"it holds run {stray[0]}, which this sweep file does not plan"
+    return None
+
+
+_DEFAULTS = RunConfig(robots=1, comm_range=1.0).to_dict()
+
+
+def _plan_difference(recorded: dict, config: RunConfig) -> str | None:
+    """How a plan as sweep.json recorded it (plan_dict: options at their default may be left
+    out) differs from `config`, its time scale aside; None when it does not."""
+    mine = config.to_dict()
+    for key in sorted(set(plan_dict(config)) | set(recorded)):
+        if key == "time_scale" or key not in mine:
+            continue
+        there = recorded.get(key, _DEFAULTS[key])
+        if there != mine[key]:
+            return f"{key} {there!r} there and {mine[key]!r} in this sweep file"
     return None
 
 

@@ -14,9 +14,10 @@ one numpy evaluation, which keeps a 10-robot step's check well under a milliseco
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
+
+from topology import pngmap
 
 Position = tuple[float, float]
 
@@ -36,13 +37,12 @@ class Walls:
 
     @classmethod
     def from_png(cls, path: str, cell: float) -> Walls:
-        import cv2  # only the los models need it; the rest of topology starts without it
-
-        if not os.path.isfile(path):
-            raise MapError(f"map file {path} does not exist")
-        img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise MapError(f"map file {path} is not an image OpenCV can read")
+        """The walls of a PNG map at its own resolution, one pixel `cell` metres; its size
+        is checked from its header before it is decoded (topology.pngmap)."""
+        try:
+            img = pngmap.read_gray(path)
+        except pngmap.PngError as exc:
+            raise MapError(str(exc)) from None
         return cls(img < 128, cell)
 
     @property
@@ -51,22 +51,43 @@ class Walls:
         return self.occupied.shape[1] * self.cell, self.occupied.shape[0] * self.cell
 
 
+def _clipped(a: np.ndarray, d: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
+    """Segments a + t d, t in [0, 1] (cells), cut to the box [-1, w + 1] x [-1, h + 1]
+    (Liang-Barsky); one that misses the box becomes the point (-1, -1), a free cell."""
+    t0, t1 = np.zeros(len(a)), np.ones(len(a))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for axis, hi in ((0, w + 1.0), (1, h + 1.0)):
+            p, lo_q, hi_q = d[:, axis], -1.0 - a[:, axis], hi - a[:, axis]
+            still = p == 0
+            outside = still & ((lo_q > 0) | (hi_q < 0))
+            enter = np.where(still, -np.inf, np.minimum(lo_q / p, hi_q / p))
+            leave = np.where(still, np.inf, np.maximum(lo_q / p, hi_q / p))
+            t0 = np.maximum(t0, enter)
+            t1 = np.where(outside, -1.0, np.minimum(t1, leave))
+    miss = t0 > t1
+    a_cut = np.where(miss[:, None], -1.0, a + t0[:, None] * d)
+    d_cut = np.where(miss[:, None], 0.0, (t1 - t0)[:, None] * d)
+    return a_cut, d_cut
+
+
 def crossings(walls: Walls, pairs: list[tuple[Position, Position]]) -> list[int]:
     """For each (a, b), the number of walls the segment a-b crosses. Outside the map is free.
 
-    Each segment is sampled once per cell of its length (its own count, all segments in
+    Each segment is first cut to the map and a free cell around it (outside is free, so
+    only that part can cross a wall: the cost is bounded by the map, however far apart the
+    robots are), then sampled once per cell of its length (its own count, all segments in
     one flat array), which finds every wall at least two cells thick: a line crosses such a
     wall over at least two cells, so one sample lands in it."""
     if not pairs:
         return []
     ab = np.array(pairs, dtype=float) / walls.cell  # (pairs, 2 ends, x y) in cells
-    a, d = ab[:, 0], ab[:, 1] - ab[:, 0]
+    h, w = walls.occupied.shape
+    a, d = _clipped(ab[:, 0], ab[:, 1] - ab[:, 0], w, h)
     n = np.ceil(np.hypot(d[:, 0], d[:, 1])).astype(np.int64) + 2  # samples per segment
     offsets = np.zeros(len(n), dtype=np.int64)
     np.cumsum(n[:-1], out=offsets[1:])
     pair = np.repeat(np.arange(len(n)), n)
     t = (np.arange(int(n.sum())) - offsets[pair]) / (n - 1)[pair]
-    h, w = walls.occupied.shape
     # Cells outside the map are free: they index the extra free row and column of `padded`.
     rows = np.clip(np.floor(a[pair, 1] + d[pair, 1] * t), -1, h).astype(np.int64)
     cols = np.clip(np.floor(a[pair, 0] + d[pair, 0] * t), -1, w).astype(np.int64)

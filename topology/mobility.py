@@ -20,6 +20,33 @@ line of 6 or 8 numbers (the bounds), then `time id x y` lines; the node is at (x
 time and moves in a straight line to its next sample. Before its first sample a node is at
 that sample; after its last, it stays there.
 
+ONE (continued): the first line is the header when it has 6 or 8 fields, as the ONE simulator's
+ExternalMovementReader requires (`minTime maxTime minX maxX minY maxY [minZ maxZ]`); records
+have exactly 4. A header is checked, not skipped: its minimums must not exceed its maximums,
+and every record must lie within its time and x, y bounds. A line that is not a header
+(a record with two extra fields, say) therefore cannot pass as one and vanish: it is refused
+with its line number, or every record after it contradicts it.
+
+Limits (`LIMITS_TEXT`, stated in `net up --help` and the README). What a trace may ask for is
+bounded by what a testbed and this machine can carry, and checked while parsing, before
+anything is allocated for it:
+
+- node ids 0..999: a testbed has at most 1000 robots (topology.names.MAX_ROBOTS), so a
+  node id of 1e11 is refused instead of becoming a list of 1e11 motions;
+- times 0..1e6 s (11.6 days emulated; BonnMotion and ONE scenarios last hours), and a
+  node's arrival (start + distance / speed) too, so a speed of 1e-320 is refused rather
+  than putting a node's arrival at infinity; coordinates within +-1e6 m, where differences
+  and squared distances stay exact to well under a millimetre;
+- a regular file of at most 64 MiB (parsing costs about 8 bytes of memory per byte of
+  file and 0.07 s per MiB here, and `net up` and the player each parse it: 64 MiB is about
+  1 million lines, 0.5 GB and 5 s per process); a FIFO or a device (/dev/zero) is refused
+  without reading it;
+- lines of at most 1000 characters (a movement line is under 100).
+
+The player's tick (`--tick`) is at least MIN_TICK_S: each tick that moves someone applies
+a batch of link changes and saves the state file, which takes a millisecond or more, so a
+shorter tick could only ever come late. `ticks()` yields the tick times one at a time.
+
 A bad file is a `TraceError` whose message names the line and what is wrong with it.
 """
 
@@ -27,10 +54,28 @@ from __future__ import annotations
 
 import bisect
 import math
+import os
 import re
+import stat
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
+from topology.names import MAX_ROBOTS
+
 Position = tuple[float, float]
+
+MAX_NODE_ID = MAX_ROBOTS - 1  # node i is robot i + 1
+MAX_TIME_S = 1e6
+MAX_COORD_M = 1e6
+MAX_FILE_BYTES = 64 * 1024 * 1024
+MAX_LINE_CHARS = 1000
+MIN_TICK_S = 1e-3
+_TIME_TEXT, _COORD_TEXT = "1e6 s", "1e6 m"  # MAX_TIME_S and MAX_COORD_M as the user reads them
+LIMITS_TEXT = (
+    f"node ids 0..{MAX_NODE_ID}, times (arrivals included) up to {_TIME_TEXT}, "
+    f"coordinates within +-{_COORD_TEXT}, a regular file of at most "
+    f"{MAX_FILE_BYTES >> 20} MiB with lines of at most {MAX_LINE_CHARS} characters"
+)
 
 _NUM = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
 _SET = re.compile(rf"^\$node_\((\d+)\)\s+set\s+([XYZ])_\s+{_NUM}$")
@@ -91,34 +136,81 @@ def _fail(where: str, n: int, what: str) -> TraceError:
 def _finite(value: str, where: str, n: int, what: str) -> float:
     v = float(value)
     if not math.isfinite(v):
-        raise _fail(where, n, f"{what} must be finite, not {value}")
+        raise _fail(where, n, f"{what} must be finite, not {_shown(value)}")
     return v
+
+
+def _shown(text: str, width: int = 40) -> str:
+    """A piece of the file as an error message quotes it: at most `width` characters, and
+    anything unprintable (a terminal's escape sequences) as a \\x or \\u escape."""
+    cut = text if len(text) <= width else text[: width - 3] + "..."
+    return "".join(c if c.isprintable() else ascii(c)[1:-1] for c in cut)
+
+
+def _time(value: str, where: str, n: int, what: str = "time") -> float:
+    """A time of the trace: finite, 0..MAX_TIME_S."""
+    t = _finite(value, where, n, what)
+    if t < 0:
+        raise _fail(where, n, f"{what} {_shown(value)} is negative")
+    if t > MAX_TIME_S:
+        raise _fail(where, n, f"{what} {_shown(value)} is past the limit of {_TIME_TEXT}")
+    return t
+
+
+def _coord(value: str, where: str, n: int, what: str) -> float:
+    """A coordinate of the trace: finite, within +-MAX_COORD_M."""
+    v = _finite(value, where, n, what)
+    if abs(v) > MAX_COORD_M:
+        raise _fail(where, n, f"{what} {_shown(value)} is beyond +-{_COORD_TEXT}")
+    return v
+
+
+def _node(text: str, where: str, n: int) -> int:
+    """A node id: a whole number 0..MAX_NODE_ID (checked before it is used as a count)."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    whole = math.isfinite(v) and v == int(v)
+    if not whole or not 0 <= v <= MAX_NODE_ID:
+        raise _fail(
+            where, n, f"node id {_shown(text)} is not a whole number 0..{MAX_NODE_ID} "
+            f"(a testbed has at most {MAX_ROBOTS} robots)",
+        )  # fmt: skip
+    return int(v)
+
+
+def _lines(text: str, where: str) -> Iterator[tuple[int, str]]:
+    """(line number, line) of `text`, each at most MAX_LINE_CHARS long."""
+    for n, raw in enumerate(text.splitlines(), start=1):
+        if len(raw) > MAX_LINE_CHARS:
+            raise _fail(where, n, f"{len(raw)} characters long; a trace line has at most "
+                        f"{MAX_LINE_CHARS}")  # fmt: skip
+        yield n, raw
 
 
 def parse_ns2(text: str, where: str = "trace") -> Trace:
     initial: dict[int, dict[str, float]] = {}
     legs: list[tuple[float, int, int, float, float, float]] = []  # (t, line, node, x, y, v)
-    for n, raw in enumerate(text.splitlines(), start=1):
+    for n, raw in _lines(text, where):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
         if m := _SET.match(line):
-            node, axis = int(m[1]), m[2]
-            initial.setdefault(node, {})[axis] = _finite(m[3], where, n, f"{axis}_")
+            node, axis = _node(m[1], where, n), m[2]
+            initial.setdefault(node, {})[axis] = _coord(m[3], where, n, f"{axis}_")
         elif m := _AT.match(line):
-            t = _finite(m[1], where, n, "time")
-            if t < 0:
-                raise _fail(where, n, f"time {m[1]} is negative")
-            x, y = _finite(m[3], where, n, "x"), _finite(m[4], where, n, "y")
+            t = _time(m[1], where, n)
+            node = _node(m[2], where, n)
+            x, y = _coord(m[3], where, n, "x"), _coord(m[4], where, n, "y")
             speed = _finite(m[5], where, n, "speed")
             if speed < 0:
-                raise _fail(where, n, f"speed {m[5]} is negative")
-            legs.append((t, n, int(m[2]), x, y, speed))
+                raise _fail(where, n, f"speed {_shown(m[5])} is negative")
+            legs.append((t, n, node, x, y, speed))
         else:
-            shown = line if len(line) <= 60 else line[:57] + "..."
             raise _fail(
                 where, n, f"not an ns-2 movement line ('$node_(i) set X_ x' or "
-                f"'$ns_ at T \"$node_(i) setdest X Y SPEED\"'): {shown}",
+                f"'$ns_ at T \"$node_(i) setdest X Y SPEED\"'): {_shown(line, 60)}",
             )  # fmt: skip
     if not initial:
         raise TraceError(f"{where}: no node has an initial position ($node_(i) set X_ ...)")
@@ -148,35 +240,45 @@ def parse_ns2(text: str, where: str = "trace") -> Trace:
         d = math.hypot(x - here[0], y - here[1])
         if speed == 0 or d == 0:
             continue
-        mo.times.append(t + d / speed)
+        arrival = t + d / speed
+        if not arrival <= MAX_TIME_S:
+            raise _fail(
+                where, n, f"node {node} would arrive at {arrival:.3g} s ({d:.6g} m at "
+                f"{speed:.3g} m/s), past the limit of {_TIME_TEXT}",
+            )  # fmt: skip
+        mo.times.append(arrival)
         mo.points.append((x, y))
     return Trace(motions)
 
 
 def parse_one(text: str, where: str = "trace") -> Trace:
     samples: dict[int, list[tuple[float, float, float]]] = {}
+    header: tuple[int, list[float]] | None = None  # (line, [minT maxT minX maxX minY maxY])
     first = True
-    for n, raw in enumerate(text.splitlines(), start=1):
+    for n, raw in _lines(text, where):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
-        parts = line.split()
-        try:
-            values = [float(p) for p in parts]
-        except ValueError:
-            raise _fail(where, n, f"not a ONE line 'time id x y': {line[:60]}") from None
+        parts = line.split(None, 8)  # no more than 9 pieces, however long the line
         if first and len(parts) in (6, 8):
             first = False
-            continue  # the bounds header
+            header = (n, _one_header(parts, where, n))
+            continue
         first = False
         if len(parts) != 4:
-            raise _fail(where, n, f"expected 4 fields 'time id x y', found {len(parts)}")
-        t, node, x, y = values
-        if not all(math.isfinite(v) for v in values) or t < 0:
-            raise _fail(where, n, "time, x and y must be finite and time >= 0")
-        if node != int(node) or node < 0:
-            raise _fail(where, n, f"node id {parts[1]} is not a whole number >= 0")
-        samples.setdefault(int(node), []).append((t, x, y))
+            found = f"{len(parts)}" if len(parts) <= 8 else "more than 8"
+            raise _fail(where, n, f"expected 4 fields 'time id x y', found {found}")
+        for p in parts:
+            try:
+                float(p)
+            except ValueError:
+                raise _fail(where, n, f"not a ONE line 'time id x y': {_shown(line, 60)}") from None
+        t = _time(parts[0], where, n)
+        node = _node(parts[1], where, n)
+        x, y = _coord(parts[2], where, n, "x"), _coord(parts[3], where, n, "y")
+        if header is not None:
+            _within_header(header, (t, x, y), where, n)
+        samples.setdefault(node, []).append((t, x, y))
     if not samples:
         raise TraceError(f"{where}: no samples")
     count = max(samples) + 1
@@ -190,6 +292,42 @@ def parse_one(text: str, where: str = "trace") -> Trace:
     return Trace(motions)
 
 
+_HEADER = ("minTime", "maxTime", "minX", "maxX", "minY", "maxY", "minZ", "maxZ")
+
+
+def _one_header(parts: list[str], where: str, n: int) -> list[float]:
+    """The ONE header's six (or eight) bounds, checked: numbers, minimum <= maximum."""
+    values = []
+    for name, p in zip(_HEADER, parts, strict=False):
+        try:
+            values.append(_finite(p, where, n, f"header {name}"))
+        except ValueError:
+            raise _fail(
+                where, n, "a first line of 6 or 8 fields is the ONE header 'minTime maxTime "
+                f"minX maxX minY maxY [minZ maxZ]', and {name} {_shown(p)} is not a number",
+            ) from None  # fmt: skip
+    for lo in range(0, len(values), 2):
+        if values[lo] > values[lo + 1]:
+            raise _fail(
+                where, n, f"ONE header: {_HEADER[lo]} {values[lo]:g} is above "
+                f"{_HEADER[lo + 1]} {values[lo + 1]:g}",
+            )  # fmt: skip
+    return values[:6]
+
+
+def _within_header(header: tuple[int, list[float]], sample: tuple[float, float, float],
+                   where: str, n: int) -> None:  # fmt: skip
+    """A record must lie within the header's bounds (time, x, y)."""
+    line, bounds = header
+    for k, (name, v) in enumerate(zip(("time", "x", "y"), sample, strict=True)):
+        lo, hi = bounds[2 * k], bounds[2 * k + 1]
+        if not lo <= v <= hi:
+            raise _fail(
+                where, n, f"{name} {v:g} is outside the header's {lo:g}..{hi:g} (line "
+                f"{line}: the ONE header 'minTime maxTime minX maxX minY maxY')",
+            )  # fmt: skip
+
+
 def parse(text: str, where: str = "trace") -> Trace:
     """An ns-2 file if any line starts with `$`, else a ONE trace."""
     if any(line.lstrip().startswith("$") for line in text.splitlines()):
@@ -198,21 +336,51 @@ def parse(text: str, where: str = "trace") -> Trace:
 
 
 def load(path: str) -> Trace:
+    """Parse the trace in file `path`: a regular file of at most MAX_FILE_BYTES, opened
+    without blocking (a FIFO is refused, not waited on)."""
     try:
-        with open(path) as f:
-            text = f.read()
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except OSError as exc:
         raise TraceError(f"{path}: {exc.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise TraceError(f"{path}: is a directory, not a trace file")
+        if not stat.S_ISREG(st.st_mode):
+            raise TraceError(f"{path}: not a regular file (a trace is read from a file, not "
+                             "a pipe or a device)")  # fmt: skip
+        if st.st_size > MAX_FILE_BYTES:
+            raise TraceError(f"{path}: {st.st_size >> 20} MiB, over the limit of "
+                             f"{MAX_FILE_BYTES >> 20} MiB for a trace")  # fmt: skip
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise TraceError(f"{path}: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_FILE_BYTES:  # grew while we read it
+        raise TraceError(f"{path}: over the limit of {MAX_FILE_BYTES >> 20} MiB for a trace")
+    try:
+        text = data.decode()
     except UnicodeDecodeError:
         raise TraceError(f"{path}: not a text file") from None
     return parse(text, path)
 
 
-def ticks(end: float, tick: float) -> list[float]:
+def check_tick(tick: float) -> None:
+    """ValueError unless `tick` is a usable player tick: finite and at least MIN_TICK_S."""
+    if not (math.isfinite(tick) and tick >= MIN_TICK_S):
+        raise ValueError(f"tick must be at least {MIN_TICK_S:g} s, not {tick:g}")
+
+
+def ticks(end: float, tick: float) -> Iterator[float]:
     """The sampling times 0, tick, 2 tick, ... up to the first at or past `end` (and `end`
-    itself, so that every node's final position is applied)."""
+    itself, so that every node's final position is applied), one at a time."""
+    check_tick(tick)
     n = math.ceil(end / tick - 1e-9) if end > 0 else 0
-    out = [round(k * tick, 9) for k in range(n + 1)]
-    if out[-1] < end:
-        out.append(end)
-    return out
+    last = 0.0
+    for k in range(n + 1):
+        last = round(k * tick, 9)
+        yield last
+    if last < end:
+        yield end

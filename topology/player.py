@@ -9,7 +9,8 @@ after the start. At each tick it samples the trace, moves the robots whose posit
 does per step. A tick that comes late is still applied, in order: the timeline is exactly
 the trace's, only its wall-clock times slip (the late ticks are counted in the log). After
 the trace's end the final positions hold and the player exits; `net down` stops it earlier
-by its recorded pid.
+by its recorded pid. Once tick 0 is applied it creates the `--ready` file: `net up` waits for
+that, and reports the player's last log line if it exits first.
 """
 
 import argparse
@@ -19,13 +20,17 @@ import sys
 import time
 
 from topology import mobility
+from topology.argtypes import number
+from topology.errors import TestbedError
 from topology.network import Network
 
 log = logging.getLogger("topology.player")
 
 
-def play(net: Network, trace: mobility.Trace, tick: float, links_out: str) -> int:
-    """Play `trace` on `net`; returns the number of ticks that came late."""
+def play(net: Network, trace: mobility.Trace, tick: float, links_out: str,
+         ready: str | None = None) -> int:  # fmt: skip
+    """Play `trace` on `net`; returns the number of ticks that came late. `ready`: a file
+    created once tick 0 is applied (the caller's sign that the player is running)."""
     robots = net.spec.robots
     scale = net.spec.time_scale
     late = 0
@@ -45,33 +50,50 @@ def play(net: Network, trace: mobility.Trace, tick: float, links_out: str) -> in
                 late += 1
             here = trace.positions(t, robots)
             moves = {k + 1: p for k, p in enumerate(here) if p != net.positions[k]}
-            if not moves:
-                continue
-            # Saved every tick that moved someone: a feed or `net move` beside the player
-            # takes its positions from the state file (Network.refresh).
-            added, removed = net.move_many(moves)
-            for i, j in sorted(removed):
-                w.writerow([f"{t:g}", "remove", i, j])
-            for i, j in sorted(added):
-                w.writerow([f"{t:g}", "add", i, j])
-            if added or removed:
-                f.flush()
+            if moves:
+                # Saved every tick that moved someone: a feed or `net move` beside the player
+                # takes its positions from the state file (Network.refresh).
+                added, removed = net.move_many(moves)
+                for i, j in sorted(removed):
+                    w.writerow([f"{t:g}", "remove", i, j])
+                for i, j in sorted(added):
+                    w.writerow([f"{t:g}", "add", i, j])
+                if added or removed:
+                    f.flush()
+            if ready is not None:
+                open(ready, "w").close()
+                ready = None
     net.save()
     return late
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The player's process. Whatever stops it early is one line in its log (`error: ...`)
+    and a non-zero exit status, which `net up` reports while it waits for `--ready`."""
     p = argparse.ArgumentParser(prog="python -m topology.player")
     p.add_argument("name")
     p.add_argument("trace")
-    p.add_argument("--tick", type=float, default=0.1, help="emulated seconds between samples")
+    p.add_argument("--tick", type=number(float, "tick", minimum=mobility.MIN_TICK_S),
+                   default=0.1, help="emulated seconds between samples")  # fmt: skip
     p.add_argument("--links-out", required=True)
+    p.add_argument("--ready", help="a file to create once the first tick is applied")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s player %(message)s")
-    trace = mobility.load(args.trace)
-    net = Network.attach(args.name)
     try:
-        late = play(net, trace, args.tick, args.links_out)
+        trace = mobility.load(args.trace)
+        net = Network.attach(args.name)
+    except (mobility.TraceError, TestbedError) as exc:
+        log.error("error: %s", exc)
+        return 2
+    try:
+        late = play(net, trace, args.tick, args.links_out, args.ready)
+    except OSError as exc:  # links_out, the state file
+        where = f"{exc.filename}: " if exc.filename else ""
+        log.error("error: %s%s", where, exc.strerror or exc)
+        return 1
+    except (TestbedError, ValueError) as exc:
+        log.error("error: %s", str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        return 1
     finally:
         net.detach()
     log.info("trace ended at %.3f s emulated; %d late ticks", trace.end, late)

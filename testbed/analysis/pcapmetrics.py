@@ -39,6 +39,7 @@ import bisect
 import contextlib
 import json
 import logging
+import math
 import os
 import re
 import statistics
@@ -105,12 +106,32 @@ class Frame:
     interface: int = 0
 
 
-def _int(s: str) -> int | None:
-    return int(s) if s else None
+def _int(s: str, top: int = 0xFFFF) -> int | None:
+    """A field tshark writes as a whole number 0..top (a port, a length: 0..65535 unless
+    said), or None when empty; ValueError otherwise."""
+    if not s:
+        return None
+    v = int(s) if len(s) <= 20 else -1  # (int() of 5000 digits is an error of its own)
+    if not 0 <= v <= top:
+        raise ValueError(f"{s[:20]!r} is not in 0..{top}")
+    return v
+
+
+_U32 = 0xFFFFFFFF
+
+
+def _time(s: str) -> float:
+    t = float(s)
+    if not (math.isfinite(t) and t >= 0):
+        raise ValueError(f"time {s[:20]!r}")
+    return t
 
 
 def parse_fields(text: str) -> list[Frame]:
-    """Frames from tshark's tab-separated `-e` output in `_FIELDS` order."""
+    """Frames from tshark's tab-separated `-e` output in `_FIELDS` order. A line whose
+    fields are not what tshark writes (a time that is not a finite number >= 0, a number out
+    of its field's range: lengths, ports and sequence numbers are unsigned of their size)
+    is skipped with a warning, so that no NaN or absurd count reaches the metrics."""
     frames = []
     for line in text.splitlines():
         if not line:
@@ -118,25 +139,28 @@ def parse_fields(text: str) -> list[Frame]:
         f = line.split("\t")
         f += [""] * (len(_FIELDS) - len(f))
         try:
+            if not f[1]:
+                raise ValueError("no frame length")
             frames.append(
                 Frame(
-                    time=float(f[0]),
-                    length=int(f[1]),
+                    time=_time(f[0]),
+                    length=_int(f[1], _U32),
                     eth_src=f[2],
                     eth_dst=f[3],
                     ip_src=f[4],
                     ip_dst=f[5],
-                    ip_proto=_int(f[6]) or _int(f[16]),  # IPv4 protocol or IPv6 next header
-                    ttl=_int(f[7]),
+                    # IPv4 protocol or IPv6 next header
+                    ip_proto=_int(f[6], 255) or _int(f[16], 255),
+                    ttl=_int(f[7], 255),
                     udp_sport=_int(f[8]),
                     udp_dport=_int(f[9]),
                     udp_len=_int(f[10]),
                     tcp_sport=_int(f[11]),
                     tcp_dport=_int(f[12]),
-                    tcp_seq=_int(f[13]),
-                    tcp_len=_int(f[14]),
-                    aodv_type=_int(f[15]),
-                    interface=_int(f[17]) or 0,
+                    tcp_seq=_int(f[13], _U32),
+                    tcp_len=_int(f[14], _U32),
+                    aodv_type=_int(f[15], 255),
+                    interface=_int(f[17], _U32) or 0,
                 )
             )
         except ValueError:

@@ -37,6 +37,14 @@ class Body:
     alive: bool = True
 
 
+def open_cells(clear: np.ndarray, reach: int) -> np.ndarray:
+    """Cells whose distance to the nearest obstacle (`clear`, from an exact distance
+    transform) is more than `reach` cells: no obstacle cell's centre lies in the disc of
+    radius `reach` around theirs. The distances are square roots of whole numbers, so they
+    are compared squared and rounded, exactly."""
+    return np.rint(clear.astype(np.float64) ** 2) > reach * reach
+
+
 class World:
     def __init__(
         self,
@@ -69,21 +77,21 @@ class World:
         self._last_scan: list = [None] * len(self.bodies)
         self._no_returns = np.full(laser.n_rays, np.inf, dtype=np.float32)
         self._no_returns.flags.writeable = False
-        # Cells from which no obstacle (nor the map's edge) is within laser range (+1 cell).
+        # Each cell's distance (in cells, centre to centre) to the nearest obstacle cell, the
+        # map's outside included: an exact Euclidean distance transform, whose cost does not
+        # grow with the laser's range (a dilation by a disc of the laser's range did: 17 s
+        # for a 20 m laser, hours for 100 m, in one C call that no signal interrupts).
+        ring = pad(truth.occupied, 1, True)
+        clear = cv2.distanceTransform((~ring).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        # Cells from which no obstacle (nor the map's edge) is within laser range (+1 cell):
+        # farther than `reach` (squared distances of cell centres are whole numbers).
         reach = laser.pad + 1
-        blocked = pad(truth.occupied, reach, True).astype(np.uint8)
-        n = 2 * reach + 1
-        yy, xx = np.mgrid[:n, :n] - reach
-        disc = ((yy * yy + xx * xx) <= reach * reach).astype(np.uint8)
-        near = cv2.dilate(blocked, disc)[reach:-reach, reach:-reach]
-        self.open_space = near == 0
+        self.open_space = open_cells(clear[1:-1, 1:-1], reach)
         self._k = np.arange(laser.n_samples, dtype=np.int32)[None, :]
         # Samples a cast from a cell may skip: a sample at radius rho (cells) from a laser in a
         # cell whose centre is d from the nearest obstacle cell's centre (the map's outside
         # included) can only fall in an obstacle cell when d <= rho + sqrt(2) (half a cell's
         # diagonal on each end); skipped: samples with rho = (s + 1) / 2 < d - 1.5.
-        ring = pad(truth.occupied, 1, True)
-        clear = cv2.distanceTransform((~ring).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         skip = np.ceil(2.0 * clear[1:-1, 1:-1].astype(np.float64) - 4.0)
         self._skip = np.clip(skip, 0, laser.n_samples).astype(np.int32)
         laser.prepare_tables()  # before the run's clock starts

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from testbed.errors import UsageError
+from topology import pngmap
 
 CELL = 0.05  # metres
 
@@ -72,26 +73,55 @@ def empty_terrain(width_m: float = 20.0, height_m: float = 20.0, wall_m: float =
     return GroundTruth(occ, CELL, "empty")
 
 
+MAX_CELLS = 4000  # a side of the world's grid, in cells (200 m at 5 cm)
+
+
+def png_cells(path: str, cell_m: float) -> tuple[int, int]:
+    """(columns, rows) of the world's grid for a PNG map of `cell_m` metres a pixel, from the
+    file's header and structure alone (topology.pngmap.check; nothing is decoded): what a
+    sweep checks of every map before its first run. UsageError for a map it cannot use."""
+    _check_cell(cell_m)
+    try:
+        width, height, _ = pngmap.check(path)
+    except pngmap.PngError as exc:
+        raise UsageError(str(exc)) from None
+    return _cells(path, width, height, cell_m)
+
+
+def _check_cell(cell_m: float) -> None:
+    if not (cell_m > 0 and math.isfinite(cell_m)):
+        raise UsageError(f"map cell size must be a positive number, not {cell_m}")
+
+
+def _cells(path: str, width: int, height: int, cell_m: float) -> tuple[int, int]:
+    """The grid a picture of width x height pixels becomes, if within MAX_CELLS a side."""
+    w = max(1, round(width * cell_m / CELL))
+    h = max(1, round(height * cell_m / CELL))
+    if w > MAX_CELLS or h > MAX_CELLS:
+        raise UsageError(
+            f"map {path} is too large ({w} x {h} cells of {CELL * 100:g} cm; at most "
+            f"{MAX_CELLS} x {MAX_CELLS})"
+        )
+    return w, h
+
+
 def load_png(path: str, cell_m: float, walls: bool = True) -> GroundTruth:
     """A map from a PNG: pixels darker than mid-grey are obstacles; one pixel is `cell_m`.
 
     The picture is resampled to the world's 5 cm cells; a one-cell wall is added around it
-    when `walls` (robots must not leave the map).
+    when `walls` (robots must not leave the map). Its size is checked from its header before
+    it is decoded (topology.pngmap): at most MAX_CELLS a side once resampled.
     """
-    if not os.path.isfile(path):
-        raise UsageError(f"map file {path} does not exist")
-    if not (cell_m > 0 and math.isfinite(cell_m)):
-        raise UsageError(f"map cell size must be a positive number, not {cell_m}")
-    img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise UsageError(f"map file {path} is not an image OpenCV can read")
+    _check_cell(cell_m)
+    try:
+        width, height, data = pngmap.check(path)
+        w, h = _cells(path, width, height, cell_m)
+        img = pngmap.decode_gray(path, width, height, data)
+    except pngmap.PngError as exc:
+        raise UsageError(str(exc)) from None
     occ = img < 128
-    if abs(cell_m - CELL) > 1e-9:
-        h = max(1, round(img.shape[0] * cell_m / CELL))
-        w = max(1, round(img.shape[1] * cell_m / CELL))
+    if (h, w) != occ.shape:
         occ = cv2.resize(occ.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
-    if occ.shape[0] > 4000 or occ.shape[1] > 4000:
-        raise UsageError(f"map {path} is too large ({occ.shape[1]} x {occ.shape[0]} cells)")
     if walls:
         occ = occ.copy()
         occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True

@@ -55,7 +55,7 @@ def test_bad_map_is_a_clear_error(tmp_path):
     with pytest.raises(MapError, match="does not exist"):
         Walls.from_png(str(tmp_path / "none.png"), 0.05)
     (tmp_path / "x.png").write_text("not a picture")
-    with pytest.raises(MapError, match="not an image"):
+    with pytest.raises(MapError, match="is not a PNG"):
         Walls.from_png(str(tmp_path / "x.png"), 0.05)
 
 

@@ -77,9 +77,9 @@ def test_one_trace():
 
 
 def test_ticks_end_on_the_trace_end():
-    assert mobility.ticks(0.25, 0.1) == [0.0, 0.1, 0.2, 0.3]
-    assert mobility.ticks(0.3, 0.1) == [0.0, 0.1, 0.2, 0.3]
-    assert mobility.ticks(0.0, 0.1) == [0.0]
+    assert list(mobility.ticks(0.25, 0.1)) == [0.0, 0.1, 0.2, 0.3]
+    assert list(mobility.ticks(0.3, 0.1)) == [0.0, 0.1, 0.2, 0.3]
+    assert list(mobility.ticks(0.0, 0.1)) == [0.0]
 
 
 def test_feed_lines():
