@@ -209,6 +209,8 @@ def _table(laser, fx: np.float32, fy: np.float32, bias: int):
     """Laser.window_marks' table for a scan without hits from (fx, fy), as addresses: (sure
     mask, open dx, open dy, how many open), or None where window_marks would not use one."""
     cb, rb = int(fx), int(fy)
+    if not laser.tabled:  # a laser too long for its tables (node.rays) marks every sample
+        return None
     if not bias <= min(cb, rb) - laser.pad - 1 < max(cb, rb) + laser.pad + 1 < 2 * bias:
         return None
     size = _FRAC // _BUCKETS
