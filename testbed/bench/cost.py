@@ -252,14 +252,18 @@ def _median_of(runs: list[dict], key: str) -> float | None:
 def measure(tree: str = REPO, runs: int = RUNS) -> dict:
     floor = [in_process(seed) for seed in (2, 2, 2)]
     floor_ms = float(np.median([f["wall_ms_per_step"] for f in floor]))
+    floor_cpu = float(np.median([f["cpu_ms_per_step"] for f in floor]))
     cases = {}
     for label, robots, k, seed in CASES:
         rs = [testbed_run(robots, k, seed, tree) for _ in range(runs)]
         for r in rs:
-            if r["step_loop_wall_s"] and r["steps"]:
+            if robots == 1 and r["step_loop_wall_s"] and r["steps"]:
+                # The floor is one robot's: a lone run's wall time per step against it (the
+                # run's clock paces its steps, so this is 100 ms / K over the floor), and its
+                # machine CPU per step against the floor's.
                 per_step = r["step_loop_wall_s"] * 1000 / r["steps"]
-                # The run's clock waits for the step's deadline: compare its busy share.
                 r["stepping_over_in_process"] = round(per_step / floor_ms, 2)
+                r["cpu_over_in_process"] = round(r["cpu_ms_per_robot_step"] / floor_cpu, 2)
         kinds = sorted({k for r in rs for k in r["stepping_cpu_ms_per_robot_step"]})
         cases[label] = {
             "runs": rs,
