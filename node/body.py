@@ -9,8 +9,7 @@ without crossing the emulated network. Messages (one datagram each, network byte
     robot -> world  HELLO  'H' u16 robot u8 role (0 robot, 1 display)
     world -> robot  FRAME  'F' u32 step f32 x f32 y f32 theta f64 sent u16 n, then n float32
                            ranges (sent: the world's time.monotonic(), for latency stats)
-    world -> robot  END    'E' [u32 step]             (the run is over: finish and exit; the
-                                                       display is told the last step)
+    world -> robot  END    'E'                        (the run is over: finish and exit)
     robot -> world  CMD    'C' u32 step u8 go f32 x f32 y   (drive toward (x, y), or stop)
     robot -> world  DONE   'D' u32 step               (no reachable frontier left)
 
@@ -58,12 +57,6 @@ def frame(
 
 
 END = b"E"
-_END_AT = struct.Struct("!cI")
-
-
-def end(step: int) -> bytes:
-    """END carrying the run's last step (for the display, which gets only some frames)."""
-    return _END_AT.pack(b"E", step)
 
 
 def cmd(step: int, target: tuple[float, float] | None) -> bytes:
@@ -94,8 +87,6 @@ def parse(data: bytes):
             ranges = np.frombuffer(body, dtype=">f4").astype(np.float32)
             return ("frame", Frame(step, x, y, theta, ranges, sent))
         if t == b"E":
-            if len(data) == _END_AT.size:
-                return ("end", _END_AT.unpack(data)[1])
             return ("end",)
         if t == b"C":
             _, step, go, x, y = _CMD.unpack(data)

@@ -7,8 +7,6 @@ and records each robot's position from its floods; every `map_period` steps it f
 beacon so that robots notice when it comes back into reach (and send it their whole maps).
 Visualization renders the merged map with the robots' paths (node.render): a video
 frame every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
-The world sends the display a frame only at the steps where it has work (those, and every
-`map_period` steps for its beacon), and tells it the last step with END.
 """
 
 from __future__ import annotations
@@ -104,8 +102,6 @@ class Display:
             if msg is None:
                 continue
             if msg[0] == "end":
-                if len(msg) > 1:  # the run's last step: the final snapshot's
-                    self.step = msg[1]
                 return
             if msg[0] != "frame":
                 continue

@@ -177,7 +177,7 @@ class Run:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
                 self.parts.mark("steps")
-                self._end_processes(started, loop.clock.step)
+                self._end_processes(started)
             self.parts.mark("network_down")
         except (TestbedError, ForkServerError) as e:
             status = ("error", str(e).splitlines()[0] if str(e) else type(e).__name__)
@@ -303,14 +303,13 @@ class Run:
 
     # -- finish -------------------------------------------------------------------------------
 
-    def _end_processes(self, started: Started, last_step: int) -> None:
-        """Tell everyone the run is over (the display: at which step) and give them a moment
-        to write their logs."""
+    def _end_processes(self, started: Started) -> None:
+        """Tell everyone the run is over and give them a moment to write their logs."""
         server = started.server
         for k, r in self.robots.items():
             if not r.crashed:
                 server.send(k, body.END)
-        server.send(self.prep.display_k, body.end(last_step), True)
+        server.send(self.prep.display_k, body.END, True)
         deadline = time.monotonic() + END_GRACE_S
         live = [r.proc for r in self.robots.values() if not r.crashed] + [started.display_proc]
         for p in live:
@@ -367,7 +366,6 @@ class StepLoop:
             kills.setdefault(s, []).append(k)
         self.kills = kills
         self.timing = StepTiming()
-        self.snapshots = frozenset(prep.snapshots)
         self.progress = ProgressLine(progress, prep.cfg.max_steps, self.n)
         self.positions: list = []  # the robots' positions at the last step
         self.scans = [self.world.scan(i) for i in range(self.n)]
@@ -475,19 +473,8 @@ class StepLoop:
                 continue
             b = self.world.bodies[k - 1]
             self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
-        if self._display_due(step):
-            x, y = self.prep.display_pos
-            self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None, now), True)
-
-    def _display_due(self, step: int) -> bool:
-        """Whether the display has work at `step` (node.display: a beacon every map period, a
-        video frame every `video_every` steps, the snapshots); it gets frames only then, and
-        the run's last step with END: a process woken every step for nothing costs as much
-        as a robot's work."""
-        cfg = self.prep.cfg
-        return (
-            step % cfg.map_period == 0 or step % NodeArgs.video_every == 0 or step in self.snapshots
-        )
+        x, y = self.prep.display_pos
+        self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None, now), True)
 
     def _show_progress(self, coverage: float) -> None:
         now = time.monotonic()
