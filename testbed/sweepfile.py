@@ -67,8 +67,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
-import os
-import stat
 import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -76,6 +74,7 @@ from pathlib import Path
 from testbed.errors import UsageError
 from testbed.runconfig import BY_NAME, OPTIONS, RunConfig
 from testbed.runoptions import GRID, RUN, Option, check_value
+from topology import boundedfile
 from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
@@ -342,29 +341,20 @@ def _read_text(path: Path) -> str:
     """The file's text: a regular UTF-8 file of at most MAX_FILE_BYTES (a FIFO or a device
     is refused without waiting on it)."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as e:
-        raise UsageError(f"sweep file {path}: cannot read: {e.strerror}") from None
-    try:
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise UsageError(f"sweep file {path}: is a directory")
-        if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_FILE_BYTES:
+        data = boundedfile.read(path, MAX_FILE_BYTES)
+    except boundedfile.Refused as r:
+        if r.kind == "directory":
+            raise UsageError(f"sweep file {path}: is a directory") from None
+        if r.kind in ("special", "too_big"):
             raise UsageError(f"sweep file {path}: not a regular file of at most "
-                             f"{MAX_FILE_BYTES >> 20} MiB")  # fmt: skip
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as e:
-        raise UsageError(f"sweep file {path}: cannot read: {e.strerror}") from None
-    finally:
-        os.close(fd)
+                             f"{MAX_FILE_BYTES >> 20} MiB") from None  # fmt: skip
+        why = r.detail if r.kind == "unreadable" else "No such file or directory"
+        raise UsageError(f"sweep file {path}: cannot read: {why}") from None
     try:
         text = data.decode()
     except UnicodeDecodeError as e:
         raise UsageError(f"sweep file {path}: not a text file (UTF-8 TOML): byte "
                          f"{e.start} is 0x{data[e.start]:02x}") from None  # fmt: skip
-    if len(data) > MAX_FILE_BYTES:
-        raise UsageError(f"sweep file {path}: more than {MAX_FILE_BYTES >> 20} MiB")
     return text
 
 

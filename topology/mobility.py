@@ -54,12 +54,11 @@ from __future__ import annotations
 
 import bisect
 import math
-import os
 import re
-import stat
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
+from topology import boundedfile
 from topology.names import MAX_ROBOTS
 
 Position = tuple[float, float]
@@ -335,31 +334,27 @@ def parse(text: str, where: str = "trace") -> Trace:
     return parse_one(text, where)
 
 
+def _refusal(path: str, r: boundedfile.Refused) -> str:
+    """The one line that says why trace file `path` was not read."""
+    if r.kind == "missing":
+        return f"{path}: No such file or directory"
+    if r.kind == "directory":
+        return f"{path}: is a directory, not a trace file"
+    if r.kind == "special":
+        return f"{path}: not a regular file (a trace is read from a file, not a pipe or a device)"
+    if r.kind == "too_big":
+        return (f"{path}: {int(r.detail) >> 20} MiB, over the limit of "
+                f"{MAX_FILE_BYTES >> 20} MiB for a trace")  # fmt: skip
+    return f"{path}: {r.detail}"
+
+
 def load(path: str) -> Trace:
     """Parse the trace in file `path`: a regular file of at most MAX_FILE_BYTES, opened
     without blocking (a FIFO is refused, not waited on)."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise TraceError(f"{path}: {exc.strerror}") from None
-    try:
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise TraceError(f"{path}: is a directory, not a trace file")
-        if not stat.S_ISREG(st.st_mode):
-            raise TraceError(f"{path}: not a regular file (a trace is read from a file, not "
-                             "a pipe or a device)")  # fmt: skip
-        if st.st_size > MAX_FILE_BYTES:
-            raise TraceError(f"{path}: {st.st_size >> 20} MiB, over the limit of "
-                             f"{MAX_FILE_BYTES >> 20} MiB for a trace")  # fmt: skip
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise TraceError(f"{path}: {exc.strerror}") from None
-    finally:
-        os.close(fd)
-    if len(data) > MAX_FILE_BYTES:  # grew while we read it
-        raise TraceError(f"{path}: over the limit of {MAX_FILE_BYTES >> 20} MiB for a trace")
+        data = boundedfile.read(path, MAX_FILE_BYTES)
+    except boundedfile.Refused as r:
+        raise TraceError(_refusal(path, r)) from None
     try:
         text = data.decode()
     except UnicodeDecodeError:

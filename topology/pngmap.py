@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import stat
 import struct
 import sys
 import zlib
 
 import numpy as np
+
+from topology import boundedfile
 
 MAX_MAP_PIXELS = 16_000_000
 # The largest such picture stored uncompressed at 16 bits per channel (RGBA), and a margin.
@@ -44,32 +45,29 @@ class PngError(ValueError):
 def check(path: str, max_pixels: int = MAX_MAP_PIXELS) -> tuple[int, int, bytes]:
     """(width, height, the file's bytes) of a PNG that passes steps 1 to 3; PngError if not."""
     what = f"map file {path}"
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except FileNotFoundError:
-        raise PngError(f"{what} does not exist") from None
-    except OSError as exc:
-        raise PngError(f"{what}: {exc.strerror}") from None
-    try:
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise PngError(f"{what} is a directory, not a PNG")
-        if not stat.S_ISREG(st.st_mode):
-            raise PngError(f"{what} is not a regular file (a pipe or a device?)")
-        if st.st_size > MAX_FILE_BYTES:
-            raise PngError(f"{what} is {st.st_size >> 20} MiB, more than a map of "
-                           f"{max_pixels:,} pixels can take")  # fmt: skip
-        head = os.pread(fd, 33, 0)
-        width, height = _ihdr(head, what)
+    size: list[int] = []
+
+    def header(fd: int, _st) -> None:  # the picture's size, before its bytes are read
+        width, height = _ihdr(os.pread(fd, 33, 0), what)
         if width * height > max_pixels:
             raise PngError(f"{what} is {width} x {height} pixels, more than the "
                            f"{max_pixels:,} a map may have")  # fmt: skip
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise PngError(f"{what}: {exc.strerror}") from None
-    finally:
-        os.close(fd)
+        size[:] = [width, height]
+
+    try:
+        data = boundedfile.read(path, MAX_FILE_BYTES, header)
+    except boundedfile.Refused as r:
+        if r.kind == "missing":
+            raise PngError(f"{what} does not exist") from None
+        if r.kind == "directory":
+            raise PngError(f"{what} is a directory, not a PNG") from None
+        if r.kind == "special":
+            raise PngError(f"{what} is not a regular file (a pipe or a device?)") from None
+        if r.kind == "too_big":
+            raise PngError(f"{what} is {int(r.detail) >> 20} MiB, more than a map of "
+                           f"{max_pixels:,} pixels can take") from None  # fmt: skip
+        raise PngError(f"{what}: {r.detail}") from None
+    width, height = size
     _check_chunks(data, what)
     return width, height, data
 
