@@ -12,8 +12,9 @@ Five threads:
   nearest reachable frontier not within laser range of a reachable teammate's goal), makes it
   the current plan and announces the goal to reachable teammates over nanomsg; with no
   reachable frontier left the robot has finished and tells its body so;
-- timer: counts steps; asks for a plan when 20 steps passed since the last one, and floods
-  the robot's local map every `map_period` steps;
+- timer: asks for a plan when 20 steps passed since the last one, and floods the robot's
+  local map every `map_period` steps (motion control counts the steps and evaluates that
+  rule as it answers each frame, and wakes the timer only for a step with work: `_tick`);
 - message processing: merges maps, records teammates' goals, settles goal conflicts (the
   winner by priority asks the loser to re-plan; the loser re-plans on that request);
 - inbox: receives from the network (UDP floods, relayed on the way; nanomsg TCP) and hands
