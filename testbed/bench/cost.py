@@ -136,31 +136,37 @@ def _split(samples, root: int, t0: float, t1: float) -> tuple[dict, dict]:
     return inside, outside
 
 
-def _robot_threads(out: str, n: int) -> dict[str, float]:
-    total: dict[str, float] = {}
+def _robots(out: str, n: int) -> list[tuple[dict, str]]:
+    """Each robot's robots/rK.json (read once) and the path of its event log."""
+    found = []
     for k in range(1, n + 1):
         try:
             with open(os.path.join(out, "robots", f"r{k}.json")) as f:
-                d = json.load(f)
+                found.append((json.load(f), os.path.join(out, "robots", f"r{k}.events.jsonl")))
         except (OSError, ValueError):
             continue
+    return found
+
+
+def _robot_threads(robots: list[tuple[dict, str]]) -> dict[str, float]:
+    total: dict[str, float] = {}
+    for d, _ in robots:
         for part, s in (d.get("thread_cpu_s") or {}).items():
             total[part] = total.get(part, 0.0) + s
     return total
 
 
-def _plans_and_frames(out: str, n: int) -> tuple[list[float], list[dict]]:
+def _plans_and_frames(robots: list[tuple[dict, str]]) -> tuple[list[float], list[dict]]:
     plan_ms, frames = [], []
-    for k in range(1, n + 1):
+    for d, events in robots:
+        frames.append(d.get("latency_ms") or {})
         try:
-            with open(os.path.join(out, "robots", f"r{k}.events.jsonl")) as f:
+            with open(events) as f:
                 for line in f:
                     if '"plan"' in line:
                         e = json.loads(line)
                         if e.get("e") == "plan" and "ms" in e:
                             plan_ms.append(float(e["ms"]))
-            with open(os.path.join(out, "robots", f"r{k}.json")) as f:
-                frames.append(json.load(f).get("latency_ms") or {})
         except (OSError, ValueError):
             continue
     return plan_ms, frames
@@ -188,8 +194,9 @@ def testbed_run(robots: int, time_scale: float, seed: int, tree: str) -> dict:
         with open(os.path.join(out, "clock.csv")) as f:
             lines = f.read().split()[1:]
         t0, t1 = float(lines[0].split(",")[1]), float(lines[-1].split(",")[1])
-        robot_threads = _robot_threads(out, robots)
-        plan_ms, frames = _plans_and_frames(out, robots)
+        found = _robots(out, robots)
+        robot_threads = _robot_threads(found)
+        plan_ms, frames = _plans_and_frames(found)
     except (OSError, ValueError, IndexError) as e:
         shutil.rmtree(out, ignore_errors=True)
         raise RuntimeError(f"run failed ({e}): {err.decode()[-500:]}") from None
