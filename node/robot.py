@@ -32,7 +32,6 @@ import logging
 import math
 import os
 import queue
-import resource
 import threading
 import time
 from collections import Counter, deque
@@ -50,6 +49,20 @@ from node.rays import _BIAS, Laser
 from node.timing import RobotTimings
 
 log = logging.getLogger(__name__)
+
+
+def peak_rss_mb() -> float | None:
+    """This process's peak resident memory (VmHWM), in MiB.
+
+    Not getrusage's ru_maxrss: Linux carries that across fork and exec, so a robot started
+    from a large parent would report the parent's peak as its own."""
+    try:
+        with open("/proc/self/status") as f:
+            kb = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+    except (OSError, StopIteration, ValueError):
+        return None
+    return round(kb / 1024, 1)
+
 
 FLOOD, MESSAGE = "flood", "message"  # what the inbox hands message processing
 STOP = "stop"  # put in the queues by stop()
@@ -285,7 +298,7 @@ class Robot:
             inbox_dropped=self.inbox_dropped,
             plan_ms_median=float(np.median(self.plan_ms)) if self.plan_ms else None,
             cpu_s=round(time.process_time(), 3),
-            max_rss_mb=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            max_rss_mb=peak_rss_mb(),
             busy_s={k: round(v, 3) for k, v in self.busy.items()},
             thread_cpu_s=thread_cpu,
             lateness={k: v.as_dict() for k, v in self.lateness.items()},
