@@ -6,7 +6,8 @@ wall clock, so every duration that belongs to emulated time is divided by K, her
 here: the robot's parts take their durations from a `RobotTimings`, never from the time
 scale. Durations that are the machine's, not the emulated world's (a thread's switch
 interval, a poll's timeout while nothing happens), are not scaled and do not live here.
-The world's side of the same clock (testbed.run) imports STEP_S from this module.
+The world's side of the same clock (testbed.stepclock, and the run's config and fidelity
+verdict) imports STEP_S from this module.
 """
 
 from __future__ import annotations
@@ -38,11 +39,6 @@ class RobotTimings:
             raise ValueError(f"time_scale must be a finite number > 0, not {self.time_scale}")
         if self.map_period < 1:
             raise ValueError(f"map_period must be >= 1, not {self.map_period}")
-
-    @property
-    def step_s(self) -> float:
-        """Wall seconds per step."""
-        return STEP_S / self.time_scale
 
     @property
     def step_order_wait_s(self) -> float:

@@ -134,7 +134,7 @@ def check_machine(spec: NetworkSpec) -> None:
     """Root, the tools, a free testbed name and the kernel features the impairments need;
     UsageError if not."""
     from topology import state
-    from topology.impair import kernel_has_netem
+    from topology.impair import kernel_has_netem, missing_feature
     from topology.network import preflight
 
     preflight(spec)
@@ -143,14 +143,9 @@ def check_machine(spec: NetworkSpec) -> None:
     imp = spec.impairment
     if imp.is_none:
         return
-    netem = kernel_has_netem()
-    if (imp.delay_ms > 0 or imp.jitter_ms > 0) and not netem:
-        raise UsageError(
-            "--delay needs the sch_netem kernel module, which this kernel lacks (--loss works "
-            "without it; `make vm-test` runs netem under a stock kernel)"
-        )
-    if not netem and shutil.which("nft") is None:
-        raise UsageError("--loss without sch_netem needs nftables: `nft` is not installed")
+    missing = missing_feature(imp, kernel_has_netem(), shutil.which("nft") is not None)
+    if missing:
+        raise UsageError(missing)
 
 
 def check_view(bind: str) -> None:

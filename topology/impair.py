@@ -27,6 +27,7 @@ import errno
 import functools
 import logging
 import math
+import shutil
 import subprocess
 from dataclasses import dataclass
 
@@ -46,6 +47,21 @@ TBF_LATENCY_US = 50_000
 
 class MissingKernelFeature(RuntimeError):
     """The kernel lacks something an impairment needs; the message names the module."""
+
+
+def missing_feature(imp: Impairment, netem: bool, nft: bool) -> str | None:
+    """What this machine lacks to apply `imp` (one line for the user), or None: the one rule
+    of which impairment needs what. Delay and jitter need sch_netem; loss needs sch_netem or
+    else nftables (a rule in the medium namespace's bridge table); a rate limit needs only
+    tbf, which every kernel has."""
+    if (imp.delay_ms > 0 or imp.jitter_ms > 0) and not netem:
+        return (
+            "delay and jitter (--delay, --jitter) need the sch_netem kernel module, which this "
+            "kernel lacks (loss works without it; `make vm-test` runs netem under a stock kernel)"
+        )
+    if imp.loss_pct > 0 and not netem and not nft:
+        return "loss (--loss) without sch_netem needs nftables: `nft` is not installed"
+    return None
 
 
 @functools.cache
@@ -251,12 +267,10 @@ class Impairer:
         return self._netem
 
     def check(self, imp: Impairment) -> None:
-        """Raise MissingKernelFeature if this kernel cannot apply `imp`."""
-        if (imp.delay_ms > 0 or imp.jitter_ms > 0) and not self.netem:
-            raise MissingKernelFeature(
-                "delay and jitter need the sch_netem kernel module, which this kernel lacks "
-                "(loss works without it; run `make vm-test` for netem under a stock kernel)"
-            )
+        """Raise MissingKernelFeature if this machine cannot apply `imp` (missing_feature)."""
+        missing = missing_feature(imp, self.netem, shutil.which("nft") is not None)
+        if missing:
+            raise MissingKernelFeature(missing)
 
     def apply(self, ifname: str, imp: Impairment) -> None:
         old = self.have.get(ifname, Impairment())

@@ -151,8 +151,6 @@ class Network:
                 self.medium.impairer.check(self.spec.impairment)
             except MissingKernelFeature as exc:
                 raise UsageError(str(exc)) from None
-            if not self.medium.impairer.netem and shutil.which("nft") is None:
-                raise UsageError("loss without sch_netem needs nftables: `nft` is not installed")
         # The kernel brings new veths' carriers up in the background (linkwatch): links first,
         # then the robots' interfaces meanwhile; _apply_positions waits for the links before
         # switching them on. The robots' namespaces are made in a thread meanwhile: both are

@@ -47,11 +47,6 @@ class Impairment:
     def is_none(self) -> bool:
         return not (self.loss_pct or self.delay_ms or self.jitter_ms or self.rate_kbit)
 
-    @property
-    def needs_netem(self) -> bool:
-        """Loss alone can go through nftables; anything timed needs sch_netem."""
-        return self.delay_ms > 0 or self.jitter_ms > 0 or self.rate_kbit > 0
-
     def scaled(self, time_scale: float) -> "Impairment":
         """Emulated time runs time_scale times faster than the wall clock: so do delays."""
         if time_scale == 1.0:

@@ -1,4 +1,4 @@
-"""What perfect links get wrong: the same runs on veth and on ns-3's 802.11 channel (issue 22).
+"""What perfect links get wrong: the same runs on veth and on ns-3's 802.11 channel.
 
 Theory of operation
 -------------------

@@ -1,4 +1,4 @@
-"""Routing protocols compared on the same exploration workload (issue 12), against the oracle.
+"""Routing protocols compared on the same exploration workload, against the oracle.
 
 Theory of operation
 -------------------

@@ -1,4 +1,4 @@
-"""Benchmark of the AODV daemon (issue 3), at time scale 1.
+"""Benchmark of the AODV daemon, at time scale 1.
 
 - discovery: on a 9-robot chain (8 m apart, range 10 m), robot 1 sends one UDP datagram to
   robot h+1 for h = 1..8, in that order, on a fresh testbed per repetition (median of

@@ -9,7 +9,7 @@
   namespace's devices in the background after that (cleanup_net) and, while it does, new
   namespaces are slow to create; each bring-up therefore starts SETTLE_S after the last
   teardown, so that it is measured on its own.
-Targets (issue 2): bring-up <= 15 ms per robot at 50 robots; link update <= 2 ms median.
+Targets: bring-up <= 15 ms per robot at 50 robots; link update <= 2 ms median.
 """
 
 import os

@@ -1,4 +1,4 @@
-"""Benchmark of the robot application and the world (issue 4).
+"""Benchmark of the robot application and the world.
 
 - plan generation: one robot explores the empty 20 x 20 m terrain in-process (the world, the
   robot's log-odds map and planner, no network), planning every 20 steps as a robot does;

@@ -3,8 +3,8 @@
 - re-route: robots 1 - 2 - 3 in a line (8 m apart, range 10 m); robot 2 steps out of range
   and back, REPEATS times each way. From Network.move() returning to robot 3's kernel
   holding (or no longer holding) its route to robot 1, read with a netlink route lookup in
-  robot 3's namespace; and the whole move (links switched, routes installed). Target (issue
-  12): under 5 ms, median.
+  robot 3's namespace; and the whole move (links switched, routes installed). Target:
+  under 5 ms, median.
 - keep-up: 10 robots walking to random waypoints at 1 m/s on a 20 x 20 m map, range 5 m,
   one world step (0.1 s of robot time) every 0.1 / 15 s as at time scale 15, for STEPS
   steps. Per step with a link change: the time to switch the links and install every

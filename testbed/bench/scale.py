@@ -18,7 +18,7 @@ robots (pairs reached, memory, idle CPU), and the position feed's rate.
   updates applied (links updated) per second; and the latency of one move_many of one robot
   (the cost of an unbatched update). A link met for the first time costs a veth pair (a few
   ms of kernel work, topology.medium), so teleports anywhere would be slower.
-Goals (issue 23): bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardown of 1000
+Goals: bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardown of 1000
 <= 10 s, every pair reached, >= 1000 feed updates per second.
 """
 

@@ -1,7 +1,7 @@
 """Benchmark of the live view's cost to a run: the same 3-robot run (seed, time scale 10)
 REPEATS times with `--view` and a client reading the stream as a browser would, and
 REPEATS times without, alternating; the median fraction of step deadlines missed outside
-host stalls of each. Target (issue 15): with the view within 0.5 percentage points of
+host stalls of each. Target: with the view within 0.5 percentage points of
 without.
 """
 

@@ -1,5 +1,5 @@
 """`testbed run` as a user runs it: the directory it writes into, bad input as one line
-before anything exists, and what it says at the end (issue 24, defects 1, 4 and 8)."""
+before anything exists, and what it says at the end."""
 
 import json
 import os

@@ -3,7 +3,16 @@ the requests that take a link end from what it has to that."""
 
 import pytest
 
-from topology.impair import CLEAR, Plan, TcRequest, plan, tc_diff, tc_rate, wanted_qdiscs
+from topology.impair import (
+    CLEAR,
+    Plan,
+    TcRequest,
+    missing_feature,
+    plan,
+    tc_diff,
+    tc_rate,
+    wanted_qdiscs,
+)
 from topology.spec import Impairment
 
 
@@ -110,3 +119,16 @@ def test_a_rate_limits_queue_holds_the_same_emulated_time_at_every_scale():
         assert fast["rate"] == "1000000bit"
     tc = plan("l1x2", Impairment(), imp, False, 10.0).tc
     assert tc[-1].qdisc.kwargs()["latency"] == 5_000
+
+
+def test_what_each_impairment_needs_from_the_kernel_is_one_rule():
+    delay, jitter = Impairment(delay_ms=5), Impairment(jitter_ms=1)
+    loss, rate = Impairment(loss_pct=10), Impairment(rate_kbit=500)
+    for imp in (delay, jitter):  # timed: netem or nothing
+        assert "sch_netem" in missing_feature(imp, netem=False, nft=True)
+        assert missing_feature(imp, netem=True, nft=False) is None
+    assert missing_feature(loss, netem=False, nft=True) is None  # nftables' random drop
+    assert "nftables" in missing_feature(loss, netem=False, nft=False)
+    assert missing_feature(loss, netem=True, nft=False) is None
+    assert missing_feature(rate, netem=False, nft=False) is None  # tbf is everywhere
+    assert missing_feature(Impairment(), netem=False, nft=False) is None

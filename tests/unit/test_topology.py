@@ -57,8 +57,7 @@ def test_impairment_validation_scaling_and_combination():
     assert (fast.delay_ms, fast.jitter_ms, fast.rate_kbit, fast.loss_pct) == (10, 0.8, 500, 10)
     both = Impairment(loss_pct=10).combined(Impairment(loss_pct=20, rate_kbit=50))
     assert both.loss_pct == pytest.approx(28.0) and both.rate_kbit == 50
-    assert Impairment().is_none and not Impairment(loss_pct=1).needs_netem
-    assert Impairment(delay_ms=1).needs_netem
+    assert Impairment().is_none and not Impairment(loss_pct=1).is_none
 
 
 def test_layouts():
