@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import re
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 from node import coordination
 from node.flood import MODES as FLOOD_MODES
@@ -19,7 +20,7 @@ from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
 from testbed.errors import UsageError
-from testbed.runoptions import GRID, RUN, option
+from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import (
     AODV_PROFILES,
@@ -54,6 +55,24 @@ def _steps(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"{text!r} is not a list of steps") from None
 
 
+EMPTY_MAP = "empty"  # how run ids and sweep files name the paper's empty terrain
+
+
+def fmt(x: float) -> str:
+    """A number as it appears in run ids: 10.0 -> '10', 1.5 -> '1.5'."""
+    return f"{x:g}"
+
+
+def map_label(m: str | None) -> str:
+    """The name a map has in run ids: `empty`, or the file's stem (letters and digits)."""
+    return EMPTY_MAP if m is None else "".join(ch for ch in Path(m).stem if ch.isalnum())
+
+
+def medium_label(medium: str) -> str:
+    """The name a medium has in run ids: its letters and digits (`veth`, `ns3wifi`)."""
+    return "".join(ch for ch in medium if ch.isalnum())
+
+
 STEP_S_TEXT = f"{STEP_S:g} s"
 SEED_HELP = (
     "random seed of the start positions and the robots' timer phases; it makes a lone "
@@ -68,12 +87,15 @@ class RunConfig:
     testbed.runoptions): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
 
     robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=50, metavar="N",
-                         sweep={GRID})  # fmt: skip
+                         sweep={GRID},
+                         grid=GridDim(0, lambda n: f"n{n:02d}", seeded=True))  # fmt: skip
     comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
-                               sweep={GRID}, net=True)  # fmt: skip
+                               sweep={GRID}, net=True,
+                               grid=GridDim(1, lambda r: f"c{fmt(r)}", seeded=True))  # fmt: skip
     laser_range: float = option(float, f"laser range, at most {MAX_LASER_RANGE_M:g} m and the "
                                 "map's diagonal", 2.0, unit="metres", above=0,
-                                maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID})  # fmt: skip
+                                maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID},
+                                grid=GridDim(2, lambda r: f"l{fmt(r)}", seeded=True))  # fmt: skip
     seed: int = option(int, SEED_HELP, 1, minimum=0, metavar="S")
     time_scale: float = option(
         float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "
@@ -81,7 +103,7 @@ class RunConfig:
         metavar="K", sweep={RUN}, net=True,
     )  # fmt: skip
     routing: str = option(str, "routing protocol", "aodv", choices=ROUTINGS,
-                          sweep={GRID, RUN}, net=True)  # fmt: skip
+                          sweep={GRID, RUN}, net=True, grid=GridDim(7, str, VARIED))  # fmt: skip
     aodv_profile: str = option(
         str, "AODV parameters (routing aodv): rfc, RFC 3561 section 10, or ns3, ns-3's "
         "defaults", "rfc", choices=AODV_PROFILES, sweep={RUN}, newer=True, net=True,
@@ -89,13 +111,17 @@ class RunConfig:
     map: str | None = option(
         str, "PNG map: dark pixels are obstacles, and walls for the los range models", None,
         metavar="PNG", default_text="an empty 20 x 20 m terrain", sweep={GRID, RUN},
+        grid=GridDim(8, lambda m: f"m{map_label(m)}", VARIED),
     )  # fmt: skip
     loss_pct: float = option(float, "packet loss on every link", 0.0, unit="percent",
                              minimum=0, maximum=100, metavar="PCT", cli="--loss",
-                             sweep={GRID}, net=True)  # fmt: skip
+                             sweep={GRID}, net=True,
+                             grid=GridDim(3, lambda p: f"p{fmt(p)}", NONZERO,
+                                          seeded=True))  # fmt: skip
     delay_ms: float = option(float, "delay on every link, with sch_netem", 0.0, unit="ms",
-                             minimum=0, metavar="MS", cli="--delay", sweep={GRID},
-                             net=True)  # fmt: skip
+                             minimum=0, metavar="MS", cli="--delay", sweep={GRID}, net=True,
+                             grid=GridDim(4, lambda d: f"d{fmt(d)}", NONZERO,
+                                          seeded=True))  # fmt: skip
     range_model: str = option(
         str, "radio: disc (the paper's), lossy, los (the map's walls block the radio), "
         "los-lossy", "disc", choices=RANGE_MODELS, sweep={RUN}, newer=True, net=True,
@@ -108,7 +134,7 @@ class RunConfig:
     medium: str = option(
         str, "radio medium: veth, perfect links switched by range, or ns3-wifi, ns-3's "
         "802.11 ad hoc channel (docs/ns3-medium.md)", "veth", choices=MEDIA,
-        sweep={GRID, RUN}, newer=True, net=True,
+        sweep={GRID, RUN}, newer=True, net=True, grid=GridDim(9, medium_label, VARIED),
     )  # fmt: skip
     wifi_loss: str = option(
         str, "ns3-wifi propagation: range, a cut-off at the radio range, or logdistance",
@@ -128,11 +154,12 @@ class RunConfig:
     coordination: str = option(
         str, "goal coordination: 'paper' reads the paper's rules literally, 'ours' departs "
         "from them where the text is silent; see README, 'Coordination'", coordination.DEFAULT,
-        choices=coordination.MODES, sweep={GRID},
+        choices=coordination.MODES, sweep={GRID}, grid=GridDim(5, str, CHANGED),
     )  # fmt: skip
     start: str = option(str, "start placement: clustered near a corner (as in the paper), "
                         "clustered at the centre, or spread over the map", "corner",
-                        choices=START_PLACEMENTS, sweep={GRID})  # fmt: skip
+                        choices=START_PLACEMENTS, sweep={GRID},
+                        grid=GridDim(6, str, CHANGED))  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip

@@ -11,7 +11,9 @@ one table from which are made:
   field's, such as `--speed` in m/s for a field in metres per step, are converted here);
 - the argv that parses back into a given config (`to_argv`), which a sweep hands each run;
 - the checks of a sweep file's `[run]` values and `[grid]` lists (`check_value`), for the
-  options marked `sweep`.
+  options marked `sweep`; and for those a sweep may vary, their `GridDim`: where they sit in
+  the grid, their part of a run's id and whether they feed its seed (testbed.sweepfile
+  expands a grid from these alone).
 
 A unit test holds the loop table -> argparse -> RunConfig -> argv -> argparse closed, as
 node/launch.py's `NodeArgs` test does for the robot's command line.
@@ -30,6 +32,25 @@ from topology.argtypes import number
 
 GRID = "grid"  # a sweep file may vary the option in [grid]
 RUN = "run"  # a sweep file may fix the option in [run]
+
+# When a grid dimension's part of a run id is shown (GridDim.shown):
+ALWAYS = "always"
+NONZERO = "nonzero"  # an impairment: only when there is one
+CHANGED = "changed"  # only when not the option's default
+VARIED = "varied"  # only when the sweep file makes the option a grid dimension
+
+
+@dataclass(frozen=True)
+class GridDim:
+    """How an option that a sweep file may vary (`sweep={GRID}`) takes part in a sweep: its
+    place in the grid (the nesting of the expansion, and the order of run ids' parts), its
+    part of a run's id and when that part is shown, and whether it feeds the run's seed
+    (the variants of a point that do not are compared on the same random draws)."""
+
+    order: int
+    label: Callable[[Any], str]  # the id part, e.g. 5.0 -> "c5"
+    shown: str = ALWAYS
+    seeded: bool = False
 
 
 @dataclass(frozen=True)
@@ -58,6 +79,7 @@ class Option:
     newer: bool = False
     net: bool = False  # `testbed net up` takes it too
     cli: str | None = None  # the flag, when not --name-with-dashes
+    grid: GridDim | None = None  # with sweep={GRID}: how it varies in a sweep
 
     @property
     def flag(self) -> str:
@@ -104,6 +126,8 @@ def options(config_class) -> tuple[Option, ...]:
         required = f.default is dataclasses.MISSING
         meta = dict(f.metadata["option"])
         meta["sweep"] = frozenset(meta.get("sweep", ()))
+        if (GRID in meta["sweep"]) != (meta.get("grid") is not None):
+            raise TypeError(f"option {f.name}: sweep={{GRID}} and grid=GridDim(...) go together")
         out.append(Option(name=f.name, default=None if required else f.default,
                           required=required, **meta))  # fmt: skip
     return tuple(out)

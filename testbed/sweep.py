@@ -159,13 +159,13 @@ def _check_maps(spec: sweepfile.SweepSpec) -> None:
     from testbed.runprepare import check_laser
     from testbed.world.worldmap import CELL, empty_terrain, png_cells
 
-    for m in dict.fromkeys(spec.maps or (spec.map,)):
+    for m in dict.fromkeys(spec.values("map")):
         if m is None:
             size_m = empty_terrain().size_m
         else:
             cols, rows = png_cells(m, RunConfig.map_cell)
             size_m = (cols * CELL, rows * CELL)
-        for laser in spec.laser_range:
+        for laser in spec.values("laser_range"):
             try:
                 check_laser(laser, size_m)
             except UsageError as exc:
@@ -221,7 +221,7 @@ def main(args: argparse.Namespace) -> int:
                     "use a new directory"
                 )
     jobs = auto_jobs(runs) if args.jobs == "auto" else args.jobs or default_jobs()
-    netem = kernel_has_netem() if any(d > 0 for d in spec.delay_ms) else False
+    netem = kernel_has_netem() if any(d > 0 for d in spec.values("delay_ms")) else False
     out.mkdir(parents=True, exist_ok=True)
     (out / "runs").mkdir(exist_ok=True)
     lock = open(out / ".sweep.lock", "w")  # noqa: SIM115 (held for the process lifetime)

@@ -68,71 +68,83 @@ import hashlib
 import itertools
 import math
 import tomllib
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from testbed.errors import UsageError
-from testbed.runconfig import BY_NAME, OPTIONS, RunConfig
-from testbed.runoptions import GRID, RUN, Option, check_value
+from testbed.runconfig import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
+from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
 from topology import boundedfile
 from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
 # The run options a sweep file may vary or fix (RunConfig fields marked so), and its own keys:
 # grid.runs, run.seed (the base of every derived seed), run.load_limit (testbed.sweep).
-_GRID_OPTIONS = tuple(opt for opt in OPTIONS if GRID in opt.sweep)
+# The grid's dimensions in their order (GridDim.order): the nesting of the expansion, the
+# order of a run id's parts and of a point's values.
+_GRID_OPTIONS = tuple(sorted((opt for opt in OPTIONS if GRID in opt.sweep),
+                             key=lambda opt: opt.grid.order))  # fmt: skip
+GRID_NAMES = tuple(opt.name for opt in _GRID_OPTIONS)
 _RUN_OPTIONS = tuple(opt for opt in OPTIONS if RUN in opt.sweep)
 _GRID_KEYS = {opt.name for opt in _GRID_OPTIONS} | {"runs"}
 _RUN_KEYS = {opt.name for opt in _RUN_OPTIONS} | {"seed", "load_limit"}
 _GRID_REQUIRED = ("robots", "comm_range", "laser_range")
-# Grid keys stored under another name in SweepSpec (the [run] value keeps the name).
-_GRID_FIELD = {"routing": "routings", "map": "maps", "medium": "media"}
-EMPTY_MAP = "empty"  # grid.map: the paper's empty terrain
-_DEFAULT = RunConfig(robots=1, comm_range=1.0)
+_DEFAULT = RunConfig(robots=1, comm_range=1.0)  # the required fields always come from the grid
 MAX_RUNS = 10_000
 MAX_FILE_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
 class SweepSpec:
-    """A validated sweep file."""
+    """A validated sweep file: the grid's dimensions with their values, and a base config
+    holding [run]'s values (every run is the base with one value of each dimension)."""
 
-    robots: tuple[int, ...]
-    comm_range: tuple[float, ...]
-    laser_range: tuple[float, ...]
-    loss_pct: tuple[float, ...] = (_DEFAULT.loss_pct,)
-    delay_ms: tuple[float, ...] = (_DEFAULT.delay_ms,)
-    coordination: tuple[str, ...] = (_DEFAULT.coordination,)
-    start: tuple[str, ...] = (_DEFAULT.start,)
+    grid: tuple[tuple[str, tuple], ...]  # (RunConfig field, its values), in GRID_NAMES order
+    base: RunConfig = _DEFAULT
     runs: int = 1
-    time_scale: float = _DEFAULT.time_scale  # for team sizes without an entry below
-    time_scale_by_robots: tuple[tuple[int, float], ...] = ()
+    time_scale_by_robots: tuple[tuple[int, float], ...] = ()  # else base.time_scale
     load_limit: float | None = None
-    routing: str = _DEFAULT.routing
-    aodv_profile: str = _DEFAULT.aodv_profile
-    max_steps: int = _DEFAULT.max_steps
-    capture: bool = _DEFAULT.capture
-    map: str | None = None
-    routings: tuple[str, ...] = ()  # grid.routing: routing as a dimension (overrides routing)
-    maps: tuple[str | None, ...] = ()  # grid.map: None is the empty terrain
-    range_model: str = _DEFAULT.range_model
-    wall_loss_pct: float | None = None
-    medium: str = _DEFAULT.medium
-    media: tuple[str, ...] = ()  # grid.medium: the medium as a dimension (overrides medium)
-    wifi_loss: str = _DEFAULT.wifi_loss
-    wifi_standard: str = _DEFAULT.wifi_standard
-    wifi_rate: str = _DEFAULT.wifi_rate
-    seed: int = 0
+    seed_base: int = 0  # [run] seed: mixed into every derived seed
     description: str = ""
 
+    @classmethod
+    def of(cls, *, runs: int = 1, time_scale_by_robots=(), load_limit=None, seed: int = 0,
+           description: str = "", **fields) -> SweepSpec:
+        """A spec from keywords, as a sweep file would give them: a tuple is a grid
+        dimension's values (robots, comm_range and laser_range are required), anything else
+        a [run] value."""  # fmt: skip
+        grid = {k: tuple(v) for k, v in fields.items() if isinstance(v, tuple | list)}
+        fields = {k: v for k, v in fields.items() if not (k in grid and not grid[k])}
+        grid = {k: v for k, v in grid.items() if v}  # an empty list: not a dimension
+        unknown = [k for k in grid if k not in GRID_NAMES]
+        if unknown:
+            raise TypeError(f"{unknown[0]} is not a grid dimension")
+        base = replace(_DEFAULT, **{k: v for k, v in fields.items() if k not in grid})
+        return cls(tuple((k, grid[k]) for k in GRID_NAMES if k in grid), base, runs,
+                   tuple(time_scale_by_robots), load_limit, seed, description)  # fmt: skip
+
+    def values(self, name: str) -> tuple:
+        """The values field `name` takes in this sweep: the grid's, else [run]'s one."""
+        return dict(self.grid).get(name, (getattr(self.base, name),))
+
+    def varies(self, name: str) -> bool:
+        return name in dict(self.grid)
+
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["time_scale_by_robots"] = {str(n): v for n, v in self.time_scale_by_robots}
-        return d
+        """As sweep.json records it: the grid, and every other field of the runs' config."""
+        return {
+            "grid": {k: list(v) for k, v in self.grid},
+            "run": {k: v for k, v in self.base.to_dict().items() if not self.varies(k)},
+            "runs": self.runs,
+            "time_scale_by_robots": {str(n): v for n, v in self.time_scale_by_robots},
+            "load_limit": self.load_limit,
+            "seed": self.seed_base,
+            "description": self.description,
+        }
 
     def scale_for(self, robots: int) -> float:
         """The time scale of a run of `robots` robots."""
-        return dict(self.time_scale_by_robots).get(robots, self.time_scale)
+        return dict(self.time_scale_by_robots).get(robots, self.base.time_scale)
 
 
 @dataclass(frozen=True)
@@ -146,9 +158,7 @@ class PlannedRun:
     @property
     def point(self) -> tuple:
         """The grid point this run belongs to (what its repetitions share)."""
-        c = self.config
-        return (c.robots, c.comm_range, c.laser_range, c.loss_pct, c.delay_ms,
-                c.coordination, c.start, c.routing, c.map, c.medium)  # fmt: skip
+        return tuple(getattr(self.config, name) for name in GRID_NAMES)
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
@@ -244,7 +254,7 @@ def _check_size(path, grid: dict) -> None:
 
 
 def _grid(path, grid: dict, run: dict) -> dict:
-    """The SweepSpec fields of [grid]."""
+    """[grid]'s dimensions (field: values) and `runs`."""
     _check_size(path, grid)
     for key in _GRID_REQUIRED:
         if key not in grid:
@@ -258,7 +268,7 @@ def _grid(path, grid: dict, run: dict) -> dict:
         values = _grid_list(path, opt, grid[opt.name])
         if opt.name == "map":
             values = tuple(None if m == EMPTY_MAP else _map_path(path, m) for m in values)
-        kw[_GRID_FIELD.get(opt.name, opt.name)] = values
+        kw[opt.name] = values
     if "runs" in grid:
         runs = grid["runs"]
         if not _is_int(runs) or runs < 1:
@@ -268,7 +278,7 @@ def _grid(path, grid: dict, run: dict) -> dict:
 
 
 def _run(path, run: dict, grid: dict, robots: tuple[int, ...]) -> dict:
-    """The SweepSpec fields of [run]."""
+    """[run]'s values (RunConfig fields) and the sweep's own keys."""
     kw: dict = {}
     for opt in _RUN_OPTIONS:
         if opt.name not in run:
@@ -303,7 +313,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
     kw = {"description": _description(path, data)}
     kw.update(_grid(path, grid, run))
     kw.update(_run(path, run, grid, kw["robots"]))
-    return SweepSpec(**kw)
+    return SweepSpec.of(**kw)
 
 
 def _map_path(path, m: str) -> str:
@@ -312,16 +322,6 @@ def _map_path(path, m: str) -> str:
     if not mp.is_absolute() and isinstance(path, Path):
         mp = path.parent / mp
     return str(mp)
-
-
-def map_label(m: str | None) -> str:
-    """The name a map has in run ids: `empty`, or the file's stem (letters and digits)."""
-    return EMPTY_MAP if m is None else "".join(ch for ch in Path(m).stem if ch.isalnum())
-
-
-def medium_label(medium: str) -> str:
-    """The name a medium has in run ids: its letters and digits (`veth`, `ns3wifi`)."""
-    return "".join(ch for ch in medium if ch.isalnum())
 
 
 def load(path: str | Path) -> SweepSpec:
@@ -358,92 +358,51 @@ def _read_text(path: Path) -> str:
     return text
 
 
-def fmt(x: float) -> str:
-    """A number as it appears in run ids: 10.0 -> '10', 1.5 -> '1.5'."""
-    return f"{x:g}"
+def run_id(config: RunConfig, index: int, varied=frozenset()) -> str:
+    """Stable, readable id of one run, from the grid's dimensions in their order (each
+    option's GridDim): impairments appear only when non-zero, coordination and start
+    placement only when not the default, routing, map and medium only where the sweep
+    varies them (`varied`); so ids of older sweeps stay valid."""
+    parts = []
+    for opt in _GRID_OPTIONS:
+        value, dim = getattr(config, opt.name), opt.grid
+        if ((dim.shown == NONZERO and not value) or (dim.shown == CHANGED and value == opt.default)
+                or (dim.shown == VARIED and opt.name not in varied)):  # fmt: skip
+            continue
+        parts.append(dim.label(value))
+    return "-".join([*parts, f"k{index}"])
 
 
-def run_id(
-    robots: int,
-    comm_range: float,
-    laser_range: float,
-    loss_pct: float,
-    delay_ms: float,
-    index: int,
-    coordination: str = _DEFAULT.coordination,
-    start: str = _DEFAULT.start,
-) -> str:
-    """Stable, readable id of one run; impairments appear only when non-zero, coordination
-    and start placement only when not the default (so ids of older sweeps stay valid)."""
-    rid = f"n{robots:02d}-c{fmt(comm_range)}-l{fmt(laser_range)}"
-    if loss_pct:
-        rid += f"-p{fmt(loss_pct)}"
-    if delay_ms:
-        rid += f"-d{fmt(delay_ms)}"
-    if coordination != _DEFAULT.coordination:
-        rid += f"-{coordination}"
-    if start != _DEFAULT.start:
-        rid += f"-{start}"
-    return f"{rid}-k{index}"
-
-
-def derive_seed(
-    base: int,
-    robots: int,
-    comm_range: float,
-    laser_range: float,
-    loss_pct: float,
-    delay_ms: float,
-    index: int,
-) -> int:
-    """A seed that depends only on the point, the run index and the file's base seed."""
-    key = ":".join(
-        [str(base), str(robots), fmt(comm_range), fmt(laser_range), fmt(loss_pct), fmt(delay_ms)]
-        + [str(index)]
-    )
+def derive_seed(base: int, config: RunConfig, index: int) -> int:
+    """A seed that depends only on the point's seeded dimensions (GridDim.seeded), the run
+    index and the file's base seed: the variants of a point (coordination, start, routing,
+    map, medium) share their random numbers, so they are compared on the same draws."""
+    words = [str(base)]
+    for opt in _GRID_OPTIONS:
+        if opt.grid.seeded:
+            value = getattr(config, opt.name)
+            words.append(fmt(value) if isinstance(value, float) else str(value))
+    key = ":".join([*words, str(index)])
     return int(hashlib.sha256(key.encode()).hexdigest()[:8], 16) % (2**31 - 1) + 1
 
 
-def _wifi(spec: SweepSpec, medium: str) -> dict:
-    """The wifi options of a run on `medium`: the file's on ns3-wifi, the defaults on veth
-    (which has no 802.11, so its config.json does not claim one)."""
-    keys = ("wifi_loss", "wifi_standard", "wifi_rate")
-    src = spec if medium == "ns3-wifi" else _DEFAULT
-    return {k: getattr(src, k) for k in keys}
+_WIFI = ("wifi_loss", "wifi_standard", "wifi_rate")
 
 
 def expand(spec: SweepSpec) -> list[PlannedRun]:
-    """All runs of the sweep, run index first (see the module docstring)."""
+    """All runs of the sweep, run index first (see the module docstring): each the base
+    config with one value of every dimension, its seed and its time scale."""
+    varied = {name for name, _ in spec.grid}
+    # On veth, which has no 802.11, the wifi options stay the defaults (config.json does not
+    # claim one); on ns3-wifi they are the file's.
+    veth_wifi = {k: getattr(_DEFAULT, k) for k in _WIFI}
     out = []
-    routings = spec.routings or (spec.routing,)
-    maps = spec.maps or (spec.map,)
-    media = spec.media or (spec.medium,)
     for index in range(1, spec.runs + 1):
-        for robots, comm, laser, loss, delay, coord, start, routing, map_, medium in (
-            itertools.product(spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct,
-                              spec.delay_ms, spec.coordination, spec.start, routings, maps, media)
-        ):  # fmt: skip
-            # The seed leaves coordination and start out: the variants of a point share their
-            # random numbers (start positions within a placement, timer phases), so they are
-            # compared on the same draws.
-            config = RunConfig(
-                robots=robots, comm_range=comm, laser_range=laser,
-                seed=derive_seed(spec.seed, robots, comm, laser, loss, delay, index),
-                time_scale=spec.scale_for(robots), routing=routing, map=map_,
-                loss_pct=loss, delay_ms=delay, capture=spec.capture, max_steps=spec.max_steps,
-                coordination=coord, start=start, aodv_profile=spec.aodv_profile,
-                range_model=spec.range_model, wall_loss_pct=spec.wall_loss_pct,
-                medium=medium, **_wifi(spec, medium),
-            )  # fmt: skip
-            rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
-            if spec.routings or spec.maps or spec.media:
-                base = rid[: -len(f"-k{index}")]
-                if spec.routings:
-                    base += f"-{routing}"
-                if spec.maps:
-                    base += f"-m{map_label(map_)}"
-                if spec.media:
-                    base += f"-{medium_label(medium)}"
-                rid = f"{base}-k{index}"
-            out.append(PlannedRun(rid, index, config))
+        for values in itertools.product(*(spec.values(name) for name in GRID_NAMES)):
+            config = replace(spec.base, **dict(zip(GRID_NAMES, values, strict=True)))
+            if config.medium != "ns3-wifi":
+                config = replace(config, **veth_wifi)
+            config = replace(config, seed=derive_seed(spec.seed_base, config, index),
+                             time_scale=spec.scale_for(config.robots))  # fmt: skip
+            out.append(PlannedRun(run_id(config, index, varied), index, config))
     return out

@@ -34,6 +34,18 @@ def lines(sweep_dir: Path, runs: list[RunRecord]) -> list[str]:
     return out
 
 
+def _spec_value(spec: dict, name: str, listed: bool = False):
+    """Field `name` of a sweep's runs as sweep.json records it: the grid's values, or the
+    one value of [run] (in a list where `listed`). Sweeps before grids were declared per
+    option recorded every field at the top level."""
+    grid, run = spec.get("grid"), spec.get("run")
+    if not isinstance(grid, dict) or not isinstance(run, dict):
+        return spec.get(name)
+    if name in grid:
+        return grid[name]
+    return [run.get(name)] if listed else run.get(name)
+
+
 def _spec_lines(spec: dict, state: dict) -> list[str]:
     if not spec:
         return []
@@ -41,14 +53,15 @@ def _spec_lines(spec: dict, state: dict) -> list[str]:
     scales = (
         ", ".join(f"{v:g} for {k}" for k, v in by_team.items()) + " robots"
         if by_team
-        else spec.get("time_scale")
+        else _spec_value(spec, "time_scale")
     )
+    teams, ranges, lasers, loss, delay = (_spec_value(spec, k, listed=True) for k in
+                                          ("robots", "comm_range", "laser_range", "loss_pct",
+                                           "delay_ms"))  # fmt: skip
     return [
-        f"Sweep file `{state.get('sweep_file', '?')}`: teams {spec.get('robots')}, ranges "
-        f"{spec.get('comm_range')} m, lasers {spec.get('laser_range')} m, loss "
-        f"{spec.get('loss_pct')} %, delay {spec.get('delay_ms')} ms, {spec.get('runs')} "
-        f"run(s) per point, time scale {scales}, routing "
-        f"{spec.get('routing')}."
+        f"Sweep file `{state.get('sweep_file', '?')}`: teams {teams}, ranges {ranges} m, "
+        f"lasers {lasers} m, loss {loss} %, delay {delay} ms, {spec.get('runs')} run(s) per "
+        f"point, time scale {scales}, routing {_spec_value(spec, 'routing')}."
     ]
 
 

@@ -242,7 +242,7 @@ def test_report_html_renders_with_its_figures(tmp_path):
     from testbed.analysis import report
     from tests.unit.test_sweep_synthetic import make_sweep
 
-    spec = sweepfile.SweepSpec(robots=(1, 2, 3), comm_range=(5.0,), laser_range=(2.0,), runs=2)
+    spec = sweepfile.SweepSpec.of(robots=(1, 2, 3), comm_range=(5.0,), laser_range=(2.0,), runs=2)
     make_sweep(tmp_path, spec)
     report.write_report(tmp_path, metrics_of=lambda run: None)
     driver = browser()

@@ -12,7 +12,7 @@ from tests.unit.test_sweep_synthetic import result_doc, timer_plans, write_run
 
 
 def one_run(tmp_path, **config):
-    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     run = sweepfile.expand(spec)[0]
     c = dataclasses.replace(run.config, **config)
     return write_run(tmp_path, run, result_doc(c, [90, None], 100, {1: timer_plans(100, 2)}))

@@ -18,7 +18,7 @@ from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans,
 def small_spec(**kw):
     base = dict(robots=(1, 2, 5, 10), comm_range=(5.0, 20.0), laser_range=(2.0, 1.5), runs=2)
     base.update(kw)
-    return sweepfile.SweepSpec(**base)
+    return sweepfile.SweepSpec.of(**base)
 
 
 @pytest.fixture(scope="module")

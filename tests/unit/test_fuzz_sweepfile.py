@@ -159,9 +159,7 @@ def check(tmp_path, content: bytes) -> None:
         event("refused")
         return
     event("accepted")
-    dims = [spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct, spec.delay_ms,
-            spec.coordination, spec.start, spec.routings or (1,), spec.maps or (1,),
-            spec.media or (1,)]  # fmt: skip
+    dims = [values for _, values in spec.grid]
     total = math.prod(len(d) for d in dims) * spec.runs
     assert total <= sweepfile.MAX_RUNS
     runs = sweepfile.expand(spec)

@@ -15,7 +15,7 @@ def test_markdown_subset_becomes_html(tmp_path):
 
 
 def test_report_html_inlines_figures_and_links_every_run(tmp_path):
-    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=2)
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=2)
     runs = make_sweep(tmp_path, spec)
     report.write_report(tmp_path, metrics_of=lambda run: None)
     page = (tmp_path / "report.html").read_text()

@@ -18,10 +18,10 @@ DELAY_MS = {"veth": 0.05, "ns3-wifi": 0.5}
 CONTROL = {"veth": 2.0, "ns3-wifi": 2.0}
 
 
-def sweep(tmp_path, runs=3, routings=()):
-    spec = sweepfile.SweepSpec(
+def sweep(tmp_path, runs=3, routing=()):
+    spec = sweepfile.SweepSpec.of(
         robots=(5,), comm_range=(20.0,), laser_range=(2.0,), runs=runs, time_scale=4.0,
-        media=("veth", "ns3-wifi"), routings=routings,
+        medium=("veth", "ns3-wifi"), routing=routing,
     )  # fmt: skip
     metrics = {}
     for run in sweepfile.expand(spec):
@@ -87,7 +87,7 @@ def test_report_has_the_section_only_when_media_vary(tmp_path):
     path, _ = report.write_report(tmp_path, metrics_of=sweep(tmp_path))
     assert "## What perfect links get wrong" in path.read_text()
     single = tmp_path / "single"
-    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,),
+    spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,),
                                medium="ns3-wifi")  # fmt: skip
     for run in sweepfile.expand(spec):
         write_run(single, run)
@@ -97,7 +97,7 @@ def test_report_has_the_section_only_when_media_vary(tmp_path):
 
 
 def test_protocols_are_compared_within_each_medium(tmp_path):
-    made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, routings=("aodv", "batman")))
+    made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, routing=("aodv", "batman")))
     rows = made["tables"]["protocols"]
     assert [(r["medium"], r["routing"], r["steps"]) for r in rows] == [
         ("ns3-wifi", "aodv", 414), ("ns3-wifi", "batman", 464),

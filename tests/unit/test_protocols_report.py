@@ -11,9 +11,9 @@ CONTROL = {"aodv": 20, "babel": 90, "batman": 60, "oracle": 0}
 
 
 def sweep(tmp_path):
-    spec = sweepfile.SweepSpec(
+    spec = sweepfile.SweepSpec.of(
         robots=(5,), comm_range=(10.0,), laser_range=(2.0,), runs=3,
-        routings=("aodv", "babel", "batman", "oracle"),
+        routing=("aodv", "babel", "batman", "oracle"),
     )  # fmt: skip
     metrics = {}
     for run in sweepfile.expand(spec):
@@ -78,7 +78,7 @@ def test_report_has_the_section_only_for_a_protocols_sweep(tmp_path):
     path, _ = report.write_report(tmp_path, metrics_of=sweep(tmp_path))
     assert "## Routing protocols against the oracle" in path.read_text()
     single = tmp_path / "single"
-    for run in sweepfile.expand(sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,),
+    for run in sweepfile.expand(sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,),
                                                     laser_range=(2.0,))):  # fmt: skip
         write_run(single, run)
     path, _ = report.write_report(single, metrics_of=lambda run: None)

@@ -97,7 +97,7 @@ def test_a_group_with_one_run_points_is_left_undecided_beside_decided_ones():
 
 
 def test_fig2_csv_leaves_the_spread_of_a_one_run_point_empty(tmp_path):
-    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     make_sweep(tmp_path, spec)
     report.write_report(tmp_path, metrics_of=lambda run: None)
     with (tmp_path / "figures" / "fig2.csv").open() as f:
@@ -157,7 +157,7 @@ def test_spearman():
 
 def test_report_end_to_end(tmp_path):
     # Three runs a point (+-3 steps): the rise and the range effect stand out of the noise.
-    spec = sweepfile.SweepSpec(
+    spec = sweepfile.SweepSpec.of(
         robots=(1, 2, 5, 10), comm_range=(5.0, 20.0), laser_range=(2.0, 1.5), runs=3
     )
     make_sweep(tmp_path, spec)
@@ -180,7 +180,7 @@ def test_report_end_to_end(tmp_path):
 
 def test_report_of_an_ablation_sweep(tmp_path):
     # paper coordination rises at 10 robots; ours does not (a made-up answer to find).
-    spec = sweepfile.SweepSpec(robots=(1, 2, 5, 10), comm_range=(20.0,), laser_range=(2.0,),
+    spec = sweepfile.SweepSpec.of(robots=(1, 2, 5, 10), comm_range=(20.0,), laser_range=(2.0,),
                                coordination=("paper", "ours"), runs=3)  # fmt: skip
     for run in sweepfile.expand(spec):
         c = run.config
@@ -213,7 +213,7 @@ def test_report_of_an_ablation_sweep(tmp_path):
 
 
 def test_report_counts_excluded_runs(tmp_path):
-    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     runs = sweepfile.expand(spec)
     write_run(tmp_path, runs[0])
     doc = result_doc(runs[1].config, [None, None], 40, {1: timer_plans(40)}, "robot_crashed")
@@ -266,7 +266,7 @@ def test_sweep_section_tells_time_scale_changes_from_concurrency_changes(tmp_pat
 
 def test_sweep_section_gives_short_stalls_in_their_own_precision(tmp_path):
     # 0.076 s of host stalls was reported as "0 s in all"
-    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     run = sweepfile.expand(spec)[0]
     doc = result_doc(run.config, [90, 95], 100)
     doc.update(deadlines_missed=3, host_stalls={"events": 2, "stalled_s": 0.076,

@@ -20,7 +20,7 @@ def mark_unfaithful(
 
 
 def sweep(tmp_path):
-    spec = sweepfile.SweepSpec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=3)
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=3)
     runs = make_sweep(tmp_path, spec)
     return [tmp_path / "runs" / r.run_id for r in runs]
 

@@ -71,7 +71,10 @@ def test_help_gives_every_options_default_and_unit():
 
 def test_one_default_routing_everywhere():
     assert RunConfig(robots=1, comm_range=1).routing == ROUTINGS[0] == "aodv"
-    assert sweepfile.SweepSpec(robots=(1,), comm_range=(1.0,), laser_range=(2.0,)).routing == "aodv"
+    assert (
+        sweepfile.SweepSpec.of(robots=(1,), comm_range=(1.0,), laser_range=(2.0,)).base.routing
+        == "aodv"
+    )
     args = net_up_parser().parse_args(["n1", "--robots", "2", "--comm-range", "5"])
     assert args.routing == "aodv"
 
@@ -146,3 +149,40 @@ def test_sweep_file_checks_come_from_the_table(opt):
             with pytest.raises(UsageError) as e:
                 sweepfile.parse(tomllib.loads(text), "s.toml")
             assert str(e.value).startswith(f"sweep file s.toml: {key}:"), (bad, str(e.value))
+
+
+def test_a_grid_dimension_is_declared_once_on_its_option():
+    """The sweep side holds no field of its own per dimension: SweepSpec names no RunConfig
+    field, every option a sweep may vary carries its GridDim, and a spec built from the
+    table alone expands with one point value per dimension, in the table's order."""
+    names = {f.name for f in dataclasses.fields(RunConfig)}
+    assert not names & {f.name for f in dataclasses.fields(sweepfile.SweepSpec)}
+    grid = [o for o in OPTIONS if "grid" in o.sweep]
+    assert grid and all(o.grid is not None for o in grid)
+    assert len({o.grid.order for o in grid}) == len(grid)  # one place each in the grid
+    assert sweepfile.GRID_NAMES == tuple(o.name for o in sorted(grid, key=lambda o: o.grid.order))
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,),
+                                  coordination=("paper", "ours"))  # fmt: skip
+    runs = sweepfile.expand(spec)
+    assert len(runs) == 4 and all(len(r.point) == len(grid) for r in runs)
+    assert {r.run_id for r in runs} == {"n01-c5-l2-paper-k1", "n01-c5-l2-k1",
+                                        "n02-c5-l2-paper-k1", "n02-c5-l2-k1"}  # fmt: skip
+    # the variants of a point share its seed; another team size has its own
+    seeds = {(r.config.robots, r.config.coordination): r.config.seed for r in runs}
+    assert seeds[1, "paper"] == seeds[1, "ours"] != seeds[2, "ours"]
+
+
+def test_the_report_reads_both_shapes_of_a_sweeps_spec():
+    from testbed.analysis.sweepinfo import _spec_lines
+
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0, 20.0), laser_range=(2.0,),
+                                  runs=2, time_scale=4.0)  # fmt: skip
+    older = {"robots": [1, 2], "comm_range": [5.0, 20.0], "laser_range": [2.0],
+             "loss_pct": [0.0], "delay_ms": [0.0], "runs": 2, "time_scale": 4.0,
+             "routing": "aodv", "time_scale_by_robots": {}}  # fmt: skip
+    state = {"sweep_file": "s.toml"}
+    assert _spec_lines(spec.to_dict(), state) == _spec_lines(older, state)
+    assert (
+        "teams [1, 2], ranges [5.0, 20.0] m, lasers [2.0] m, loss [0.0] %"
+        in (_spec_lines(spec.to_dict(), state)[0])
+    )

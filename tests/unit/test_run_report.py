@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def one_run(tmp_path, time_scale=10.0):
-    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     run = sweepfile.expand(spec)[0]
     config = dataclasses.replace(run.config, time_scale=time_scale)
     doc = result_doc(config, [817, 823], 823)
@@ -94,7 +94,7 @@ def test_report_of_a_malformed_run_or_neither_is_one_line_and_exit_2(tmp_path):
 def test_a_run_on_ns3_wifi_shows_the_channel_counters(tmp_path):
     from tests.unit.test_analysis_runs import channel_doc
 
-    spec = sweepfile.SweepSpec(robots=(1,), comm_range=(5.0,), laser_range=(2.0,),
+    spec = sweepfile.SweepSpec.of(robots=(1,), comm_range=(5.0,), laser_range=(2.0,),
                                medium="ns3-wifi", wifi_standard="80211b",
                                wifi_rate="DsssRate1Mbps")  # fmt: skip
     run = sweepfile.expand(spec)[0]

@@ -72,7 +72,7 @@ def test_tcps_measures_across_scales_are_compared_only_where_tcp_kept_emulated_t
 
 
 def test_a_runs_mean_delay_is_emulated_and_its_retransmissions_are_counted_per_flow(tmp_path):
-    spec = sweepfile.SweepSpec(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     planned = sweepfile.expand(spec)[0]
     c = dataclasses.replace(planned.config, time_scale=6.0)
     run = load_run(write_run(tmp_path, planned, result_doc(c, [90, 100], 100)))

@@ -64,7 +64,7 @@ def test_submit_makes_one_array_per_team_size_from_the_planned_configs(tmp_path,
         (bindir / tool).chmod(0o755)
     monkeypatch.setenv("PATH", f"{bindir}:{os.environ['PATH']}")
     scales = ((1, 15.0), (4, 9.0))
-    spec = sweepfile.SweepSpec(robots=(1, 4), comm_range=(5.0, 10.0), laser_range=(2.0,),
+    spec = sweepfile.SweepSpec.of(robots=(1, 4), comm_range=(5.0, 10.0), laser_range=(2.0,),
                                time_scale_by_robots=scales, max_steps=6000)  # fmt: skip
     runs = sweepfile.expand(spec)
     out = tmp_path / "out"

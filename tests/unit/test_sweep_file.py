@@ -77,11 +77,14 @@ def test_bad_sweep_file_names_the_key(text, key):
 
 def test_defaults_and_types():
     spec = parse(GOOD)
-    assert spec.robots == (1, 2)
-    assert spec.comm_range == (5.0, 20.0) and all(isinstance(x, float) for x in spec.comm_range)
-    assert spec.loss_pct == (0.0,) and spec.delay_ms == (0.0,)
-    assert spec.time_scale == 4.0 and spec.capture is True and spec.routing == "aodv"
-    assert spec.max_steps == 3000 and spec.runs == 2
+    assert spec.values("robots") == (1, 2)
+    ranges = spec.values("comm_range")
+    assert ranges == (5.0, 20.0) and all(isinstance(x, float) for x in ranges)
+    assert spec.values("loss_pct") == (0.0,) and spec.values("delay_ms") == (0.0,)
+    assert not spec.varies("loss_pct") and spec.varies("robots")
+    base = spec.base
+    assert base.time_scale == 4.0 and base.capture is True and base.routing == "aodv"
+    assert base.max_steps == 3000 and spec.runs == 2
 
 
 def test_invalid_toml_and_missing_file(tmp_path):
@@ -96,7 +99,7 @@ def test_invalid_toml_and_missing_file(tmp_path):
 def test_relative_map_path_is_relative_to_the_file(tmp_path):
     f = tmp_path / "s.toml"
     f.write_text(GOOD + 'map = "maps/office.png"\n')
-    assert sweepfile.load(f).map == str(tmp_path / "maps" / "office.png")
+    assert sweepfile.load(f).base.map == str(tmp_path / "maps" / "office.png")
 
 
 @pytest.mark.parametrize(
@@ -118,29 +121,35 @@ def test_profiles_load(name, n_runs):
     runs = sweepfile.expand(spec)
     assert len(runs) == n_runs
     assert len({r.run_id for r in runs}) == n_runs
-    assert spec.capture
+    assert spec.base.capture
 
 
 def test_paper_profile_is_the_papers_grid():
     spec = sweepfile.load(EXPERIMENTS / "paper.toml")
-    assert spec.robots == tuple(range(1, 11))
-    assert spec.comm_range == (5.0, 10.0, 15.0, 20.0)
-    assert spec.laser_range == (2.0, 1.5)
+    assert spec.values("robots") == tuple(range(1, 11))
+    assert spec.values("comm_range") == (5.0, 10.0, 15.0, 20.0)
+    assert spec.values("laser_range") == (2.0, 1.5)
     assert spec.runs == 3
 
 
 def test_media_profiles_are_issue_22s_grids():
     media = sweepfile.load(EXPERIMENTS / "media.toml")
-    assert (media.robots, media.comm_range, media.laser_range) == ((2, 5, 10), (5.0, 20.0), (2.0,))
-    assert (media.media, media.routing, media.runs) == (("veth", "ns3-wifi"), "aodv", 5)
-    protos = sweepfile.load(EXPERIMENTS / "media-protocols.toml")
-    assert (protos.robots, protos.routings) == ((10,), ("aodv", "babel", "batman"))
-    assert protos.media == ("veth", "ns3-wifi")
+    grid = dict(media.grid)
+    assert (grid["robots"], grid["comm_range"], grid["laser_range"]) == (
+        (2, 5, 10),
+        (5.0, 20.0),
+        (2.0,),
+    )
+    assert (grid["medium"], media.base.routing, media.runs) == (("veth", "ns3-wifi"), "aodv", 5)
+    protos = dict(sweepfile.load(EXPERIMENTS / "media-protocols.toml").grid)
+    assert (protos["robots"], protos["routing"]) == ((10,), ("aodv", "babel", "batman"))
+    assert protos["medium"] == ("veth", "ns3-wifi")
     rise = sweepfile.load(EXPERIMENTS / "media-rise.toml")
     slow = sweepfile.load(EXPERIMENTS / "media-rise-slow.toml")
-    assert rise.robots == (1, 2, 4, 6, 8, 10) and rise.comm_range == (5.0, 20.0)
-    assert (rise.medium, rise.wifi_standard, rise.runs) == ("ns3-wifi", "80211a", 3)
-    assert (slow.wifi_standard, slow.wifi_rate) == ("80211b", "DsssRate1Mbps")
+    assert rise.values("robots") == (1, 2, 4, 6, 8, 10)
+    assert rise.values("comm_range") == (5.0, 20.0)
+    assert (rise.base.medium, rise.base.wifi_standard, rise.runs) == ("ns3-wifi", "80211a", 3)
+    assert (slow.base.wifi_standard, slow.base.wifi_rate) == ("80211b", "DsssRate1Mbps")
     # the slow channel's runs are the fast one's, point for point (ids, seeds, time scales)
     fast_runs, slow_runs = sweepfile.expand(rise), sweepfile.expand(slow)
     assert [(r.run_id, r.config.seed, r.config.time_scale) for r in fast_runs] == [

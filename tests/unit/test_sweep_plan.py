@@ -12,7 +12,7 @@ from tests.unit.test_sweep_synthetic import write_run
 def spec(**kw):
     base = dict(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=2)
     base.update(kw)
-    return sweepfile.SweepSpec(**base)
+    return sweepfile.SweepSpec.of(**base)
 
 
 def test_plan_sorts_runs_by_what_is_on_disk(tmp_path):

@@ -83,7 +83,7 @@ def make_sweep(out: Path, spec: sweepfile.SweepSpec) -> list[sweepfile.PlannedRu
 
 
 def test_synthetic_runs_follow_the_contract(tmp_path):
-    spec = sweepfile.SweepSpec(robots=(1, 3), comm_range=(5.0,), laser_range=(2.0,), runs=2)
+    spec = sweepfile.SweepSpec.of(robots=(1, 3), comm_range=(5.0,), laser_range=(2.0,), runs=2)
     runs = make_sweep(tmp_path, spec)
     for run in runs:
         d = tmp_path / "runs" / run.run_id
