@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from node import render, stepcore
-from testbed import fidelity
+from testbed import fidelity, isolation
 from testbed.world.world import World
 from topology.jsonfile import read_json, write_json_atomic
 
@@ -73,6 +73,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
     out = {
         "finish_step": r.finish_step,
         "crashed": r.crashed,
+        "stopped_step": r.stopped_step,
         "exit_status": r.exit_status,
         "plans": plans,
         "messages": {"sent": sent, "received": received},
@@ -80,7 +81,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
     }
     detail = dict(out)
     detail.update(
-        crash_step=r.crash_step, killed_at=r.killed_at, deadlines_missed=r.missed,
+        crash_step=r.crash_step, deadlines_missed=r.missed,
         deadlines_missed_steps=list(r.missed_steps),
         collisions=b.collisions, final_pose=[round(b.x, 3), round(b.y, 3)],
         plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e["e"] == "plan"],
@@ -117,6 +118,9 @@ def contents(rec: RunRecord) -> dict:
         "steps": clock.steps,
         "last_finish_step": rec.last_finish_step,
         "mean_finish_step": None if mean_finish is None else round(mean_finish, 2),
+        "mean_finish_step_robots": len(rec.counted_robots),
+        "survivors_finished": rec.survivors_finished,
+        "isolated": isolation.record(rec.outages, clock.steps),
         "coverage_final": round(rec.world.coverage(), 5),
         "time_scale_requested": rec.time_scale,
         "time_scale_achieved": round(clock.time_scale_achieved, 3),

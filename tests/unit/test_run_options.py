@@ -9,6 +9,7 @@ import pytest
 
 from testbed import cli, sweepfile
 from testbed.errors import UsageError
+from testbed.isolation import Outage
 from testbed.runconfig import NET_OPTIONS, OPTIONS, RunConfig, config_from_args, to_argv
 from testbed.rundir import plan_dict, run_argv
 from topology.spec import ROUTINGS
@@ -43,9 +44,16 @@ def test_every_option_round_trips_through_argv_with_non_default_values():
         kill=((2, 150), (3, 300)), view="127.0.0.1:8123", medium="ns3-wifi",
         wifi_loss="logdistance", wifi_standard="80211b", wifi_rate="DsssRate1Mbps",
     )  # fmt: skip
-    for opt in OPTIONS:
-        assert getattr(cfg, opt.name) != opt.default, opt.name  # every option non-default
+    # --isolate is for the veth medium: its non-default value rides on a veth config.
+    veth = dataclasses.replace(
+        cfg, medium="veth", wifi_loss="range", wifi_standard="80211a", wifi_rate="",
+        isolate=(Outage(3, 200, 100), Outage(5, 10, 1), Outage(3, 250, 20)),
+    )  # fmt: skip
+    for opt in OPTIONS:  # every option non-default in one of the two
+        assert opt.default != getattr(cfg, opt.name) or opt.default != getattr(veth, opt.name)
     assert parse_run(to_argv(cfg)) == cfg
+    assert parse_run(to_argv(veth)) == veth
+    assert RunConfig.from_dict(veth.to_dict()) == veth
 
 
 def test_defaults_agree_and_the_table_is_the_parser():
