@@ -126,21 +126,6 @@ def test_ten_robots_explore_the_empty_terrain(tmp_path, tn_name, comm_range):
     check_exploration(out, result, 10, comm_range)
 
 
-def test_killed_robot_does_not_stop_the_others(tmp_path, tn_name):
-    out, result = explore(tmp_path, tn_name, 3, 20.0, kill=((2, 60),))
-    assert result["status"] == "robot_crashed"
-    assert "r2" in result["status_detail"]
-    r2 = result["robots"]["r2"]
-    assert r2["crashed"] and r2["exit_status"] == -9 and r2["finish_step"] is None
-    for k in ("r1", "r3"):
-        assert not result["robots"][k]["crashed"]
-        assert result["robots"][k]["finish_step"] is not None
-        assert result["robots"][k]["exit_status"] == 0
-    assert result["coverage_final"] >= 0.99
-    with open(os.path.join(out, "robots", "r2.json")) as f:
-        assert json.load(f)["crash_step"] >= 60
-
-
 def test_png_map_with_walls_and_a_door(tmp_path, tn_name):
     import cv2
     import numpy as np
