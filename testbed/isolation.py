@@ -19,6 +19,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from testbed.resultfile import Isolated
+
 _TEXT = re.compile(r"r?(\d+):(\d+):(\d+)")
 
 
@@ -59,7 +61,7 @@ def isolated_at(outages: tuple[Outage, ...], step: int) -> frozenset[int]:
     return frozenset(o.robot for o in outages if o.covers(step))
 
 
-def record(outages: tuple[Outage, ...], steps_run: int) -> list[dict]:
+def record(outages: tuple[Outage, ...], steps_run: int) -> list[Isolated]:
     """result.json's `isolated`: each window the run reached (in start order), with the step
     its robot came back in range, or None when the run ended while it was out."""
     out = []
@@ -67,5 +69,5 @@ def record(outages: tuple[Outage, ...], steps_run: int) -> list[dict]:
         if o.start > steps_run:
             continue
         back = o.end if o.end <= steps_run else None
-        out.append({"robot": f"r{o.robot}", "from_step": o.start, "back_step": back})
+        out.append(Isolated(robot=f"r{o.robot}", from_step=o.start, back_step=back))
     return out

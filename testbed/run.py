@@ -61,6 +61,7 @@ from node.launch import NodeArgs
 from node.sched import deadline_priority
 from testbed import isolation, runresults
 from testbed.errors import TestbedError
+from testbed.resultfile import RunResult
 from testbed.runconfig import RunConfig, add_arguments, config_from_args
 from testbed.runfiles import RunFiles
 from testbed.runprepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
@@ -97,40 +98,39 @@ def main(args: argparse.Namespace) -> int:
     for line in (fidelity_warning(result), network_note(result)):
         if line:
             sys.stderr.write(line + "\n")
-    if result["status"] != "complete":
-        sys.stderr.write(f"testbed run: {result['status']}: {result['status_detail']}\n")
-        return 130 if result["status"] == "interrupted" else 1
+    if result.status != "complete":
+        sys.stderr.write(f"testbed run: {result.status}: {result.status_detail}\n")
+        return 130 if result.status == "interrupted" else 1
     return 0
 
 
-def fidelity_warning(result: dict) -> str | None:
+def fidelity_warning(result: RunResult) -> str | None:
     """The one line `testbed run` prints for a run its verdict (testbed.fidelity) found
     unfaithful to the time scale; None for a faithful one."""
-    f = result.get("fidelity") or {}
-    if f.get("ok", True):
+    if result.faithful is not False:
         return None
-    scale = result.get("time_scale_requested")
     return (
-        f"testbed run: warning: not faithful at time scale {scale:g}: {f.get('reason')}; "
-        "its results may differ from a slower run's (a lower --time-scale)"
+        f"testbed run: warning: not faithful at time scale {result.time_scale_requested:g}: "
+        f"{result.fidelity_reason}; its results may differ from a slower run's (a lower "
+        "--time-scale)"
     )
 
 
-def network_note(result: dict) -> str | None:
+def network_note(result: RunResult) -> str | None:
     """The one line `testbed run` prints for a dilated run whose TCP could not be dilated
     (testbed.fidelity.network_verdict); None otherwise."""
-    network = (result.get("fidelity") or {}).get("network") or {}
-    if network.get("ok", True):
+    if result.network_faithful is not False:
         return None
-    scale = result.get("time_scale_requested")
     return (
-        f"testbed run: note: {network.get('reason')}; compare its PDF and delay only with "
-        f"runs at time scale {scale:g}"
+        f"testbed run: note: {result.network_reason}; compare its PDF and delay only with "
+        f"runs at time scale {result.time_scale_requested:g}"
     )
 
 
-def run(cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False) -> dict:
-    """Do one run into directory `out`; returns the result dict (also in out/result.json).
+def run(
+    cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False
+) -> RunResult:
+    """Do one run into directory `out`; returns its RunResult (also in out/result.json).
     UsageError, before anything is made, for a run that cannot be done or a directory that
     holds a run (unless `replace`)."""
     prepared = prepare(cfg, out, name, replace)

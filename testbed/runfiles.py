@@ -23,10 +23,11 @@ import os
 import shutil
 
 from testbed.errors import UsageError
+from testbed.resultfile import RESULT_NAME
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by
 # the robot processes (robots/).
-RUN_MARKERS = ("config.json", "result.json", "robots")
+RUN_MARKERS = ("config.json", RESULT_NAME, "robots")
 
 
 def holds_run(out: str) -> bool:

@@ -63,7 +63,7 @@ def explore(tmp_path, name, robots, comm_range, time_scale=10.0, routing="babel"
         robots=robots, comm_range=comm_range, laser_range=2.0, seed=robots * 7 + 1,
         time_scale=time_scale, routing=routing, max_steps=6000, **kw,
     )  # fmt: skip
-    return out, run(cfg, out, name, progress=False)
+    return out, run(cfg, out, name, progress=False).to_json()
 
 
 def check_exploration(out: str, result: dict, robots: int, comm_range: float) -> None:
@@ -160,7 +160,9 @@ def test_live_view_streams_the_run_as_it_happens(tmp_path, tn_name):
     cfg = RunConfig(robots=3, comm_range=5.0, laser_range=2.0, seed=5, time_scale=10.0,
                     routing="oracle", max_steps=1500, view=f"127.0.0.1:{port}")  # fmt: skip
     box = {}
-    worker = threading.Thread(target=lambda: box.update(r=run(cfg, out, tn_name, progress=False)))
+    worker = threading.Thread(
+        target=lambda: box.update(r=run(cfg, out, tn_name, progress=False).to_json())
+    )
     worker.start()
     frames = []
     deadline = time.monotonic() + 60

@@ -44,7 +44,7 @@ def small_run(tmp_path, name, small_map, **kw):
         robots=3, comm_range=20.0, laser_range=2.0, seed=22, time_scale=10.0,
         routing="babel", max_steps=1500, map=small_map, map_cell=0.1, **kw,
     )  # fmt: skip
-    return out, run(cfg, out, name, progress=False)
+    return out, run(cfg, out, name, progress=False).to_json()
 
 
 def events(out: str) -> list[dict]:

@@ -116,12 +116,14 @@ def test_outage_windows():
     assert isolation.isolated_at(windows, 255) == {1, 3}
     assert isolation.isolated_at(windows, 299) == {3}
     assert isolation.isolated_at(windows, 300) == frozenset()  # back at start + steps
-    assert isolation.record(windows, 1000) == [
+    assert [i.to_dict() for i in isolation.record(windows, 1000)] == [
         {"robot": "r3", "from_step": 200, "back_step": 300},
         {"robot": "r1", "from_step": 250, "back_step": 260},
     ]
     # the run ended while r3 was out, and before r1's window began
-    assert isolation.record(windows, 240) == [{"robot": "r3", "from_step": 200, "back_step": None}]
+    assert [i.to_dict() for i in isolation.record(windows, 240)] == [
+        {"robot": "r3", "from_step": 200, "back_step": None}
+    ]
 
 
 def test_an_isolated_robot_has_no_link_whatever_the_positions():
