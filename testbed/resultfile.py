@@ -408,10 +408,12 @@ class RunResult:
 
     def to_json(self) -> dict:
         """The file's contents, keys in the file's order."""
-        return {
+        out = {
             f.name: _plain(getattr(self, f.name))
             for f in dataclasses.fields(RunResult)  # a subclass's own fields are not the file's
         }
+        out["robots"] = {r.name: r.to_dict() for r in self.robots}  # by name, in order
+        return out
 
     def write(self, run_dir: str | Path) -> None:
         """result.json in `run_dir`, atomically (a temporary file, then rename)."""
