@@ -246,24 +246,3 @@ def network_verdict(timers: dict | None, time_scale: float) -> dict:
     if record.tcp_dilated:
         return {"ok": True}
     return {"ok": False, "reason": record.tcp_reason}
-
-
-def tcp_in_emulated_time(result: dict) -> bool | None:
-    """Whether a result.json's TCP ran in emulated time: True at time scale 1 or with TCP's
-    timers dilated, False for a dilated run without (and any dilated run made before they
-    were), None when the file does not say its time scale."""
-    scale = result.get("time_scale_requested") or (result.get("config") or {}).get("time_scale")
-    if not isinstance(scale, (int, float)):
-        return None
-    if scale == 1:
-        return True
-    network = (result.get("fidelity") or {}).get("network")
-    return bool(isinstance(network, dict) and network.get("ok") is True)
-
-
-def is_faithful(result: dict) -> bool | None:
-    """A result.json's verdict: True or False, None for a run made before verdicts."""
-    f = result.get("fidelity")
-    if not isinstance(f, dict) or not isinstance(f.get("ok"), bool):
-        return None
-    return f["ok"]

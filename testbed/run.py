@@ -29,9 +29,13 @@ first, result.json last, atomically), and the network is torn down (the ExitStac
 
 The clock counts every missed deadline, the world's (its own work overran) and each robot's
 (it had not answered the step's frame by the deadline); `deadline_miss_fraction` is misses
-over steps x (robots + 1). The run ends when every robot that is still alive has finished
+over steps x (robots + 1). The run ends when every robot that is still in it has finished
 (no reachable frontier on its own map), or at the step cap. A robot process that dies
-before the end is recorded with its exit status and step; the others carry on. See
+unasked before the end is recorded with its exit status and step (status `robot_crashed`);
+one the run kills on purpose (`--kill`) is *stopped*: the others carry on and decide the
+status, and the averages over robots leave it out (testbed.runrecord). `--isolate` takes a
+robot's radio out of range for a window of steps (testbed.isolation): the step loop tells
+the topology controller which robots are out before it feeds the step's positions. See
 docs/architecture.md for the process tree.
 
 No object of this module changes its own attributes after `__init__`: what changes during a
@@ -55,8 +59,9 @@ from dataclasses import dataclass
 from node import body
 from node.launch import NodeArgs
 from node.sched import deadline_priority
-from testbed import runresults
+from testbed import isolation, runresults
 from testbed.errors import TestbedError
+from testbed.resultfile import RunResult
 from testbed.runconfig import RunConfig, add_arguments, config_from_args
 from testbed.runfiles import RunFiles
 from testbed.runprepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
@@ -93,40 +98,39 @@ def main(args: argparse.Namespace) -> int:
     for line in (fidelity_warning(result), network_note(result)):
         if line:
             sys.stderr.write(line + "\n")
-    if result["status"] != "complete":
-        sys.stderr.write(f"testbed run: {result['status']}: {result['status_detail']}\n")
-        return 130 if result["status"] == "interrupted" else 1
+    if result.status != "complete":
+        sys.stderr.write(f"testbed run: {result.status}: {result.status_detail}\n")
+        return 130 if result.status == "interrupted" else 1
     return 0
 
 
-def fidelity_warning(result: dict) -> str | None:
+def fidelity_warning(result: RunResult) -> str | None:
     """The one line `testbed run` prints for a run its verdict (testbed.fidelity) found
     unfaithful to the time scale; None for a faithful one."""
-    f = result.get("fidelity") or {}
-    if f.get("ok", True):
+    if result.faithful is not False:
         return None
-    scale = result.get("time_scale_requested")
     return (
-        f"testbed run: warning: not faithful at time scale {scale:g}: {f.get('reason')}; "
-        "its results may differ from a slower run's (a lower --time-scale)"
+        f"testbed run: warning: not faithful at time scale {result.time_scale_requested:g}: "
+        f"{result.fidelity_reason}; its results may differ from a slower run's (a lower "
+        "--time-scale)"
     )
 
 
-def network_note(result: dict) -> str | None:
+def network_note(result: RunResult) -> str | None:
     """The one line `testbed run` prints for a dilated run whose TCP could not be dilated
     (testbed.fidelity.network_verdict); None otherwise."""
-    network = (result.get("fidelity") or {}).get("network") or {}
-    if network.get("ok", True):
+    if result.network_faithful is not False:
         return None
-    scale = result.get("time_scale_requested")
     return (
-        f"testbed run: note: {network.get('reason')}; compare its PDF and delay only with "
-        f"runs at time scale {scale:g}"
+        f"testbed run: note: {result.network_reason}; compare its PDF and delay only with "
+        f"runs at time scale {result.time_scale_requested:g}"
     )
 
 
-def run(cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False) -> dict:
-    """Do one run into directory `out`; returns the result dict (also in out/result.json).
+def run(
+    cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False
+) -> RunResult:
+    """Do one run into directory `out`; returns its RunResult (also in out/result.json).
     UsageError, before anything is made, for a run that cannot be done or a directory that
     holds a run (unless `replace`)."""
     prepared = prepare(cfg, out, name, replace)
@@ -307,11 +311,11 @@ class Run:
         """Tell everyone the run is over and give them a moment to write their logs."""
         server = started.server
         for k, r in self.robots.items():
-            if not r.crashed:
+            if not r.gone:
                 server.send(k, body.END)
         server.send(self.prep.display_k, body.END, True)
         deadline = time.monotonic() + END_GRACE_S
-        live = [r.proc for r in self.robots.values() if not r.crashed] + [started.display_proc]
+        live = [r.proc for r in self.robots.values() if not r.gone] + [started.display_proc]
         for p in live:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 p.wait(timeout=max(0.1, deadline - time.monotonic()))
@@ -346,7 +350,7 @@ class Run:
             clock=loop.clock.summary() if loop else no_clock(self.n),
             world_timing=loop.timing.seconds() if loop else {},
             parts=dict(self.parts.parts), priority=priority, t_start=self.parts.t_start,
-            network_timers=network_timers,
+            network_timers=network_timers, outages=self.cfg.isolate,
         )  # fmt: skip
 
 
@@ -398,7 +402,7 @@ class StepLoop:
         self._notice_crashes(step)
         ts = time.monotonic()
         self.scans[:] = [
-            world.scan(i) if not self.robots[i + 1].crashed else None for i in range(self.n)
+            world.scan(i) if not self.robots[i + 1].gone else None for i in range(self.n)
         ]
         cov = world.coverage()
         self.files.coverage(step, cov)
@@ -441,6 +445,7 @@ class StepLoop:
     def _update_links(self, step: int) -> None:
         """The new positions to the topology controller; links.csv gets what changed."""
         tn = time.monotonic()
+        self._isolate(step)
         positions = self.world.positions()
         self.positions[:] = positions
         added, removed = self.net.set_positions(positions + [self.prep.display_pos])
@@ -450,16 +455,38 @@ class StepLoop:
         self.files.links(step, added, removed)
         self.files.positions(step, positions)
 
+    def _isolate(self, step: int) -> None:
+        """--isolate: the robots whose radio is out at this step, to the topology controller
+        (links off, or back as the positions want) when that changed; events.jsonl says so."""
+        out = isolation.isolated_at(self.prep.cfg.isolate, step)
+        was = self.net.isolated
+        if out == was:
+            return
+        added, removed = self.net.set_isolated(out)
+        self.files.links(step, added, removed)
+        for k in sorted(out - was):
+            self.files.event(step, "isolated", k)
+            log.info("r%d out of everyone's radio range at step %d", k, step)
+        for k in sorted(was - out):
+            self.files.event(step, "back_in_range", k)
+
     def _inject_kills(self, step: int) -> None:
+        """--kill: the robot's process is SIGKILLed and it is stopped (not crashed) from now on;
+        its body stays where it is."""
         for k in self.kills.get(step, []):
             r = self.robots[k]
+            if r.gone:  # it died unasked before: a crash, as recorded
+                continue
             with contextlib.suppress(ProcessLookupError):
                 os.kill(r.proc.pid, signal.SIGKILL)
-            r.killed_at = step
+            r.stop(step)
+            self.world.bodies[k - 1].alive = False
+            self.files.event(step, "stopped", k)
+            log.info("r%d stopped at step %d (--kill)", k, step)
 
     def _notice_crashes(self, step: int) -> None:
         for k, r in self.robots.items():
-            if not r.crashed and r.proc.poll() is not None:
+            if not r.gone and r.proc.poll() is not None:
                 r.died(step, r.proc.returncode)
                 self.world.bodies[k - 1].alive = False
                 log.warning("r%d exited with status %s at step %d", k, r.exit_status, step)
@@ -469,7 +496,7 @@ class StepLoop:
         self.files.frames_out(now)
         step = self.clock.step
         for k, r in self.robots.items():
-            if r.crashed:
+            if r.gone:
                 continue
             b = self.world.bodies[k - 1]
             self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
@@ -480,26 +507,42 @@ class StepLoop:
         now = time.monotonic()
         if not self.progress.due(now):
             return
-        live = [r for r in self.robots.values() if not r.crashed]
+        live = [r for r in self.robots.values() if not r.gone]
         done = sum(1 for r in live if r.finish_step is not None)
         clock = self.clock
         self.progress.show(now, clock.step, coverage, done, self.n - len(live),
                            clock.achieved_scale(now), clock.summary().deadlines_missed)  # fmt: skip
 
     def _over(self) -> tuple[str, str] | None:
-        live = [r for r in self.robots.values() if not r.crashed]
-        if live and all(r.finish_step is not None for r in live):
-            last = max(r.finish_step for r in live)
+        return over(list(self.robots.values()), self.clock.step, self.prep.cfg.max_steps)
+
+
+def over(robots: list[RobotRecord], step: int, max_steps: int) -> tuple[str, str] | None:
+    """The run's (status, detail) if it is over at `step`, else None: `complete` when every
+    robot still in it finished (a stopped robot is not waited for), `stopped` when every
+    robot was stopped on purpose, `robot_crashed` when none is left and one crashed, the
+    step cap."""
+    live = [r for r in robots if not r.gone]
+    stopped = [r for r in robots if r.stopped_step is not None]
+    if live and all(r.finish_step is not None for r in live):
+        last = max(r.finish_step for r in live)
+        if not stopped:
             return "complete", f"all robots finished by step {last}"
-        if not live:
-            return "robot_crashed", "every robot process died"
-        if self.clock.step >= self.prep.cfg.max_steps:
-            return "step_cap", f"the step cap ({self.prep.cfg.max_steps}) was reached"
-        return None
+        return "complete", f"the robots not stopped finished by step {last}; " + ", ".join(
+            f"r{r.k} stopped at step {r.stopped_step}" for r in stopped
+        )
+    if not live:
+        if len(stopped) == len(robots):
+            return "stopped", "every robot was stopped (--kill)"
+        return "robot_crashed", "every robot process died"
+    if step >= max_steps:
+        return "step_cap", f"the step cap ({max_steps}) was reached"
+    return None
 
 
 def final_status(status: tuple[str, str], robots: list[RobotRecord]) -> tuple[str, str]:
-    """The status of a loop that ended, with the first crash named when a robot died."""
+    """The status of a loop that ended, with the first crash named when a robot died unasked
+    (a robot stopped on purpose is no crash)."""
     crashed = [r for r in robots if r.crashed]
     if not crashed:
         return status

@@ -20,6 +20,7 @@ from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
 from testbed.errors import UsageError
+from testbed.isolation import Outage
 from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import (
@@ -38,6 +39,13 @@ def _kill(text: str) -> tuple[int, int]:
     if not m:
         raise argparse.ArgumentTypeError(f"--kill {text!r} is not ROBOT:STEP (e.g. r2:150)")
     return int(m[1]), int(m[2])
+
+
+def _isolate(text: str) -> Outage:
+    try:
+        return Outage.parse(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _point(text: str) -> tuple[float, float]:
@@ -187,6 +195,12 @@ class RunConfig:
         metavar="ROBOT:STEP", parse=_kill, text=lambda k: f"r{k[0]}:{k[1]}", repeat=True,
         default_text="none",
     )  # fmt: skip
+    isolate: tuple[Outage, ...] = option(
+        str, "take robot ROBOT out of everyone's radio range from step STEP for STEPS steps, "
+        "then back (a partition: every link of it off, whatever the positions; the robot "
+        "goes on exploring; veth medium; repeatable)", (), metavar="ROBOT:STEP:STEPS",
+        parse=_isolate, text=Outage.text, repeat=True, default_text="none",
+    )  # fmt: skip
     view: str | None = option(
         str, "serve a live view of the run at [HOST:]PORT (127.0.0.1 unless a host is given)",
         None, metavar="[HOST:]PORT", default_text="none",
@@ -197,6 +211,7 @@ class RunConfig:
         d["display_pos"] = list(self.display_pos) if self.display_pos else None
         d["snapshots"] = list(self.snapshots)
         d["kill"] = [f"{k}:{s}" for k, s in self.kill]
+        d["isolate"] = [o.text() for o in self.isolate]
         return d
 
     @classmethod
@@ -210,6 +225,8 @@ class RunConfig:
             kw["snapshots"] = tuple(kw["snapshots"])
         if "kill" in kw:
             kw["kill"] = tuple(_kill(k) for k in kw["kill"])
+        if "isolate" in kw:
+            kw["isolate"] = tuple(Outage.parse(o) for o in kw["isolate"])
         return cls(**kw)
 
 
@@ -263,6 +280,12 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     for k, _ in cfg.kill:
         if not 1 <= k <= cfg.robots:
             raise UsageError(f"--kill names robot {k}, but the team is r1..r{cfg.robots}")
+    for o in cfg.isolate:
+        if not 1 <= o.robot <= cfg.robots:
+            raise UsageError(f"--isolate names robot {o.robot}, but the team is r1..r{cfg.robots}")
+    if cfg.isolate and cfg.medium != "veth":
+        raise UsageError("--isolate needs the veth medium: on ns3-wifi the channel decides "
+                         "who hears whom")  # fmt: skip
     _view(cfg.view)
     return cfg
 

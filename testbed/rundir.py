@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from testbed.resultfile import RunResult, has_result
 from testbed.runconfig import OPTIONS, RunConfig, to_argv
-from topology.jsonfile import read_json
 
 # The options a sweep's plan always names (the rest only when not the default): those of the
 # sweep file, and the seed (each run's own, derived from the file's base seed).
@@ -31,10 +31,11 @@ def run_dir(out: Path, run_id: str) -> Path:
 def is_done(out: Path, run_id: str) -> bool:
     """A run is done iff its result.json exists (the contract's completion marker) and does
     not say it was interrupted (a run stopped by Ctrl-C keeps what it had, but is redone)."""
-    path = run_dir(out, run_id) / "result.json"
-    if not path.is_file():
+    rdir = run_dir(out, run_id)
+    if not has_result(rdir):
         return False
-    return (read_json(path) or {}).get("status") != "interrupted"
+    result = RunResult.read(rdir)
+    return result is None or result.status != "interrupted"
 
 
 def plan_dict(config: RunConfig) -> dict:

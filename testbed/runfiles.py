@@ -7,7 +7,9 @@ whole, so that no pcap, daemon log or snapshot of the old run lies beside the ne
 directory that cannot be made or written is bad input too (UsageError: one line, exit 2).
 
 `RunFiles` is the step loop's output, a context manager: entering opens links.csv,
-coverage.csv and positions.csv with their headers; each step adds its rows; leaving writes
+coverage.csv and positions.csv with their headers, and events.jsonl (what the run did to its
+robots on purpose: a robot stopped, a radio taken out of range and back); each step adds its
+rows; leaving writes
 clock.csv (when each step's frames went out) and closes everything, whatever happened, so a
 failed run's files are complete up to its last step. docs/run-results.md says what each
 file holds.
@@ -16,14 +18,16 @@ file holds.
 from __future__ import annotations
 
 import csv
+import json
 import os
 import shutil
 
 from testbed.errors import UsageError
+from testbed.resultfile import RESULT_NAME
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by
 # the robot processes (robots/).
-RUN_MARKERS = ("config.json", "result.json", "robots")
+RUN_MARKERS = ("config.json", RESULT_NAME, "robots")
 
 
 def holds_run(out: str) -> bool:
@@ -69,7 +73,7 @@ class RunFiles:
         self.robots = robots
         self._files: list = []
         self._frames: list[float] = []  # CLOCK_MONOTONIC of each step's frames (clock.csv)
-        self._links = self._coverage = self._positions = None
+        self._links = self._coverage = self._positions = self._events = None
 
     def __enter__(self) -> RunFiles:
         def writer(name: str, header: list[str]):
@@ -83,6 +87,8 @@ class RunFiles:
         self._coverage = writer("coverage.csv", ["step", "coverage"])
         xy = [f"{a}{k}" for k in range(1, self.robots + 1) for a in "xy"]
         self._positions = writer("positions.csv", ["step"] + xy)
+        self._events = open(os.path.join(self.out, "events.jsonl"), "w")  # noqa: SIM115
+        self._files.append(self._events)
         return self
 
     def __exit__(self, *exc) -> None:
@@ -98,6 +104,12 @@ class RunFiles:
             self._links.writerow([step, "remove", i, j])
         for i, j in sorted(added):
             self._links.writerow([step, "add", i, j])
+
+    def event(self, step: int, kind: str, robot: int) -> None:
+        """Something the run did to robot `robot` at `step` (events.jsonl): `stopped`,
+        `isolated`, `back_in_range`."""
+        self._events.write(json.dumps({"step": step, "e": kind, "robot": f"r{robot}"}) + "\n")
+        self._events.flush()
 
     def coverage(self, step: int, coverage: float) -> None:
         self._coverage.writerow([step, f"{coverage:.5f}"])

@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import shlex
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from testbed.resultfile import RunResult
 
 
 class ProgressLine:
@@ -39,10 +43,10 @@ class ProgressLine:
             sys.stderr.write("\n")
 
 
-def summary_line(result: dict, out: str) -> str:
+def summary_line(result: RunResult, out: str) -> str:
     """One line for the end of `testbed run`."""
     return (
-        f"testbed run: {result['status']} after {result['steps']} steps, coverage "
-        f"{100 * result['coverage_final']:.1f}%; results in {out}; replay: "
+        f"testbed run: {result.status} after {result.steps} steps, coverage "
+        f"{100 * result.coverage_final:.1f}%; results in {out}; replay: "
         f"testbed view {shlex.quote(out)}"
     )

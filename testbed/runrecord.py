@@ -1,8 +1,12 @@
 """What a run knows of itself: robots' records while it goes, the frozen record at its end.
 
 Theory of operation. While the step loop runs, each robot's process has a `RobotRecord` the
-loop updates (its last answered step, when it finished, whether it crashed, its missed
-deadlines). When the run ends, `Run.execute` (testbed.run) freezes everything the results
+loop updates (its last answered step, when it finished, whether it crashed or was stopped,
+its missed deadlines). A robot is *stopped* when the run itself killed it (`--kill`, a
+battery failure on purpose) and *crashed* when its process died unasked; either way it is
+gone for the rest of the run, but only a crash is a failure of the run, and a stopped
+robot's exploration is cut short on purpose, so the averages over robots leave it out.
+When the run ends, `Run.execute` (testbed.run) freezes everything the results
 need into a `RunRecord`: the configuration, the status, the world, each robot's
 `RobotOutcome`, the clock's summary (testbed.stepclock) and the wall time of each stage.
 testbed.runresults writes result.json and the per-robot files from that record alone.
@@ -32,7 +36,12 @@ class RobotRecord:
     exit_status: int | None = None
     missed: int = 0
     missed_steps: list = field(default_factory=list)
-    killed_at: int | None = None
+    stopped_step: int | None = None  # the step the run killed it at (--kill)
+
+    @property
+    def gone(self) -> bool:
+        """Whether its process is out of the run: crashed, or stopped on purpose."""
+        return self.crashed or self.stopped_step is not None
 
     def answered(self, step: int) -> None:
         self.last_cmd = max(self.last_cmd, step)
@@ -44,7 +53,7 @@ class RobotRecord:
 
     def missed_deadline(self, step: int) -> bool:
         """Whether a live robot had not answered `step`'s frame by the deadline (counted)."""
-        if self.crashed or self.last_cmd >= step:
+        if self.gone or self.last_cmd >= step:
             return False
         self.missed += 1
         if len(self.missed_steps) < MAX_MISSED_STEPS_KEPT:
@@ -52,13 +61,18 @@ class RobotRecord:
         return True
 
     def died(self, step: int, status: int | None) -> None:
+        """Its process died unasked (noticed at `step`)."""
         self.crashed, self.crash_step, self.exit_status = True, step, status
+
+    def stop(self, step: int) -> None:
+        """The run killed it at `step` on purpose (--kill)."""
+        self.stopped_step = step
 
     def outcome(self) -> RobotOutcome:
         return RobotOutcome(
             k=self.k, finish_step=self.finish_step, crashed=self.crashed,
             crash_step=self.crash_step, exit_status=self.exit_status, missed=self.missed,
-            missed_steps=tuple(self.missed_steps), killed_at=self.killed_at,
+            missed_steps=tuple(self.missed_steps), stopped_step=self.stopped_step,
         )  # fmt: skip
 
 
@@ -73,7 +87,12 @@ class RobotOutcome:
     exit_status: int | None
     missed: int
     missed_steps: tuple
-    killed_at: int | None
+    stopped_step: int | None  # killed on purpose at this step (--kill); None: it was not
+
+    @property
+    def counted(self) -> bool:
+        """Whether the averages over robots count it: every robot but a stopped one."""
+        return self.stopped_step is None
 
 
 class WallParts:
@@ -108,6 +127,7 @@ class RunRecord:
     priority: str | None  # what the step loop's thread got
     t_start: float  # CLOCK_MONOTONIC when the run began
     network_timers: dict | None = None  # topology.nettimers' record; None: no network came up
+    outages: tuple = ()  # testbed.isolation.Outage: the radio outages asked for (--isolate)
 
     @property
     def steps(self) -> int:
@@ -123,11 +143,25 @@ class RunRecord:
         return max(self.finish_steps, default=None)
 
     @property
+    def counted_robots(self) -> tuple[RobotOutcome, ...]:
+        """The robots the averages count: all but those stopped on purpose."""
+        return tuple(r for r in self.robots if r.counted)
+
+    @property
     def mean_finish_step(self) -> float | None:
-        """The mean over robots of their finishing step, a robot that never finished
-        counting the run's last step: the paper's exploration time (Fig. 2)."""
-        if not self.robots:
+        """The mean over the counted robots of their finishing step, a robot that never
+        finished counting the run's last step: the paper's exploration time (Fig. 2). None
+        when no robot counts."""
+        counted = self.counted_robots
+        if not counted:
             return None
         return statistics.fmean(
-            r.finish_step if r.finish_step is not None else self.steps for r in self.robots
+            r.finish_step if r.finish_step is not None else self.steps for r in counted
         )
+
+    @property
+    def survivors_finished(self) -> bool:
+        """Whether every robot that was neither stopped nor crashed finished (False when
+        none is left)."""
+        left = [r for r in self.robots if r.counted and not r.crashed]
+        return bool(left) and all(r.finish_step is not None for r in left)

@@ -1,15 +1,17 @@
-"""What a finished run writes about itself: robots/rK.json, paths.png and the result dict.
+"""What a finished run writes about itself: robots/rK.json, paths.png and its RunResult.
 
 `write(record)` reads what the robot processes logged (robots/rK.events.jsonl) and the
 run's frozen record (testbed.runrecord: what the world and its clock saw), writes each
 robot's detailed record and the picture of the paths, and, last and atomically, result.json
-(docs/run-results.md says what every key means). A picture that cannot be drawn is logged,
-never a reason to lose the results.
+from a `RunResult` (testbed.resultfile, the file's one type; docs/run-results.md says what
+every key means). A picture that cannot be drawn is logged, never a reason to lose the
+results.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import logging
 import os
@@ -20,7 +22,8 @@ import cv2
 import numpy as np
 
 from node import render, stepcore
-from testbed import fidelity
+from testbed import fidelity, isolation
+from testbed.resultfile import HostStalls, Plan, ResultConfig, RobotResult, RunResult
 from testbed.world.world import World
 from topology.jsonfile import read_json, write_json_atomic
 
@@ -29,12 +32,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-RESULT_FORMAT = 1
-# The keys of config.json that result.json repeats under "config" (the contract's).
-RESULT_CONFIG_KEYS = (
-    "robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map", "loss_pct",
-    "delay_ms", "capture", "max_steps", "coordination", "start",
-)  # fmt: skip
 # What each robot's summary line (its last event) says, copied into robots/rK.json.
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
@@ -56,11 +53,11 @@ def read_events(path: str) -> list[dict]:
     return out
 
 
-def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
+def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
     """Robot r's entry in result.json, and its summary event ({} when it left none: its
     lateness, node.lateness, and CPU); its fuller record goes to robots/rK.json."""
     ev = read_events(os.path.join(rec.out, "robots", f"r{r.k}.events.jsonl"))
-    plans = [{"step": e["step"], "cause": e["cause"]} for e in ev if e["e"] == "plan"]
+    plans = tuple(Plan(e["step"], e["cause"]) for e in ev if e["e"] == "plan")
     sent: dict[str, int] = {}
     received: dict[str, int] = {}
     for e in ev:
@@ -70,17 +67,14 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
             received[e["kind"]] = received.get(e["kind"], 0) + 1
     summary = next((e for e in reversed(ev) if e["e"] == "summary"), {})
     b = rec.world.bodies[r.k - 1]
-    out = {
-        "finish_step": r.finish_step,
-        "crashed": r.crashed,
-        "exit_status": r.exit_status,
-        "plans": plans,
-        "messages": {"sent": sent, "received": received},
-        "path_length_m": round(b.path_length, 3),
-    }
-    detail = dict(out)
+    out = RobotResult(
+        name=f"r{r.k}", finish_step=r.finish_step, crashed=r.crashed, plans=plans, sent=sent,
+        received=received, path_length_m=round(b.path_length, 3), stopped_step=r.stopped_step,
+        exit_status=r.exit_status,
+    )  # fmt: skip
+    detail = out.to_dict()
     detail.update(
-        crash_step=r.crash_step, killed_at=r.killed_at, deadlines_missed=r.missed,
+        crash_step=r.crash_step, deadlines_missed=r.missed,
         deadlines_missed_steps=list(r.missed_steps),
         collisions=b.collisions, final_pose=[round(b.x, 3), round(b.y, 3)],
         plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e["e"] == "plan"],
@@ -90,62 +84,29 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[dict, dict]:
     return out, summary
 
 
-def write(rec: RunRecord) -> dict:
-    """robots/rK.json, paths.png and, last, result.json; returns result.json's contents."""
+def write(rec: RunRecord) -> RunResult:
+    """robots/rK.json, paths.png and, last, result.json; returns what result.json holds."""
     t0 = time.monotonic()
     result = contents(rec)
-    result["wall_parts_s"]["results"] = round(time.monotonic() - t0, 3)
-    write_json_atomic(os.path.join(rec.out, "result.json"), result)
+    parts = dict(result.wall_parts_s, results=round(time.monotonic() - t0, 3))
+    result = dataclasses.replace(result, wall_parts_s=parts)
+    result.write(rec.out)
     return result
 
 
-def contents(rec: RunRecord) -> dict:
-    """robots/rK.json and paths.png; returns result.json's contents (not yet written)."""
-    robots = {f"r{r.k}": robot_result(rec, r) for r in rec.robots}
-    robot_out = {k: v[0] for k, v in robots.items()}
+def contents(rec: RunRecord) -> RunResult:
+    """robots/rK.json and paths.png; returns the run's result (not yet written)."""
+    robots = [robot_result(rec, r) for r in rec.robots]
     clock = rec.clock
     try:
         paths_png(rec.world, os.path.join(rec.out, "paths.png"))
     except Exception as e:  # a picture must not lose the results
         log.warning("paths.png: %s", e)
     mean_finish = rec.mean_finish_step
-    result = {
-        "format": RESULT_FORMAT,
-        "config": {k: rec.config[k] for k in RESULT_CONFIG_KEYS},
-        "status": rec.status,
-        "status_detail": rec.detail,
-        "steps": clock.steps,
-        "last_finish_step": rec.last_finish_step,
-        "mean_finish_step": None if mean_finish is None else round(mean_finish, 2),
-        "coverage_final": round(rec.world.coverage(), 5),
-        "time_scale_requested": rec.time_scale,
-        "time_scale_achieved": round(clock.time_scale_achieved, 3),
-        "deadlines_missed": clock.deadlines_missed,
-        "deadline_miss_fraction": clock.miss_fraction,
-        "deadlines_missed_world": clock.missed_world,
-        # Misses while the host stalled the whole machine (testbed.stalls), and the fraction
-        # without them: what a lower time scale could have avoided.
-        "host_stalls": dict(clock.stalls),
-        "deadline_miss_fraction_outside_stalls": clock.miss_fraction_outside_stalls,
-        "wall_time_s": round(time.monotonic() - rec.t_start, 2),
-        "step_loop_wall_s": round(clock.loop_wall_s, 2),
-        "wall_parts_s": dict(rec.parts),
-        "world_priority": rec.priority,
-        "step_core": stepcore.kind(),
-        "display": {
-            "robot": len(rec.robots) + 1,
-            "coverage_final": display_coverage(rec.out, rec.world),
-            "snapshots": snapshot_steps(rec.out),
-        },
-        "world_timing_s": dict(rec.world_timing),
-        "world_missed_steps_ms_late": [list(m) for m in clock.world_missed_steps],
-        "robots": robot_out,
-    }
-    summaries = [v[1] for v in robots.values()]
+    summaries = [sm for _, sm in robots]
     display = display_summary(rec.out)
     daemons = daemon_stats(rec.out, len(rec.robots) + 1)
-    result["cpu_s"] = cpu_seconds(rec, summaries, display, daemons)
-    result["fidelity"] = fidelity.verdict(
+    verdict = fidelity.verdict(
         fidelity.measures(
             clock.miss_fraction_outside_stalls if clock.steps else None,
             [sm.get("lateness") for sm in summaries],
@@ -154,11 +115,45 @@ def contents(rec: RunRecord) -> dict:
             channel_relay_lag(rec.out),
         )
     )
-    # The robots' network timers (topology.nettimers) and whether TCP kept emulated time.
-    result["network_timers"] = rec.network_timers
-    result["fidelity"]["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
-    result["config"]["extra"] = {k: v for k, v in rec.config.items() if k not in result["config"]}
-    return result
+    # Whether TCP kept emulated time, from the robots' network timers (topology.nettimers).
+    verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
+    return RunResult(
+        config=ResultConfig.from_config(rec.config),
+        status=rec.status,
+        status_detail=rec.detail,
+        steps=clock.steps,
+        last_finish_step=rec.last_finish_step,
+        mean_finish_step=None if mean_finish is None else round(mean_finish, 2),
+        mean_finish_step_robots=len(rec.counted_robots),
+        survivors_finished=rec.survivors_finished,
+        isolated=tuple(isolation.record(rec.outages, clock.steps)),
+        coverage_final=round(rec.world.coverage(), 5),
+        time_scale_requested=rec.time_scale,
+        time_scale_achieved=round(clock.time_scale_achieved, 3),
+        deadlines_missed=clock.deadlines_missed,
+        deadline_miss_fraction=clock.miss_fraction,
+        deadlines_missed_world=clock.missed_world,
+        # Misses while the host stalled the whole machine (testbed.stalls), and the fraction
+        # without them: what a lower time scale could have avoided.
+        host_stalls=HostStalls(**clock.stalls),
+        deadline_miss_fraction_outside_stalls=clock.miss_fraction_outside_stalls,
+        wall_time_s=round(time.monotonic() - rec.t_start, 2),
+        step_loop_wall_s=round(clock.loop_wall_s, 2),
+        wall_parts_s=dict(rec.parts),
+        world_priority=rec.priority,
+        step_core=stepcore.kind(),
+        display={
+            "robot": len(rec.robots) + 1,
+            "coverage_final": display_coverage(rec.out, rec.world),
+            "snapshots": snapshot_steps(rec.out),
+        },
+        world_timing_s=dict(rec.world_timing),
+        world_missed_steps_ms_late=tuple(tuple(m) for m in clock.world_missed_steps),
+        robots=tuple(r for r, _ in robots),
+        cpu_s=cpu_seconds(rec, summaries, display, daemons),
+        fidelity=verdict,
+        network_timers=rec.network_timers,
+    )
 
 
 def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:

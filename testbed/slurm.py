@@ -29,9 +29,11 @@ import shlex
 import shutil
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from testbed.errors import TestbedError, UsageError
+from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.runconfig import RunConfig
 from testbed.rundir import is_done, run_argv, run_dir
 from testbed.sweepfile import PlannedRun
@@ -85,9 +87,10 @@ def measured_cpu_per_robot_step(out: Path) -> float | None:
     """The most CPU seconds per robot-step that the finished runs (and calibration trials)
     of the sweep directory measured (result.json's cpu_s), or None when none says."""
     found = []
-    for res in [*out.glob("runs/*/result.json"), *out.glob("calibration/*/result.json")]:
-        ms = ((read_json(res) or {}).get("cpu_s") or {}).get("per_robot_step_ms")
-        if isinstance(ms, int | float) and ms > 0:
+    for res in [*out.glob(f"runs/*/{RESULT_NAME}"), *out.glob(f"calibration/*/{RESULT_NAME}")]:
+        result = RunResult.read(res.parent)
+        ms = result.cpu_per_robot_step_ms if result else None
+        if ms is not None and ms > 0:
             found.append(ms / 1000)
     return max(found, default=None)
 
@@ -245,16 +248,14 @@ def _mark_interrupted(rdir: Path) -> None:
     (Slurm signals the whole step): the run may end with an error of its own ("the fork
     server died") rather than as interrupted. It did not end on its own, so it is recorded
     as interrupted, which `--resume` redoes (testbed.rundir.is_done)."""
-    path = rdir / "result.json"
-    result = read_json(path)
-    if result is None or result.get("status") == "interrupted":
+    result = RunResult.read(rdir)
+    if result is None or result.status == "interrupted":
         return
-    result["status_detail"] = (
-        f"cancelled (SIGTERM from the batch system); it ended as {result.get('status')}: "
-        f"{result.get('status_detail', '')}"
+    detail = (
+        f"cancelled (SIGTERM from the batch system); it ended as {result.status}: "
+        f"{result.status_detail}"
     )
-    result["status"] = "interrupted"
-    write_json_atomic(path, result)
+    replace(result, status="interrupted", status_detail=detail).write(rdir)
 
 
 if __name__ == "__main__":

@@ -108,8 +108,16 @@ class SweepSpec:
     description: str = ""
 
     @classmethod
-    def of(cls, *, runs: int = 1, time_scale_by_robots=(), load_limit=None, seed: int = 0,
-           description: str = "", **fields) -> SweepSpec:
+    def of(
+        cls,
+        *,
+        runs: int = 1,
+        time_scale_by_robots=(),
+        load_limit=None,
+        seed: int = 0,
+        description: str = "",
+        **fields,
+    ) -> SweepSpec:
         """A spec from keywords, as a sweep file would give them: a tuple is a grid
         dimension's values (robots, comm_range and laser_range are required), anything else
         a [run] value."""  # fmt: skip

@@ -11,6 +11,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from testbed.resultfile import RunResult
 from testbed.runconfig import RunConfig
 from testbed.rundir import is_done, plan_dict, run_dir
 from testbed.sweepfile import PlannedRun
@@ -50,9 +51,10 @@ def plan(runs: list[PlannedRun], out: Path, netem: bool) -> Plan:
 
 def config_mismatch(out: Path, run: PlannedRun) -> str | None:
     """How a finished run's recorded config differs from the planned one, or None."""
-    recorded = (read_json(run_dir(out, run.run_id) / "result.json") or {}).get("config")
-    if not isinstance(recorded, dict):
+    result = RunResult.read(run_dir(out, run.run_id))
+    if result is None:
         return None  # unreadable results are the report's problem, not a reason to stop
+    recorded = result.config.to_dict()
     for key, want in plan_dict(run.config).items():
         if key == "time_scale":
             continue  # how fast, not what: the sweep may have run it slower (sweeprunner)

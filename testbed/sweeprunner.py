@@ -51,8 +51,9 @@ from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from testbed import fidelity, sweeppolicy
+from testbed import sweeppolicy
 from testbed.errors import TestbedError
+from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.runconfig import RunConfig
 from testbed.rundir import is_done, plan_dict, run_argv, run_dir
 from testbed.sweepfile import PlannedRun
@@ -279,16 +280,16 @@ class Sweep:
         if not is_done(self.out, run.run_id):
             st["status"] = "failed"
             st["reason"] = _last_line(self.out / "logs" / f"{run.run_id}.log") or (
-                f"exited with status {child.proc.returncode} without result.json"
+                f"exited with status {child.proc.returncode} without {RESULT_NAME}"
             )
             return f"{run.run_id}: FAILED ({st['reason']})"
-        result = read_json(run_dir(self.out, run.run_id) / "result.json") or {}
+        # None: unreadable, counted as saying nothing (the report names it)
+        result = RunResult.read(run_dir(self.out, run.run_id))
         st["status"] = "done"
-        st["result_status"] = result.get("status")
-        miss = result.get("deadline_miss_fraction")
+        st["result_status"] = result.status if result else None
+        miss = result.deadline_miss_fraction if result else None
         st["deadline_miss_fraction"] = miss
-        verdict = result.get("fidelity") if isinstance(result.get("fidelity"), dict) else {}
-        faithful = fidelity.is_faithful(result)
+        faithful = result.faithful if result else None
         if faithful is not None:
             st["faithful"] = faithful
         n = run.config.robots
@@ -297,17 +298,17 @@ class Sweep:
             robots=n,
             miss=miss,
             # Misses while the host stalled the whole machine (testbed.stalls) are told apart.
-            miss_outside_stalls=result.get("deadline_miss_fraction_outside_stalls", miss),
+            miss_outside_stalls=result.deadline_miss_fraction_outside_stalls if result else None,
             shared=child.shared,
             load_seen=child.load_seen,
             jobs_at_start=child.jobs_at_start,
             attempts=st["attempts"],
             faithful=faithful,
-            fidelity_reason=str(verdict.get("reason", "")),
+            fidelity_reason=result.fidelity_reason if result else "",
         )
         decision = sweeppolicy.decide(outcome, self._policy_state())
         self._apply(decision, run, st, queue)
-        return f"{run.run_id}: {result.get('status')} in {wall:.0f} s" + decision.words
+        return f"{run.run_id}: {st['result_status']} in {wall:.0f} s" + decision.words
 
     def _policy_state(self) -> sweeppolicy.State:
         return sweeppolicy.State(
@@ -363,12 +364,10 @@ class Sweep:
         proc, log_file = self._spawn(config, rdir, rdir.with_suffix(".log"), f"calibrate {k}")
         proc.wait()
         log_file.close()
-        res = read_json(rdir / "result.json") or {}
-        miss = res.get("deadline_miss_fraction_outside_stalls")
-        if miss is None:
-            miss = res.get("deadline_miss_fraction")
-        faithful = fidelity.is_faithful(res) is not False
-        return (float(miss) if isinstance(miss, int | float) else 1.0), faithful
+        res = RunResult.read(rdir)
+        if res is None:  # no result: as bad as can be
+            return 1.0, True
+        return float(res.deadline_miss_fraction_outside_stalls), res.faithful is not False
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
         for child in children.values():
@@ -414,8 +413,8 @@ class Sweep:
     def run(self, todo: list[PlannedRun], done: list[PlannedRun], skipped: dict[str, str]) -> int:
         for r in done:
             self.status[r.run_id] = {"status": "done", "previous_sweep": True}
-            res = read_json(run_dir(self.out, r.run_id) / "result.json") or {}
-            self.status[r.run_id]["result_status"] = res.get("status")
+            res = RunResult.read(run_dir(self.out, r.run_id))
+            self.status[r.run_id]["result_status"] = res.status if res else None
         for rid, reason in skipped.items():
             self.status[rid] = {"status": "skipped", "reason": reason}
         self.progress.total = len(self.runs) - len(skipped)

@@ -20,7 +20,9 @@ then any other process still inside our namespaces, then remove the namespaces (
 every interface with them) and the state. It works from names and the state file alone, so
 it needs nothing from the process that built the testbed.
 
-Moving robots recomputes the wanted links and applies only the difference.
+Moving robots recomputes the wanted links and applies only the difference. A robot whose
+radio is taken out of range on purpose (`set_isolated`, a run's `--isolate`) has no link in
+the wanted set, whatever the positions say, until it is let back.
 """
 
 import contextlib
@@ -76,6 +78,7 @@ class Network:
         self._deferred: list[state.ProcessRecord] | None = None  # see _recording
         self._state_mtime: int | None = None  # of the state file we last read or wrote
         self._adj: dict[int, set[Pair]] | None = None  # robot -> its links in current
+        self.isolated: frozenset[int] = frozenset()  # robots out of everyone's range
         if spec.map_png and spec.range_model in LOS_MODELS:
             try:
                 self.walls = Walls.from_png(spec.map_png, spec.map_cell)
@@ -336,6 +339,8 @@ class Network:
         """The links (with their impairments) the positions call for; `moved`: the robots
         that moved since the last call, if known."""
         links = self._range_links(moved)
+        if self.isolated:
+            links = {p: v for p, v in links.items() if not self.isolated.intersection(p)}
         base = self.spec.impairment
         if base.is_none and not self.link_impairments:
             return links  # the common case, once per world step: nothing to combine
@@ -362,10 +367,23 @@ class Network:
             self.link_impairments[pair] = imp
         self._moved()
 
+    def set_isolated(self, robots) -> tuple[list[Pair], list[Pair]]:
+        """Take `robots` out of everyone's radio range (every link of theirs off, whatever the
+        positions say) and let every other robot back; links follow before this returns.
+        Returns (added, removed). Only on the veth medium (on ns3-wifi the channel decides
+        who hears whom)."""
+        robots = frozenset(robots)
+        for k in robots:
+            self._check_robot(k)
+        if self.spec.medium != "veth":
+            raise UsageError("a robot can be isolated only on the veth medium")
+        self.isolated = robots
+        return self._moved()
+
     def _apply_positions(self, moved: set[int] | None = None) -> tuple[list[Pair], list[Pair]]:
         if self.spec.medium == "ns3-wifi":
             self.medium.set_positions(self.positions)  # the channel decides who hears whom
-        if moved is not None and self.spec.range_model in ("disc", "lossy"):
+        if moved is not None and self.spec.range_model in ("disc", "lossy") and not self.isolated:
             add, remove, change, wanted = self._diff_moved(moved)
         else:
             wanted = self.wanted()
@@ -376,7 +394,7 @@ class Network:
         for p in add + change:
             self.medium.set_link_impairment(*p, wanted[p])
         self.medium.set_links(add, remove)
-        if moved is None or self.spec.range_model not in ("disc", "lossy"):
+        if moved is None or self.spec.range_model not in ("disc", "lossy") or self.isolated:
             self.current = wanted
         if self.oracle is not None and (add or remove):
             self.oracle.update(self.current)  # routes in place before the move returns

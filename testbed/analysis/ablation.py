@@ -23,7 +23,7 @@ from pathlib import Path
 
 from testbed.analysis import stats
 from testbed.analysis.plots import plt, save
-from testbed.analysis.runs import RunRecord
+from testbed.analysis.runs import FinishedRun
 from testbed.analysis.tables import plan_intervals
 
 THIRDS = ("start", "middle", "end")
@@ -40,7 +40,7 @@ def _name(variant: tuple[str, str]) -> str:
     return f"{variant[0]}, {variant[1]}"
 
 
-def request_thirds(run: RunRecord) -> list[int]:
+def request_thirds(run: FinishedRun) -> list[int]:
     """On-request plan generations of all robots in each third of the run's steps."""
     steps = max(1, run.steps or 1)
     counts = [0, 0, 0]
@@ -51,7 +51,7 @@ def request_thirds(run: RunRecord) -> list[int]:
     return counts
 
 
-def _fig4_point(runs: list[RunRecord], variant: tuple[str, str]) -> list[RunRecord]:
+def _fig4_point(runs: list[FinishedRun], variant: tuple[str, str]) -> list[FinishedRun]:
     return sorted(
         (
             r
@@ -67,7 +67,7 @@ def _fig4_point(runs: list[RunRecord], variant: tuple[str, str]) -> list[RunReco
     )
 
 
-def request_thirds_rows(runs: list[RunRecord]) -> list[dict]:
+def request_thirds_rows(runs: list[FinishedRun]) -> list[dict]:
     """Per variant, per run of 10 robots at 20 m (laser 2 m): on-request generations per third,
     and the plans on the timer, for the report and ablation_thirds.csv."""
     rows = []
@@ -84,7 +84,7 @@ def request_thirds_rows(runs: list[RunRecord]) -> list[dict]:
     return rows
 
 
-def plot_fig4_variants(runs: list[RunRecord], stem: Path) -> list[Path]:
+def plot_fig4_variants(runs: list[FinishedRun], stem: Path) -> list[Path]:
     """One panel per variant: the first run of 10 robots at 20 m, plan intervals against the
     step, by cause, with the thirds marked and their on-request counts written in."""
     variants = [v for v in sorted({r.variant for r in runs if r.usable}) if _fig4_point(runs, v)]

@@ -39,13 +39,13 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from testbed.analysis import ablation, media, pathsfig, pcapmetrics, plots, protocols, tables
-from testbed.analysis.runs import RunRecord, load_runs
+from testbed.analysis.runs import FinishedRun, load_runs
 from testbed.analysis.tables import MetricsOf, write_table
 
 log = logging.getLogger(__name__)
 
 
-def capture_metrics(run: RunRecord) -> dict | None:
+def capture_metrics(run: FinishedRun) -> dict | None:
     """The run's routing metrics from its captures (None without captures or tshark)."""
     try:
         return pcapmetrics.run_metrics(run.path, run=run)
@@ -54,7 +54,7 @@ def capture_metrics(run: RunRecord) -> dict | None:
         return None
 
 
-def collect_paths(runs: list[RunRecord], dest: Path) -> list[Path]:
+def collect_paths(runs: list[FinishedRun], dest: Path) -> list[Path]:
     """The path pictures (Figs. 3 and 5) of each point's first usable run: drawn from its
     positions (testbed.analysis.pathsfig: start markers, a scale bar, names inside the
     frame), or its own paths.png copied where it recorded no positions."""
@@ -76,7 +76,7 @@ def collect_paths(runs: list[RunRecord], dest: Path) -> list[Path]:
     return out
 
 
-def _paper_figures(runs: list[RunRecord], figdir: Path, made: dict) -> None:
+def _paper_figures(runs: list[FinishedRun], figdir: Path, made: dict) -> None:
     """Figs. 2 and 4, the plan causes, and the ablation's tables when variants ran."""
     fig2_all = tables.fig2_rows(runs)
     write_table(fig2_all, figdir / "fig2")
@@ -103,14 +103,14 @@ def _paper_figures(runs: list[RunRecord], figdir: Path, made: dict) -> None:
         made["files"] += ablation.plot_fig4_variants(runs, figdir / "ablation_fig4")
 
 
-def _all_metrics(runs: list[RunRecord], metrics_of: MetricsOf) -> dict[str, dict | None]:
+def _all_metrics(runs: list[FinishedRun], metrics_of: MetricsOf) -> dict[str, dict | None]:
     """Each run's routing metrics. tshark is the slow part: keep the cores busy with one
     run's captures each."""
     with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
         return dict(zip((r.run_id for r in runs), pool.map(metrics_of, runs), strict=True))
 
 
-def _protocol_tables(all_runs: list[RunRecord], metrics: dict, figdir: Path, made: dict) -> None:
+def _protocol_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
     """The protocols comparison's tables, when the sweep ran more than one routing."""
     if len({r.config.routing for r in all_runs if r.usable}) < 2:
         return
@@ -123,7 +123,7 @@ def _protocol_tables(all_runs: list[RunRecord], metrics: dict, figdir: Path, mad
     write_table(made["tables"]["protocols"], figdir / "protocols")
 
 
-def _media_tables(all_runs: list[RunRecord], metrics: dict, figdir: Path, made: dict) -> None:
+def _media_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
     """The media comparison's tables, when the sweep ran more than one medium."""
     usable = [r for r in all_runs if r.usable]
     if len({r.config.medium for r in usable}) < 2:
@@ -135,7 +135,7 @@ def _media_tables(all_runs: list[RunRecord], metrics: dict, figdir: Path, made: 
     write_table(made["tables"]["media"], figdir / "media")
 
 
-def _routing_figures(runs: list[RunRecord], metrics: dict, figdir: Path, made: dict) -> None:
+def _routing_figures(runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
     """Section 2.4's routing metrics, and the impairments when loss or delay varied."""
     per_run = tables.routing_per_run(runs, lambda run: metrics[run.run_id])
     made["tables"]["routing_runs"] = per_run
@@ -156,7 +156,7 @@ def make_all(
     sweep_dir: str | Path, metrics_of: MetricsOf | None = None, unfaithful: bool = False
 ) -> dict:
     """Write every figure the sweep has data for into DIR/figures/; returns what was made:
-    {"files": [...], "runs": [RunRecord, ...], "tables": {name: rows}}. Runs not faithful
+    {"files": [...], "runs": [FinishedRun, ...], "tables": {name: rows}}. Runs not faithful
     to their time scale are left out unless `unfaithful`."""
     sweep_dir = Path(sweep_dir)
     figdir = sweep_dir / "figures"

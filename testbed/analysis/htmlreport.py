@@ -14,6 +14,8 @@ import html
 import re
 from pathlib import Path
 
+from testbed.resultfile import RESULT_NAME
+
 _IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)$")
 _BOLD = re.compile(r"\*\*(.+?)\*\*")
 _CODE = re.compile(r"`([^`]+)`")
@@ -99,12 +101,12 @@ def to_html(markdown: str, base: Path) -> str:
 
 
 def _runs_table(sweep_dir: Path) -> str:
-    runs = sorted(p.parent for p in sweep_dir.glob("runs/*/result.json"))
+    runs = sorted(p.parent for p in sweep_dir.glob(f"runs/*/{RESULT_NAME}"))
     if not runs:
         return ""
     rows = []
     for r in runs:
-        links = [f'<a href="runs/{r.name}/result.json">result</a>']
+        links = [f'<a href="runs/{r.name}/{RESULT_NAME}">result</a>']
         if (r / "paths.png").is_file():
             links.append(f'<a href="runs/{r.name}/paths.png">paths</a>')
         replay = f"<code>testbed view {html.escape(str(r))}</code>"

@@ -35,7 +35,7 @@ import re
 import statistics
 
 from testbed.analysis import stats
-from testbed.analysis.runs import RunRecord
+from testbed.analysis.runs import FinishedRun
 
 VETH, WIFI = "veth", "ns3-wifi"
 MEDIA_ORDER = (VETH, WIFI)
@@ -105,7 +105,7 @@ def traffic_airtime_s(packets: float, eth_bytes: float, family: str, mbps: float
 # ---------------------------------------------------------------- rows
 
 
-def _control_airtime_share(run: RunRecord, metrics: dict) -> float | None:
+def _control_airtime_share(run: FinishedRun, metrics: dict) -> float | None:
     tx_p, tx_b = metrics.get("tx_packets"), metrics.get("tx_bytes")
     ctl_p, ctl_b = metrics.get("control_tx_packets"), metrics.get("control_tx_bytes")
     if not tx_p or tx_b is None or ctl_p is None or ctl_b is None:
@@ -115,7 +115,7 @@ def _control_airtime_share(run: RunRecord, metrics: dict) -> float | None:
     return traffic_airtime_s(ctl_p, ctl_b, *phy) / total if total else None
 
 
-def run_row(run: RunRecord, metrics: dict | None) -> dict:
+def run_row(run: FinishedRun, metrics: dict | None) -> dict:
     """One run's numbers (`metrics`: its pcapmetrics, or None without captures)."""
     c = run.config
     m = metrics or {}

@@ -22,7 +22,7 @@ from matplotlib.patches import Patch
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from testbed.analysis.plots import plt
-from testbed.analysis.runs import RunRecord
+from testbed.analysis.runs import FinishedRun
 
 MAX_POINTS = 2000
 _GREYS = np.array([215, 255, 0], dtype=np.uint8)  # unknown, free, occupied
@@ -46,7 +46,7 @@ def read_positions(run_dir: Path) -> dict[int, list[tuple[float, float]]]:
     return {k: p[:: max(1, len(p) // MAX_POINTS)] + p[-1:] for k, p in paths.items()}
 
 
-def _extent(run: RunRecord, shape: tuple[int, int] | None) -> tuple[float, float]:
+def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, float]:
     """The map's width and height in metres."""
     cell = run.config.extra.get("map_cell") or 0.05
     if shape is None:
@@ -55,7 +55,7 @@ def _extent(run: RunRecord, shape: tuple[int, int] | None) -> tuple[float, float
     return shape[1] * cell, shape[0] * cell
 
 
-def _background(ax, run: RunRecord) -> tuple[float, float, bool]:
+def _background(ax, run: FinishedRun) -> tuple[float, float, bool]:
     """The display's map in metres; (width, height, whether there was one)."""
     grid = None
     path = run.path / "display" / "map.npy"
@@ -90,7 +90,7 @@ def _label(ax, name: str, end: tuple[float, float], size: tuple[float, float], c
                 fontweight="bold", annotation_clip=True)  # fmt: skip
 
 
-def paths_figure(run: RunRecord, paths: dict[int, list[tuple[float, float]]]):
+def paths_figure(run: FinishedRun, paths: dict[int, list[tuple[float, float]]]):
     fig, ax = plt.subplots(figsize=(5.5, 5.5))
     *size, has_map = _background(ax, run)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -121,7 +121,7 @@ def paths_figure(run: RunRecord, paths: dict[int, list[tuple[float, float]]]):
     return fig
 
 
-def write_paths(run: RunRecord, stem: Path) -> Path | None:
+def write_paths(run: FinishedRun, stem: Path) -> Path | None:
     """stem.png for the run, or None when it recorded no positions."""
     paths = read_positions(run.path)
     if not paths:

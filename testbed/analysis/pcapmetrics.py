@@ -522,7 +522,7 @@ def _pcaps(run_dir: Path) -> dict[int, Path]:
 def run_metrics(
     run_dir: str | Path,
     use_cache: bool = True,
-    run: runs.RunRecord | None = None,
+    run: runs.FinishedRun | None = None,
     network: tuple[str, float | None] | None = None,
 ) -> dict | None:
     """Routing metrics of one run directory (None if it has no captures), cached in its

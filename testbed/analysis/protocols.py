@@ -20,7 +20,7 @@ import statistics
 from pathlib import Path
 
 from testbed.analysis import stats
-from testbed.analysis.runs import RunRecord
+from testbed.analysis.runs import FinishedRun
 from topology.jsonfile import read_json
 from topology.spec import ROUTINGS
 
@@ -40,12 +40,13 @@ CHOICE_RULE = (
 )
 
 
-def _map_delivery(run: RunRecord) -> float | None:
-    """Mean over robots of (map floods it received) / (map floods its teammates sent)."""
+def _map_delivery(run: FinishedRun) -> float | None:
+    """Mean over robots (but those stopped on purpose) of (map floods it received) / (map
+    floods its teammates sent)."""
     sent = {r.name: r.sent.get("map", 0) for r in run.robots}
     total = sum(sent.values())
     shares = []
-    for r in run.robots:
+    for r in run.counted_robots:
         others = total - sent[r.name]
         if others:
             shares.append(min(1.0, r.received.get("map", 0) / others))
@@ -61,7 +62,7 @@ def _discovery_ms(run_dir: Path) -> float | None:
     return statistics.median(lat) if lat else None
 
 
-def run_row(run: RunRecord, steps: float | None, metrics: dict | None) -> dict:
+def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> dict:
     """One run's numbers (`metrics`: its pcapmetrics, or None)."""
     c = run.config
     n = c.robots + 1  # the display robot transmits too

@@ -32,6 +32,7 @@ from testbed.analysis import (
 from testbed.analysis.runs import ResultError, load_run
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
 from testbed.errors import UsageError
+from testbed.resultfile import has_result
 
 log = logging.getLogger(__name__)
 
@@ -243,7 +244,7 @@ def main(args: argparse.Namespace) -> int:
     d = Path(args.dir)
     if (d / "runs").is_dir():
         return _sweep_main(d, getattr(args, "include_unfaithful", False))
-    if (d / "result.json").is_file():
+    if has_result(d):
         return _run_main(d)
     raise UsageError(
         f"DIR {d}: neither a sweep directory (no runs/ in it) nor a finished run's directory "

@@ -21,6 +21,8 @@ import json
 import os
 from collections import defaultdict
 
+from testbed.resultfile import RunResult
+
 
 def link_timeline(out: str) -> dict[int, list[tuple[str, int, int]]]:
     changes: dict[int, list[tuple[str, int, int]]] = defaultdict(list)
@@ -91,10 +93,8 @@ def step_clock(out: str) -> list[float]:
 
 def causality_violations(out: str, slack: int = 2) -> tuple[int, list[dict]]:
     """(messages checked, messages that had no time-respecting path from their sender)."""
-    with open(os.path.join(out, "result.json")) as f:
-        result = json.load(f)
-    robots = result["config"]["robots"]
-    steps = result["steps"]
+    result = RunResult.from_json(out)
+    robots, steps = result.config.robots, int(result.steps)
     sets = links_by_step(out, steps + slack + 1)
     evs = received(out, robots)
     clock = step_clock(out)

@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from testbed.analysis import pcapmetrics
-from testbed.analysis.runs import RunRecord
+from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
 
 SUMMARY_NAME = "summary.md"
@@ -27,7 +27,7 @@ def _num(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
-def _outcome(run: RunRecord) -> list[str]:
+def _outcome(run: FinishedRun) -> list[str]:
     c = run.config
     mean = run.exploration_steps
     lines = [
@@ -39,10 +39,21 @@ def _outcome(run: RunRecord) -> list[str]:
         f"steps (mean of the robots' finishing steps, as Fig. 2 plots): {_num(mean, '.1f')}; "
         f"coverage at the end: {_num(run.coverage_final, '.1%')}.",
     ]
+    stopped = [r for r in run.robots_by_number() if not r.counted]
+    if stopped:
+        names = ", ".join(f"{r.name} at step {r.stopped_step}" for r in stopped)
+        lines.append(
+            f"Stopped on purpose (--kill): {names}; the mean counts the other "
+            f"{len(run.counted_robots)} robot(s)."
+        )
+    for o in run.isolated:
+        back = f"back at step {o.back_step}" if o.back_step is not None else "until the end"
+        lines.append(f"{o.robot} out of everyone's radio range (--isolate) from step "
+                     f"{o.from_step}, {back}.")  # fmt: skip
     return lines
 
 
-def _timing(run: RunRecord) -> list[str]:
+def _timing(run: FinishedRun) -> list[str]:
     ts, got = run.time_scale_requested or run.config.time_scale, run.time_scale_achieved
     line = f"Time scale requested {_num(ts, 'g')}, achieved {_num(got, 'g')}"
     line += f"; step deadlines missed: {run.deadlines_missed} ({run.deadline_miss_fraction:.1%})"
@@ -123,7 +134,7 @@ def _routing(m: dict | None) -> list[str]:
     return out + ["", "All numbers and what each means: `routing.json` (its `about`)."]
 
 
-def _channel(run: RunRecord) -> list[str]:
+def _channel(run: FinishedRun) -> list[str]:
     """The 802.11 channel's counters (medium.json), for a run on ns3-wifi."""
     ch = run.channel
     if ch is None:
@@ -153,7 +164,7 @@ def _channel(run: RunRecord) -> list[str]:
     return lines + [""]
 
 
-def summary(run: RunRecord, metrics: dict | None) -> str:
+def summary(run: FinishedRun, metrics: dict | None) -> str:
     out = [f"# Run {run.run_id}", ""]
     for line in _outcome(run) + _timing(run):
         out += [line, ""]
@@ -163,7 +174,7 @@ def summary(run: RunRecord, metrics: dict | None) -> str:
     return "\n".join(out) + "\n"
 
 
-def write(run: RunRecord) -> tuple[Path, dict | None]:
+def write(run: FinishedRun) -> tuple[Path, dict | None]:
     """routing.json (when the run has captures) and summary.md; returns the summary's path
     and the metrics."""
     metrics = pcapmetrics.run_metrics(run.path, run=run)

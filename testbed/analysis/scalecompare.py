@@ -37,7 +37,7 @@ import sys
 from pathlib import Path
 
 from testbed.analysis import media, pcapmetrics, stats
-from testbed.analysis.runs import ResultError, RunRecord, load_runs
+from testbed.analysis.runs import FinishedRun, ResultError, load_runs
 from testbed.errors import UsageError
 
 # (key, name, format)
@@ -59,12 +59,13 @@ RULE = (
 )
 
 
-def run_row(run: RunRecord, metrics: dict | None) -> dict:
+def run_row(run: FinishedRun, metrics: dict | None) -> dict:
     """One run's measures."""
     row = media.run_row(run, metrics)
-    plans = [p for r in run.robots for p in r.plans]
+    counted = run.counted_robots  # a robot stopped on purpose (--kill) is not averaged
+    plans = [p for r in counted for p in r.plans]
     row["requests"] = (
-        sum(1 for p in plans if p.cause == "request") / len(run.robots) if run.robots else None
+        sum(1 for p in plans if p.cause == "request") / len(counted) if counted else None
     )
     row["time_scale"] = run.time_scale_achieved or run.config.time_scale
     row["laser_range"] = run.config.laser_range

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from testbed.analysis.runs import RunRecord
+from testbed.analysis.runs import FinishedRun
 from topology.jsonfile import read_json
 
 
@@ -23,7 +23,7 @@ def seconds(x: float) -> str:
     return f"{x:.2g}" if abs(x) < 10 else f"{x:.0f}"
 
 
-def lines(sweep_dir: Path, runs: list[RunRecord]) -> list[str]:
+def lines(sweep_dir: Path, runs: list[FinishedRun]) -> list[str]:
     """The section's sentences (Markdown paragraphs)."""
     state = read_json(sweep_dir / "sweep.json") or {}
     out = _spec_lines(state.get("spec") or {}, state)
@@ -65,7 +65,7 @@ def _spec_lines(spec: dict, state: dict) -> list[str]:
     ]
 
 
-def _finished_lines(runs: list[RunRecord], planned: list[dict]) -> list[str]:
+def _finished_lines(runs: list[FinishedRun], planned: list[dict]) -> list[str]:
     status: dict[str, int] = {}
     for r in runs:
         status[r.status] = status.get(r.status, 0) + 1
@@ -90,7 +90,7 @@ def _finished_lines(runs: list[RunRecord], planned: list[dict]) -> list[str]:
     return out
 
 
-def _fidelity_lines(runs: list[RunRecord]) -> list[str]:
+def _fidelity_lines(runs: list[FinishedRun]) -> list[str]:
     """The runs whose fidelity verdict (testbed.fidelity) says time dilation changed them."""
     bad = [r for r in runs if r.faithful is False]
     if not bad:
@@ -110,7 +110,7 @@ def _fidelity_lines(runs: list[RunRecord]) -> list[str]:
     ]
 
 
-def _timing_lines(runs: list[RunRecord]) -> list[str]:
+def _timing_lines(runs: list[FinishedRun]) -> list[str]:
     """The time scale achieved and the deadlines missed, in and outside host stalls."""
     out = []
     achieved = [
@@ -139,7 +139,7 @@ def _timing_lines(runs: list[RunRecord]) -> list[str]:
     return out
 
 
-def _scale_lines(runs: list[RunRecord], state: dict) -> list[str]:
+def _scale_lines(runs: list[FinishedRun], state: dict) -> list[str]:
     """Which time scales each team size ran at (a sweep may move them), and what calibration
     found where it ran."""
     by_team: dict[int, dict[float, int]] = {}

@@ -1,10 +1,10 @@
-"""The numbers behind the figures: pure functions of a sweep's runs (`RunRecord`s).
+"""The numbers behind the figures: pure functions of a sweep's runs (`FinishedRun`s).
 
 Theory of operation. Each figure of the report is drawn from one table (a list of flat
 dicts) computed here and written next to it as CSV and JSON (`write_table`), so a reader or
 a test can check a figure against the runs' own result.json; the report's verdicts are
 decided on the same tables. Which runs count is the caller's choice of runs plus
-`RunRecord.usable` and `.unimpaired` (testbed.analysis.runs).
+`FinishedRun.usable` and `.unimpaired` (testbed.analysis.runs).
 
 - `fig2_rows`: exploration steps per (variant, laser, range, team size) with each point's
   spread and the 95% interval of its mean (testbed.analysis.stats). A point of one run has
@@ -25,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from testbed.analysis import stats
-from testbed.analysis.runs import DEFAULT_VARIANT, RunRecord
+from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 
 FIG4_TEAMS = (1, 2, 5, 10)
 FIG4_LASER = 2.0
@@ -37,10 +37,10 @@ ROUTING_METRICS = (
     ("throughput_bps", "throughput (bit/s, wall clock)"),
 )
 
-MetricsOf = Callable[[RunRecord], "dict | None"]
+MetricsOf = Callable[[FinishedRun], "dict | None"]
 
 
-def plan_intervals(run: RunRecord) -> list[dict]:
+def plan_intervals(run: FinishedRun) -> list[dict]:
     """Each plan generation after a robot's first: its step, cause and interval."""
     rows = []
     for robot in run.robots_by_number():
@@ -75,20 +75,20 @@ def spread(values: list[float]) -> dict:
 MAIN_NETWORK = ("aodv", "empty", "veth")
 
 
-def main_network(runs: list[RunRecord]) -> tuple[str, str, str]:
+def main_network(runs: list[FinishedRun]) -> tuple[str, str, str]:
     """(routing, map, medium) the paper's figures are drawn for when a sweep varied them (a
     protocols or media sweep): AODV on the empty terrain over veth where it ran."""
     present = {r.network for r in runs if r.usable}
     return MAIN_NETWORK if MAIN_NETWORK in present or not present else min(present)
 
 
-def main_variant(runs: list[RunRecord]) -> tuple[str, str]:
+def main_variant(runs: list[FinishedRun]) -> tuple[str, str]:
     """The variant the paper's figures are drawn for: the default where it ran."""
     present = {r.variant for r in runs if r.usable}
     return DEFAULT_VARIANT if DEFAULT_VARIANT in present or not present else min(present)
 
 
-def fig2_rows(runs: list[RunRecord]) -> list[dict]:
+def fig2_rows(runs: list[FinishedRun]) -> list[dict]:
     """Exploration steps per (variant, laser, range, team size) over the usable unimpaired
     runs, with the 95% confidence interval of each point's mean."""
     groups: dict[tuple, list[tuple[str, float]]] = {}
@@ -114,7 +114,7 @@ def fig2_rows(runs: list[RunRecord]) -> list[dict]:
     return rows
 
 
-def fig4_runs(runs: list[RunRecord]) -> list[RunRecord]:
+def fig4_runs(runs: list[FinishedRun]) -> list[FinishedRun]:
     """The runs Fig. 4 shows: one per team size (first run of the point), laser 2 m and range
     20 m where present (else the largest laser and range), teams 1, 2, 5, 10 where present
     (else up to four team sizes that ran)."""
@@ -128,7 +128,7 @@ def fig4_runs(runs: list[RunRecord]) -> list[RunRecord]:
     ranges = {r.config.comm_range for r in cands}
     comm = FIG4_RANGE if FIG4_RANGE in ranges else max(ranges)
     cands = [r for r in cands if r.config.comm_range == comm]
-    by_team: dict[int, RunRecord] = {}
+    by_team: dict[int, FinishedRun] = {}
     for r in sorted(cands, key=lambda r: r.run_id):
         by_team.setdefault(r.config.robots, r)
     teams = [n for n in FIG4_TEAMS if n in by_team]
@@ -136,7 +136,7 @@ def fig4_runs(runs: list[RunRecord]) -> list[RunRecord]:
     return [by_team[n] for n in sorted(teams)]
 
 
-def fig4_rows(runs: list[RunRecord]) -> list[dict]:
+def fig4_rows(runs: list[FinishedRun]) -> list[dict]:
     rows = []
     for run in fig4_runs(runs):
         c = run.config
@@ -153,7 +153,7 @@ def fig4_rows(runs: list[RunRecord]) -> list[dict]:
     return rows
 
 
-def plan_cause_rows(runs: list[RunRecord]) -> list[dict]:
+def plan_cause_rows(runs: list[FinishedRun]) -> list[dict]:
     """Per usable unimpaired run: how many plan generations each cause produced."""
     rows = []
     for run in runs:
@@ -179,7 +179,7 @@ def plan_cause_rows(runs: list[RunRecord]) -> list[dict]:
     return rows
 
 
-def routing_per_run(runs: list[RunRecord], metrics_of: MetricsOf) -> list[dict]:
+def routing_per_run(runs: list[FinishedRun], metrics_of: MetricsOf) -> list[dict]:
     """One row per usable run that has captures: its routing metrics (metrics_of(run) -> dict)."""
     rows = []
     for run in runs:
@@ -246,7 +246,7 @@ def routing_rows(per_run: list[dict]) -> list[dict]:
     return rows
 
 
-def impairment_rows(runs: list[RunRecord], per_run: list[dict]) -> list[dict]:
+def impairment_rows(runs: list[FinishedRun], per_run: list[dict]) -> list[dict]:
     """Exploration steps and PDF per (team, range, delay, loss) when the sweep varied loss or
     delay; empty otherwise."""
     usable = [r for r in runs if r.usable]

@@ -37,6 +37,7 @@ import uuid
 import numpy as np
 
 from testbed.bench.common import REPO, write
+from testbed.resultfile import RunResult
 
 RUNS = 3
 CLK_TCK = os.sysconf("SC_CLK_TCK")
@@ -189,8 +190,7 @@ def testbed_run(robots: int, time_scale: float, seed: int, tree: str) -> dict:
     sampler.join()
     wall = time.monotonic() - t_start
     try:
-        with open(os.path.join(out, "result.json")) as f:
-            r = json.load(f)
+        r = RunResult.from_json(out)
         with open(os.path.join(out, "clock.csv")) as f:
             lines = f.read().split()[1:]
         t0, t1 = float(lines[0].split(",")[1]), float(lines[-1].split(",")[1])
@@ -202,15 +202,14 @@ def testbed_run(robots: int, time_scale: float, seed: int, tree: str) -> dict:
         raise RuntimeError(f"run failed ({e}): {err.decode()[-500:]}") from None
     shutil.rmtree(out, ignore_errors=True)
     inside, outside = _split(sampler.samples, proc.pid, t0, t1)
-    steps = r["steps"]
+    steps = r.steps
     robot_steps = steps * robots
-    fid = r.get("fidelity") or {}
     return {
         "robots": robots, "time_scale": time_scale, "seed": seed, "load_at_start": load,
-        "status": r["status"], "steps": steps, "wall_s": round(wall, 2),
-        "step_loop_wall_s": r.get("step_loop_wall_s"),
-        "faithful": fid.get("ok"), "fidelity_reason": fid.get("reason"),
-        "step_core": r.get("step_core", "numpy"),
+        "status": r.status, "steps": steps, "wall_s": round(wall, 2),
+        "step_loop_wall_s": r.step_loop_wall_s,
+        "faithful": r.faithful, "fidelity_reason": r.fidelity_reason or None,
+        "step_core": r.step_core or "numpy",
         "cpu_ms_per_robot_step": round(sum(inside.values()) * 1000 / robot_steps, 3),
         "stepping_cpu_ms_per_robot_step": {
             k: round(v * 1000 / robot_steps, 3) for k, v in sorted(inside.items())

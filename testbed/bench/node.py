@@ -121,27 +121,27 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
     finally:
         destroy(name)
         shutil.rmtree(out, ignore_errors=True)
-    wall = r["step_loop_wall_s"] or 1e-9
+    wall = r.step_loop_wall_s or 1e-9
     cpu = [d["cpu_s"] for d in robots if d.get("cpu_s") is not None]
     rss = [d["max_rss_mb"] for d in robots if d.get("max_rss_mb") is not None]
     answer = [d["latency_ms"]["answer"]["p50"] for d in robots if d.get("latency_ms")]
     return {
         "time_scale": time_scale,
-        "status": r["status"],
-        "steps": r["steps"],
-        "time_scale_achieved": r["time_scale_achieved"],
-        "deadline_miss_fraction": r["deadline_miss_fraction"],
-        "deadlines_missed_world": r["deadlines_missed_world"],
+        "status": r.status,
+        "steps": r.steps,
+        "time_scale_achieved": r.time_scale_achieved,
+        "deadline_miss_fraction": r.deadline_miss_fraction,
+        "deadlines_missed_world": r.deadlines_missed_world,
         # For reading, not for the search (which counts every miss): how many of the misses
         # fell while the host held the machine (testbed/stalls.py).
-        "deadline_miss_fraction_outside_stalls": r.get("deadline_miss_fraction_outside_stalls"),
-        "host_stalls": r.get("host_stalls"),
+        "deadline_miss_fraction_outside_stalls": r.deadline_miss_fraction_outside_stalls,
+        "host_stalls": r.host_stalls.to_dict(),
         "world_cpu_ms_per_step": round(
-            1000 * r["world_timing_s"].get("world_cpu_s", 0) / max(1, r["steps"]), 2
+            1000 * r.world_timing_s.get("world_cpu_s", 0) / max(1, r.steps), 2
         ),
         # Robot CPU from the fork (the imports were done once, in the fork server).
         "robot_cpu_core_fraction_mean": round(statistics.mean(cpu) / wall, 3) if cpu else None,
-        "robot_cpu_ms_per_step_mean": round(1000 * statistics.mean(cpu) / max(1, r["steps"]), 2)
+        "robot_cpu_ms_per_step_mean": round(1000 * statistics.mean(cpu) / max(1, r.steps), 2)
         if cpu
         else None,
         "robot_max_rss_mb": max(rss) if rss else None,

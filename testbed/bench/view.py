@@ -60,10 +60,7 @@ def one(view: bool) -> tuple[float, int]:
         destroy(name)
     # Outside host stalls: the machine stopping (testbed.stalls) is not the view's doing, and
     # on this shared host it dominated the misses of some runs either way.
-    miss = result.get("deadline_miss_fraction_outside_stalls")
-    if miss is None:
-        miss = result.get("deadline_miss_fraction") or 0.0
-    return miss, len(frames)
+    return result.deadline_miss_fraction_outside_stalls, len(frames)
 
 
 def run_bench() -> dict:

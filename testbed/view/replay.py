@@ -18,6 +18,7 @@ import json
 import math
 from pathlib import Path
 
+from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.view.served import in_run, snapshot, snapshot_steps
 from topology.names import MAX_ROBOTS
 from topology.spec import MAX_COORD_M
@@ -126,9 +127,10 @@ def _whole(text: str, lo: int, hi: int) -> int:
 def load(run_dir: str | Path) -> dict:
     d = Path(run_dir)
     config = read_config(d)
-    result = _json_object(d, "result.json", required=False)
-    status = result.get("status", "running")
-    if not (isinstance(status, str) and len(status) <= 40):
+    found = in_run(d, RESULT_NAME)
+    result = None if found is None else RunResult.read(found)
+    status = "running" if found is None else result.status if result else "unknown"
+    if len(status) > 40:
         status = "unknown"
     n = config["robots"]
 

@@ -114,7 +114,9 @@ def live_run(tmp_path_factory):
                     routing="oracle", max_steps=3000, map=str(OFFICE),
                     view=f"127.0.0.1:{port}")  # fmt: skip
     box = {}
-    worker = threading.Thread(target=lambda: box.update(r=run(cfg, str(out), name, progress=False)))
+    worker = threading.Thread(
+        target=lambda: box.update(r=run(cfg, str(out), name, progress=False).to_json())
+    )
     worker.start()
     driver = None
     try:

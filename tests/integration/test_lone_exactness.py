@@ -29,7 +29,7 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed):
         out = str(tmp_path / f"run{attempt}")
         cfg = RunConfig(robots=1, comm_range=20.0, laser_range=2.0, seed=seed, time_scale=5.0)
         try:
-            result = run(cfg, out, name, progress=False)
+            result = run(cfg, out, name, progress=False).to_json()
         finally:
             destroy(name)
         if not result["fidelity"]["ok"]:

@@ -30,7 +30,7 @@ def test_a_short_exploration_runs_on_ns3_wifi_and_keeps_the_channel_counters(tb_
     # Time scale 3: what a loaded 2-core machine sustains with the channel (media.toml).
     cfg = RunConfig(robots=3, comm_range=20.0, laser_range=2.0, seed=5, time_scale=3.0,
                     max_steps=STEPS, capture=True, medium="ns3-wifi")  # fmt: skip
-    result = run(cfg, out, tb_name, progress=False)
+    result = run(cfg, out, tb_name, progress=False).to_json()
     assert result["status"] in ("complete", "step_cap"), result["status_detail"]
     assert result["steps"] <= STEPS
     assert result["config"]["extra"]["medium"] == "ns3-wifi"

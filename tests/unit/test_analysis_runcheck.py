@@ -7,7 +7,9 @@ from testbed.analysis import runcheck
 
 def write_run(d, links, recvs, robots=3, steps=20):
     (d / "robots").mkdir()
-    (d / "result.json").write_text(json.dumps({"config": {"robots": robots}, "steps": steps}))
+    config = {"robots": robots, "comm_range": 5.0, "laser_range": 2.0}
+    doc = {"status": "complete", "config": config, "steps": steps}
+    (d / "result.json").write_text(json.dumps(doc))
     rows = ["step,event,i,j"] + [f"{s},{e},{i},{j}" for s, e, i, j in links]
     (d / "links.csv").write_text("\n".join(rows) + "\n")
     for k in range(1, robots + 1):

@@ -5,6 +5,7 @@ import pytest
 from node.lateness import MS_BOUNDS, Lateness
 from testbed import fidelity
 from testbed.fidelity import Measures, Thresholds, measures, verdict
+from testbed.resultfile import ResultError, RunResult
 from topology import nettimers
 
 
@@ -102,11 +103,19 @@ def test_daemons_and_display_are_folded_in():
     assert v["ok"] is False and "expiry" in v["reason"] and "display" in v["reason"]
 
 
-def test_is_faithful_reads_a_result():
-    assert fidelity.is_faithful({"fidelity": {"ok": False}}) is False
-    assert fidelity.is_faithful({"fidelity": {"ok": True}}) is True
-    assert fidelity.is_faithful({}) is None
-    assert fidelity.is_faithful({"fidelity": "yes"}) is None
+CONFIG = {"robots": 2, "comm_range": 5.0, "laser_range": 2.0}
+
+
+def _result(doc: dict) -> RunResult:
+    return RunResult.from_json({"status": "complete", "config": CONFIG, **doc})
+
+
+def test_a_results_verdict_is_read_as_it_was_written():
+    assert _result({"fidelity": {"ok": False}}).faithful is False
+    assert _result({"fidelity": {"ok": True}}).faithful is True
+    assert _result({}).faithful is None  # written before verdicts
+    with pytest.raises(ResultError, match="fidelity"):
+        _result({"fidelity": "yes"})
 
 
 def test_hello_limit_is_half_the_lateness_that_breaks_a_link_in_every_aodv_profile():
@@ -187,11 +196,11 @@ def test_which_results_ran_tcp_in_emulated_time():
         out = {"time_scale_requested": scale, "fidelity": {"ok": True}}
         if network is not None:
             out["fidelity"]["network"] = network
-        return out
+        return _result(out)
 
-    assert fidelity.tcp_in_emulated_time(result(1)) is True
-    assert fidelity.tcp_in_emulated_time(result(6, {"ok": True})) is True
-    assert fidelity.tcp_in_emulated_time(result(6, {"ok": False, "reason": "x"})) is False
-    assert fidelity.tcp_in_emulated_time(result(6)) is False  # made before TCP was dilated
-    assert fidelity.tcp_in_emulated_time({"config": {"time_scale": 1}}) is True
-    assert fidelity.tcp_in_emulated_time({}) is None
+    assert result(1).tcp_in_emulated_time is True
+    assert result(6, {"ok": True}).tcp_in_emulated_time is True
+    assert result(6, {"ok": False, "reason": "x"}).tcp_in_emulated_time is False
+    assert result(6).tcp_in_emulated_time is False  # made before TCP was dilated
+    assert _result({"config": dict(CONFIG, time_scale=1)}).tcp_in_emulated_time is True
+    assert _result({}).tcp_in_emulated_time is True  # no time scale said: the wall clock's

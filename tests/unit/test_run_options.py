@@ -9,6 +9,7 @@ import pytest
 
 from testbed import cli, sweepfile
 from testbed.errors import UsageError
+from testbed.isolation import Outage
 from testbed.runconfig import NET_OPTIONS, OPTIONS, RunConfig, config_from_args, to_argv
 from testbed.rundir import plan_dict, run_argv
 from topology.spec import ROUTINGS
@@ -43,9 +44,16 @@ def test_every_option_round_trips_through_argv_with_non_default_values():
         kill=((2, 150), (3, 300)), view="127.0.0.1:8123", medium="ns3-wifi",
         wifi_loss="logdistance", wifi_standard="80211b", wifi_rate="DsssRate1Mbps",
     )  # fmt: skip
-    for opt in OPTIONS:
-        assert getattr(cfg, opt.name) != opt.default, opt.name  # every option non-default
+    # --isolate is for the veth medium: its non-default value rides on a veth config.
+    veth = dataclasses.replace(
+        cfg, medium="veth", wifi_loss="range", wifi_standard="80211a", wifi_rate="",
+        isolate=(Outage(3, 200, 100), Outage(5, 10, 1), Outage(3, 250, 20)),
+    )  # fmt: skip
+    for opt in OPTIONS:  # every option non-default in one of the two
+        assert opt.default != getattr(cfg, opt.name) or opt.default != getattr(veth, opt.name)
     assert parse_run(to_argv(cfg)) == cfg
+    assert parse_run(to_argv(veth)) == veth
+    assert RunConfig.from_dict(veth.to_dict()) == veth
 
 
 def test_defaults_agree_and_the_table_is_the_parser():
@@ -160,7 +168,7 @@ def test_a_grid_dimension_is_declared_once_on_its_option():
     grid = [o for o in OPTIONS if "grid" in o.sweep]
     assert grid and all(o.grid is not None for o in grid)
     assert len({o.grid.order for o in grid}) == len(grid)  # one place each in the grid
-    assert sweepfile.GRID_NAMES == tuple(o.name for o in sorted(grid, key=lambda o: o.grid.order))
+    assert tuple(o.name for o in sorted(grid, key=lambda o: o.grid.order)) == sweepfile.GRID_NAMES
     spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,),
                                   coordination=("paper", "ours"))  # fmt: skip
     runs = sweepfile.expand(spec)

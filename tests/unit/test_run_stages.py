@@ -8,6 +8,7 @@ import os
 import pytest
 
 from testbed.errors import UsageError
+from testbed.resultfile import ResultConfig, RunResult
 from testbed.run import final_status
 from testbed.runfiles import RunFiles, claim_directory, holds_run, make_directory
 from testbed.runprogress import summary_line
@@ -118,7 +119,8 @@ def test_final_status_names_the_first_crash():
 
 
 def test_the_last_line_says_where_the_results_are_and_how_to_look():
-    line = summary_line({"status": "complete", "steps": 824, "coverage_final": 0.99712},
-                        "/tmp/my run")  # fmt: skip
+    result = RunResult(config=ResultConfig(robots=2, comm_range=5.0, laser_range=2.0),
+                       status="complete", steps=824, coverage_final=0.99712)  # fmt: skip
+    line = summary_line(result, "/tmp/my run")
     assert line == ("testbed run: complete after 824 steps, coverage 99.7%; results in "
                     "/tmp/my run; replay: testbed view '/tmp/my run'")  # fmt: skip

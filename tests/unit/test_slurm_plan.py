@@ -38,8 +38,9 @@ def test_a_task_index_outside_its_list_is_refused(tmp_path):
 def test_a_cancelled_run_is_recorded_as_interrupted_whatever_it_ended_with(tmp_path):
     import json
 
+    config = {"robots": 2, "comm_range": 5.0, "laser_range": 2.0}
     (tmp_path / "result.json").write_text(
-        json.dumps({"status": "error", "status_detail": "the fork server died"})
+        json.dumps({"status": "error", "status_detail": "the fork server died", "config": config})
     )
     slurm._mark_interrupted(tmp_path)
     doc = json.loads((tmp_path / "result.json").read_text())
@@ -86,7 +87,10 @@ def test_sizing_uses_the_cpu_per_robot_step_the_sweeps_runs_measured(tmp_path):
         d = tmp_path / "runs" / name
         d.mkdir(parents=True)
         cpu = {} if ms is None else {"per_robot_step_ms": ms}
-        (d / "result.json").write_text(json.dumps({"cpu_s": cpu}))
+        config = {"robots": 2, "comm_range": 5.0, "laser_range": 2.0}
+        (d / "result.json").write_text(
+            json.dumps({"status": "complete", "config": config, "cpu_s": cpu})
+        )
     assert slurm.measured_cpu_per_robot_step(tmp_path) == 0.003
     config = RunConfig(robots=10, comm_range=5.0, time_scale=15, max_steps=6000)
     assert slurm.resources(config, cpu_per_robot_step=0.003)[0] > slurm.resources(config)[0]

@@ -21,7 +21,9 @@ def write_run(d, steps=3):
             w.writerow([s, 1 + s, 1, 4, 1])
     (d / "links.csv").write_text("step,event,i,j\n0,add,1,2\n2,remove,1,2\n")
     (d / "coverage.csv").write_text("step,coverage\n0,0.1\n1,0.2\n2,0.3\n3,0.4\n")
-    (d / "result.json").write_text('{"status": "complete"}')
+    (d / "result.json").write_text(
+        '{"status": "complete", "config": {"robots": 2, "comm_range": 5.0, "laser_range": 2.0}}'
+    )
     (d / "display").mkdir()
     (d / "display" / "step-00002.png").write_bytes(
         served.PACKAGED_MAPS.joinpath("office.png").read_bytes()
