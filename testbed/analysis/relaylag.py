@@ -83,9 +83,18 @@ def parse_records(data: bytes) -> tuple[list[LagRecord], int]:
         ipv4 = eth == ETH_IPV4 and src != b"\0\0\0\0"
         out.append(
             LagRecord(
-                written=written / 1e9, in_ns=in_ns, out_ns=out_ns, receiver=rcv, sender=snd,
-                ethertype=eth, ip_id=ipid, ip_src=_ip(src) if ipv4 else "",
-                ip_dst=_ip(dst) if ipv4 else "", tcp_seq=seq, ip_proto=proto, tcp_flags=flags,
+                written=written / 1e9,
+                in_ns=in_ns,
+                out_ns=out_ns,
+                receiver=rcv,
+                sender=snd,
+                ethertype=eth,
+                ip_id=ipid,
+                ip_src=_ip(src) if ipv4 else "",
+                ip_dst=_ip(dst) if ipv4 else "",
+                tcp_seq=seq,
+                ip_proto=proto,
+                tcp_flags=flags,
             )  # fmt: skip
         )
     return out, len(body) - whole
