@@ -30,11 +30,14 @@
 // shrink by K with everything else in the run. A periodic probe records how late the
 // simulator runs behind that clock, and every relayed frame how late it was handled (the
 // medium's own fidelity); with --rt-priority the process asks for SCHED_RR, like the
-// testbed's world loop.
+// testbed's world loop. With --lag-file, each frame delivered to a robot leaves a record of
+// its relay lag, the wall time its two relays added beyond its emulated time on the channel
+// (LagRecord below), which the analysis takes out of the delays it measures.
 //
 // Usage: tb-ns3-wifi --socket PATH --range M [--loss range|logdistance]
 //          [--standard 80211a|80211b|80211g] [--rate WIFIMODE|minstrel] [--time-scale K]
-//          [--rt-priority N] --robot IFNAME,MAC,X,Y ...   (one --robot per robot, in order)
+//          [--rt-priority N] [--lag-file PATH [--lag-cap-bytes N]]
+//          --robot IFNAME,MAC,X,Y ...   (one --robot per robot, in order)
 // Bad arguments: one line on stderr, exit 2. It runs until SIGTERM.
 //
 // Protocol (requests and answers are single lines of ASCII):
@@ -43,6 +46,8 @@
 //   links                 -> "links 1-2 2-3"  the pairs that hear each other (1-based), by
 //                                              the propagation model at the current positions
 //   ping                  -> "ok"             answered from inside the simulator (readiness)
+//   flush                 -> "ok"             the lag records so far are in the file (stats
+//                                              flushes them too)
 // Anything else is answered "error ..." and the connection stays open.
 
 #include <ns3/core-module.h>
