@@ -30,6 +30,7 @@ Not supported here (yet): link impairments (no link to put them on), the los ran
 """
 
 import json
+import logging
 import os
 import shutil
 import socket
@@ -41,6 +42,8 @@ from topology import names, netns, processes, rtnl, state
 from topology.errors import TestbedError, UsageError
 from topology.medium import WLAN_INDEX, Medium, port_index
 from topology.spec import Impairment, NetworkSpec, Position
+
+log = logging.getLogger(__name__)
 
 ROLE = "ns3-wifi"
 NS3_HEADER = "/usr/include/ns3/wifi-module.h"  # installed with Debian's libns3-dev
@@ -243,11 +246,15 @@ class Ns3Medium(Medium):
 
     def keep_lag_file(self, dest: str) -> None:
         """Copy the per-frame relay lag records written so far (the process flushes them
-        first) to `dest`."""
+        first) to `dest`. A copy that fails is logged: the run's delays then stay
+        uncorrected, and its report says so."""
         answer = self._ask("flush")
         if answer != "ok":
             raise TestbedError(f"ns-3 medium: {answer}")
-        shutil.copyfile(lag_path(self.testbed), dest)
+        try:
+            shutil.copyfile(lag_path(self.testbed), dest)
+        except OSError as e:
+            log.warning("relay-lag records not kept: %s", e)
 
     def _ask(self, line: str) -> str:
         """request(), with a dead or stuck process reported as one TestbedError line."""
