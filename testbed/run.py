@@ -338,6 +338,10 @@ class Run:
         counters = getattr(net.medium, "counters", None)  # the ns3-wifi channel's, if any
         if counters is not None:
             write_json_atomic(self.prep.path("medium.json"), counters())
+            from topology.ns3medium import LAG_FILE
+
+            # Each frame's relay lag, which the analysis takes out of the delays.
+            net.medium.keep_lag_file(self.prep.path(LAG_FILE))
 
     def finish(
         self, status: tuple[str, str], loop: StepLoop | None, priority, network_timers=None

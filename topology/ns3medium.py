@@ -21,11 +21,18 @@ the channel which pairs hear each other, so a process that attaches to a `net up
 sees the truth. The process is recorded in the testbed's state (role "ns3-wifi") and stopped
 by its pid with the others (topology.network.destroy).
 
+Each frame the channel delivers to a robot leaves one record of its relay lag (what the
+relay added to its trip beyond the channel's emulated time) in the testbed's run directory,
+`relay-lag.bin` (docs/ns3-medium.md, "Each frame's relay lag"); `keep_lag_file` copies it
+out at the end of a run, and testbed.analysis.relaylag reads it.
+
 Not supported here (yet): link impairments (no link to put them on), the los range models.
 """
 
 import json
+import logging
 import os
+import shutil
 import socket
 import struct
 import subprocess
@@ -35,6 +42,8 @@ from topology import names, netns, processes, rtnl, state
 from topology.errors import TestbedError, UsageError
 from topology.medium import WLAN_INDEX, Medium, port_index
 from topology.spec import Impairment, NetworkSpec, Position
+
+log = logging.getLogger(__name__)
 
 ROLE = "ns3-wifi"
 NS3_HEADER = "/usr/include/ns3/wifi-module.h"  # installed with Debian's libns3-dev
@@ -47,6 +56,10 @@ RT_PRIORITY = 2
 REQUEST_TIMEOUT_S = 10.0
 SIOCETHTOOL = 0x8946
 ETHTOOL_STXCSUM = 0x17
+LAG_FILE = "relay-lag.bin"  # in the testbed's run directory, and in a run's directory
+# The lag file's size cap (40 bytes a frame delivered: about 840 000 frames); the records
+# past it are counted in the counters' lag_file.not_written.
+LAG_CAP_BYTES = 32 << 20
 
 Pair = tuple[int, int]
 
@@ -71,13 +84,22 @@ def socket_path(testbed: str) -> str:
     return os.path.join(state.run_dir(testbed), "ns3-wifi.sock")
 
 
-def argv(spec: NetworkSpec, positions: list[Position], sock: str) -> list[str]:
-    """The command line of the ns-3 process for this testbed."""
+def lag_path(testbed: str) -> str:
+    return os.path.join(state.run_dir(testbed), LAG_FILE)
+
+
+def argv(
+    spec: NetworkSpec, positions: list[Position], sock: str, lag_file: str | None = None
+) -> list[str]:
+    """The command line of the ns-3 process for this testbed (with `lag_file`, where its
+    per-frame relay lag records go)."""
     out = [
         binary(), "--socket", sock, "--range", repr(spec.comm_range),
         "--loss", spec.wifi_loss, "--standard", spec.wifi_standard,
         "--time-scale", repr(spec.time_scale),
     ]  # fmt: skip
+    if lag_file:
+        out += ["--lag-file", lag_file, "--lag-cap-bytes", str(LAG_CAP_BYTES)]
     if spec.wifi_rate:
         out += ["--rate", spec.wifi_rate]
     if os.environ.get("TESTBED_REALTIME", "1") != "0":
@@ -185,7 +207,7 @@ class Ns3Medium(Medium):
         logp = os.path.join(state.run_dir(self.testbed), "ns3-wifi.log")
         with open(logp, "w") as logf:
             proc = processes.spawn(
-                self.ns, argv(self.spec, positions, self.sock_path),
+                self.ns, argv(self.spec, positions, self.sock_path, lag_path(self.testbed)),
                 stdout=logf, stderr=subprocess.STDOUT,
             )  # fmt: skip
         deadline = time.monotonic() + START_TIMEOUT_S
@@ -221,6 +243,18 @@ class Ns3Medium(Medium):
         drops, PHY drops by reason, airtime; how late the simulator ran (lateness) and
         handled the frames it relayed (relay_lag). docs/ns3-medium.md lists them."""
         return json.loads(self._ask("stats"))
+
+    def keep_lag_file(self, dest: str) -> None:
+        """Copy the per-frame relay lag records written so far (the process flushes them
+        first) to `dest`. A copy that fails is logged: the run's delays then stay
+        uncorrected, and its report says so."""
+        answer = self._ask("flush")
+        if answer != "ok":
+            raise TestbedError(f"ns-3 medium: {answer}")
+        try:
+            shutil.copyfile(lag_path(self.testbed), dest)
+        except OSError as e:
+            log.warning("relay-lag records not kept: %s", e)
 
     def _ask(self, line: str) -> str:
         """request(), with a dead or stuck process reported as one TestbedError line."""

@@ -30,11 +30,14 @@
 // shrink by K with everything else in the run. A periodic probe records how late the
 // simulator runs behind that clock, and every relayed frame how late it was handled (the
 // medium's own fidelity); with --rt-priority the process asks for SCHED_RR, like the
-// testbed's world loop.
+// testbed's world loop. With --lag-file, each frame delivered to a robot leaves a record of
+// its relay lag, the wall time its two relays added beyond its emulated time on the channel
+// (LagRecord below), which the analysis takes out of the delays it measures.
 //
 // Usage: tb-ns3-wifi --socket PATH --range M [--loss range|logdistance]
 //          [--standard 80211a|80211b|80211g] [--rate WIFIMODE|minstrel] [--time-scale K]
-//          [--rt-priority N] --robot IFNAME,MAC,X,Y ...   (one --robot per robot, in order)
+//          [--rt-priority N] [--lag-file PATH [--lag-cap-bytes N]]
+//          --robot IFNAME,MAC,X,Y ...   (one --robot per robot, in order)
 // Bad arguments: one line on stderr, exit 2. It runs until SIGTERM.
 //
 // Protocol (requests and answers are single lines of ASCII):
@@ -43,6 +46,8 @@
 //   links                 -> "links 1-2 2-3"  the pairs that hear each other (1-based), by
 //                                              the propagation model at the current positions
 //   ping                  -> "ok"             answered from inside the simulator (readiness)
+//   flush                 -> "ok"             the lag records so far are in the file (stats
+//                                              flushes them too)
 // Anything else is answered "error ..." and the connection stays open.
 
 #include <ns3/core-module.h>
@@ -55,6 +60,8 @@
 
 #include <arpa/inet.h>
 #include <sched.h>
+#include <sys/prctl.h>
+#include <time.h>
 #include <sys/resource.h>
 #include <linux/if_packet.h>
 #include <net/ethernet.h>
@@ -217,6 +224,8 @@ struct Options
     std::string rate;               // a WifiMode name, or "minstrel"
     double timeScale{1.0};
     int rtPriority{0}; // SCHED_RR priority of the simulator (0: normal scheduling)
+    std::string lagFile;   // per-frame relay lag records (empty: none)
+    uint64_t lagCapBytes{32u << 20};
     std::vector<Robot> robots;
 };
 
@@ -286,6 +295,15 @@ ParseArgs(int argc, char** argv)
             o.timeScale = Number("--time-scale", value);
         else if (key == "--rt-priority")
             o.rtPriority = static_cast<int>(Number("--rt-priority", value));
+        else if (key == "--lag-file")
+            o.lagFile = value;
+        else if (key == "--lag-cap-bytes")
+        {
+            double cap = Number("--lag-cap-bytes", value);
+            if (cap < 0 || cap > 1e15)
+                Fail("--lag-cap-bytes must be between 0 and 1e15");
+            o.lagCapBytes = static_cast<uint64_t>(cap);
+        }
         else if (key == "--robot")
             o.robots.push_back(ParseRobot(value));
         else
@@ -379,6 +397,243 @@ LatenessProbe()
     Simulator::Schedule(kProbeEvery, &LatenessProbe);
 }
 
+// ---- each frame's relay lag -------------------------------------------------------------------
+//
+// What the relay adds to a frame's trip from one robot's wlan0 to another's, beyond the
+// channel's emulated time (airtime, contention, back-off, retries), in wall-clock ns:
+//   in:  from the frame's arrival on rpK (the kernel's receive stamp, SO_TIMESTAMPNS) to the
+//        emulated instant at which it entered the WiFi MAC (the time its relay event was
+//        scheduled for), i.e. the reader thread's wake-up and the hand-over;
+//   out: from the emulated instant its reception ended (the forward-up event's time) to the
+//        moment it was written into rpJ.
+// A relay event the simulator handles late delays the frame's entry into the MAC only in
+// wall time, not in emulated time: the MAC's next events are then already due and run at
+// once, and whatever lateness is left when the reception ends is in `out`. So in + out is
+// exactly the frame's wall time on the relay minus its emulated time on the channel / K.
+
+int64_t
+RealtimeNs()
+{
+    timespec ts{};
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+}
+
+double g_timeScale = 1.0;
+
+// Wall-clock ns since the emulated instant `at` (now by the simulator's scaled clock).
+int64_t
+WallSince(Time at)
+{
+    auto impl = DynamicCast<RealtimeSimulatorImpl>(Simulator::GetImplementation());
+    return static_cast<int64_t>((impl->RealtimeNow() - at).GetNanoSeconds() / g_timeScale);
+}
+
+// Carried by a frame from its sender's ghost through the MAC (retries included) and the
+// channel to each receiver's forward-up: who sent it and its lag on the way in.
+class RelayTag : public Tag
+{
+  public:
+    uint16_t sender{0}; // robot number, 1-based
+    int64_t inNs{0};
+
+    static TypeId GetTypeId()
+    {
+        static TypeId tid =
+            TypeId("tb::RelayTag").SetParent<Tag>().AddConstructor<RelayTag>();
+        return tid;
+    }
+
+    TypeId GetInstanceTypeId() const override
+    {
+        return GetTypeId();
+    }
+
+    uint32_t GetSerializedSize() const override
+    {
+        return 10;
+    }
+
+    void Serialize(TagBuffer b) const override
+    {
+        b.WriteU16(sender);
+        b.WriteU64(static_cast<uint64_t>(inNs));
+    }
+
+    void Deserialize(TagBuffer b) override
+    {
+        sender = b.ReadU16();
+        inNs = static_cast<int64_t>(b.ReadU64());
+    }
+
+    void Print(std::ostream& os) const override
+    {
+        os << "sender=" << sender << " in_ns=" << inNs;
+    }
+};
+
+// The file of per-frame records, one per frame delivered to a robot: "TBRLAG01", then
+// 40-byte little-endian records (topology/ns3medium.py and testbed/analysis/relaylag.py read
+// them; docs/ns3-medium.md, "Each frame's relay lag"). A cap on its size: records past it
+// are counted, not written.
+#pragma pack(push, 1)
+struct LagRecord
+{
+    uint64_t writtenNs; // CLOCK_REALTIME when the frame had been written into rpJ
+    uint32_t inNs;      // lag on the way in (saturated at 2^32-1; never negative)
+    uint32_t outNs;     // lag on the way out
+    uint16_t receiver;  // robot J, 1-based
+    uint16_t sender;    // robot K whose rpK the frame came from (0: unknown)
+    uint16_t etherType;
+    uint16_t ipId;      // IPv4 only (else 0), like the fields below
+    uint8_t ipSrc[4];   // network order
+    uint8_t ipDst[4];
+    uint32_t tcpSeq;    // TCP only: the raw sequence number
+    uint8_t ipProto;
+    uint8_t tcpFlags;
+    uint16_t reserved;
+};
+#pragma pack(pop)
+static_assert(sizeof(LagRecord) == 40, "the lag file's record is 40 bytes");
+
+struct LagLog
+{
+    FILE* file{nullptr};
+    uint64_t capRecords{0};
+    uint64_t written{0};
+    uint64_t notWritten{0}; // past the cap, or a failed write
+    uint64_t untagged{0};   // delivered frames without a RelayTag (should stay 0)
+    uint64_t inStampMissing{0}; // arrivals without a usable kernel stamp (read time used)
+    int64_t sumInNs{0};
+    int64_t sumOutNs{0};
+
+    void Open(const std::string& path, uint64_t capBytes)
+    {
+        file = std::fopen(path.c_str(), "wb");
+        if (file == nullptr)
+            Fail("lag file " + path + ": " + std::strerror(errno));
+        static char buffer[1 << 16];
+        std::setvbuf(file, buffer, _IOFBF, sizeof(buffer));
+        static const char magic[8] = {'T', 'B', 'R', 'L', 'A', 'G', '0', '1'};
+        std::fwrite(magic, 1, sizeof(magic), file);
+        capRecords = capBytes > sizeof(magic) ? (capBytes - sizeof(magic)) / sizeof(LagRecord) : 0;
+    }
+
+    void Add(const LagRecord& r)
+    {
+        sumInNs += r.inNs;
+        sumOutNs += r.outNs;
+        if (file == nullptr)
+            return;
+        if (written >= capRecords || std::fwrite(&r, sizeof(r), 1, file) != 1)
+        {
+            notWritten++;
+            return;
+        }
+        written++;
+    }
+
+    void Flush()
+    {
+        if (file != nullptr)
+            std::fflush(file);
+    }
+
+    std::string Json() const
+    {
+        uint64_t n = written + notWritten;
+        std::ostringstream s;
+        s << "{\"records\": " << written << ", \"not_written\": " << notWritten
+          << ", \"untagged\": " << untagged << ", \"in_stamp_missing\": " << inStampMissing
+          << ", \"mean_in_ms\": " << (n ? sumInNs / 1e6 / n : 0.0)
+          << ", \"mean_out_ms\": " << (n ? sumOutNs / 1e6 / n : 0.0) << "}";
+        return s.str();
+    }
+};
+
+LagLog g_lagLog;
+
+uint32_t
+Saturate(int64_t ns)
+{
+    return static_cast<uint32_t>(std::clamp<int64_t>(ns, 0, UINT32_MAX));
+}
+
+// The identity of an IPv4 frame's packet (fields that no hop changes), into `r`.
+void
+Identify(Ptr<const Packet> payload, uint16_t etherType, LagRecord& r)
+{
+    r.etherType = etherType;
+    if (etherType != 0x0800)
+        return;
+    uint8_t h[80];
+    uint32_t n = payload->CopyData(h, sizeof(h));
+    if (n < 20 || (h[0] >> 4) != 4)
+        return;
+    const uint32_t ihl = (h[0] & 0x0f) * 4u;
+    r.ipId = static_cast<uint16_t>(h[4] << 8 | h[5]);
+    r.ipProto = h[9];
+    std::memcpy(r.ipSrc, h + 12, 4);
+    std::memcpy(r.ipDst, h + 16, 4);
+    if (r.ipProto == 6 && ihl >= 20 && n >= ihl + 14)
+    {
+        const uint8_t* t = h + ihl;
+        r.tcpSeq = uint32_t(t[4]) << 24 | uint32_t(t[5]) << 16 | uint32_t(t[6]) << 8 | t[7];
+        r.tcpFlags = t[13];
+    }
+}
+
+// Reads rpK like ns-3's FdNetDeviceFdReader, and appends to each frame the kernel's stamp of
+// its arrival (8 bytes, CLOCK_REALTIME ns), which FromLinux takes off again before the frame
+// goes to the MAC. The stamp rides in the buffer because FdNetDevice hands buffers from this
+// thread to the simulator through a queue of its own that may drop some.
+class StampingReader : public FdReader
+{
+    static constexpr size_t kFrameMax = 1500 + 22; // what ns-3's own reader reads (MTU 1500)
+
+    FdReader::Data DoRead() override
+    {
+        auto* buf = static_cast<uint8_t*>(std::malloc(kFrameMax + sizeof(int64_t)));
+        iovec iov{buf, kFrameMax};
+        alignas(cmsghdr) char control[CMSG_SPACE(sizeof(timespec))];
+        msghdr msg{};
+        msg.msg_iov = &iov;
+        msg.msg_iovlen = 1;
+        msg.msg_control = control;
+        msg.msg_controllen = sizeof(control);
+        ssize_t len = recvmsg(m_fd, &msg, 0);
+        if (len <= 0)
+        {
+            std::free(buf);
+            return FdReader::Data(nullptr, 0);
+        }
+        const int64_t now = RealtimeNs();
+        int64_t stamp = 0;
+        for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c != nullptr; c = CMSG_NXTHDR(&msg, c))
+        {
+            if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS)
+            {
+                timespec ts;
+                std::memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+                stamp = static_cast<int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
+            }
+        }
+        // A stamp from another clock or none at all: the read's own time (counted).
+        if (stamp <= 0 || stamp > now || now - stamp > 1000000000)
+            stamp = -now;
+        std::memcpy(buf + len, &stamp, sizeof(stamp));
+        return FdReader::Data(buf, len + static_cast<ssize_t>(sizeof(stamp)));
+    }
+};
+
+class StampingFdNetDevice : public FdNetDevice
+{
+    Ptr<FdReader> DoCreateFdReader() override
+    {
+        return Create<StampingReader>();
+    }
+};
+
 int
 OpenPacketSocket(const std::string& ifname)
 {
@@ -401,6 +656,9 @@ OpenPacketSocket(const std::string& ifname)
 #endif
     if (setsockopt(fd, SOL_PACKET, PACKET_IGNORE_OUTGOING, &one, sizeof(one)) < 0)
         Fail("PACKET_IGNORE_OUTGOING: " + std::string(std::strerror(errno)));
+    // Each frame's arrival time, for its relay lag (StampingReader).
+    if (setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof(one)) < 0)
+        Fail("SO_TIMESTAMPNS: " + std::string(std::strerror(errno)));
     return fd;
 }
 
@@ -423,14 +681,33 @@ FromLinux(size_t k,
           NetDevice::PacketType)
 {
     Ghost& g = g_ghosts[k];
+    // StampingReader's arrival stamp, at the end (negative: the read's time, no kernel stamp).
+    Ptr<Packet> frame = packet->Copy();
+    int64_t stamp = 0;
+    if (frame->GetSize() < sizeof(stamp))
+        return true;
+    frame->CreateFragment(frame->GetSize() - sizeof(stamp), sizeof(stamp))
+        ->CopyData(reinterpret_cast<uint8_t*>(&stamp), sizeof(stamp));
+    frame->RemoveAtEnd(sizeof(stamp));
     if (Mac48Address::ConvertFrom(from) != g.robot.mac)
     {
         g.c.foreign++;
         return true;
     }
+    if (stamp < 0)
+    {
+        g_lagLog.inStampMissing++;
+        stamp = -stamp;
+    }
     g.c.fromLinux++;
     g_relay.Add();
-    g.wifi->Send(packet->Copy(), to, protocol);
+    RelayTag tag;
+    tag.sender = static_cast<uint16_t>(k + 1);
+    // Wall time since the arrival, less the wall time since the emulated instant the frame
+    // enters the MAC at (now, by the simulator's clock).
+    tag.inNs = std::max<int64_t>(0, (RealtimeNs() - stamp) - WallSince(Simulator::Now()));
+    frame->AddPacketTag(tag);
+    g.wifi->Send(frame, to, protocol);
     return true;
 }
 
@@ -450,7 +727,25 @@ ToLinux(size_t k, Ptr<const Packet> packet, Mac48Address from, Mac48Address to)
     copy->RemoveHeader(llc);
     g.c.toLinux++;
     g_relay.Add();
+    RelayTag tag;
+    const bool tagged = copy->RemovePacketTag(tag);
+    LagRecord r{};
+    Identify(copy, llc.GetType(), r);
+    // Stamped as the write begins: the write itself carries the frame through rpJ into the
+    // robot's wlan0 (where its capture stamps it) and on, when the robot answers at once,
+    // through its whole stack; that is not the relay's.
+    r.outNs = Saturate(WallSince(Simulator::Now()));
+    r.writtenNs = static_cast<uint64_t>(RealtimeNs());
     g.fd->SendFrom(copy, from, to, llc.GetType());
+    r.receiver = static_cast<uint16_t>(k + 1);
+    if (tagged)
+    {
+        r.sender = tag.sender;
+        r.inNs = Saturate(tag.inNs);
+    }
+    else
+        g_lagLog.untagged++;
+    g_lagLog.Add(r);
 }
 
 void
@@ -539,7 +834,7 @@ Build(const Options& o)
         g.wifi->GetMac()->GetFrameExchangeManager()->SetAddress(g.robot.mac);
         g.wifi->GetMac()->SetForwardUpCallback(MakeBoundCallback(&ToLinux, k));
 
-        g.fd = CreateObject<FdNetDevice>();
+        g.fd = CreateObject<StampingFdNetDevice>();
         g.fd->SetAddress(Mac48Address::Allocate());
         g.node->AddDevice(g.fd);
         g.fd->SetFileDescriptor(OpenPacketSocket(g.robot.ifname));
@@ -600,7 +895,8 @@ StatsJson()
     s << "{\"now_s\": " << Simulator::Now().GetSeconds() << ", \"qos\": "
       << (g_ghosts[0].wifi->GetMac()->GetQosSupported() ? "true" : "false")
       << ", \"lateness\": " << g_late.Json("probes")
-      << ", \"relay_lag\": " << g_relay.Json("frames") << ", \"robots\": [";
+      << ", \"relay_lag\": " << g_relay.Json("frames")
+      << ", \"lag_file\": " << g_lagLog.Json() << ", \"robots\": [";
     for (size_t k = 0; k < g_ghosts.size(); ++k)
     {
         const Counters& c = g_ghosts[k].c;
@@ -642,7 +938,15 @@ Execute(const std::string& line)
     if (verb == "ping")
         return "ok";
     if (verb == "stats")
+    {
+        g_lagLog.Flush();
         return StatsJson();
+    }
+    if (verb == "flush")
+    {
+        g_lagLog.Flush();
+        return "ok";
+    }
     if (verb == "links")
     {
         std::ostringstream s;
@@ -738,8 +1042,9 @@ main(int argc, char** argv)
 {
     Options o = ParseArgs(argc, argv);
     // The channel is part of the emulated world's clock: like the world's step loop it asks
-    // for real-time priority (inherited by ns-3's reader threads, started later), and falls
-    // back to nice -10 where that is refused.
+    // for real-time priority for the simulator's thread (SCHED_RESET_ON_FORK: ns-3's reader
+    // threads, started later, get normal scheduling), and falls back to nice -10 where that
+    // is refused.
     if (o.rtPriority > 0)
     {
         sched_param param{};
@@ -753,6 +1058,9 @@ main(int argc, char** argv)
     auto impl = DynamicCast<RealtimeSimulatorImpl>(Simulator::GetImplementation());
     PeekPointer(impl)->*Get(SyncMember()) = Create<ScaledSynchronizer>(o.timeScale);
 
+    g_timeScale = o.timeScale;
+    if (!o.lagFile.empty())
+        g_lagLog.Open(o.lagFile, o.lagCapBytes);
     Build(o);
     Simulator::Schedule(kProbeEvery, &LatenessProbe);
 

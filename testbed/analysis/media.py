@@ -10,7 +10,10 @@ contention, collisions and retries: docs/ns3-medium.md) on the same seeds. Per r
 - exploration steps (as Fig. 2);
 - packet delivery fraction and median end-to-end delay of the robots' TCP traffic, from the
   captures (testbed.analysis.pcapmetrics); the delay in emulated ms (wall ms x the time
-  scale the run achieved), so runs a sweep slowed down compare with the others;
+  scale the run achieved), so runs a sweep slowed down compare with the others. On ns3-wifi
+  the delay is corrected for the medium's relay lag where the run recorded it
+  (relay-lag.bin, testbed.analysis.relaylag): the channel's table gives the raw median
+  beside it and how many runs were corrected;
 - control overhead: routing control packets and bytes per robot per second of robot time,
   and their share of airtime, i.e. of the time the transmitters' radios spend sending. A
   frame's airtime is that of the run's 802.11 PHY (`frame_airtime_s`: preamble and header,
@@ -49,7 +52,7 @@ COMPARED = (
     ("control_airtime_share", "control share of airtime", ".3f"),
 )
 CHANNEL = ("channel_airtime_share", "channel_retry_rate", "channel_drops",
-           "channel_relay_lag_ms", "channel_relay_lag_over_1ms")  # fmt: skip
+           "channel_relay_lag_ms", "channel_relay_lag_over_1ms", "delay_raw_ms")  # fmt: skip
 NOISE_RULE = (
     "veth's answer is within the noise of 802.11's at a point when the 95% intervals of the "
     "two means overlap (the report's rule for a difference beyond noise, Student t); a point "
@@ -127,6 +130,7 @@ def run_row(run: FinishedRun, metrics: dict | None) -> dict:
         return m[key] / robot_s if robot_s and m.get(key) is not None else None
 
     ch = run.channel
+    raw = m.get("delay_raw_ms_median")
     return {
         "run": run.run_id,
         "medium": c.medium,
@@ -144,6 +148,9 @@ def run_row(run: FinishedRun, metrics: dict | None) -> dict:
         "channel_drops": ch.drops if ch else None,
         "channel_relay_lag_ms": ch.relay_lag_mean_ms if ch else None,
         "channel_relay_lag_over_1ms": ch.relay_lag_over_1ms if ch else None,
+        # ns3-wifi: the median delay before the relay-lag correction (None: not corrected)
+        "delay_raw_ms": raw * scale if raw is not None else None,
+        "delay_lag_corrected": "relay_lag" in m,
     }
 
 
@@ -167,6 +174,7 @@ def point_rows(per_run: list[dict]) -> list[dict]:
         for k in CHANNEL:
             vals = [i[k] for i in items if i.get(k) is not None]
             row[k] = statistics.fmean(vals) if vals else None
+        row["delay_lag_corrected_runs"] = sum(bool(i.get("delay_lag_corrected")) for i in items)
         out.append(row)
     return out
 
@@ -247,7 +255,10 @@ def section(rows: list[dict]) -> list[str]:
     out += [
         "Each point ran on both media with the same seeds. Every cell: the mean over the "
         "point's runs with its 95% interval in brackets (Student t). Delay: median of the "
-        "robots' TCP segments in emulated ms. Control traffic per robot per second of robot "
+        "robots' TCP segments in emulated ms; on ns3-wifi, corrected for the medium's relay "
+        "lag (each segment less the lag its hop frames recorded as the channel relayed them: "
+        "docs/ns3-medium.md) in the runs that recorded it, which the channel's table counts. "
+        "Control traffic per robot per second of robot "
         "time, from the captures; its share of airtime is the share of the radios' sending "
         "time that routing control took, each captured frame priced at the run's 802.11 PHY "
         "(veth: what 802.11a at 54 Mbit/s would have taken; no ACKs or retries counted). "
@@ -283,11 +294,15 @@ def _channel_lines(rows: list[dict]) -> list[str]:
         "use (all robots' sending time over the run's emulated time), unacknowledged "
         "transmissions per frame handed to the MAC, frames the MACs lost (retry limit, full "
         "or expired queue), and how late the channel relayed frames (emulated ms; the share "
-        "over 1 ms says when the host could not keep up with the time scale).",
+        "over 1 ms says when the host could not keep up with the time scale); then the "
+        "median delay before the relay lag was taken out of it, and in how many of the "
+        "point's runs it was (runs made before the channel recorded each frame's lag keep "
+        "their raw delay in the table above).",
         "",
         "| routing | range (m) | robots | air in use | retries / frame | MAC drops | "
-        "relay lag (ms) | relayed > 1 ms late |",
-        "|---|---|---|---|---|---|---|---|",
+        "relay lag (ms) | relayed > 1 ms late | median delay, raw (emulated ms) | "
+        "delay corrected for the lag |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in wifi:
         out.append(
@@ -295,6 +310,7 @@ def _channel_lines(rows: list[dict]) -> list[str]:
             f"{_fmt(r['channel_airtime_share'], '.3f')} | "
             f"{_fmt(r['channel_retry_rate'], '.3f')} | {_fmt(r['channel_drops'], '.1f')} | "
             f"{_fmt(r['channel_relay_lag_ms'], '.2f')} | "
-            f"{_fmt(r['channel_relay_lag_over_1ms'], '.1%')} |"
+            f"{_fmt(r['channel_relay_lag_over_1ms'], '.1%')} | "
+            f"{_fmt(r['delay_raw_ms'], '.2f')} | {r['delay_lag_corrected_runs']} of {r['n']} |"
         )
     return out + [""]

@@ -23,7 +23,14 @@ were *transmitted* by the robot (its own traffic and what it forwards); the rest
   segments between the two captures. `segment_delivery` counts unique segments instead,
   matched by (src, dst, ports, raw sequence number): a segment is delivered when j received
   one covering its first byte; TCP's retransmissions keep it near 1 unless connections break.
-- end-to-end delay: first reception in j's capture minus first transmission in i's.
+- end-to-end delay: first reception in j's capture minus first transmission in i's. On the
+  ns3-wifi medium, when the run kept the channel's per-frame relay lag (relay-lag.bin,
+  testbed.analysis.relaylag), `delay_ms_*` are corrected: each segment's delay less the lag
+  of the hop frames its first received copy travelled (what the medium's relaying added in
+  wall time, beyond the channel's airtime, contention and retries); `delay_raw_ms_*` keep
+  the uncorrected values, and segments whose hops could not all be matched stay
+  uncorrected and are counted (`relay_lag`). A run without that file (veth, or older
+  ns3-wifi runs) has the raw delays under `delay_ms_*` and none of these keys.
 - throughput: delivered TCP payload bytes over the span of the captures, in bit/s.
 
 Times are host wall-clock: with a time scale K, emulated time runs K times faster, so delays
@@ -51,7 +58,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import routingnotes, runs
+from testbed.analysis import relaylag, routingnotes, runs
 from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
@@ -61,7 +68,7 @@ CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracl
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
-CACHE_FORMAT = 4  # 3: "emulated" and "about"; 4: "tcp_flows"
+CACHE_FORMAT = 5  # 3: "emulated" and "about"; 4: "tcp_flows"; 5: relay-lag correction
 
 _FIELDS = (
     "frame.time_epoch",
@@ -82,6 +89,7 @@ _FIELDS = (
     "aodv.type",
     "ipv6.nxt",
     "frame.interface_id",  # in a merged capture, which input file the frame came from
+    "ip.id",  # with the addresses, protocol and TCP sequence: a packet's identity across hops
 )
 
 
@@ -104,6 +112,7 @@ class Frame:
     tcp_len: int | None = None
     aodv_type: int | None = None
     interface: int = 0
+    ip_id: int | None = None
 
 
 def _int(s: str, top: int = 0xFFFF) -> int | None:
@@ -118,6 +127,17 @@ def _int(s: str, top: int = 0xFFFF) -> int | None:
 
 
 _U32 = 0xFFFFFFFF
+
+
+def _hex_int(s: str, top: int = 0xFFFF) -> int | None:
+    """A field tshark writes in hex ("0x1a2b"; or in decimal), or None when empty;
+    ValueError otherwise."""
+    if not s:
+        return None
+    v = (int(s, 16) if s[:2].lower() == "0x" else int(s)) if len(s) <= 20 else -1
+    if not 0 <= v <= top:
+        raise ValueError(f"{s[:20]!r} is not in 0..{top}")
+    return v
 
 
 def _time(s: str) -> float:
@@ -161,6 +181,7 @@ def parse_fields(text: str) -> list[Frame]:
                     tcp_len=_int(f[14], _U32),
                     aodv_type=_int(f[15], 255),
                     interface=_int(f[17], _U32) or 0,
+                    ip_id=_hex_int(f[18]),
                 )
             )
         except ValueError:
@@ -253,7 +274,8 @@ class _Traffic:
     sources: set[str]  # only traffic whose sender was captured too
     # (src, dst, sport, dport, seq) -> [first time, length, transmissions]
     sent: dict[tuple, list] = field(default_factory=dict)
-    # received segments per flow: flow -> {seq: [first time, length, receptions]}
+    # received segments per flow: flow -> {seq: [first time, length, receptions, IP id of
+    # the first reception, seq]}
     received: dict[tuple, dict[int, list]] = field(default_factory=lambda: defaultdict(dict))
     tx_payload: int = 0  # TCP payload bytes, all transmissions
     rx_payload: int = 0  # TCP payload bytes, all receptions
@@ -276,9 +298,10 @@ class _Traffic:
         flow = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport)
         seen = self.received[flow].get(f.tcp_seq)
         if seen is None:
-            self.received[flow][f.tcp_seq] = [f.time, f.tcp_len, 1]
+            self.received[flow][f.tcp_seq] = [f.time, f.tcp_len, 1, f.ip_id, f.tcp_seq]
         else:
-            seen[0] = min(seen[0], f.time)
+            if f.time < seen[0]:
+                seen[0], seen[3] = f.time, f.ip_id
             seen[2] += 1
 
 
@@ -328,15 +351,24 @@ def _robot_counts(frames: list[Frame], addr: str, port: int, traffic: _Traffic) 
 
 @dataclass
 class _Delivery:
-    delays_ms: list[float]
+    delays_ms: list[float]  # corrected for the relay lag where a lag index was given
     delivered: int  # segments
     delivered_bytes: int
     delivered_tx: int  # transmissions
+    raw_delays_ms: list[float] = field(default_factory=list)
+    lag_ms: list[float] = field(default_factory=list)  # subtracted, per corrected segment
+    uncorrected: int = 0  # segments whose hops could not all be matched with lag records
 
 
-def _deliveries(traffic: _Traffic) -> _Delivery:
+def _deliveries(
+    traffic: _Traffic,
+    lags: relaylag.LagIndex | None = None,
+    robot_of: dict[str, int] | None = None,
+) -> _Delivery:
     """Match each segment sent with its first reception: exactly (same flow and sequence
-    number) or, when GSO/GRO resegmented it, a received segment covering its first byte."""
+    number) or, when GSO/GRO resegmented it, a received segment covering its first byte.
+    With `lags` (and `robot_of`, robot number by address), each delay has the relay lag of
+    the hops of the received copy taken out (relaylag.LagIndex.path_lag)."""
     index = {flow: sorted(segs) for flow, segs in traffic.received.items()}
     out = _Delivery([], 0, 0, 0)
     for (src, dst, sport, dport, seq), (t_sent, length, n_sent) in traffic.sent.items():
@@ -349,13 +381,26 @@ def _deliveries(traffic: _Traffic) -> _Delivery:
             starts = index[flow]
             i = bisect.bisect_right(starts, seq)
             covering = [segs[s] for s in starts[max(0, i - 8) : i] if s + segs[s][1] > seq]
-            hit = min(covering) if covering else None
+            hit = min(covering, key=lambda h: h[0]) if covering else None
         if hit is None:
             continue
         out.delivered += 1
         out.delivered_tx += min(n_sent, hit[2])
         out.delivered_bytes += length
-        out.delays_ms.append(1000.0 * (hit[0] - t_sent))
+        delay_ms = 1000.0 * (hit[0] - t_sent)
+        out.raw_delays_ms.append(delay_ms)
+        if lags is not None:
+            path = None
+            if hit[3] is not None:
+                key = relaylag.packet_key(src, dst, hit[3], 6, hit[4])
+                path = lags.path_lag(key, robot_of[src], robot_of[dst], t_sent, hit[0])
+            if path is None:
+                out.uncorrected += 1
+            else:
+                lag_ms = sum(r.lag_ns for r in path) / 1e6
+                out.lag_ms.append(lag_ms)
+                delay_ms -= lag_ms
+        out.delays_ms.append(delay_ms)
     return out
 
 
@@ -391,28 +436,57 @@ def _delivery_metrics(traffic: _Traffic, d: _Delivery, duration: float) -> dict:
         "tcp_payload_bytes_transmitted": traffic.tx_payload,
         "tcp_payload_bytes_received": traffic.rx_payload,
         "pdf": traffic.rx_payload / traffic.tx_payload if traffic.tx_payload else None,
-        "delay_ms_mean": statistics.fmean(delays_ms) if delays_ms else None,
-        "delay_ms_median": statistics.median(delays_ms) if delays_ms else None,
-        "delay_ms_p95": _quantile(delays_ms, 0.95) if delays_ms else None,
+        **_delay_stats("delay_ms", delays_ms),
         "throughput_bps": 8.0 * d.delivered_bytes / duration if duration else None,
         "delivered_payload_bytes": d.delivered_bytes,
     }
 
 
-def compute(captures: dict[int, list[Frame]], addrs: dict[int, str], port: int = 654) -> dict:
-    """Routing metrics of one run from each robot's frames (see the module docstring)."""
+def _delay_stats(prefix: str, delays_ms: list[float]) -> dict:
+    return {
+        f"{prefix}_mean": statistics.fmean(delays_ms) if delays_ms else None,
+        f"{prefix}_median": statistics.median(delays_ms) if delays_ms else None,
+        f"{prefix}_p95": _quantile(delays_ms, 0.95) if delays_ms else None,
+    }
+
+
+def _lag_metrics(d: _Delivery, records: int) -> dict:
+    """What the relay-lag correction did (only for a run with the channel's lag records)."""
+    return {
+        **_delay_stats("delay_raw_ms", d.raw_delays_ms),
+        "relay_lag": {
+            "records": records,
+            "segments_corrected": len(d.lag_ms),
+            "segments_uncorrected": d.uncorrected,
+            "subtracted_ms_mean": statistics.fmean(d.lag_ms) if d.lag_ms else None,
+            "subtracted_ms_median": statistics.median(d.lag_ms) if d.lag_ms else None,
+        },
+    }
+
+
+def compute(
+    captures: dict[int, list[Frame]],
+    addrs: dict[int, str],
+    port: int = 654,
+    lags: list[relaylag.LagRecord] | None = None,
+) -> dict:
+    """Routing metrics of one run from each robot's frames (see the module docstring); with
+    `lags`, the ns3-wifi channel's relay-lag records, delays are corrected for them."""
     traffic = _Traffic(sources=set(addrs.values()))
     robots = {
         f"r{k}": _robot_counts(frames, addrs[k], port, traffic)
         for k, frames in sorted(captures.items())
     }
     duration = (traffic.t_max - traffic.t_min) if traffic.t_max > traffic.t_min else 0.0
+    index = relaylag.LagIndex(lags) if lags is not None else None
+    delivery = _deliveries(traffic, index, {a: k for k, a in addrs.items()})
     return {
         "format": CACHE_FORMAT,
         "control_port": port,
         "duration_s": duration,
         **_control_totals(robots),
-        **_delivery_metrics(traffic, _deliveries(traffic), duration),
+        **_delivery_metrics(traffic, delivery, duration),
+        **(_lag_metrics(delivery, len(lags)) if lags is not None else {}),
         "robots": robots,
     }
 
@@ -534,7 +608,9 @@ def run_metrics(
     if not pcaps:
         return None
     cache = run_dir / CACHE_NAME
-    stamp = {p.name: [p.stat().st_size, p.stat().st_mtime_ns] for p in pcaps.values()}
+    lag_path = run_dir / relaylag.LAG_NAME
+    stamped = [*pcaps.values(), *([lag_path] if lag_path.is_file() else [])]
+    stamp = {p.name: [p.stat().st_size, p.stat().st_mtime_ns] for p in stamped}
     if use_cache and cache.is_file():
         try:
             doc = json.loads(cache.read_text())
@@ -552,16 +628,24 @@ def run_metrics(
         scale = run.time_scale_achieved or run.time_scale_requested or run.config.time_scale
     else:
         routing, scale = network or (runs.DEFAULT_ROUTING, None)
+    lags = None
+    if lag_path.is_file():
+        try:
+            lags, partial = relaylag.read_records(lag_path)
+        except (OSError, relaylag.LagFileError) as e:
+            raise runs.ResultError(str(e)) from None
+        if partial:
+            log.warning("%s: a record cut short at its end (%d bytes) left out", lag_path, partial)
     captures = read_pcaps(pcaps)
     metrics = compute(
-        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654)
+        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654), lags
     )
     metrics["pcaps"] = stamp
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}
     metrics["emulated"] = routingnotes.emulated(metrics, scale)
-    metrics["about"] = routingnotes.ABOUT
+    metrics["about"] = routingnotes.about(lags is not None)
     try:
         write_json_atomic(cache, metrics)
     except OSError as e:

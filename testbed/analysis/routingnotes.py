@@ -40,7 +40,25 @@ ABOUT = {
     ),
 }
 
+RELAY_LAG = (
+    "ns3-wifi only: delay_ms_* are corrected for the medium's relay lag. The channel relays "
+    "each frame twice a hop (Linux to the simulator, the simulator to Linux) and each relay "
+    "takes wall time the channel's emulated time does not account for; it recorded that lag "
+    "per frame (relay-lag.bin), and each segment's delay has the lag of the hop frames its "
+    "received copy travelled taken out. What is left is the channel's own delay (airtime, "
+    "contention, back-off, MAC retries, route discoveries, TCP retransmissions) and the "
+    "robots' kernels. delay_raw_ms_* are the uncorrected delays; relay_lag says how many "
+    "segments were corrected, how many could not be matched (left uncorrected) and how much "
+    "was taken out."
+)
+
 _DELAYS = ("delay_ms_mean", "delay_ms_median", "delay_ms_p95")
+_RAW_DELAYS = ("delay_raw_ms_mean", "delay_raw_ms_median", "delay_raw_ms_p95")
+
+
+def about(relay_lag_corrected: bool = False) -> dict:
+    """ABOUT, with what the relay-lag correction means when the delays had it."""
+    return {**ABOUT, "relay_lag": RELAY_LAG} if relay_lag_corrected else ABOUT
 
 
 def emulated(metrics: dict, time_scale: float | None) -> dict | None:
@@ -48,7 +66,8 @@ def emulated(metrics: dict, time_scale: float | None) -> dict | None:
     if not time_scale:
         return None
     out: dict = {"time_scale": time_scale}
-    for key in (*_DELAYS, "duration_s"):
+    raw = _RAW_DELAYS if _RAW_DELAYS[0] in metrics else ()
+    for key in (*_DELAYS, *raw, "duration_s"):
         value = metrics.get(key)
         out[key] = None if value is None else value * time_scale
     bps = metrics.get("throughput_bps")

@@ -82,9 +82,16 @@ def _routing_table(m: dict) -> list[str]:
         f"{_num(m.get('pdf'), '.3f')} | same |",
         f"| segment delivery (unique segments) | {_num(m.get('segment_delivery'), '.3f')} | same |",
     ]
+    corrected = "relay_lag" in m  # ns3-wifi: the medium's relay lag taken out
     for key, name in (("mean", "mean"), ("median", "median"), ("p95", "95th percentile")):
-        k = f"delay_ms_{key}"
-        rows.append(f"| delay, {name} (ms) | {_num(m.get(k), '.3f')} | {_num(emu.get(k), '.3f')} |")
+        for k, what in (
+            (f"delay_ms_{key}", ", corrected for the relay lag" if corrected else ""),
+            *([(f"delay_raw_ms_{key}", ", raw")] if corrected else []),
+        ):
+            rows.append(
+                f"| delay, {name}{what} (ms) | {_num(m.get(k), '.3f')} | "
+                f"{_num(emu.get(k), '.3f')} |"
+            )
     bps = m.get("throughput_bps")
     rows.append(
         f"| throughput (kbit/s) | {_num(bps and bps / 1000, '.2f')} | "
@@ -105,6 +112,17 @@ def _explanations(m: dict) -> list[str]:
             f"{m.get('tcp_transmissions')} transmissions (retransmissions included); PDF counts "
             "every transmission's bytes, so lost or repeated transmissions lower it even when "
             "every segment arrived in the end."
+        )
+    lag = m.get("relay_lag")
+    if lag:
+        taken = lag.get("subtracted_ms_mean")
+        out.append(
+            "The delays are corrected for the ns3-wifi medium's relay lag (the wall time its "
+            "relaying of each frame added, beyond the channel's emulated time): "
+            f"{lag['segments_corrected']} segments had the lag of their hop frames taken out"
+            + (f" ({taken:.3f} ms of wall time on average)" if taken is not None else "")
+            + f", {lag['segments_uncorrected']} could not be matched with the channel's "
+            "records and keep their raw delay; the raw delays are in the rows marked raw."
         )
     mean, median = m.get("delay_ms_mean"), m.get("delay_ms_median")
     if mean is not None and median is not None:
@@ -134,7 +152,7 @@ def _routing(m: dict | None) -> list[str]:
     return out + ["", "All numbers and what each means: `routing.json` (its `about`)."]
 
 
-def _channel(run: FinishedRun) -> list[str]:
+def _channel(run: FinishedRun, metrics: dict | None = None) -> list[str]:
     """The 802.11 channel's counters (medium.json), for a run on ns3-wifi."""
     ch = run.channel
     if ch is None:
@@ -151,7 +169,13 @@ def _channel(run: FinishedRun) -> list[str]:
         f"preamble missed): {int(ch.total('phy_rx_drops'))}. Relay lag: mean "
         f"{_num(ch.relay_lag_mean_ms, '.2f')} ms of emulated time, "
         f"{_num(ch.relay_lag_over_1ms, '.1%')} of frames over 1 ms late (more than a few "
-        "percent: the host did not keep up with the time scale, and delays include it).",
+        "percent: the host did not keep up with the time scale). "
+        + (
+            "The routing delays above have each frame's relay lag taken out."
+            if metrics and "relay_lag" in metrics
+            else "The routing delays include the relay lag: this run did not record it "
+            "per frame (relay-lag.bin)."
+        ),
         "",
         "| robot | frames sent | delivered to it | retries | MAC drops | airtime (ms) |",
         "|---|---|---|---|---|---|",
@@ -170,7 +194,7 @@ def summary(run: FinishedRun, metrics: dict | None) -> str:
         out += [line, ""]
     out += ["## Routing (from the captures)", ""] + _routing(metrics)
     if run.channel:
-        out += [""] + _channel(run)
+        out += [""] + _channel(run, metrics)
     return "\n".join(out) + "\n"
 
 

@@ -14,7 +14,9 @@ defaults of older files applied there) plus its run id and directory:
 - A run on the ns3-wifi medium also left `medium.json`, the 802.11 channel's counters
   (docs/ns3-medium.md, "Counters"): read into `FinishedRun.channel` (`ChannelRecord`), None
   for a veth run or a run made before the file existed. A medium.json that is there but
-  not what the channel writes makes the run malformed, as a bad result.json does.
+  not what the channel writes makes the run malformed, as a bad result.json does; so does
+  a relay-lag file (the channel's per-frame lag, testbed.analysis.relaylag) without its
+  header.
 
 Which runs count (`FinishedRun.usable`): status `complete` or `step_cap`, and faithful to
 its time scale (result.json's `fidelity`, testbed.fidelity; a run written before verdicts
@@ -176,12 +178,29 @@ def _load_channel(run_dir: Path) -> ChannelRecord | None:
         raise ResultError(f"{path}: {e}") from None
 
 
+def _check_lag_file(run_dir: Path) -> None:
+    """ResultError when the run's relay-lag file is there but not one (its header)."""
+    from testbed.analysis import relaylag
+
+    path = run_dir / relaylag.LAG_NAME
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(relaylag.MAGIC))
+    except FileNotFoundError:
+        return
+    except OSError as e:
+        raise ResultError(f"{path}: unreadable ({e})") from None
+    if head != relaylag.MAGIC:
+        raise ResultError(f"{path}: not a relay-lag file (no {relaylag.MAGIC.decode()} header)")
+
+
 def load_run(run_dir: str | Path) -> FinishedRun:
     """The finished run in `run_dir`; ResultError (one line, naming the file) when its
     result.json is missing, not JSON or lacks what the analysis needs, or its medium.json
-    is there but unreadable."""
+    or relay-lag file is there but unreadable."""
     run_dir = Path(run_dir)
     channel = _load_channel(run_dir)
+    _check_lag_file(run_dir)
     return FinishedRun.of(RunResult.from_json(run_dir), run_dir, channel)
 
 

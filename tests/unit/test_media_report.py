@@ -135,3 +135,20 @@ def test_the_airtime_of_a_frame():
     assert media.frame_airtime_s(100, "dsss", 1.0) == pytest.approx(192e-6 + 976e-6)
     assert media.traffic_airtime_s(2, 200, "dsss", 1.0) == pytest.approx(2 * (192e-6 + 976e-6))
     assert media.traffic_airtime_s(0, 0, "ofdm", 54.0) == 0.0
+
+
+def test_the_channel_table_gives_the_raw_delay_of_runs_corrected_for_the_relay_lag(tmp_path):
+    metrics_of = sweep(tmp_path)
+
+    def corrected(run):
+        m = metrics_of(run)
+        if m is not None and run.config.medium == "ns3-wifi" and not run.run_id.endswith("k1"):
+            m = {**m, "delay_raw_ms_median": m["delay_ms_median"] + 0.25, "relay_lag": {}}
+        return m
+
+    made = figures.make_all(tmp_path, metrics_of=corrected)
+    rows = {r["medium"]: r for r in made["tables"]["media"]}
+    assert rows["ns3-wifi"]["delay_lag_corrected_runs"] == 2
+    text = "\n".join(media.section(made["tables"]["media"]))
+    assert "corrected for the medium's relay lag" in text
+    assert "| 1.0% | 3.10 | 2 of 3 |" in text  # runs 2 and 3: (0.5 + 0.02 + 0.25) x 4

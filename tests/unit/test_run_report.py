@@ -53,7 +53,7 @@ def test_routing_json_says_what_its_numbers_mean_and_gives_emulated_time(tmp_pat
     monkeypatch.setattr(pcapmetrics, "robot_address", lambda k: tp.ADDRS[k])
     m = pcapmetrics.run_metrics(d)
     doc = json.loads((d / "routing.json").read_text())
-    assert doc["format"] == pcapmetrics.CACHE_FORMAT == 4
+    assert doc["format"] == pcapmetrics.CACHE_FORMAT == 5
     assert set(doc["about"]) == {"pdf", "segment_delivery", "delay", "time"}
     assert "0.957 against 1.0" in doc["about"]["segment_delivery"]
     assert "mean far above the median" in doc["about"]["delay"]
@@ -111,3 +111,29 @@ def test_a_run_on_ns3_wifi_shows_the_channel_counters(tmp_path):
     assert "| r2 (display) | 100 | 180 | 1 | 3 | 250.0 |" in text
     # a veth run has no such section
     assert "802.11 channel" not in runreport.summary(load_run(one_run(tmp_path / "v")), None)
+
+
+def test_a_run_whose_delays_were_corrected_for_the_relay_lag_says_so(tmp_path):
+    from tests.unit.test_analysis_runs import channel_doc
+
+    spec = sweepfile.SweepSpec.of(robots=(1,), comm_range=(5.0,), laser_range=(2.0,),
+                               medium="ns3-wifi")  # fmt: skip
+    run = sweepfile.expand(spec)[0]
+    d = write_run(tmp_path, run, result_doc(run.config, [300], 301))
+    (d / "medium.json").write_text(json.dumps(channel_doc()))
+    m = {"delay_ms_mean": 0.3, "delay_ms_median": 0.2, "delay_ms_p95": 0.9,
+         "delay_raw_ms_mean": 0.6, "delay_raw_ms_median": 0.5, "delay_raw_ms_p95": 1.4,
+         "relay_lag": {"records": 900, "segments_corrected": 95, "segments_uncorrected": 5,
+                       "subtracted_ms_mean": 0.3, "subtracted_ms_median": 0.3}}  # fmt: skip
+    m["emulated"] = routingnotes.emulated(m, 2.0)
+    text = runreport.summary(load_run(d), m)
+    assert "| delay, median, corrected for the relay lag (ms) | 0.200 | 0.400 |" in text
+    assert "| delay, median, raw (ms) | 0.500 | 1.000 |" in text
+    assert "95 segments had the lag of their hop frames taken out (0.300 ms" in text
+    assert "5 could not be matched" in text
+    assert "The routing delays above have each frame's relay lag taken out." in text
+    # an ns3-wifi run that did not record the lag: its delays say they include it
+    old = {k: v for k, v in m.items() if not k.startswith("delay_raw") and k != "relay_lag"}
+    text = runreport.summary(load_run(d), old)
+    assert "| delay, median (ms) | 0.200 |" in text and "raw" not in text
+    assert "The routing delays include the relay lag" in text
