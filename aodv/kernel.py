@@ -2,14 +2,15 @@
 
 - `KernelRoutes`: /32 routes of our own routing protocol number. Neighbours are
   `dev wlan0 scope link`, others `via NEXT dev wlan0 onlink`. Requests are rtnetlink
-  messages packed here and written to a raw NETLINK_ROUTE socket. At run time installs and
-  deletes ask for no acknowledgement: the kernel applies a route request within the
-  send() call, so a packet sent right after sees the route, and it answers a request
-  without NLM_F_ACK only when the request failed; the daemon's loop wakes on that answer
-  and `read_acks` names the failed request. (Asking for every acknowledgement cost one
-  more loop turn per discovery hop.) Start-up and teardown requests ask and wait.
-  (pyroute2's IPRoute costs ~1.5 ms a request, more than a discovery hop, and its import
-  18 MB and half a second per daemon: the daemon does not use it.)
+  messages (packed by topology/netlinkmsg.py) written to a raw NETLINK_ROUTE socket. At
+  run time installs and deletes ask for no acknowledgement: the kernel applies a route
+  request within the send() call, so a packet sent right after sees the route, and it
+  answers a request without NLM_F_ACK only when the request failed; the daemon's loop
+  wakes on that answer and `read_acks` names the failed request. (Asking for every
+  acknowledgement cost one more loop turn per discovery hop.) Start-up and teardown
+  requests ask and wait. (pyroute2's IPRoute costs ~1.5 ms a request, more than a
+  discovery hop, and its import 18 MB and half a second per daemon: the daemon does not
+  use it.)
 - `Tun`: the TUN device that catches packets with no route (a 10.0.0.0/16 route points at
   it, less specific than every /32), IPv6 disabled on it.
 - `UseMonitor`: an nftables table whose dynamic set collects the addresses of data packets
@@ -33,24 +34,14 @@ import socket
 import struct
 import subprocess
 
+from topology import netlinkmsg as nl
+
 log = logging.getLogger(__name__)
 
 # Our routing protocol number in `ip route` (rt_protos has babel at 42); unassigned.
 RTPROT_AODV = 101
-RTNH_F_ONLINK = 4
-RT_SCOPE_LINK = 253
 TUN_NAME = "aodv0"
 NFT_TABLE = "aodv"
-
-_NLMSGHDR = struct.Struct("=LHHLL")
-_RTMSG = struct.Struct("=BBBBBBBBI")
-_RTA = struct.Struct("=HH")
-_RTM_NEWROUTE, _RTM_DELROUTE, _RTM_GETROUTE = 24, 25, 26
-_NLMSG_ERROR, _NLMSG_DONE = 2, 3
-_NLM_F_REQUEST, _NLM_F_ACK, _NLM_F_DUMP = 0x1, 0x4, 0x300
-_NLM_F_REPLACE, _NLM_F_CREATE = 0x100, 0x400
-_RTA_DST, _RTA_OIF, _RTA_GATEWAY, _RTA_PRIORITY, _RTA_PREFSRC = 1, 4, 5, 6, 7
-_RT_TABLE_MAIN, _RTN_UNICAST, _RT_SCOPE_UNIVERSE, _RT_SCOPE_NOWHERE = 254, 1, 0, 255
 
 _SIOCGIFFLAGS, _SIOCSIFFLAGS, _SIOCGIFADDR = 0x8913, 0x8914, 0x8915
 _IFF_UP = 0x1
@@ -125,11 +116,6 @@ def set_up(name: str) -> None:
         )
 
 
-def _attr(kind: int, data: bytes) -> bytes:
-    """One rtattr; all of ours carry 4 bytes, so no padding is needed."""
-    return _RTA.pack(_RTA.size + len(data), kind) + data
-
-
 class KernelRoutes:
     PENDING_MAX = 1024
 
@@ -147,21 +133,23 @@ class KernelRoutes:
         self.errors = 0
 
     # -- raw rtnetlink ---------------------------------------------------------------------
-    def _request(self, rtm_type: int, flags: int, rtmsg: bytes, attrs: bytes, what: str) -> int:
+    def _next_seq(self, what: str) -> int:
+        """The sequence number of a new request, remembered with what the request is."""
         self._seq += 1
-        body = rtmsg + attrs
-        hdr = _NLMSGHDR.pack(_NLMSGHDR.size + len(body), rtm_type, flags, self._seq, 0)
         self._pending[self._seq] = what
         if len(self._pending) > self.PENDING_MAX:
             del self._pending[next(iter(self._pending))]
-        try:
-            self.nl.send(hdr + body)
-        except OSError as e:
-            raise KernelError(f"{what}: {e}") from e
         return self._seq
 
+    def _send(self, request: bytes, what: str) -> None:
+        try:
+            self.nl.send(request)
+        except OSError as e:
+            raise KernelError(f"{what}: {e}") from e
+
     def _messages(self, timeout: float | None = 0.0):
-        """(type, seq, payload) of every netlink message readable now (or within timeout)."""
+        """(type, seq, data, payload start, payload end) of every netlink message readable
+        now (or within timeout)."""
         if timeout and not select.select([self.nl], [], [], timeout)[0]:
             return
         while True:
@@ -169,17 +157,12 @@ class KernelRoutes:
                 data = self.nl.recv(1 << 16)
             except BlockingIOError:
                 return
-            off = 0
-            while off + _NLMSGHDR.size <= len(data):
-                length, mtype, _flags, seq, _pid = _NLMSGHDR.unpack_from(data, off)
-                if length < _NLMSGHDR.size:
-                    break
-                yield mtype, seq, data[off + _NLMSGHDR.size : off + length]
-                off += (length + 3) & ~3
+            for mtype, seq, start, end in nl.messages(data):
+                yield mtype, seq, data, start, end
 
-    def _ack(self, seq: int, payload: bytes) -> str | None:
+    def _ack(self, seq: int, data: bytes, start: int) -> str | None:
         """The failure an NLMSG_ERROR carries, or None for an acknowledgement."""
-        code = -struct.unpack_from("=i", payload)[0]
+        code = nl.error_code(data, start)
         what = self._pending.pop(seq, "?")
         if code and code not in (errno.ESRCH, errno.ENOENT):
             self.errors += 1
@@ -189,9 +172,9 @@ class KernelRoutes:
     def read_acks(self) -> list[str]:
         """Read the kernel's answers that arrived; return one message per failed request."""
         failures = []
-        for mtype, seq, payload in self._messages():
-            if mtype == _NLMSG_ERROR and len(payload) >= 4:
-                failure = self._ack(seq, payload)
+        for mtype, seq, data, start, end in self._messages():
+            if mtype == nl.NLMSG_ERROR and end - start >= 4:
+                failure = self._ack(seq, data, start)
                 if failure:
                     failures.append(failure)
         return failures
@@ -199,9 +182,9 @@ class KernelRoutes:
     def _wait(self, seq: int) -> None:
         """Block (up to 5 s) for the acknowledgement of request `seq`; raise its error."""
         for _ in range(100):
-            for mtype, mseq, payload in self._messages(timeout=0.05):
-                if mtype == _NLMSG_ERROR and len(payload) >= 4:
-                    failure = self._ack(mseq, payload)
+            for mtype, mseq, data, start, end in self._messages(timeout=0.05):
+                if mtype == nl.NLMSG_ERROR and end - start >= 4:
+                    failure = self._ack(mseq, data, start)
                     if mseq == seq:
                         if failure:
                             raise KernelError(failure)
@@ -217,30 +200,22 @@ class KernelRoutes:
     def ours(self) -> list[tuple[str, int]]:
         """(destination, prefix length) of routes with our protocol number, any table."""
         self.read_acks()
-        rtmsg = _RTMSG.pack(socket.AF_INET, 0, 0, 0, 0, 0, 0, 0, 0)
-        seq = self._request(_RTM_GETROUTE, _NLM_F_REQUEST | _NLM_F_DUMP, rtmsg, b"", "dump")
-        self._pending.pop(seq, None)
+        self._seq += 1
+        seq = self._seq
+        self._send(nl.route_dump(seq), "dump")
         found = []
         for _ in range(100):
-            for mtype, mseq, payload in self._messages(timeout=0.05):
+            for mtype, mseq, data, start, end in self._messages(timeout=0.05):
                 if mseq != seq:
                     continue
-                if mtype in (_NLMSG_DONE, _NLMSG_ERROR):
+                if mtype in (nl.NLMSG_DONE, nl.NLMSG_ERROR):
                     return found
-                if mtype != _RTM_NEWROUTE or len(payload) < _RTMSG.size:
+                if mtype != nl.RTM_NEWROUTE:
                     continue
-                _fam, plen, _s, _t, _table, proto, *_ = _RTMSG.unpack_from(payload)
-                if proto != RTPROT_AODV:
+                route = nl.parse_route(data, start, end)
+                if route is None or route.proto != RTPROT_AODV:
                     continue
-                off, dst = _RTMSG.size, "0.0.0.0"
-                while off + _RTA.size <= len(payload):
-                    alen, atype = _RTA.unpack_from(payload, off)
-                    if alen < _RTA.size:
-                        break
-                    if atype == _RTA_DST and alen == 8:
-                        dst = socket.inet_ntoa(payload[off + 4 : off + 8])
-                    off += (alen + 3) & ~3
-                found.append((dst, plen))
+                found.append((route.dst or "0.0.0.0", route.dst_len))
         raise KernelError("route dump did not finish")
 
     def flush(self) -> int:
@@ -255,46 +230,36 @@ class KernelRoutes:
 
         Returns the request's sequence number. Without `ack` the kernel answers only if the
         request failed (`read_acks`); with it, always (`_wait` needs that)."""
-        attrs = _attr(_RTA_DST, socket.inet_aton(dest)) + _attr(
-            _RTA_OIF, struct.pack("=I", self.ifindex)
-        )
-        if next_hop == dest:
-            scope, rflags = RT_SCOPE_LINK, 0
-        else:
-            scope, rflags = _RT_SCOPE_UNIVERSE, RTNH_F_ONLINK
-            attrs += _attr(_RTA_GATEWAY, socket.inet_aton(next_hop))
-        rtmsg = _RTMSG.pack(
-            socket.AF_INET, 32, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, scope, _RTN_UNICAST, rflags
-        )
-        flags = _NLM_F_REQUEST | _NLM_F_REPLACE | _NLM_F_CREATE | (_NLM_F_ACK if ack else 0)
-        return self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {dest} via {next_hop}")
+        what = f"route {dest} via {next_hop}"
+        seq = self._next_seq(what)
+        self._send(nl.route_replace(dest, next_hop, self.ifindex, RTPROT_AODV, ack=ack, seq=seq),
+                   what)  # fmt: skip
+        return seq
 
     def delete(self, dest: str, plen: int = 32, ack: bool = False) -> int:
         """`ip route del DEST/PLEN proto RTPROT_AODV`; a route already gone is no error.
         `ack` as for `install`."""
-        rtmsg = _RTMSG.pack(
-            socket.AF_INET, plen, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, _RT_SCOPE_NOWHERE, 0, 0
-        )
-        attrs = _attr(_RTA_DST, socket.inet_aton(dest))
-        flags = _NLM_F_REQUEST | (_NLM_F_ACK if ack else 0)
-        return self._request(_RTM_DELROUTE, flags, rtmsg, attrs, f"delete route {dest}")
+        what = f"delete route {dest}"
+        seq = self._next_seq(what)
+        self._send(nl.route_delete(dest, RTPROT_AODV, plen=plen, ack=ack, seq=seq), what)
+        return seq
 
     def catch_all(self, oif: int, net: str, src: str) -> None:
         """`ip route replace NET dev TUN src SRC metric 1000 proto RTPROT_AODV`: packets
         without a /32 route go to the TUN device."""
         n = ipaddress.IPv4Network(net)
-        attrs = (
-            _attr(_RTA_DST, n.network_address.packed)
-            + _attr(_RTA_OIF, struct.pack("=I", oif))
-            + _attr(_RTA_PREFSRC, socket.inet_aton(src))
-            + _attr(_RTA_PRIORITY, struct.pack("=I", 1000))
-        )
-        rtmsg = _RTMSG.pack(
-            socket.AF_INET, n.prefixlen, 0, 0, _RT_TABLE_MAIN, RTPROT_AODV, RT_SCOPE_LINK,
-            _RTN_UNICAST, 0,
+        what = f"route {net} dev TUN"
+        seq = self._next_seq(what)
+        flags = nl.NLM_F_REQUEST | nl.NLM_F_ACK | nl.NLM_F_REPLACE | nl.NLM_F_CREATE
+        self._send(
+            nl.route_message(
+                nl.RTM_NEWROUTE, flags, str(n.network_address), plen=n.prefixlen,
+                proto=RTPROT_AODV, scope=nl.RT_SCOPE_LINK, oif=oif, prefsrc=src, priority=1000,
+                seq=seq,
+            ),
+            what,
         )  # fmt: skip
-        flags = _NLM_F_REQUEST | _NLM_F_ACK | _NLM_F_REPLACE | _NLM_F_CREATE
-        self._wait(self._request(_RTM_NEWROUTE, flags, rtmsg, attrs, f"route {net} dev TUN"))
+        self._wait(seq)
 
     def close(self) -> None:
         self.nl.close()
@@ -334,26 +299,6 @@ class Tun:
 
 
 _NETLINK_NETFILTER = 12
-_NFT_GETSETELEM = (10 << 8) | 13  # NFNL_SUBSYS_NFTABLES, NFT_MSG_GETSETELEM
-_NFT_NEWSETELEM = (10 << 8) | 12  # what the dump answers with
-_NFGENMSG = struct.Struct("=BBH")
-_NLA_TYPE_MASK = 0x3FFF
-
-
-def _nla_string(kind: int, text: str) -> bytes:
-    data = text.encode() + b"\0"
-    return _RTA.pack(_RTA.size + len(data), kind) + data + b"\0" * (-len(data) % 4)
-
-
-def _nlas(data: bytes):
-    """(type, payload) of the netlink attributes in `data`."""
-    off = 0
-    while off + _RTA.size <= len(data):
-        alen, atype = _RTA.unpack_from(data, off)
-        if alen < _RTA.size:
-            return
-        yield atype & _NLA_TYPE_MASK, data[off + _RTA.size : off + alen]
-        off += (alen + 3) & ~3
 
 
 class SetReader:
@@ -367,23 +312,15 @@ class SetReader:
         self.sock = socket.socket(socket.AF_NETLINK, socket.SOCK_RAW, _NETLINK_NETFILTER)
         self.sock.bind((0, 0))
         self.sock.setblocking(False)
-        self._body = (
-            _NFGENMSG.pack(socket.AF_INET, 0, 0)
-            + _nla_string(1, table)  # NFTA_SET_ELEM_LIST_TABLE
-            + _nla_string(2, set_name)  # NFTA_SET_ELEM_LIST_SET
-        )
+        self.table, self.set_name = table, set_name
         self._seq = 0
         self._found: list[str] = []
         self.busy = False
 
     def request(self) -> None:
         self._seq += 1
-        hdr = _NLMSGHDR.pack(
-            _NLMSGHDR.size + len(self._body), _NFT_GETSETELEM, _NLM_F_REQUEST | _NLM_F_DUMP,
-            self._seq, 0,
-        )  # fmt: skip
         self._found = []
-        self.sock.send(hdr + self._body)
+        self.sock.send(nl.set_elements_dump(self.table, self.set_name, self._seq))
         self.busy = True
 
     def receive(self) -> list[str] | None:
@@ -392,37 +329,18 @@ class SetReader:
                 data = self.sock.recv(1 << 16)
             except BlockingIOError:
                 return None
-            off = 0
-            while off + _NLMSGHDR.size <= len(data):
-                length, mtype, _flags, seq, _pid = _NLMSGHDR.unpack_from(data, off)
-                if length < _NLMSGHDR.size:
-                    break
-                payload = data[off + _NLMSGHDR.size : off + length]
-                off += (length + 3) & ~3
+            for mtype, seq, start, end in nl.messages(data):
                 if seq != self._seq:
                     continue
-                if mtype in (_NLMSG_DONE, _NLMSG_ERROR):
+                if mtype in (nl.NLMSG_DONE, nl.NLMSG_ERROR):
                     self.busy = False
-                    if mtype == _NLMSG_ERROR and struct.unpack_from("=i", payload)[0]:
-                        code = -struct.unpack_from("=i", payload)[0]
-                        raise KernelError(f"nftables set read: {os.strerror(code)}")
+                    if mtype == nl.NLMSG_ERROR and end - start >= 4:
+                        code = nl.error_code(data, start)
+                        if code:
+                            raise KernelError(f"nftables set read: {os.strerror(code)}")
                     return self._found
-                if mtype == _NFT_NEWSETELEM:
-                    self._parse(payload[_NFGENMSG.size :])
-
-    def _parse(self, attrs: bytes) -> None:
-        for kind, body in _nlas(attrs):
-            if kind != 3:  # NFTA_SET_ELEM_LIST_ELEMENTS
-                continue
-            for ekind, elem in _nlas(body):
-                if ekind != 1:  # NFTA_LIST_ELEM
-                    continue
-                for k, key in _nlas(elem):
-                    if k != 1:  # NFTA_SET_ELEM_KEY
-                        continue
-                    for dk, value in _nlas(key):
-                        if dk == 1 and len(value) == 4:  # NFTA_DATA_VALUE
-                            self._found.append(socket.inet_ntoa(value))
+                if mtype == nl.NFT_MSG_NEWSETELEM:
+                    self._found += nl.set_element_addresses(data[start:end])
 
     def close(self) -> None:
         self.sock.close()

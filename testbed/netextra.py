@@ -25,8 +25,9 @@ def add_up_arguments(up) -> None:
     """The options of `net up` that belong here."""
     up.add_argument("--mobility", metavar="FILE",
                     help="play an ns-2 movement file (BonnMotion NSFile, CORE) or a ONE trace; "
-                         "node i is robot i+1, --robots defaults to the file's nodes; limits: "
-                         f"{LIMITS_TEXT}")  # fmt: skip
+                         "the file's nodes in ascending order of id are robots r1, r2, ... "
+                         "(node i is robot i+1 when ids start at 0), --robots defaults to the "
+                         f"file's nodes; limits: {LIMITS_TEXT}")  # fmt: skip
     up.add_argument("--tick", type=number(float, "tick", minimum=MIN_TICK_S), default=0.1,
                     metavar="S", help=f"with --mobility: emulated s between samples, at least "
                     f"{MIN_TICK_S:g} (default 0.1)")  # fmt: skip
@@ -122,8 +123,12 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
                 "--tick", repr(args.tick), "--links-out", out, "--ready", ready]  # fmt: skip
         proc = _start(net, argv, "mobility")
         _wait_ready(proc, ready, os.path.join(net.state_dir, "mobility.log"), "the trace player")
+        robots = net.spec.robots
+        if net.spec.capture_dir:
+            _record_mapping(net.spec.capture_dir, os.path.abspath(args.mobility), trace, robots)
         lines.append(f"trace: {trace.nodes} nodes, {trace.end:g} s emulated; links to {out} "
                      "(kept after net down)")  # fmt: skip
+        lines.append(f"trace {trace.mapping_text(robots)}")
     if args.feed:
         from topology import feed
 
@@ -139,6 +144,22 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
             time.sleep(0.02)
         lines.append(f"feed: {path}")
     return lines
+
+
+def _record_mapping(capture_dir: str, path: str, trace, robots: int) -> None:
+    """Add to the capture's network.json which trace file was played and which of its nodes
+    is which robot: {"mobility": {"file": path, "robot_of_node": {"6": 1, ...}}}."""
+    from topology.jsonfile import read_json, write_json_atomic
+
+    about_path = os.path.join(capture_dir, "daemons", "network.json")
+    about = read_json(about_path)
+    if not isinstance(about, dict):  # net up wrote it: only a hand that removed it gets here
+        return
+    about["mobility"] = {
+        "file": path,
+        "robot_of_node": {str(node): k for node, k in trace.robot_of_node(robots).items()},
+    }
+    write_json_atomic(about_path, about)
 
 
 def _wait_ready(proc, ready: str, log_path: str, what: str) -> None:

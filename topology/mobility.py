@@ -13,7 +13,12 @@ ns-2 (what BonnMotion's NSFile and CORE write, and ns-3's Ns2MobilityHelper read
 `$ns` is accepted for `$ns_`. A setdest starts from wherever the node is at that time (the
 previous leg may be unfinished: it is abandoned there, as ns-2 does) and moves in a straight
 line at constant speed; on arrival the node stops exactly at the destination. Speed 0 means
-no motion. Node i (from 0) is robot i+1. Comments (#) and blank lines are skipped.
+no motion. Comments (#) and blank lines are skipped.
+
+Nodes and robots (both formats). A file's nodes, in ascending order of id, are robots 1, 2,
+...: node i is robot i+1 when the ids are 0..n-1 (BonnMotion, setdest, ONE), and a file whose
+ids start elsewhere or have gaps plays as well (CORE numbers its nodes as its canvas does:
+6..9 are robots 1..4). `Trace.node_ids` holds the mapping, `mapping_text` says it.
 
 ONE (the Opportunistic Network Environment's external movement format): an optional first
 line of 6 or 8 numbers (the bounds), then `time id x y` lines; the node is at (x, y) at that
@@ -31,8 +36,8 @@ Limits (`LIMITS_TEXT`, stated in `net up --help` and the README). What a trace m
 bounded by what a testbed and this machine can carry, and checked while parsing, before
 anything is allocated for it:
 
-- node ids 0..999: a testbed has at most 1000 robots (topology.names.MAX_ROBOTS), so a
-  node id of 1e11 is refused instead of becoming a list of 1e11 motions;
+- node ids 0..999: a testbed has at most 1000 robots (topology.names.MAX_ROBOTS), and so a
+  file has at most 1000 nodes whatever its ids; a node id of 1e11 is refused, not stored;
 - times 0..1e6 s (11.6 days emulated; BonnMotion and ONE scenarios last hours), and a
   node's arrival (start + distance / speed) too, so a speed of 1e-320 is refused rather
   than putting a node's arrival at infinity; coordinates within +-1e6 m, where differences
@@ -63,7 +68,7 @@ from topology.names import MAX_ROBOTS
 
 Position = tuple[float, float]
 
-MAX_NODE_ID = MAX_ROBOTS - 1  # node i is robot i + 1
+MAX_NODE_ID = MAX_ROBOTS - 1  # ids 0..999: at most MAX_ROBOTS nodes
 MAX_TIME_S = 1e6
 MAX_COORD_M = 1e6
 MAX_FILE_BYTES = 64 * 1024 * 1024
@@ -111,11 +116,32 @@ class Motion:
 
 @dataclass
 class Trace:
-    motions: list[Motion]  # motions[i] is node i, robot i + 1
+    motions: list[Motion]  # motions[k] is robot k + 1
+    node_ids: list[int]  # the file's id of motions[k]: its node ids in ascending order
 
     @property
     def nodes(self) -> int:
         return len(self.motions)
+
+    def robot_of_node(self, robots: int | None = None) -> dict[int, int]:
+        """{file node id: robot} of the first `robots` nodes (all by default)."""
+        ids = self.node_ids if robots is None else self.node_ids[:robots]
+        return {node: k + 1 for k, node in enumerate(ids)}
+
+    def mapping_text(self, robots: int | None = None) -> str:
+        """Which file node is which robot, runs of consecutive ids as ranges:
+        `nodes 6..9 -> r1..r4`, `nodes 0..3 -> r1..r4, 7 -> r5`."""
+        ids = self.node_ids if robots is None else self.node_ids[:robots]
+        runs: list[list[int]] = []  # [first id, last id, first robot]
+        for k, node in enumerate(ids):
+            if runs and node == runs[-1][1] + 1:
+                runs[-1][1] = node
+            else:
+                runs.append([node, node, k + 1])
+        parts = [
+            f"{a} -> r{r}" if a == b else f"{a}..{b} -> r{r}..r{r + b - a}" for a, b, r in runs
+        ]
+        return ("nodes " if len(ids) > 1 else "node ") + ", ".join(parts)
 
     @property
     def end(self) -> float:
@@ -165,7 +191,7 @@ def _coord(value: str, where: str, n: int, what: str) -> float:
 
 
 def _node(text: str, where: str, n: int) -> int:
-    """A node id: a whole number 0..MAX_NODE_ID (checked before it is used as a count)."""
+    """A node id: a whole number 0..MAX_NODE_ID (checked before it is stored)."""
     try:
         v = float(text)
     except ValueError:
@@ -218,16 +244,12 @@ def parse_ns2(text: str, where: str = "trace") -> Trace:
             raise TraceError(
                 f"{where}: node {node} has no initial {'X_' if 'X' not in axes else 'Y_'}"
             )
-    count = max(initial) + 1
-    missing = [i for i in range(count) if i not in initial]
-    if missing:
-        raise TraceError(
-            f"{where}: node {missing[0]} has no initial position (nodes 0..{count - 1})"
-        )
-    motions = [Motion([0.0], [(initial[i]["X"], initial[i]["Y"])]) for i in range(count)]
+    ids = sorted(initial)
+    motions = {i: Motion([0.0], [(initial[i]["X"], initial[i]["Y"])]) for i in ids}
     for t, n, node, x, y, speed in sorted(legs, key=lambda leg: (leg[0], leg[1])):
-        if node >= count:
-            raise _fail(where, n, f"node {node} has no initial position")
+        if node not in motions:
+            raise _fail(where, n, f"node {node} has no initial position ($node_({node}) set "
+                        "X_ ...)")  # fmt: skip
         mo = motions[node]
         here = mo.at(t)
         # A leg in progress is cut at t: drop the way-points after t, end at where we are.
@@ -247,7 +269,7 @@ def parse_ns2(text: str, where: str = "trace") -> Trace:
             )  # fmt: skip
         mo.times.append(arrival)
         mo.points.append((x, y))
-    return Trace(motions)
+    return Trace([motions[i] for i in ids], ids)
 
 
 def parse_one(text: str, where: str = "trace") -> Trace:
@@ -280,15 +302,12 @@ def parse_one(text: str, where: str = "trace") -> Trace:
         samples.setdefault(node, []).append((t, x, y))
     if not samples:
         raise TraceError(f"{where}: no samples")
-    count = max(samples) + 1
-    missing = [i for i in range(count) if i not in samples]
-    if missing:
-        raise TraceError(f"{where}: node {missing[0]} has no sample (nodes 0..{count - 1})")
+    ids = sorted(samples)
     motions = []
-    for i in range(count):
+    for i in ids:
         pts = sorted(samples[i], key=lambda s: s[0])
         motions.append(Motion([p[0] for p in pts], [(p[1], p[2]) for p in pts]))
-    return Trace(motions)
+    return Trace(motions, ids)
 
 
 _HEADER = ("minTime", "maxTime", "minX", "maxX", "minY", "maxY", "minZ", "maxZ")

@@ -23,26 +23,15 @@ farther robot via its next hop (onlink, as the robots have /32 addresses and no 
 from __future__ import annotations
 
 import socket
-import struct
 import time
 from collections import deque
 from collections.abc import Iterable
 
-from topology import names, netns, rtnl
+from topology import names, netlinkmsg, netns, rtnl
 
 RTPROT_ORACLE = 102
 Pair = tuple[int, int]
 Routes = dict[int, dict[int, tuple[int, int]]]  # robot -> dest -> (next hop, hops)
-
-_RTM_NEWROUTE, _RTM_DELROUTE = 24, 25
-_NLM_F_REQUEST, _NLM_F_ACK, _NLM_F_REPLACE, _NLM_F_CREATE = 0x1, 0x4, 0x100, 0x400
-_RTMSG = struct.Struct("=BBBBBBBBI")
-_RTA = struct.Struct("=HH")
-_RTA_DST, _RTA_OIF, _RTA_GATEWAY = 1, 4, 5
-_RT_TABLE_MAIN, _RTN_UNICAST = 254, 1
-_RT_SCOPE_UNIVERSE, _RT_SCOPE_LINK, _RT_SCOPE_NOWHERE = 0, 253, 255
-_RTNH_F_ONLINK = 4
-_NLMSGHDR = struct.Struct("=LHHLL")
 
 
 def shortest_routes(links: Iterable[Pair], n: int) -> Routes:
@@ -81,36 +70,17 @@ def changes(
     return install, delete
 
 
-def _attr(kind: int, data: bytes) -> bytes:
-    return _RTA.pack(_RTA.size + len(data), kind) + data
-
-
 def route_request(dest: int, next_hop: int, oif: int) -> bytes:
-    """`ip route replace 10.0.0.D/32 [via 10.0.0.NH onlink] dev wlan0 proto 102`."""
-    attrs = _attr(_RTA_DST, socket.inet_aton(names.robot_addr(dest)))
-    attrs += _attr(_RTA_OIF, struct.pack("=I", oif))
-    if next_hop == dest:
-        scope, flags = _RT_SCOPE_LINK, 0
-    else:
-        scope, flags = _RT_SCOPE_UNIVERSE, _RTNH_F_ONLINK
-        attrs += _attr(_RTA_GATEWAY, socket.inet_aton(names.robot_addr(next_hop)))
-    body = (
-        _RTMSG.pack(
-            socket.AF_INET, 32, 0, 0, _RT_TABLE_MAIN, RTPROT_ORACLE, scope, _RTN_UNICAST, flags
-        )
-        + attrs
+    """`ip route replace 10.0.0.D/32 [via 10.0.0.NH onlink] dev wlan0 proto 102`, to be
+    acknowledged (a batch numbers its requests)."""
+    return netlinkmsg.route_replace(
+        names.robot_addr(dest), names.robot_addr(next_hop), oif, RTPROT_ORACLE, ack=True
     )
-    nl_flags = _NLM_F_REQUEST | _NLM_F_ACK | _NLM_F_REPLACE | _NLM_F_CREATE
-    return _NLMSGHDR.pack(_NLMSGHDR.size + len(body), _RTM_NEWROUTE, nl_flags, 0, 0) + body
 
 
 def delete_request(dest: int) -> bytes:
-    """`ip route del 10.0.0.D/32 proto 102`."""
-    body = _RTMSG.pack(
-        socket.AF_INET, 32, 0, 0, _RT_TABLE_MAIN, RTPROT_ORACLE, _RT_SCOPE_NOWHERE, 0, 0
-    ) + _attr(_RTA_DST, socket.inet_aton(names.robot_addr(dest)))
-    flags = _NLM_F_REQUEST | _NLM_F_ACK
-    return _NLMSGHDR.pack(_NLMSGHDR.size + len(body), _RTM_DELROUTE, flags, 0, 0) + body
+    """`ip route del 10.0.0.D/32 proto 102`, to be acknowledged."""
+    return netlinkmsg.route_delete(names.robot_addr(dest), RTPROT_ORACLE, ack=True)
 
 
 class OracleRouter:

@@ -2,8 +2,11 @@
 
 pyroute2's IPRoute costs about 1.5 ms per request on this machine (an asyncio round trip per
 call), which alone would break the bring-up and link-update budgets. The kernel needs far
-less: so here pyroute2 encodes the messages (ifinfmsg, ifaddrmsg) and we write a whole batch
-to a raw NETLINK_ROUTE socket in one go, then read one acknowledgement per message.
+less: so here pyroute2 encodes the link and address messages (ifinfmsg, ifaddrmsg, nested
+attributes that are encoded once as templates) and we write a whole batch to a raw
+NETLINK_ROUTE socket in one go, then read one acknowledgement per message. Headers, the
+answers and the requests packed by hand (route requests, the bridge port dump) are
+netlinkmsg's.
 
 Interfaces get their ifindex chosen by us at creation (RTM_NEWLINK honours ifi_index), so no
 request ever has to look a name up, and the messages that flip a link on and off can be
@@ -14,30 +17,30 @@ import os
 import socket
 import struct
 
-from pyroute2.netlink import (
+from pyroute2.netlink.rtnl import RTM_NEWADDR
+from pyroute2.netlink.rtnl.ifaddrmsg import ifaddrmsg
+from pyroute2.netlink.rtnl.ifinfmsg import ifinfmsg
+
+from topology import netlinkmsg as nl
+from topology.netlinkmsg import (
+    NLA_F_NESTED,
     NLM_F_ACK,
     NLM_F_CREATE,
-    NLM_F_DUMP,
     NLM_F_EXCL,
     NLM_F_REQUEST,
     NLMSG_DONE,
     NLMSG_ERROR,
-)  # fmt: skip
-from pyroute2.netlink.rtnl import RTM_GETLINK, RTM_NEWADDR, RTM_NEWLINK, RTM_SETLINK
-from pyroute2.netlink.rtnl.ifaddrmsg import ifaddrmsg
-from pyroute2.netlink.rtnl.ifinfmsg import ifinfmsg
+    RTM_NEWLINK,
+    RTM_SETLINK,
+)
 
 IFF_UP = 0x1
-NLA_F_NESTED = 0x8000
 BR_STATE_DISABLED = 0
 BR_STATE_FORWARDING = 3
 REQUEST = NLM_F_REQUEST | NLM_F_ACK
 CREATE = REQUEST | NLM_F_CREATE | NLM_F_EXCL
 MAX_WRITE = 60_000
 MAX_INFLIGHT = 256  # requests written before their acknowledgements are read
-_NLMSGHDR = struct.Struct("=LHHLL")
-_IFINFOMSG = struct.Struct("=BxHiII")
-_NLA = struct.Struct("=HH")
 IFLA_IFNAME = 3
 IFLA_PROTINFO = 12
 IFLA_OPERSTATE = 16
@@ -113,9 +116,7 @@ def port_state(index: int, state: int) -> bytes:
     m["index"] = index
     m["attrs"] = [("IFLA_PROTINFO", {"attrs": [("IFLA_BRPORT_STATE", state)]})]
     buf = bytearray(_encode(m, RTM_SETLINK, REQUEST))
-    at = _NLMSGHDR.size + 16  # the first attribute, after the ifinfomsg
-    (nla_type,) = struct.unpack_from("=H", buf, at + 2)
-    struct.pack_into("=H", buf, at + 2, nla_type | NLA_F_NESTED)
+    nl.flag_attr(buf, nl.NLMSGHDR.size + nl.IFINFOMSG.size, NLA_F_NESTED)  # the first one
     return bytes(buf)
 
 
@@ -212,7 +213,7 @@ class Batch:
         inflight = 0
         for n, (req, what) in enumerate(self.requests, start=1):
             buf = bytearray(req)
-            struct.pack_into("=L", buf, 8, n)  # our own sequence numbers, 1..N
+            nl.set_seq(buf, n)  # our own sequence numbers, 1..N
             seqs[n] = what
             if chunk and (len(chunk) + len(buf) > MAX_WRITE or inflight >= MAX_INFLIGHT):
                 _exchange(sock, chunk, inflight, seqs, failures)
@@ -237,15 +238,12 @@ def _exchange(
     acked = 0
     while acked < count:
         data = sock.recv(1 << 20)
-        off = 0
-        while off + _NLMSGHDR.size <= len(data):
-            length, mtype, _, seq, _ = _NLMSGHDR.unpack_from(data, off)
+        for mtype, seq, start, _end in nl.messages(data):
             if mtype == NLMSG_ERROR:
-                (code,) = struct.unpack_from("=i", data, off + _NLMSGHDR.size)
+                code = nl.error_code(data, start)
                 acked += 1
                 if code:
-                    failures.append((seqs.get(seq, f"request {seq}"), -code))
-            off += max((length + 3) & ~3, _NLMSGHDR.size)
+                    failures.append((seqs.get(seq, f"request {seq}"), code))
 
 
 def open_socket() -> socket.socket:
@@ -263,27 +261,19 @@ def bridge_ports(sock: socket.socket) -> dict[int, tuple[str, int, int]]:
     Parsed here with struct, reading only the three attributes we need: pyroute2 decodes
     every attribute of every message, ~0.2 ms a port, which made one dump of the 5000 ports
     of a 1000-robot medium cost a second; this costs a few ms."""
-    req = bytearray(_NLMSGHDR.size + _IFINFOMSG.size)
-    _NLMSGHDR.pack_into(req, 0, len(req), RTM_GETLINK, NLM_F_REQUEST | NLM_F_DUMP, 1, 0)
-    _IFINFOMSG.pack_into(req, _NLMSGHDR.size, socket.AF_BRIDGE, 0, 0, 0, 0)
-    sock.send(req)
+    sock.send(nl.link_get(socket.AF_BRIDGE, 0, dump=True, seq=1))
     ports: dict[int, tuple[str, int, int]] = {}
     while True:
         data = sock.recv(1 << 20)
-        off = 0
-        while off + _NLMSGHDR.size <= len(data):
-            length, mtype, _, _, _ = _NLMSGHDR.unpack_from(data, off)
+        for mtype, _seq, start, end in nl.messages(data):
             if mtype == NLMSG_DONE:
                 return ports
             if mtype == NLMSG_ERROR:
-                (code,) = struct.unpack_from("=i", data, off + _NLMSGHDR.size)
+                code = nl.error_code(data, start)
                 if code:
-                    raise NetlinkBatchError(-code, f"bridge port dump: {os.strerror(-code)}")
+                    raise NetlinkBatchError(code, f"bridge port dump: {os.strerror(code)}")
             elif mtype == RTM_NEWLINK:
-                index = _IFINFOMSG.unpack_from(data, off + _NLMSGHDR.size)[2]
-                ports[index] = _port_attrs(data, off + _NLMSGHDR.size + _IFINFOMSG.size,
-                                           off + length)  # fmt: skip
-            off += max((length + 3) & ~3, _NLMSGHDR.size)
+                ports[nl.link_index(data, start)] = _port_attrs(data, start, end)
 
 
 def port_states(sock: socket.socket, indices) -> dict[int, tuple[str, int, int]]:
@@ -293,45 +283,28 @@ def port_states(sock: socket.socket, indices) -> dict[int, tuple[str, int, int]]
     indices = list(indices)
     ports: dict[int, tuple[str, int, int]] = {}
     for at in range(0, len(indices), 64):  # ~2 kB an answer: a chunk fits the buffer
-        chunk = bytearray()
-        for n, index in enumerate(indices[at : at + 64], start=1):
-            req = bytearray(_NLMSGHDR.size + _IFINFOMSG.size)
-            _NLMSGHDR.pack_into(req, 0, len(req), RTM_GETLINK, NLM_F_REQUEST, n, 0)
-            _IFINFOMSG.pack_into(req, _NLMSGHDR.size, socket.AF_UNSPEC, 0, index, 0, 0)
-            chunk += req
+        chunk = b"".join(
+            nl.link_get(socket.AF_UNSPEC, index, dump=False, seq=n)
+            for n, index in enumerate(indices[at : at + 64], start=1)
+        )
         sock.send(chunk)
-        answers = n
+        answers = len(indices[at : at + 64])
         while answers:
             data = sock.recv(1 << 20)
-            off = 0
-            while off + _NLMSGHDR.size <= len(data):
-                length, mtype, _, _, _ = _NLMSGHDR.unpack_from(data, off)
+            for mtype, _seq, start, end in nl.messages(data):
                 if mtype in (NLMSG_ERROR, RTM_NEWLINK):
                     answers -= 1
                 if mtype == RTM_NEWLINK:
-                    index = _IFINFOMSG.unpack_from(data, off + _NLMSGHDR.size)[2]
-                    ports[index] = _port_attrs(data, off + _NLMSGHDR.size + _IFINFOMSG.size,
-                                               off + length)  # fmt: skip
-                off += max((length + 3) & ~3, _NLMSGHDR.size)
+                    ports[nl.link_index(data, start)] = _port_attrs(data, start, end)
     return ports
 
 
-def _nested(data: bytes, at: int, end: int):
-    """(type, body offset, end) of each attribute in data[at:end]."""
-    while at + _NLA.size <= end:
-        nla_len, nla_type = _NLA.unpack_from(data, at)
-        if nla_len < _NLA.size:
-            return
-        yield nla_type & 0x3FFF, at + _NLA.size, at + nla_len
-        at += (nla_len + 3) & ~3
-
-
 def _port_attrs(data: bytes, at: int, end: int) -> tuple[str, int, int]:
-    """(IFLA_IFNAME, IFLA_BRPORT_STATE, IFLA_OPERSTATE) of one RTM_NEWLINK message; -1 for
-    what is absent. The port state is in IFLA_PROTINFO in an AF_BRIDGE dump, in
-    IFLA_LINKINFO's bridge-slave data in an ordinary answer."""
+    """(IFLA_IFNAME, IFLA_BRPORT_STATE, IFLA_OPERSTATE) of the RTM_NEWLINK message whose
+    payload is data[at:end]; -1 for what is absent. The port state is in IFLA_PROTINFO in an
+    AF_BRIDGE dump, in IFLA_LINKINFO's bridge-slave data in an ordinary answer."""
     name, state, oper = "", -1, -1
-    for kind, body, stop in _nested(data, at, end):
+    for kind, body, stop in nl.attrs(data, at + nl.IFINFOMSG.size, end):
         if kind == IFLA_IFNAME:
             name = data[body:stop].split(b"\0", 1)[0].decode()
         elif kind == IFLA_OPERSTATE:
@@ -339,14 +312,14 @@ def _port_attrs(data: bytes, at: int, end: int) -> tuple[str, int, int]:
         elif kind == IFLA_PROTINFO:
             state = _brport_state(data, body, stop, state)
         elif kind == IFLA_LINKINFO:
-            for sub, sbody, sstop in _nested(data, body, stop):
+            for sub, sbody, sstop in nl.attrs(data, body, stop):
                 if sub == IFLA_INFO_SLAVE_DATA:
                     state = _brport_state(data, sbody, sstop, state)
     return name, state, oper
 
 
 def _brport_state(data: bytes, at: int, end: int, default: int) -> int:
-    for kind, body, _ in _nested(data, at, end):
+    for kind, body, _ in nl.attrs(data, at, end):
         if kind == IFLA_BRPORT_STATE:
             return data[body]
     return default

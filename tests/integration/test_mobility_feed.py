@@ -1,6 +1,7 @@
 """Bring your own robots, end to end: an ns-2 trace and a live feed drive the links."""
 
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -80,6 +81,58 @@ def test_ns2_trace_drives_the_links_exactly(tb_name, tmp_path):
         assert rows(out) == TIMELINE  # the applied timeline, exactly the trace's ticks
         assert links(tb_name) == set()  # after the end: r2 at (5, 40), r3 at (12, 0)
         assert state.read(tb_name).positions == [[0.0, 0.0], [5.0, 40.0], [12.0, 0.0]]
+    finally:
+        assert tb("net", "down", tb_name).returncode == 0
+
+
+# CORE's shape (its GUI's sample1.scen): a comment header, nodes numbered from 6, X_ Y_ Z_.
+# Range 10: 6-7 (7 m) and 7-8 (8 m) are linked, 9 is 25 m from 8. Node 9 comes in at 8 m/s
+# from t=1 and is within 10 of node 8 from t=2.875 (tick 2.9); node 6 leaves downward at
+# 10 m/s from t=2 and is out of node 7's range from t=2.714 (tick 2.8); it stops at t=5.
+CORE_SCEN = """\
+#
+# nodes: 4, max time: 5.000000, max x: 40.00, max y: 30.00
+# nominal range: 10.00 link bw: 54000000.00
+# pause: 0.00, min speed 8.00 max speed: 10.00
+
+$node_(6) set X_ 0.0
+$node_(6) set Y_ 0.0
+$node_(6) set Z_ 0.00
+$node_(7) set X_ 7.0
+$node_(7) set Y_ 0.0
+$node_(7) set Z_ 0.00
+$node_(8) set X_ 15.0
+$node_(8) set Y_ 0.0
+$node_(8) set Z_ 0.00
+$node_(9) set X_ 40.0
+$node_(9) set Y_ 0.0
+$node_(9) set Z_ 0.00
+$ns_ at 2.00 "$node_(6) setdest 0.0 -30.0 10.0"
+$ns_ at 1.00 "$node_(9) setdest 24.0 0.0 8.0"
+"""
+
+
+def test_a_core_file_numbered_from_six_plays_with_its_mapping_stated(tb_name, tmp_path):
+    trace = tmp_path / "core.scen"
+    trace.write_text(CORE_SCEN)
+    out, cap = tmp_path / "links.csv", tmp_path / "cap"
+    up = tb("net", "up", tb_name, "--mobility", str(trace), "--comm-range", "10",
+            "--routing", "none", "--links-out", str(out), "--capture", str(cap))  # fmt: skip
+    assert up.returncode == 0, up.stderr
+    try:
+        assert "4 robots, 2 links" in up.stdout
+        assert "trace nodes 6..9 -> r1..r4" in up.stdout.splitlines()[-1], up.stdout
+        about = json.loads((cap / "daemons" / "network.json").read_text())
+        assert about["mobility"] == {
+            "file": str(trace), "robot_of_node": {"6": 1, "7": 2, "8": 3, "9": 4},
+        }  # fmt: skip
+        (player,) = [p for p in state.read(tb_name).processes if p.role == "mobility"]
+        assert wait_for(lambda: not state.is_alive(player.pid, player.start))
+        assert rows(out) == [["0", "add", "1", "2"], ["0", "add", "2", "3"],
+                             ["2.8", "remove", "1", "2"], ["2.9", "add", "3", "4"]]  # fmt: skip
+        assert links(tb_name) == {(2, 3), (3, 4)}
+        assert state.read(tb_name).positions == [[0.0, -30.0], [7.0, 0.0], [15.0, 0.0],
+                                                 [24.0, 0.0]]  # fmt: skip
     finally:
         assert tb("net", "down", tb_name).returncode == 0
 

@@ -128,3 +128,89 @@ def test_no_code_cites_documents_users_do_not_have():
         if name in open(p).read()
     ]
     assert not cites, cites
+
+
+# The layouts of netlink's own structures, as struct formats in the host's byte order,
+# counts written out and L as I (both 4 bytes in standard sizes).
+NETLINK_LAYOUTS = {
+    "IHHII": "nlmsghdr",
+    "BBBBBBBBI": "rtmsg",
+    "BxHiII": "ifinfomsg",
+    "BBH": "nfgenmsg",
+    "HH": "rtattr",
+}
+STRUCT_CALLS = {"Struct", "pack", "pack_into", "unpack", "unpack_from", "calcsize", "iter_unpack"}
+NETLINK_MODULE = os.path.join("topology", "netlinkmsg.py")
+
+
+def netlink_layout(fmt: str) -> str | None:
+    """The netlink structure a struct format begins with, or None. Formats in network or
+    big-endian order (packets, files) are never netlink's."""
+    if fmt[:1] in "!>":
+        return None
+    fmt = fmt.lstrip("@=<").replace(" ", "")
+    expanded = "".join(
+        code * int(count or 1) for count, code in re.findall(r"(\d*)([a-zA-Z?])", fmt)
+    )
+    expanded = expanded.replace("L", "I").replace("l", "i")
+    for layout, name in NETLINK_LAYOUTS.items():
+        if expanded.startswith(layout):
+            return name
+    return None
+
+
+def netlink_structs(path: str) -> set[tuple[int, str]]:
+    """(line, structure) of every struct call in `path` whose format is a netlink layout."""
+    found = set()
+    for node in ast.walk(ast.parse(open(path).read(), path)):
+        if not (isinstance(node, ast.Call) and node.args):
+            continue
+        func = node.func
+        name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", None)
+        fmt = node.args[0]
+        if name in STRUCT_CALLS and isinstance(fmt, ast.Constant) and isinstance(fmt.value, str):
+            layout = netlink_layout(fmt.value)
+            if layout:
+                found.add((node.lineno, layout))
+    return found
+
+
+def test_netlink_structures_are_packed_in_one_module():
+    """nlmsghdr, rtmsg, ifinfomsg, nfgenmsg and rtattr are laid out in topology/netlinkmsg.py
+    only: the AODV daemon, the oracle, route queries and the medium use its functions."""
+    where = {
+        os.path.relpath(p, REPO): netlink_structs(p)
+        for package in ("node", "topology", "aodv", "testbed")
+        for p in modules(package)
+    }
+    assert {name for _, name in where[NETLINK_MODULE]} == set(NETLINK_LAYOUTS.values())
+    bad = [
+        f"{path}:{line}: {name}"
+        for path, found in sorted(where.items())
+        if path != NETLINK_MODULE
+        for line, name in sorted(found)
+    ]
+    assert not bad, f"netlink structures packed outside {NETLINK_MODULE}:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize(
+    "source, found",
+    [
+        ('H = struct.Struct("=LHHLL")\n', "nlmsghdr"),
+        ('struct.unpack_from("=IHHIIi", data, 0)\n', "nlmsghdr"),
+        ('from struct import pack\npack("BBBBBBBBI", 2, 32, 0, 0, 254, 0, 0, 1, 0)\n', "rtmsg"),
+        ('struct.pack("=8BI", 2, 32, 0, 0, 254, 0, 0, 1, 0)\n', "rtmsg"),
+        ('_NLA = struct.Struct("=HH")\n', "rtattr"),
+        ('struct.pack_into("<BxHiII", buf, 16, 7, 0, 1, 0, 0)\n', "ifinfomsg"),
+    ],
+)
+def test_the_netlink_check_sees_every_spelling(tmp_path, source, found):
+    p = tmp_path / "m.py"
+    p.write_text(source)
+    assert {name for _, name in netlink_structs(str(p))} == {found}
+
+
+def test_packet_and_file_formats_are_not_netlink(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text('struct.unpack("!HHH", udp)\nstruct.pack(">II", w, h)\nstruct.pack("=I", 10)\n')
+    assert netlink_structs(str(p)) == set()

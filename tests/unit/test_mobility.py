@@ -58,13 +58,71 @@ def test_ns2_speed_zero_stays():
         ("$node_(0) set X_ 1\n$node_(0) set Y_ 1\n$ns_ at 1 \"$node_(4) setdest 1 1 1\"\n",
          "line 3: node 4 has no initial position"),
         ("$node_(0) set X_ 1\n", "node 0 has no initial Y_"),
-        ("$node_(1) set X_ 1\n$node_(1) set Y_ 1\n", "node 0 has no initial position"),
+        ("$node_(6) set X_ 1\n$node_(6) set Y_ 1\n$ns_ at 1 \"$node_(5) setdest 1 1 1\"\n",
+         "line 3: node 5 has no initial position"),
         ("# only a comment\n", "no node"),
     ],
 )  # fmt: skip
 def test_ns2_errors_name_the_line(text, where):
     with pytest.raises(mobility.TraceError, match=where):
         mobility.parse_ns2(text, "f.ns2")
+
+
+# In the shape of CORE's own mobility files (its GUI's sample1.scen): a comment header,
+# nodes numbered as on CORE's canvas (6..9, not from 0), X_ Y_ Z_, legs out of time order.
+CORE_SCEN = """\
+#
+# nodes: 4, max time: 12.000000, max x: 400.00, max y: 300.00
+# nominal range: 150.00 link bw: 54000000.00
+# pause: 2.00, min speed 2.00 max speed: 10.00
+
+$node_(6) set X_ 100.0
+$node_(6) set Y_ 50.0
+$node_(6) set Z_ 0.00
+$node_(7) set X_ 160.0
+$node_(7) set Y_ 50.0
+$node_(7) set Z_ 0.00
+$node_(8) set X_ 220.0
+$node_(8) set Y_ 80.0
+$node_(8) set Z_ 0.00
+$node_(9) set X_ 300.0
+$node_(9) set Y_ 80.0
+$node_(9) set Z_ 0.00
+$ns_ at 2.00 "$node_(9) setdest 300.0 200.0 10.0"
+$ns_ at 1.00 "$node_(8) setdest 220.0 50.0 6.0"
+$ns_ at 6.00 "$node_(6) setdest 40.0 50.0 20.0"
+"""
+
+
+def test_core_file_with_nodes_six_to_nine_plays_as_robots_one_to_four():
+    tr = mobility.parse(CORE_SCEN, "sample.scen")
+    assert tr.nodes == 4 and tr.node_ids == [6, 7, 8, 9]
+    assert tr.robot_of_node() == {6: 1, 7: 2, 8: 3, 9: 4}
+    assert tr.mapping_text() == "nodes 6..9 -> r1..r4"
+    assert tr.positions(0.0) == [(100.0, 50.0), (160.0, 50.0), (220.0, 80.0), (300.0, 80.0)]
+    # node 8 (robot 3): 30 m down at 6 m/s from t=1; node 9 (robot 4): 120 m up from t=2.
+    assert tr.positions(3.5)[2:] == [(220.0, 65.0), (300.0, 95.0)]
+    assert tr.positions(100.0) == [(40.0, 50.0), (160.0, 50.0), (220.0, 50.0), (300.0, 200.0)]
+    assert tr.end == 14.0  # node 9 arrives at 2 + 120 / 10
+    # --robots 2: the two lowest ids.
+    assert tr.positions(0.0, 2) == [(100.0, 50.0), (160.0, 50.0)]
+    assert tr.mapping_text(2) == "nodes 6..7 -> r1..r2"
+
+
+def test_ids_with_gaps_are_robots_in_ascending_order_of_id():
+    ns2 = "".join(f"$node_({i}) set X_ {i}\n$node_({i}) set Y_ 0\n" for i in (12, 0, 2, 3, 4))
+    tr = mobility.parse(ns2)
+    assert tr.node_ids == [0, 2, 3, 4, 12]
+    assert tr.positions(0.0) == [(0.0, 0.0), (2.0, 0.0), (3.0, 0.0), (4.0, 0.0), (12.0, 0.0)]
+    assert tr.mapping_text() == "nodes 0 -> r1, 2..4 -> r2..r4, 12 -> r5"
+    one = mobility.parse("0 5 1 1\n0 3 2 2\n4 5 9 1\n")
+    assert one.node_ids == [3, 5] and one.positions(4.0) == [(2.0, 2.0), (9.0, 1.0)]
+    assert one.mapping_text(1) == "node 3 -> r1"
+
+
+def test_files_from_node_zero_keep_node_i_as_robot_i_plus_1():
+    tr = mobility.parse_ns2(NS2)
+    assert tr.robot_of_node() == {0: 1, 1: 2} and tr.mapping_text() == "nodes 0..1 -> r1..r2"
 
 
 def test_one_trace():
