@@ -1,4 +1,4 @@
-"""Goal messages over nanomsg TCP (pynng): a PULL socket to hear, one PUSH per teammate.
+"""nanomsg, the default middleware: a PULL socket to hear, one PUSH per teammate (pynng).
 
 nng speaks nanomsg's SP wire protocol, so Debian's `nanocat --push`/`--pull` talk to these
 sockets (tests/integration/test_nanomsg_interop.py). Dialers connect in the background and
@@ -9,30 +9,42 @@ one hop away come from the robot's routing daemon, like any other traffic.
 Every interval nng keeps here is in wall ms and comes from node.timing, divided by the time
 scale there: the send timeout and the redial backoff (`reconnect_ms`: the first wait, and the
 ceiling it doubles up to). A PUSH socket has no resend timer, and TCP keepalives stay off.
+
+The wire is nanomsg's SP over TCP on the robot's goal port (`port`, 5101 in a run): the
+listener on the robot's own address, one outgoing connection per teammate it sends to.
+This messenger was the robots' only one (node.goalnet.GoalNet); its sockets and options are
+unchanged, and it counts what it does in `stats` (node.messaging.stats).
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import pynng
+
+from node.messaging.stats import MessengerStats
 
 log = logging.getLogger(__name__)
 
 
-class GoalNet:
+class NanomsgMessenger:
+    name = "nanomsg"
+
     def __init__(
         self,
         me: int,
         bind_addr: str,
         port: int,
         addr_of: Callable[[int], str],
+        team: Sequence[int] = (),
         send_timeout_ms: int = 20,
         reconnect_ms: tuple[int, int] = (50, 500),
     ):
         self.me = me
+        self.team = tuple(team)
+        self.stats = MessengerStats()
         self.port = port
         self.addr_of = addr_of
         self.send_timeout_ms = max(1, int(send_timeout_ms))
@@ -64,6 +76,12 @@ class GoalNet:
 
     def send(self, j: int, data: bytes) -> bool:
         """Send to teammate j; False if it could not be handed over within the timeout."""
+        token = self.stats.send_started()
+        ok = self._send(j, data)
+        self.stats.send_ended(token, ok)
+        return ok
+
+    def _send(self, j: int, data: bytes) -> bool:
         try:
             self._socket(j).send(data)
             return True
@@ -79,6 +97,7 @@ class GoalNet:
             try:
                 out.append(self.pull.recv(block=False))
             except pynng.TryAgain:
+                self.stats.received += len(out)
                 return out
 
     def close(self) -> None:
