@@ -18,6 +18,7 @@ for every run of the sweep::
     map = ["empty", "maps/office.png"]  # optional: maps as a grid dimension ("empty": the
                                   # paper's empty terrain; else as run.map)
     medium = ["veth", "ns3-wifi"] # optional: the radio medium as a grid dimension
+    middleware = ["nanomsg", "zeromq"]  # optional: the goals' middleware as a grid dimension
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -36,6 +37,8 @@ for every run of the sweep::
     wifi_standard = "80211b"      # ns3-wifi only: 80211a | 80211b | 80211g, default 80211a
     wifi_rate = "DsssRate1Mbps"   # ns3-wifi only: an ns-3 WifiMode or minstrel
     wifi_loss = "range"           # ns3-wifi only: range | logdistance
+    middleware = "zeromq"         # nanomsg | zeromq | zeromq-reqrep | zenoh | dds, default
+                                  # nanomsg (docs/middleware.md)
     seed = 0                      # optional base mixed into every derived seed
 
 The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
@@ -54,9 +57,9 @@ several sweep files. The file itself is a regular UTF-8 file of at most MAX_FILE
 
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
 its parameters and run index only, so they are the same every time the file is expanded
-(a routing, map or medium grid names its value in every id, `-aodv`, `-moffice`,
-`-ns3wifi`; the variants of a point share their seeds, so protocols, maps and media are
-compared on the same draws):
+(a routing, map, medium or middleware grid names its value in every id, `-aodv`,
+`-moffice`, `-ns3wifi`, `-zeromqreqrep`; the variants of a point share their seeds, so
+protocols, maps, media and middlewares are compared on the same draws):
 that is what lets an interrupted sweep resume without redoing a finished run. Runs are
 ordered run index first, so an interrupted sweep has covered every point once before it
 covers any point twice.
@@ -86,7 +89,8 @@ _GRID_KEYS = {opt.name for opt in _GRID_OPTIONS} | {"runs"}
 _RUN_KEYS = {opt.name for opt in _RUN_OPTIONS} | {"seed", "load_limit"}
 _GRID_REQUIRED = ("robots", "comm_range", "laser_range")
 # Grid keys stored under another name in SweepSpec (the [run] value keeps the name).
-_GRID_FIELD = {"routing": "routings", "map": "maps", "medium": "media"}
+_GRID_FIELD = {"routing": "routings", "map": "maps", "medium": "media",
+               "middleware": "middlewares"}  # fmt: skip
 EMPTY_MAP = "empty"  # grid.map: the paper's empty terrain
 _DEFAULT = RunConfig(robots=1, comm_range=1.0)
 MAX_RUNS = 10_000
@@ -122,6 +126,8 @@ class SweepSpec:
     wifi_loss: str = _DEFAULT.wifi_loss
     wifi_standard: str = _DEFAULT.wifi_standard
     wifi_rate: str = _DEFAULT.wifi_rate
+    middleware: str = _DEFAULT.middleware
+    middlewares: tuple[str, ...] = ()  # grid.middleware: a dimension (overrides middleware)
     seed: int = 0
     description: str = ""
 
@@ -148,7 +154,7 @@ class PlannedRun:
         """The grid point this run belongs to (what its repetitions share)."""
         c = self.config
         return (c.robots, c.comm_range, c.laser_range, c.loss_pct, c.delay_ms,
-                c.coordination, c.start, c.routing, c.map, c.medium)  # fmt: skip
+                c.coordination, c.start, c.routing, c.map, c.medium, c.middleware)  # fmt: skip
 
 
 def _fail(path: Path | str, key: str, message: str) -> UsageError:
@@ -324,6 +330,11 @@ def medium_label(medium: str) -> str:
     return "".join(ch for ch in medium if ch.isalnum())
 
 
+def middleware_label(middleware: str) -> str:
+    """The name a middleware has in run ids: its letters and digits (`zeromqreqrep`)."""
+    return "".join(ch for ch in middleware if ch.isalnum())
+
+
 def load(path: str | Path) -> SweepSpec:
     """Read and validate a sweep file (UsageError with one line if it is bad)."""
     path = Path(path)
@@ -418,10 +429,12 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     routings = spec.routings or (spec.routing,)
     maps = spec.maps or (spec.map,)
     media = spec.media or (spec.medium,)
+    middlewares = spec.middlewares or (spec.middleware,)
     for index in range(1, spec.runs + 1):
-        for robots, comm, laser, loss, delay, coord, start, routing, map_, medium in (
+        for robots, comm, laser, loss, delay, coord, start, routing, map_, medium, mw in (
             itertools.product(spec.robots, spec.comm_range, spec.laser_range, spec.loss_pct,
-                              spec.delay_ms, spec.coordination, spec.start, routings, maps, media)
+                              spec.delay_ms, spec.coordination, spec.start, routings, maps, media,
+                              middlewares)
         ):  # fmt: skip
             # The seed leaves coordination and start out: the variants of a point share their
             # random numbers (start positions within a placement, timer phases), so they are
@@ -433,10 +446,10 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 loss_pct=loss, delay_ms=delay, capture=spec.capture, max_steps=spec.max_steps,
                 coordination=coord, start=start, aodv_profile=spec.aodv_profile,
                 range_model=spec.range_model, wall_loss_pct=spec.wall_loss_pct,
-                medium=medium, **_wifi(spec, medium),
+                medium=medium, **_wifi(spec, medium), middleware=mw,
             )  # fmt: skip
             rid = run_id(robots, comm, laser, loss, delay, index, coord, start)
-            if spec.routings or spec.maps or spec.media:
+            if spec.routings or spec.maps or spec.media or spec.middlewares:
                 base = rid[: -len(f"-k{index}")]
                 if spec.routings:
                     base += f"-{routing}"
@@ -444,6 +457,8 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     base += f"-m{map_label(map_)}"
                 if spec.media:
                     base += f"-{medium_label(medium)}"
+                if spec.middlewares:
+                    base += f"-{middleware_label(mw)}"
                 rid = f"{base}-k{index}"
             out.append(PlannedRun(rid, index, config))
     return out

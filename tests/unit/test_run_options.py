@@ -42,6 +42,7 @@ def test_every_option_round_trips_through_argv_with_non_default_values():
         map_period=7, flood="blind", display_pos=(3.5, 4.25), snapshots=(200, 600),
         kill=((2, 150), (3, 300)), view="127.0.0.1:8123", medium="ns3-wifi",
         wifi_loss="logdistance", wifi_standard="80211b", wifi_rate="DsssRate1Mbps",
+        middleware="zeromq-reqrep",
     )  # fmt: skip
     for opt in OPTIONS:
         assert getattr(cfg, opt.name) != opt.default, opt.name  # every option non-default
