@@ -222,3 +222,31 @@ def test_result_json_gets_the_middleware_each_robots_counters_and_the_teams_tota
     assert (team["robots"], team["sent"], team["failed"], team["received"]) == (2, 7, 2, 4)
     assert (team["blocked_s"], team["blocked_max_s"], team["late"]) == (0.5, 0.5, 1)
     assert (team["delay_steps_max"], team["duplicates"], team["sending"]) == (1, 0, 0)
+
+
+@pytest.mark.skipif("zeromq" not in AVAILABLE, reason="pyzmq is not installed")
+@pytest.mark.parametrize("scale", [1.0, 10.0])
+def test_zeromq_sockets_keep_the_dilated_intervals_and_the_recommended_options(scale):
+    import zmq
+
+    from node.timing import RobotTimings
+
+    t = RobotTimings(time_scale=scale)
+    kw = dict(me=1, bind_addr="127.0.0.1", port=_free_port(), addr_of=lambda j: "127.0.0.1",
+              team=(1, 2), send_timeout_ms=t.goal_send_timeout_ms,
+              reconnect_ms=(t.goal_reconnect_min_ms, t.goal_reconnect_max_ms))  # fmt: skip
+    bounded, naive = open_messenger("zeromq", **kw), None
+    try:
+        s = bounded._peer(2).sock
+        got = [s.getsockopt(o) for o in (zmq.SNDTIMEO, zmq.IMMEDIATE, zmq.SNDHWM, zmq.LINGER,
+                                         zmq.RECONNECT_IVL, zmq.RECONNECT_IVL_MAX)]  # fmt: skip
+        assert got == [round(50 / scale), 1, 8, 0, round(50 / scale), round(500 / scale)]
+        naive = open_messenger("zeromq-reqrep", **dict(kw, port=_free_port()))
+        s = naive._peer(2).sock
+        got = [s.getsockopt(o) for o in (zmq.SNDTIMEO, zmq.RCVTIMEO, zmq.IMMEDIATE,
+                                         zmq.RECONNECT_IVL)]  # fmt: skip
+        assert got == [-1, -1, 0, round(50 / scale)]  # no bound: the naive variant
+    finally:
+        for m in (bounded, naive):
+            if m is not None:
+                m.close()
