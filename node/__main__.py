@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
         log.info("display up")
         d.run()
     else:
-        from node.goalnet import GoalNet
+        from node.messaging import MiddlewareUnavailable, open_messenger
         from node.robot import Robot, RobotConfig
         from topology.names import robot_addr
 
@@ -71,11 +71,19 @@ def main(argv: list[str] | None = None) -> int:
             radius=args.radius, plan_period=args.plan_period, map_period=args.map_period,
             timing=timing, phase=max(0, args.timer_phase), coordination=args.coordination,
         )  # fmt: skip
-        goals = GoalNet(
-            me, args.bind or robot_addr(me), args.goal_port, robot_addr,
-            send_timeout_ms=timing.goal_send_timeout_ms,
-            reconnect_ms=(timing.goal_reconnect_min_ms, timing.goal_reconnect_max_ms),
-        )  # fmt: skip
+        try:
+            goals = open_messenger(
+                args.middleware, me=me, bind_addr=args.bind or robot_addr(me),
+                port=args.goal_port, addr_of=robot_addr, team=tuple(range(1, args.robots + 1)),
+                send_timeout_ms=timing.goal_send_timeout_ms,
+                reconnect_ms=(timing.goal_reconnect_min_ms, timing.goal_reconnect_max_ms),
+            )  # fmt: skip
+        except MiddlewareUnavailable as e:
+            sys.stderr.write(f"node: r{me}: {e}\n")
+            flooder.close()
+            link.close()
+            events.close()
+            return 2
         r = Robot(cfg, link, flooder, goals, events)
         stop["robot"] = r
         log.info("robot up: team of %d, laser %.1f m", args.robots, args.laser_range)

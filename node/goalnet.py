@@ -1,87 +1,10 @@
-"""Goal messages over nanomsg TCP (pynng): a PULL socket to hear, one PUSH per teammate.
+"""The goal messenger's first name: `GoalNet` is node.messaging.nanomsg's NanomsgMessenger.
 
-nng speaks nanomsg's SP wire protocol, so Debian's `nanocat --push`/`--pull` talk to these
-sockets (tests/integration/test_nanomsg_interop.py). Dialers connect in the background and
-reconnect on their own; a send waits at most `send_timeout_ms` for a connected peer and then
-gives up, so an unreachable teammate never blocks the robot. Routes to teammates more than
-one hop away come from the robot's routing daemon, like any other traffic.
-
-Every interval nng keeps here is in wall ms and comes from node.timing, divided by the time
-scale there: the send timeout and the redial backoff (`reconnect_ms`: the first wait, and the
-ceiling it doubles up to). A PUSH socket has no resend timer, and TCP keepalives stay off.
+The robots' unicast messages went over nanomsg only, through `node.goalnet.GoalNet`, before
+the middleware became a run option (node.messaging). Code and tests written against that
+name keep working; new code opens its messenger with node.messaging.open_messenger.
 """
 
-from __future__ import annotations
+from node.messaging.nanomsg import NanomsgMessenger as GoalNet
 
-import contextlib
-import logging
-from collections.abc import Callable
-
-import pynng
-
-log = logging.getLogger(__name__)
-
-
-class GoalNet:
-    def __init__(
-        self,
-        me: int,
-        bind_addr: str,
-        port: int,
-        addr_of: Callable[[int], str],
-        send_timeout_ms: int = 20,
-        reconnect_ms: tuple[int, int] = (50, 500),
-    ):
-        self.me = me
-        self.port = port
-        self.addr_of = addr_of
-        self.send_timeout_ms = max(1, int(send_timeout_ms))
-        lo, hi = (max(1, int(v)) for v in reconnect_ms)
-        self.reconnect_ms = (lo, max(lo, hi))
-        self.pull = pynng.Pull0()
-        self.pull.listen(f"tcp://{bind_addr}:{port}")
-        self.push: dict[int, pynng.Push0] = {}
-
-    def fileno(self) -> int:
-        return self.pull.recv_fd
-
-    def _socket(self, j: int) -> pynng.Push0:
-        s = self.push.get(j)
-        if s is None:
-            s = pynng.Push0(
-                send_timeout=self.send_timeout_ms,
-                reconnect_time_min=self.reconnect_ms[0],
-                reconnect_time_max=self.reconnect_ms[1],
-                send_buffer_size=8,
-            )
-            s.dial(f"tcp://{self.addr_of(j)}:{self.port}", block=False)
-            self.push[j] = s
-        return s
-
-    def connect(self, j: int) -> None:
-        """Start dialling teammate j (so its connection is up before the first send)."""
-        self._socket(j)
-
-    def send(self, j: int, data: bytes) -> bool:
-        """Send to teammate j; False if it could not be handed over within the timeout."""
-        try:
-            self._socket(j).send(data)
-            return True
-        except (pynng.Timeout, pynng.TryAgain):
-            return False
-        except pynng.NNGException as e:
-            log.debug("send to r%d failed: %s", j, e)
-            return False
-
-    def receive(self) -> list[bytes]:
-        out = []
-        while True:
-            try:
-                out.append(self.pull.recv(block=False))
-            except pynng.TryAgain:
-                return out
-
-    def close(self) -> None:
-        for s in [self.pull, *self.push.values()]:
-            with contextlib.suppress(Exception):
-                s.close()
+__all__ = ["GoalNet"]

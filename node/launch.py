@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 from node import coordination
 from node.flood import MODES
+from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
+from node.messaging import MIDDLEWARES
 from topology.argtypes import number
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
@@ -43,6 +45,7 @@ class NodeArgs:
     flood: str = "pruned"
     coordination: str = coordination.DEFAULT  # how goals are agreed: "paper" or "ours"
     goal_port: int = 5101
+    middleware: str = DEFAULT_MIDDLEWARE  # what carries goals and requests (node.messaging)
     bind: str | None = None  # address for the goal socket (default: the robot's)
     out_dir: str | None = None  # display: where snapshots and the video go
     snapshots: frozenset[int] = frozenset()  # display: steps with a PNG snapshot
@@ -141,6 +144,12 @@ def parser() -> argparse.ArgumentParser:
         help="goal coordination: the paper's rules read literally, or ours (node.coordination)",
     )
     p.add_argument("--goal-port", type=number(int, "--goal-port", above=0), default=5101)
+    p.add_argument(
+        "--middleware",
+        choices=MIDDLEWARES,
+        default=DEFAULT_MIDDLEWARE,
+        help="what carries goals and re-plan requests (node.messaging)",
+    )
     p.add_argument("--bind", help="address for the goal socket (default: the robot's)")
     p.add_argument("--out-dir", help="display: where snapshots and the video go")
     p.add_argument(

@@ -10,14 +10,15 @@ Five threads:
   frame with a motion command;
 - path planning: waits for a request, plans on a snapshot of the map (node.planner: the
   nearest reachable frontier not within laser range of a reachable teammate's goal), makes it
-  the current plan and announces the goal to reachable teammates over nanomsg; with no
+  the current plan and announces the goal to reachable teammates over the run's middleware
+  (node.messaging: nanomsg unless --middleware says otherwise); with no
   reachable frontier left the robot has finished and tells its body so;
 - timer: asks for a plan when 20 steps passed since the last one, and floods the robot's
   local map every `map_period` steps (motion control counts the steps and evaluates that
   rule as it answers each frame, and wakes the timer only for a step with work: `_tick`);
 - message processing: merges maps, records teammates' goals, settles goal conflicts (the
   winner by priority asks the loser to re-plan; the loser re-plans on that request);
-- inbox: receives from the network (UDP floods, relayed on the way; nanomsg TCP) and hands
+- inbox: receives from the network (UDP floods, relayed on the way; the messenger) and hands
   each new message to message processing through a bounded queue (full: dropped, counted).
 
 A teammate is *reachable* while its map floods keep arriving (within `reach_steps`): a flood
@@ -28,6 +29,7 @@ the step, which is what the run's results and checks are built from.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import math
 import os
@@ -42,9 +44,10 @@ import numpy as np
 from node import body, coordination, planner, sched, stepcore, wire
 from node.events import EventLog
 from node.flood import Flooder
-from node.goalnet import GoalNet
 from node.grid import FREE, OCC, OccupancyGrid
 from node.lateness import MS_BOUNDS, Lateness
+from node.messaging.arrivals import Arrivals
+from node.messaging.contract import Messenger
 from node.rays import _BIAS, Laser
 from node.timing import RobotTimings
 
@@ -183,7 +186,7 @@ class Robot:
         cfg: RobotConfig,
         link: body.BodyClient,
         flooder: Flooder,
-        goals: GoalNet,
+        goals: Messenger,
         events: EventLog,
     ):
         self.cfg = cfg
@@ -222,6 +225,8 @@ class Robot:
         self.received: Counter[str] = Counter()
         self.failed: Counter[str] = Counter()
         self.malformed = 0
+        self.msg_numbers = itertools.count(1)  # "n" of the goals and requests sent (node.wire)
+        self.arrivals = Arrivals()  # duplicates and late ones among those received
         self.inbox_dropped = 0
         self.stuck = 0
         self.linger = cfg.timing.flood_linger_s
@@ -311,6 +316,9 @@ class Robot:
                 if v
             },
             finished=self.s.finished,
+            middleware=self.goals.name,
+            messenger=self.goals.stats.as_dict(),
+            arrivals=self.arrivals.as_dict(),
         )
 
     def _motion(self) -> None:
@@ -526,7 +534,8 @@ class Robot:
                 continue
             if p.status == "blocked":
                 continue  # no goal selected, nothing to announce: it waits (coordination)
-            data = wire.goal_msg(cfg.robot, step, p.goal, p.cost, p.status == "fallback")
+            data = wire.goal_msg(cfg.robot, step, p.goal, p.cost, p.status == "fallback",
+                                 next(self.msg_numbers))  # fmt: skip
             for j in reach:
                 self._send(j, "goal", data, step)
 
@@ -733,6 +742,7 @@ class Robot:
             mine = s.plan.goal if (s.plan and not s.finished) else None
             my_cost = s.plan.cost if s.plan else 0.0
         self.received[m["k"]] += 1
+        self.arrivals.note(j, m["n"], m["step"], step)
         self.events.write("recv", step, kind=m["k"], frm=j, sent=m["step"],
                           t=round(time.monotonic(), 4))  # fmt: skip
         mode = cfg.coordination
@@ -740,7 +750,8 @@ class Robot:
             decision = coordination.on_goal(mode, cfg.robot, mine, my_cost, j, m["goal"],
                                             m["cost"], m["fallback"], cfg.laser_range)  # fmt: skip
             if decision == "request":
-                self._send(j, "replan", wire.replan_msg(cfg.robot, step, mine), step)
+                data = wire.replan_msg(cfg.robot, step, mine, next(self.msg_numbers))
+                self._send(j, "replan", data, step)
         elif m["k"] == "replan":
             if coordination.on_request(mode, mine, m["goal"], cfg.laser_range):
                 self.request("request")

@@ -56,12 +56,12 @@ class RobotTimings:
 
     @property
     def goal_send_timeout_ms(self) -> int:
-        """How long sending a goal to an unreachable teammate may block (node.goalnet)."""
+        """How long sending a goal to an unreachable teammate may block (node.messaging)."""
         return max(GOAL_SEND_TIMEOUT_MIN_MS, round(GOAL_SEND_TIMEOUT_EMULATED_MS / self.time_scale))
 
     @property
     def goal_reconnect_min_ms(self) -> int:
-        """nng's first wait before redialling a teammate (node.goalnet), in wall ms."""
+        """nng's first wait before redialling a teammate (node.messaging), in wall ms."""
         return max(NNG_MIN_MS, round(GOAL_RECONNECT_MIN_EMULATED_MS / self.time_scale))
 
     @property

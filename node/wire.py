@@ -21,13 +21,18 @@ every `full_period` steps in any case:
 The display, which explores nothing, floods a BEACON (its position) so that robots notice when
 it comes back into reach.
 
-Goals and re-plan requests travel over nanomsg TCP (node.goalnet) as small JSON objects:
+Goals and re-plan requests travel over the run's middleware (node.messaging; nanomsg TCP by
+default) as small JSON objects:
 
-    {"k": "goal",   "from": 3, "step": 120, "goal": [x, y], "cost": 4.2[, "fallback": true]}
-    {"k": "replan", "from": 1, "step": 121, "goal": [x, y]}       (the sender's winning goal)
+    {"k": "goal",   "from": 3, "step": 120, "goal": [x, y], "cost": 4.2[, "fallback": true],
+     "n": 7}
+    {"k": "replan", "from": 1, "step": 121, "goal": [x, y], "n": 8}  (the sender's winning goal)
 
 "fallback" marks a goal taken although it is near a teammate's (every reachable frontier was):
-asking its robot to re-plan would not help, so nobody does.
+asking its robot to re-plan would not help, so nobody does. "n" numbers the sender's messages
+(1, 2, ...; a goal sent to several teammates is one message, one number), so that a receiver
+can tell a duplicate the middleware delivered twice (node.messaging.arrivals); a message
+without it (older senders, nanocat) is valid.
 
 Every parser raises ValueError on malformed input; callers count and drop it.
 """
@@ -152,16 +157,26 @@ def unpack_map(payload: bytes, shape: tuple[int, int]) -> MapMsg:
 
 
 def goal_msg(
-    sender: int, step: int, goal: tuple[float, float], cost: float, fallback: bool = False
+    sender: int,
+    step: int,
+    goal: tuple[float, float],
+    cost: float,
+    fallback: bool = False,
+    n: int | None = None,
 ) -> bytes:
     m = {"k": "goal", "from": sender, "step": step, "goal": list(goal), "cost": round(cost, 3)}
     if fallback:
         m["fallback"] = True
+    if n is not None:
+        m["n"] = n
     return json.dumps(m).encode()
 
 
-def replan_msg(sender: int, step: int, goal: tuple[float, float]) -> bytes:
-    return json.dumps({"k": "replan", "from": sender, "step": step, "goal": list(goal)}).encode()
+def replan_msg(sender: int, step: int, goal: tuple[float, float], n: int | None = None) -> bytes:
+    m = {"k": "replan", "from": sender, "step": step, "goal": list(goal)}
+    if n is not None:
+        m["n"] = n
+    return json.dumps(m).encode()
 
 
 def parse_msg(data: bytes, n_robots: int) -> dict:
@@ -184,6 +199,10 @@ def parse_msg(data: bytes, n_robots: int) -> dict:
     ):
         raise ValueError("message goal is not a point")
     m["goal"] = (float(goal[0]), float(goal[1]))
+    n = m.get("n")
+    if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
+        raise ValueError("message number is not a number >= 1")
+    m["n"] = n
     if m["k"] == "goal":
         cost = m.get("cost")
         if not isinstance(cost, int | float) or not math.isfinite(cost) or cost < 0:

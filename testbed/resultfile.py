@@ -333,6 +333,7 @@ class RunResult:
     world_missed_steps_ms_late: tuple = ()
     robots: tuple[RobotResult, ...] = ()  # in the file's order
     cpu_s: Mapping = field(default_factory=lambda: _EMPTY)
+    messaging: Mapping | None = None  # the goals' middleware and its counters (None: older)
     fidelity: Mapping = field(default_factory=lambda: _EMPTY)  # {} : made before verdicts
     network_timers: Mapping | None = None
 
@@ -499,6 +500,7 @@ class RunResult:
             ),
             robots=tuple(RobotResult.from_dict(k, v) for k, v in _mapping(doc, "robots").items()),
             cpu_s=_mapping(doc, "cpu_s"),
+            messaging=_mapping(doc, "messaging") if doc.get("messaging") is not None else None,
             fidelity=fidelity,
             network_timers=None if timers is None else _mapping(doc, "network_timers"),
         )

@@ -56,7 +56,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from node import body
+from node import body, messaging
 from node.launch import NodeArgs
 from node.sched import deadline_priority
 from testbed import isolation, runresults
@@ -77,8 +77,9 @@ log = logging.getLogger(__name__)
 WORLD_RT_PRIORITY = 2  # the step loop's SCHED_RR priority (robots' motion control: 1)
 WORLD_NICE = -10  # its nice value where real-time priority is refused
 PROJECT_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# What the fork server imports once for every robot and the display (topology.forkserver).
-NODE_PRELOAD = ["node.__main__", "node.robot", "node.goalnet", "node.display", "topology.names"]
+# What the fork server imports once for every robot and the display (topology.forkserver);
+# the run's middleware module (node.messaging) is added to it.
+NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "topology.names"]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
 END_GRACE_S = 15.0  # for the processes to write their logs after END
 __all__ = [
@@ -203,7 +204,8 @@ class Run:
         env["OPENBLAS_NUM_THREADS"] = "1"  # a robot's numpy needs no thread pool of its own
         # Started first, so that its imports overlap the network's bring-up.
         laser = [self.cfg.laser_range, self.cfg.laser_rays, prep.truth.cell]
-        forks = ForkServer(NODE_PRELOAD, env=env, label=prep.out,
+        preload = [*NODE_PRELOAD, messaging.module_of(self.cfg.middleware)]
+        forks = ForkServer(preload, env=env, label=prep.out,
                            warm=[["node.rays", "warm", laser]])  # fmt: skip
         stack.callback(forks.close)
         net = stack.enter_context(Network(prep.spec))
@@ -274,7 +276,7 @@ class Run:
             cell=truth.cell, laser_range=cfg.laser_range, laser_rays=cfg.laser_rays,
             speed=cfg.speed, radius=cfg.radius, plan_period=cfg.plan_period,
             map_period=cfg.map_period, time_scale=cfg.time_scale, flood=cfg.flood,
-            coordination=cfg.coordination, **role,
+            coordination=cfg.coordination, middleware=cfg.middleware, **role,
         )  # fmt: skip
 
     def _display_args(self, server: BodyServer) -> NodeArgs:

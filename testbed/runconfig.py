@@ -16,6 +16,8 @@ from pathlib import Path
 
 from node import coordination
 from node.flood import MODES as FLOOD_MODES
+from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
+from node.messaging import MIDDLEWARES
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
@@ -168,6 +170,11 @@ class RunConfig:
                         "clustered at the centre, or spread over the map", "corner",
                         choices=START_PLACEMENTS, sweep={GRID},
                         grid=GridDim(6, str, CHANGED))  # fmt: skip
+    middleware: str = option(
+        str, "the middleware of the robots' goal messages (goals, requests to plan again): "
+        "see docs/middleware.md", DEFAULT_MIDDLEWARE, choices=MIDDLEWARES,
+        sweep={GRID, RUN}, newer=True, grid=GridDim(10, medium_label, VARIED),
+    )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip

@@ -4,10 +4,11 @@ Theory of operation. `prepare(cfg, out, name)` builds the world (ground truth, s
 positions, lasers), each robot's timer phase (seeded, as robots booted one by one would
 start theirs), the display's position and the description of the testbed network (one
 namespace per robot plus one for the display, robot N+1, which does not explore). Then it
-checks everything that can be checked before anything exists: the network's description,
-root and tools (topology.network.preflight), a testbed name nobody uses, the kernel
-features the impairments need, the live view's address, and the output directory
-(testbed.runfiles: a directory holding a run is refused unless `replace`). Each is a
+checks everything that can be checked before anything exists: the middleware's Python
+package (node.messaging), the network's description, root and tools
+(topology.network.preflight), a testbed name nobody uses, the kernel features the
+impairments need, the live view's address, and the output directory (testbed.runfiles: a
+directory holding a run is refused unless `replace`). Each is a
 UsageError (one line, exit 2) that leaves nothing behind. Only then it makes the directory
 and writes config.json, the first file of the run-results contract (docs/run-results.md),
 and returns a frozen `PreparedRun`, which the next stage (testbed.run.Run) takes.
@@ -76,6 +77,7 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     UsageError for a run this machine cannot do or a directory it may not write (nothing
     is created then)."""
     out = os.path.abspath(out)
+    check_middleware(cfg.middleware)
     truth = load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
     check_laser(cfg.laser_range, truth.size_m)
     rng = np.random.default_rng(cfg.seed)
@@ -104,6 +106,16 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     except OSError as e:
         raise UsageError(f"--out {out}: cannot write there: {e.strerror}") from None
     return prepared
+
+
+def check_middleware(name: str) -> None:
+    """UsageError naming the Python package to install when middleware `name` cannot be
+    opened here (its module is imported, as the robots will)."""
+    from node.messaging import unavailable
+
+    why = unavailable(name)
+    if why:
+        raise UsageError(why)
 
 
 def check_laser(laser_range: float, size_m: tuple[float, float]) -> None:

@@ -35,8 +35,14 @@ log = logging.getLogger(__name__)
 # What each robot's summary line (its last event) says, copied into robots/rK.json.
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
-    "frames", "latency_ms", "thread_cpu_s", "lateness",
+    "frames", "latency_ms", "thread_cpu_s", "lateness", "middleware", "messenger", "arrivals",
 )  # fmt: skip
+# The team's messaging totals (result.json's "messaging"): these are summed over the robots,
+# the others are the largest of any robot.
+MESSAGING_SUMS = (
+    "sent", "failed", "received", "blocked_s", "sending", "messages", "duplicates", "late",
+)  # fmt: skip
+MESSAGING_MAX = ("blocked_max_s", "delay_steps_max")
 PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
 
 
@@ -151,9 +157,33 @@ def contents(rec: RunRecord) -> RunResult:
         world_missed_steps_ms_late=tuple(tuple(m) for m in clock.world_missed_steps),
         robots=tuple(r for r, _ in robots),
         cpu_s=cpu_seconds(rec, summaries, display, daemons),
+        messaging=messaging(
+            rec.config.get("middleware", "nanomsg"), {r.name: sm for r, sm in robots}
+        ),
         fidelity=verdict,
         network_timers=rec.network_timers,
     )
+
+
+def messaging(middleware: str, summaries: dict[str, dict]) -> dict:
+    """The goal messages' middleware and what it did: each robot's messenger counters and
+    arrivals (node.messaging.stats, node.messaging.arrivals; None for a robot that left no
+    summary), and the team's totals over the robots that did."""
+    robots = {}
+    for k, sm in summaries.items():
+        if sm.get("messenger") is None:
+            robots[k] = None
+            continue
+        robots[k] = dict(sm["messenger"], **(sm.get("arrivals") or {}))
+    counted = [v for v in robots.values() if v is not None]
+    team: dict = {"robots": len(counted)}
+    for key in MESSAGING_SUMS:
+        team[key] = sum(v.get(key) or 0 for v in counted)
+    for key in MESSAGING_MAX:
+        team[key] = max((v.get(key) or 0 for v in counted), default=0)
+    for key in ("blocked_s", "blocked_max_s"):
+        team[key] = round(team[key], 6)
+    return {"middleware": middleware, "team": team, "robots": robots}
 
 
 def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:

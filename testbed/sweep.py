@@ -173,6 +173,18 @@ def _check_maps(spec: sweepfile.SweepSpec) -> None:
                 raise UsageError(f"sweep: grid.laser_range on {where}: {exc}") from None
 
 
+def _check_middlewares(runs: list[PlannedRun]) -> None:
+    """Every middleware of the sweep can be opened here (its Python package installed), before
+    the first run: a missing one stops the sweep now instead of failing each of its runs."""
+    from testbed.runprepare import check_middleware
+
+    for name in dict.fromkeys(r.config.middleware for r in runs):
+        try:
+            check_middleware(name)
+        except UsageError as exc:
+            raise UsageError(f"sweep: {exc}") from None
+
+
 def _check_same_sweep(out: Path, runs: list[PlannedRun], sweep_file: str) -> None:
     """--resume continues the sweep that made `out`, never another one into it."""
     diff = other_sweep(out, runs)
@@ -203,6 +215,7 @@ def main(args: argparse.Namespace) -> int:
     runs = sweepfile.expand(spec)
     # Everything that can refuse the sweep comes before anything is made or locked.
     _check_maps(spec)
+    _check_middlewares(runs)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: exists and is not a directory")
     existing = sorted(p.name for p in (out / "runs").iterdir()) if (out / "runs").is_dir() else []

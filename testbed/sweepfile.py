@@ -18,6 +18,7 @@ for every run of the sweep::
     map = ["empty", "maps/office.png"]  # optional: maps as a grid dimension ("empty": the
                                   # paper's empty terrain; else as run.map)
     medium = ["veth", "ns3-wifi"] # optional: the radio medium as a grid dimension
+    middleware = ["nanomsg", "zeromq"]  # optional: the goals' middleware as a grid dimension
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -36,6 +37,8 @@ for every run of the sweep::
     wifi_standard = "80211b"      # ns3-wifi only: 80211a | 80211b | 80211g, default 80211a
     wifi_rate = "DsssRate1Mbps"   # ns3-wifi only: an ns-3 WifiMode or minstrel
     wifi_loss = "range"           # ns3-wifi only: range | logdistance
+    middleware = "zeromq"         # nanomsg | zeromq | zeromq-reqrep | zenoh | dds, default
+                                  # nanomsg (docs/middleware.md)
     seed = 0                      # optional base mixed into every derived seed
 
 The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
@@ -54,9 +57,9 @@ several sweep files. The file itself is a regular UTF-8 file of at most MAX_FILE
 
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
 its parameters and run index only, so they are the same every time the file is expanded
-(a routing, map or medium grid names its value in every id, `-aodv`, `-moffice`,
-`-ns3wifi`; the variants of a point share their seeds, so protocols, maps and media are
-compared on the same draws):
+(a routing, map, medium or middleware grid names its value in every id, `-aodv`,
+`-moffice`, `-ns3wifi`, `-zeromqreqrep`; the variants of a point share their seeds, so
+protocols, maps, media and middlewares are compared on the same draws):
 that is what lets an interrupted sweep resume without redoing a finished run. Runs are
 ordered run index first, so an interrupted sweep has covered every point once before it
 covers any point twice.

@@ -32,6 +32,14 @@ were *transmitted* by the robot (its own traffic and what it forwards); the rest
   uncorrected and are counted (`relay_lag`). A run without that file (veth, or older
   ns3-wifi runs) has the raw delays under `delay_ms_*` and none of these keys.
 - throughput: delivered TCP payload bytes over the span of the captures, in bit/s.
+- the middleware's traffic (`middleware`), a class of its own: the TCP frames each robot
+  transmitted to or from the goal port (GOAL_PORT), split into TCP's own (no payload:
+  handshakes, ACKs, FIN/RST) and those with data; the data, reassembled per connection and
+  direction, is walked in the middleware's framing (testbed.analysis.mwframing) into the
+  robots' messages (`message_bytes`) and the middleware's own bytes (`protocol_bytes`:
+  nanomsg's SP headers and length prefixes, ZeroMQ's greetings, commands, frame headers and
+  REQ/REP's delimiters and empty replies). Retransmitted payload is counted apart. The
+  metrics above still count all TCP, as before.
 
 Times are host wall-clock: with a time scale K, emulated time runs K times faster, so delays
 and throughput are those the kernel saw. `run_metrics` applies this to a run directory,
@@ -58,7 +66,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import relaylag, routingnotes, runs
+from testbed.analysis import mwframing, relaylag, routingnotes, runs
 from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
@@ -68,7 +76,15 @@ CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracl
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
-CACHE_FORMAT = 5  # 3: "emulated" and "about"; 4: "tcp_flows"; 5: relay-lag correction
+# 3: "emulated" and "about"; 4: "tcp_flows"; 5: relay-lag correction, or "middleware";
+# 6: both
+CACHE_FORMAT = 6
+# The robots' goal messages: the TCP port every robot's messenger listens on (node.launch's
+# --goal-port, which a run leaves at its default), and each middleware's framing on it
+# (testbed.analysis.mwframing). A middleware without an entry is not counted as a class.
+GOAL_PORT = 5101
+MIDDLEWARE_FRAMING = {"nanomsg": "sp", "zeromq": "zmtp", "zeromq-reqrep": "zmtp"}
+DEFAULT_MIDDLEWARE = "nanomsg"  # the only one before there was a choice
 
 _FIELDS = (
     "frame.time_epoch",
@@ -90,6 +106,7 @@ _FIELDS = (
     "ipv6.nxt",
     "frame.interface_id",  # in a merged capture, which input file the frame came from
     "ip.id",  # with the addresses, protocol and TCP sequence: a packet's identity across hops
+    "tcp.payload",  # hex; the middleware's framing is read from it
 )
 
 
@@ -113,6 +130,7 @@ class Frame:
     aodv_type: int | None = None
     interface: int = 0
     ip_id: int | None = None
+    tcp_payload: bytes = b""
 
 
 def _int(s: str, top: int = 0xFFFF) -> int | None:
@@ -182,6 +200,7 @@ def parse_fields(text: str) -> list[Frame]:
                     aodv_type=_int(f[15], 255),
                     interface=_int(f[17], _U32) or 0,
                     ip_id=_hex_int(f[18]),
+                    tcp_payload=bytes.fromhex(f[19]),
                 )
             )
         except ValueError:
@@ -469,9 +488,11 @@ def compute(
     addrs: dict[int, str],
     port: int = 654,
     lags: list[relaylag.LagRecord] | None = None,
+    middleware: str = DEFAULT_MIDDLEWARE,
 ) -> dict:
     """Routing metrics of one run from each robot's frames (see the module docstring); with
-    `lags`, the ns3-wifi channel's relay-lag records, delays are corrected for them."""
+    `lags`, the ns3-wifi channel's relay-lag records, delays are corrected for them; the
+    goal messages' port is counted as `middleware`'s traffic."""
     traffic = _Traffic(sources=set(addrs.values()))
     robots = {
         f"r{k}": _robot_counts(frames, addrs[k], port, traffic)
@@ -480,6 +501,11 @@ def compute(
     duration = (traffic.t_max - traffic.t_min) if traffic.t_max > traffic.t_min else 0.0
     index = relaylag.LagIndex(lags) if lags is not None else None
     delivery = _deliveries(traffic, index, {a: k for k, a in addrs.items()})
+    framing = MIDDLEWARE_FRAMING.get(middleware)
+    if framing is not None:
+        for k, frames in captures.items():
+            r = robots[f"r{k}"]
+            r["middleware"] = _middleware_counts(frames, addrs[k], r["mac"], framing)
     return {
         "format": CACHE_FORMAT,
         "control_port": port,
@@ -487,8 +513,85 @@ def compute(
         **_control_totals(robots),
         **_delivery_metrics(traffic, delivery, duration),
         **(_lag_metrics(delivery, len(lags)) if lags is not None else {}),
+        "middleware": _middleware_totals(middleware, framing, robots),
         "robots": robots,
     }
+
+
+# ---------------------------------------------------------------- the middleware's traffic
+
+MIDDLEWARE_COUNTS = (
+    "tx_packets", "tx_bytes", "tcp_control_packets", "tcp_control_bytes", "data_packets",
+    "data_bytes", "payload_bytes", "retransmitted_payload_bytes", "messages", "message_bytes",
+    "protocol_bytes", "unparsed_bytes",
+)  # fmt: skip
+
+
+def _stream(segments: list[tuple[int, bytes]]) -> tuple[bytes, int]:
+    """One direction of a connection from its segments (raw sequence number, payload) in the
+    order sent: the bytes in sequence order up to the first gap, and the bytes after it."""
+    if not segments:
+        return b"", 0
+    first = segments[0][0]
+    pieces = sorted(((seq - first) & _U32, data) for seq, data in segments)
+    out = bytearray()
+    for rel, data in pieces:
+        if rel > len(out):  # a gap: the capture missed a segment
+            break
+        out += data[len(out) - rel :]
+    return bytes(out), sum(len(d) for rel, d in pieces if rel > len(out))
+
+
+def _middleware_counts(frames: list[Frame], addr: str, mac: str | None, framing: str) -> dict:
+    """What one robot transmitted on the goal port (see the module docstring)."""
+    r = dict.fromkeys(MIDDLEWARE_COUNTS, 0)
+    flows: dict[tuple, list[tuple[int, bytes]]] = defaultdict(list)
+    seen: set[tuple] = set()
+    for f in frames:
+        if mac is None or f.eth_src != mac or f.ip_src != addr or f.ip_proto != 6:
+            continue
+        if GOAL_PORT not in (f.tcp_sport, f.tcp_dport):
+            continue
+        r["tx_packets"] += 1
+        r["tx_bytes"] += f.length
+        if not f.tcp_len:
+            r["tcp_control_packets"] += 1
+            r["tcp_control_bytes"] += f.length
+            continue
+        r["data_packets"] += 1
+        r["data_bytes"] += f.length
+        r["payload_bytes"] += f.tcp_len
+        flow = (f.ip_dst, f.tcp_sport, f.tcp_dport)
+        if (flow, f.tcp_seq) in seen:
+            r["retransmitted_payload_bytes"] += f.tcp_len
+            continue
+        seen.add((flow, f.tcp_seq))
+        flows[flow].append((f.tcp_seq or 0, f.tcp_payload))
+    whole = mwframing.Split()
+    for segments in flows.values():
+        stream, after_gap = _stream(segments)
+        part = mwframing.split(framing, stream)
+        part.unparsed += after_gap
+        whole.add(part)
+    r["messages"] = whole.messages
+    r["message_bytes"] = whole.payload
+    r["protocol_bytes"] = whole.protocol
+    r["unparsed_bytes"] = whole.unparsed
+    return r
+
+
+def _middleware_totals(middleware: str, framing: str | None, robots: dict[str, dict]) -> dict:
+    """The team's middleware traffic: the robots' counts summed, and the share of the
+    middleware's bytes on the wire that were the robots' messages."""
+    out: dict = {"name": middleware, "port": GOAL_PORT, "framing": framing}
+    if framing is None:
+        return out
+    for key in MIDDLEWARE_COUNTS:
+        out[key] = sum(r["middleware"][key] for r in robots.values() if "middleware" in r)
+    out["message_fraction_bytes"] = (
+        out["message_bytes"] / out["tx_bytes"] if out["tx_bytes"] else None
+    )
+    return out
 
 
 # ---------------------------------------------------------------- the AODV daemons' counters
@@ -636,10 +739,12 @@ def run_metrics(
             raise runs.ResultError(str(e)) from None
         if partial:
             log.warning("%s: a record cut short at its end (%d bytes) left out", lag_path, partial)
+    middleware = run.config.extra.get("middleware") if run is not None else None
     captures = read_pcaps(pcaps)
     metrics = compute(
-        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654), lags
-    )
+        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654), lags,
+        middleware if isinstance(middleware, str) else DEFAULT_MIDDLEWARE,
+    )  # fmt: skip
     metrics["pcaps"] = stamp
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)

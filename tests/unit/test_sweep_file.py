@@ -315,3 +315,25 @@ def test_medium_fixed_in_run_is_not_in_the_ids():
     assert {r.config.medium for r in runs} == {"ns3-wifi"}
     assert {r.config.wifi_loss for r in runs} == {"logdistance"}
     assert runs[0].run_id == "n01-c5-l2-k1"
+
+
+def test_middleware_as_a_grid_dimension_names_itself_and_shares_seeds():
+    text = GOOD.replace("runs = 2", 'runs = 1\nmiddleware = ["nanomsg", "zeromq-reqrep"]')
+    runs = sweepfile.expand(parse(text))
+    assert len(runs) == 2 * 2 * 2
+    ids = {r.run_id: r.config for r in runs}
+    plain, reqrep = ids["n02-c20-l2-nanomsg-k1"], ids["n02-c20-l2-zeromqreqrep-k1"]
+    assert (plain.middleware, reqrep.middleware) == ("nanomsg", "zeromq-reqrep")
+    assert plain.seed == reqrep.seed
+    assert len({r.point for r in runs}) == len(runs)
+    # A newer option: in a plan only when not the default, so older sweeps' plans stay.
+    assert "middleware" not in plan_dict(plain)
+    assert plan_dict(reqrep)["middleware"] == "zeromq-reqrep"
+
+
+def test_middleware_fixed_in_run_is_not_in_the_ids_and_a_bad_one_is_named():
+    runs = sweepfile.expand(parse(GOOD.replace("capture = true", 'middleware = "zeromq"')))
+    assert {r.config.middleware for r in runs} == {"zeromq"}
+    assert runs[0].run_id == "n01-c5-l2-k1"
+    with pytest.raises(UsageError, match="run.middleware: expected one of nanomsg"):
+        parse(GOOD.replace("capture = true", 'middleware = "mqtt"'))

@@ -165,3 +165,20 @@ def test_every_map_of_the_grid_is_checked_before_the_first_run(env, tmp_path):  
     refused(run_sweep(dict(env, file=laser), out),
             "grid.laser_range on the empty terrain: --laser-range 29 is longer than the map's "
             "diagonal")  # fmt: skip
+
+
+def test_a_middleware_whose_package_is_missing_refuses_the_sweep_before_any_run(env, tmp_path):  # noqa: F811
+    grid = tmp_path / "middleware.toml"
+    grid.write_text(env["file"].read_text().replace(
+        "runs = 1", 'runs = 1\nmiddleware = ["nanomsg", "zeromq"]'))  # fmt: skip
+    out = tmp_path / "out"
+    code = (
+        "import runpy, sys; sys.modules['zmq'] = None; "  # as if pyzmq were not installed
+        f"sys.argv = ['testbed.sweep', {str(grid)!r}, '--out', {str(out)!r}]; "
+        "runpy.run_module('testbed.sweep', run_name='__main__')"
+    )
+    r = subprocess.run([sys.executable, "-c", code], env=env["env"], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)  # fmt: skip
+    refused(r, "sweep: --middleware zeromq needs the Python package pyzmq")
+    assert not out.exists()
+    assert not list(env["pids"].iterdir())  # no run was started
