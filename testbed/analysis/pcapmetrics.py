@@ -487,6 +487,7 @@ def compute(
     captures: dict[int, list[Frame]],
     addrs: dict[int, str],
     port: int = 654,
+    *,
     lags: list[relaylag.LagRecord] | None = None,
     middleware: str = DEFAULT_MIDDLEWARE,
 ) -> dict:
@@ -742,8 +743,8 @@ def run_metrics(
     middleware = run.config.extra.get("middleware") if run is not None else None
     captures = read_pcaps(pcaps)
     metrics = compute(
-        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654), lags,
-        middleware if isinstance(middleware, str) else DEFAULT_MIDDLEWARE,
+        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654),
+        lags=lags, middleware=middleware if isinstance(middleware, str) else DEFAULT_MIDDLEWARE,
     )  # fmt: skip
     metrics["pcaps"] = stamp
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))

@@ -27,17 +27,20 @@ def _free_port() -> int:
 
 def _pair(name: str, port: int, listening: tuple[int, ...] = (1, 2)):
     """Messengers of robots 1 and 2 on 127.0.0.1 and 127.0.0.2, the same port, as in a run
-    (only those in `listening` are made)."""
+    (only those in `listening` are made). Cyclone DDS binds its sockets to every address:
+    its two robots share 127.0.0.1 and one network stack, told apart by participant index."""
+    dds = name == "dds"
     return {
         k: open_messenger(
             name,
             me=k,
-            bind_addr=f"127.0.0.{k}",
+            bind_addr="127.0.0.1" if dds else f"127.0.0.{k}",
             port=port,
-            addr_of=lambda j: f"127.0.0.{j}",
+            addr_of=(lambda j: "127.0.0.1") if dds else (lambda j: f"127.0.0.{j}"),
             team=(1, 2),
             send_timeout_ms=TIMEOUT_MS,
             reconnect_ms=(10, 100),
+            **({"shared_stack": 2} if dds else {}),
         )  # fmt: skip
         for k in listening
     }

@@ -78,7 +78,9 @@ def test_the_captures_count_the_middleware_apart_from_tcp_and_the_messages_apart
     assert team["message_fraction_bytes"] == len(GOAL) / mw["tx_bytes"]
     # The routing metrics still count all TCP, the middleware's included.
     assert m["tcp_segments_sent"] == 3
-    other = pm.compute({1: r1}, {1: A1}, 654, "dds")  # no framing known here: not a class
+    other = pm.compute(
+        {1: r1}, {1: A1}, 654, middleware="dds"
+    )  # no framing known here: not a class
     assert other["middleware"] == {"name": "dds", "port": pm.GOAL_PORT, "framing": None}
     assert "middleware" not in other["robots"]["r1"]
 
