@@ -12,7 +12,9 @@ import argparse
 import dataclasses
 import re
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from node import coordination
 from node.flood import MODES
@@ -23,33 +25,55 @@ from topology.argtypes import number
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
 
 
+def arg(default=dataclasses.MISSING, help: str = "", *, kind: type | None = None,
+        parse: Callable[[str], Any] | None = None, above: float | None = None,
+        minimum: float | None = None, choices: tuple[str, ...] | None = None,
+        run: bool = False) -> Any:
+    """A NodeArgs field and its flag: the default, the help, how the text is read (`parse`,
+    or a number of `kind` within `above`/`minimum`, or one of `choices`), and whether a run
+    passes its RunConfig field of the same name through (`run`: testbed.run does, and
+    testbed.runconfig takes the default and bounds of that option from here). No default:
+    the flag is required."""  # fmt: skip
+    meta = {"help": help, "kind": kind, "parse": parse, "above": above, "minimum": minimum,
+            "choices": choices, "run": run}  # fmt: skip
+    return dataclasses.field(default=default, metadata={"arg": meta})
+
+
 @dataclass(frozen=True)
 class NodeArgs:
-    robot: int
-    robots: int  # team size (exploring robots; the display is robots + 1)
-    body: str  # the Unix socket of the world's body link
-    role: str = "robot"  # or "display"
-    events: str | None = None  # JSON-lines event log to append to
-    map_size: tuple[int, int] = (400, 400)  # rows, columns
-    cell: float = 0.05  # metres per map cell
-    laser_range: float = 2.0
-    laser_rays: int = 360
-    speed: float = 0.1  # metres per step
-    radius: float = 0.15
-    plan_period: int = 20  # steps between plans on the timer
-    map_period: int = 10  # steps between map floods
-    time_scale: float = 1.0
-    timer_phase: int = 0  # steps added to the first timer period
-    iface: str = "wlan0"  # '' to not bind floods to a device
-    flood_port: int = 5100
-    flood: str = "pruned"
-    coordination: str = coordination.DEFAULT  # how goals are agreed: "paper" or "ours"
-    goal_port: int = 5101
-    middleware: str = DEFAULT_MIDDLEWARE  # what carries goals and requests (node.messaging)
-    bind: str | None = None  # address for the goal socket (default: the robot's)
-    out_dir: str | None = None  # display: where snapshots and the video go
-    snapshots: frozenset[int] = frozenset()  # display: steps with a PNG snapshot
-    video_every: int = 10  # display: steps between video frames
+    """The robot's parameters: each declared once, here, with its default and bounds."""
+
+    robot: int = arg(help="this robot, e.g. r3", parse=lambda t: robot_number(t))
+    robots: int = arg(help="team size (exploring; the display is robots + 1)", kind=int,
+                      above=0)  # fmt: skip
+    body: str = arg(help="Unix socket of the world's body link")
+    role: str = arg("robot", "robot, or the display", choices=("robot", "display"))
+    events: str | None = arg(None, "JSON-lines event log to append to")
+    map_size: tuple[int, int] = arg((400, 400), "ROWSxCOLS cells", parse=lambda t: shape(t))
+    cell: float = arg(0.05, "metres per map cell", kind=float, above=0)
+    laser_range: float = arg(2.0, "laser range (m)", kind=float, above=0, run=True)
+    laser_rays: int = arg(360, "rays of a laser scan", kind=int, minimum=4, run=True)
+    speed: float = arg(0.1, "metres per step", kind=float, above=0, run=True)
+    radius: float = arg(0.15, "the robot's radius (m)", kind=float, above=0, run=True)
+    plan_period: int = arg(20, "steps between plans on the timer", kind=int, above=0, run=True)
+    map_period: int = arg(10, "steps between map floods", kind=int, minimum=1, run=True)
+    time_scale: float = arg(1.0, "emulated time over wall time", kind=float, above=0, run=True)
+    timer_phase: int = arg(0, "steps added to the first timer", kind=int)
+    iface: str = arg("wlan0", "'' to not bind floods to a device")
+    flood_port: int = arg(5100, "UDP port of the map floods", kind=int, above=0)
+    flood: str = arg("pruned", "map flooding: self-pruning, or blind (every robot relays)",
+                     choices=MODES, run=True)  # fmt: skip
+    coordination: str = arg(coordination.DEFAULT, "goal coordination: the paper's rules read "
+                            "literally, or ours (node.coordination)", choices=coordination.MODES,
+                            run=True)  # fmt: skip
+    goal_port: int = arg(5101, "port of the goal messages", kind=int, above=0)
+    middleware: str = arg(DEFAULT_MIDDLEWARE, "what carries goals and re-plan requests "
+                          "(node.messaging)", choices=MIDDLEWARES, run=True)  # fmt: skip
+    bind: str | None = arg(None, "address for the goal socket (default: the robot's)")
+    out_dir: str | None = arg(None, "display: where snapshots and the video go")
+    snapshots: frozenset[int] = arg(frozenset(), "display: steps, e.g. 100,500",
+                                    parse=lambda t: steps(t))  # fmt: skip
+    video_every: int = arg(10, "display: steps between video frames", kind=int, above=0)
 
     @classmethod
     def parse(cls, argv: list[str] | None = None) -> NodeArgs:
@@ -106,54 +130,35 @@ class _Parser(argparse.ArgumentParser):
 
 
 def parser() -> argparse.ArgumentParser:
+    """`python -m node`'s parser, made from NodeArgs' fields (dest: the field's name)."""
     p = _Parser(prog="python -m node", description=USAGE)
-    p.add_argument("--robot", type=robot_number, required=True)
-    p.add_argument(
-        "--robots",
-        type=number(int, "--robots", above=0),
-        required=True,
-        help="team size (exploring)",
-    )
-    p.add_argument("--role", choices=("robot", "display"), default="robot")
-    p.add_argument("--body", required=True, help="Unix socket of the world's body link")
-    p.add_argument("--events", help="JSON-lines event log to append to")
-    p.add_argument("--map-size", type=shape, default=(400, 400), help="ROWSxCOLS cells")
-    p.add_argument("--cell", type=number(float, "--cell", above=0), default=0.05)
-    p.add_argument("--laser-range", type=number(float, "--laser-range", above=0), default=2.0)
-    p.add_argument("--laser-rays", type=number(int, "--laser-rays", above=0), default=360)
-    p.add_argument(
-        "--speed", type=number(float, "--speed", above=0), default=0.1, help="metres per step"
-    )
-    p.add_argument("--radius", type=number(float, "--radius", above=0), default=0.15)
-    p.add_argument("--plan-period", type=number(int, "--plan-period", above=0), default=20)
-    p.add_argument("--map-period", type=number(int, "--map-period", above=0), default=10)
-    p.add_argument("--time-scale", type=number(float, "--time-scale", above=0), default=1.0)
-    p.add_argument("--timer-phase", type=int, default=0, help="steps added to the first timer")
-    p.add_argument("--iface", default="wlan0", help="'' to not bind floods to a device")
-    p.add_argument("--flood-port", type=number(int, "--flood-port", above=0), default=5100)
-    p.add_argument(
-        "--flood",
-        choices=MODES,
-        default="pruned",
-        help="map flooding: self-pruning (default) or blind (every robot relays)",
-    )
-    p.add_argument(
-        "--coordination",
-        choices=coordination.MODES,
-        default=coordination.DEFAULT,
-        help="goal coordination: the paper's rules read literally, or ours (node.coordination)",
-    )
-    p.add_argument("--goal-port", type=number(int, "--goal-port", above=0), default=5101)
-    p.add_argument(
-        "--middleware",
-        choices=MIDDLEWARES,
-        default=DEFAULT_MIDDLEWARE,
-        help="what carries goals and re-plan requests (node.messaging)",
-    )
-    p.add_argument("--bind", help="address for the goal socket (default: the robot's)")
-    p.add_argument("--out-dir", help="display: where snapshots and the video go")
-    p.add_argument(
-        "--snapshots", type=steps, default=frozenset(), help="display: steps, e.g. 100,500"
-    )
-    p.add_argument("--video-every", type=number(int, "--video-every", above=0), default=10)
+    for f in dataclasses.fields(NodeArgs):
+        meta = f.metadata["arg"]
+        flag = "--" + f.name.replace("_", "-")
+        kw: dict[str, Any] = {"dest": f.name, "help": meta["help"]}
+        if meta["parse"] is not None:
+            kw["type"] = meta["parse"]
+        elif meta["kind"] is not None:
+            kw["type"] = number(meta["kind"], flag, above=meta["above"], minimum=meta["minimum"])
+        if meta["choices"] is not None:
+            kw["choices"] = meta["choices"]
+        if f.default is dataclasses.MISSING:
+            kw["required"] = True
+        else:
+            kw["default"] = f.default
+        p.add_argument(flag, **kw)
     return p
+
+
+def run_params() -> dict[str, dataclasses.Field]:
+    """The fields a run passes through from its RunConfig fields of the same names."""
+    return {f.name: f for f in dataclasses.fields(NodeArgs) if f.metadata["arg"]["run"]}
+
+
+def bounds(name: str) -> dict:
+    """The default and bounds of robot parameter `name`, for the run option that sets it."""
+    f = {f.name: f for f in dataclasses.fields(NodeArgs)}[name]
+    meta = f.metadata["arg"]
+    out = {"default": f.default}
+    out.update({k: meta[k] for k in ("above", "minimum", "choices") if meta[k] is not None})
+    return out

@@ -46,6 +46,7 @@ from node.events import EventLog
 from node.flood import Flooder
 from node.grid import FREE, OCC, OccupancyGrid
 from node.lateness import MS_BOUNDS, Lateness
+from node.launch import NodeArgs
 from node.messaging.arrivals import Arrivals
 from node.messaging.contract import Messenger
 from node.rays import _BIAS, Laser
@@ -77,21 +78,24 @@ MOTION_NICE = -5  # its nice value where real-time priority is refused
 
 @dataclass(frozen=True)
 class RobotConfig:
+    """What a robot process runs with; the parameters its command line sets take their
+    defaults from there (node.launch.NodeArgs), the one place they are declared."""
+
     robot: int
     robots: int
-    shape: tuple[int, int] = (400, 400)
-    cell: float = 0.05
-    laser_range: float = 2.0
-    laser_rays: int = 360
-    speed: float = 0.1  # metres per step (the world's; for waypoint tolerance)
-    radius: float = 0.15
-    plan_period: int = 20
-    map_period: int = 10
+    shape: tuple[int, int] = NodeArgs.map_size
+    cell: float = NodeArgs.cell
+    laser_range: float = NodeArgs.laser_range
+    laser_rays: int = NodeArgs.laser_rays
+    speed: float = NodeArgs.speed  # metres per step (the world's; for waypoint tolerance)
+    radius: float = NodeArgs.radius
+    plan_period: int = NodeArgs.plan_period
+    map_period: int = NodeArgs.map_period
     full_period: int = 500  # whole local map at least this often (and on reunions)
     reach_steps: int = 30
     goal_fresh_steps: int = 40
     timing: RobotTimings = RobotTimings()  # every wall-clock duration (node.timing)
-    coordination: str = coordination.DEFAULT  # how goals are agreed (node.coordination)
+    coordination: str = NodeArgs.coordination  # how goals are agreed (node.coordination)
     planner_factor: int = 2
     phase: int = 0  # steps added to the first timer period (and map floods' offset)
 

@@ -57,7 +57,7 @@ import time
 from dataclasses import dataclass
 
 from node import body, messaging
-from node.launch import NodeArgs
+from node.launch import NodeArgs, run_params
 from node.sched import deadline_priority
 from testbed import isolation, runresults
 from testbed.errors import TestbedError
@@ -271,13 +271,9 @@ class Run:
     def _node_args(self, k: int, server: BodyServer, **role: object) -> NodeArgs:
         """What robot k's process is told: the run's parameters plus its role's own."""
         cfg, truth = self.cfg, self.prep.truth
-        return NodeArgs(
-            robot=k, robots=self.n, body=server.path, map_size=truth.shape,
-            cell=truth.cell, laser_range=cfg.laser_range, laser_rays=cfg.laser_rays,
-            speed=cfg.speed, radius=cfg.radius, plan_period=cfg.plan_period,
-            map_period=cfg.map_period, time_scale=cfg.time_scale, flood=cfg.flood,
-            coordination=cfg.coordination, middleware=cfg.middleware, **role,
-        )  # fmt: skip
+        passed = {name: getattr(cfg, name) for name in run_params()}  # same names both sides
+        return NodeArgs(robot=k, robots=self.n, body=server.path, map_size=truth.shape,
+                        cell=truth.cell, **passed, **role)  # fmt: skip
 
     def _display_args(self, server: BodyServer) -> NodeArgs:
         prep = self.prep

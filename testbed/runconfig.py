@@ -14,10 +14,7 @@ import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from node import coordination
-from node.flood import MODES as FLOOD_MODES
-from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
-from node.messaging import MIDDLEWARES
+from node.launch import bounds as robot
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
@@ -103,7 +100,7 @@ class RunConfig:
                                sweep={GRID}, net=True,
                                grid=GridDim(1, lambda r: f"c{fmt(r)}", seeded=True))  # fmt: skip
     laser_range: float = option(float, f"laser range, at most {MAX_LASER_RANGE_M:g} m and the "
-                                "map's diagonal", 2.0, unit="metres", above=0,
+                                "map's diagonal", **robot("laser_range"), unit="metres",
                                 maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID},
                                 grid=GridDim(2, lambda r: f"l{fmt(r)}", seeded=True))  # fmt: skip
     seed: int = option(int, SEED_HELP, 1, minimum=0, metavar="S")
@@ -163,8 +160,8 @@ class RunConfig:
                             unit=f"steps of {STEP_S_TEXT}", minimum=1, sweep={RUN})  # fmt: skip
     coordination: str = option(
         str, "goal coordination: 'paper' reads the paper's rules literally, 'ours' departs "
-        "from them where the text is silent; see README, 'Coordination'", coordination.DEFAULT,
-        choices=coordination.MODES, sweep={GRID}, grid=GridDim(5, str, CHANGED),
+        "from them where the text is silent; see README, 'Coordination'",
+        **robot("coordination"), sweep={GRID}, grid=GridDim(5, str, CHANGED),
     )  # fmt: skip
     start: str = option(str, "start placement: clustered near a corner (as in the paper), "
                         "clustered at the centre, or spread over the map", "corner",
@@ -172,22 +169,22 @@ class RunConfig:
                         grid=GridDim(6, str, CHANGED))  # fmt: skip
     middleware: str = option(
         str, "the middleware of the robots' goal messages (goals, requests to plan again): "
-        "see docs/middleware.md", DEFAULT_MIDDLEWARE, choices=MIDDLEWARES,
+        "see docs/middleware.md", **robot("middleware"),
         sweep={GRID, RUN}, newer=True, grid=GridDim(10, medium_label, VARIED),
     )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip
-    laser_rays: int = option(int, "rays of a laser scan", 360, minimum=4, metavar="N")
+    laser_rays: int = option(int, "rays of a laser scan", **robot("laser_rays"), metavar="N")
     # The field is in metres per step, the flag in m/s (per_step).
-    speed: float = option(float, "robot speed", 0.1, unit="m/s", above=0, metavar="V",
+    speed: float = option(float, "robot speed", **robot("speed"), unit="m/s", metavar="V",
                           per_step=STEP_S)  # fmt: skip
-    radius: float = 0.15
-    plan_period: int = 20
-    map_period: int = option(int, "steps between a robot's map floods", 10, unit="steps",
-                             minimum=1, metavar="N")  # fmt: skip
+    radius: float = robot("radius")["default"]
+    plan_period: int = robot("plan_period")["default"]
+    map_period: int = option(int, "steps between a robot's map floods", **robot("map_period"),
+                             unit="steps", metavar="N")  # fmt: skip
     flood: str = option(str, "map flooding: pruned (self-pruning) or blind (every robot "
-                        "relays every flood)", "pruned", choices=FLOOD_MODES)  # fmt: skip
+                        "relays every flood)", **robot("flood"))  # fmt: skip
     display_pos: tuple[float, float] | None = option(
         str, "where the display stands", None, unit="metres", parse=_point, metavar="X,Y",
         text=lambda p: f"{p[0]!r},{p[1]!r}", default_text="the map's centre",

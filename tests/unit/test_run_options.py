@@ -195,3 +195,28 @@ def test_the_report_reads_both_shapes_of_a_sweeps_spec():
         "teams [1, 2], ranges [5.0, 20.0] m, lasers [2.0] m, loss [0.0] %"
         in (_spec_lines(spec.to_dict(), state)[0])
     )
+
+
+def test_the_robots_parameters_are_declared_once_in_node_launch():
+    """A run passes each robot parameter through by name (node.launch.run_params); its run
+    option, the robot's own config and the robot's command line take the default and the
+    bounds from NodeArgs' one declaration, so they cannot disagree."""
+    from node.launch import NodeArgs, bounds, parser, run_params
+    from node.robot import RobotConfig
+    from testbed.runconfig import BY_NAME
+
+    robot_defaults = {f.name: f.default for f in dataclasses.fields(RobotConfig)}
+    run_defaults = {f.name: f.default for f in dataclasses.fields(RunConfig)}
+    flags = {a.dest: a for a in parser()._actions}
+    for name, f in run_params().items():
+        assert run_defaults[name] == f.default == flags[name].default, name
+        if name in robot_defaults:
+            assert robot_defaults[name] == f.default, name
+        opt = BY_NAME.get(name)
+        if opt is None or name == "time_scale":  # not an option, or the run's own clock
+            continue
+        for key, value in bounds(name).items():
+            if key != "default":
+                assert getattr(opt, key) == value, (name, key)
+    assert "laser_rays" in run_params() and BY_NAME["laser_rays"].minimum == 4
+    assert NodeArgs(robot=1, robots=1, body="b").laser_rays == BY_NAME["laser_rays"].default
