@@ -106,15 +106,12 @@ def _builtin_kind(entity: bytes) -> str:
     return BUILTIN_KINDS.get(int.from_bytes(entity[:3], "big"), "builtin_other")
 
 
-def split(datagram: bytes, seen: set[tuple[bytes, bytes, bytes]]) -> Split:
-    """One UDP datagram's RTPS message; `seen` holds the (GUID prefix, writer, sequence
-    number) of the robots' DATA counted so far, and gains this datagram's."""
-    out = Split()
+def submessages(datagram: bytes) -> tuple[list[tuple[int, int, bytes]], int]:
+    """An RTPS datagram's submessages as (id, flags, body), and where the walk stopped (the
+    datagram's length, unless a submessage runs past it); ([], 0) if it is not RTPS."""
     if len(datagram) < HEADER or not datagram.startswith(MAGIC):
-        out.unparsed = len(datagram)
-        return out
-    out.own("rtps_header", HEADER)
-    prefix = datagram[8:HEADER]
+        return [], 0
+    out = []
     at = HEADER
     while at + SUB_HEADER <= len(datagram):
         sub_id, flags = datagram[at], datagram[at + 1]
@@ -124,9 +121,23 @@ def split(datagram: bytes, seen: set[tuple[bytes, bytes, bytes]]) -> Split:
         end = at + SUB_HEADER + length
         if end > len(datagram):
             break
-        body = datagram[at + SUB_HEADER : end]
-        size = SUB_HEADER + length
+        out.append((sub_id, flags, datagram[at + SUB_HEADER : end]))
         at = end
+    return out, at
+
+
+def split(datagram: bytes, seen: set[tuple[bytes, bytes, bytes]]) -> Split:
+    """One UDP datagram's RTPS message; `seen` holds the (GUID prefix, writer, sequence
+    number) of the robots' DATA counted so far, and gains this datagram's."""
+    out = Split()
+    subs, walked = submessages(datagram)
+    out.unparsed = len(datagram) - walked
+    if not walked:
+        return out
+    out.own("rtps_header", HEADER)
+    prefix = datagram[8:HEADER]
+    for sub_id, flags, body in subs:
+        size = SUB_HEADER + len(body)
         if sub_id in INFO:
             out.own("info", size)
             continue
@@ -154,5 +165,4 @@ def split(datagram: bytes, seen: set[tuple[bytes, bytes, bytes]]) -> Split:
             seen.add((prefix, writer, body[12:20]))
             out.message(n)
             out.own("data_headers", size - n)
-    out.unparsed += len(datagram) - at
     return out
