@@ -379,12 +379,13 @@ def _robot_counts(frames: list[Frame], addr: str, port: int, traffic: _Traffic) 
                 r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
                 if port == CONTROL_PORTS["aodv"]:
                     r["aodv_tx_by_type"][_aodv_kind(f)] += 1
-            if f.ip_src == addr and f.tcp_len and f.ip_dst != addr and f.ip_proto == 6:
+            segment = f.tcp_len and f.tcp_seq is not None and f.ip_proto == 6  # (seq: a match)
+            if f.ip_src == addr and segment and f.ip_dst != addr:
                 r["tcp_segments_sent"] += traffic.transmitted(f)
         else:
             r["rx_packets"] += 1
             r["control_rx_packets"] += control
-            to_me = f.ip_dst == addr and f.tcp_len and f.ip_proto == 6
+            to_me = f.ip_dst == addr and f.tcp_len and f.tcp_seq is not None and f.ip_proto == 6
             if to_me and f.ip_src in traffic.sources:
                 traffic.got(f)
     r["aodv_tx_by_type"] = dict(r["aodv_tx_by_type"])
@@ -607,7 +608,7 @@ def _udp_split(frames: list[Frame], r: dict) -> mwframing.Split:
     whole = mwframing.Split()
     seen: set[tuple] = set()
     for f in frames:
-        if f.ip_proto != 17 or not {f.udp_sport, f.udp_dport} & set(DDS_PORTS):
+        if f.ip_proto != 17 or not (f.udp_sport in DDS_PORTS or f.udp_dport in DDS_PORTS):
             continue
         size = max(len(f.udp_payload), (f.udp_len or 8) - 8)
         r["tx_packets"] += 1
