@@ -32,14 +32,19 @@ were *transmitted* by the robot (its own traffic and what it forwards); the rest
   uncorrected and are counted (`relay_lag`). A run without that file (veth, or older
   ns3-wifi runs) has the raw delays under `delay_ms_*` and none of these keys.
 - throughput: delivered TCP payload bytes over the span of the captures, in bit/s.
-- the middleware's traffic (`middleware`), a class of its own: the TCP frames each robot
-  transmitted to or from the goal port (GOAL_PORT), split into TCP's own (no payload:
-  handshakes, ACKs, FIN/RST) and those with data; the data, reassembled per connection and
-  direction, is walked in the middleware's framing (testbed.analysis.mwframing) into the
-  robots' messages (`message_bytes`) and the middleware's own bytes (`protocol_bytes`:
-  nanomsg's SP headers and length prefixes, ZeroMQ's greetings, commands, frame headers and
-  REQ/REP's delimiters and empty replies). Retransmitted payload is counted apart. The
-  metrics above still count all TCP, as before.
+- the middleware's traffic (`middleware`), a class of its own: the frames each robot
+  transmitted on the middleware's ports. Over TCP (nanomsg, zeromq, zeromq-reqrep, zenoh:
+  to or from the goal port, GOAL_PORT), split into TCP's own (no payload: handshakes, ACKs,
+  FIN/RST) and those with data; the data, reassembled per connection and direction, is
+  walked in the middleware's framing (testbed.analysis.mwframing) into the robots' messages
+  (`message_bytes`) and the middleware's own bytes (`protocol_bytes`: nanomsg's SP headers
+  and length prefixes, ZeroMQ's greetings, commands, frame headers and REQ/REP's delimiters
+  and empty replies, Zenoh's batch lengths, handshakes, keep-alives, declarations and the
+  headers around each message). Retransmitted payload is counted apart. Over UDP (dds: to or
+  from DDS_PORTS), each datagram's RTPS (testbed.analysis.rtps) into the messages and
+  Cyclone's own: discovery, reliability, headers; a DATA that DDS retransmitted is counted
+  apart. `protocol_by_kind` breaks the own bytes down. The metrics above still count all
+  TCP, as before.
 
 Times are host wall-clock: with a time scale K, emulated time runs K times faster, so delays
 and throughput are those the kernel saw. `run_metrics` applies this to a run directory,
@@ -66,7 +71,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.analysis import mwframing, relaylag, routingnotes, runs
+from testbed.analysis import mwframing, relaylag, routingnotes, rtps, runs
 from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
@@ -77,13 +82,20 @@ AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
 # 3: "emulated" and "about"; 4: "tcp_flows"; 5: relay-lag correction, or "middleware";
-# 6: both
-CACHE_FORMAT = 6
-# The robots' goal messages: the TCP port every robot's messenger listens on (node.launch's
+# 6: both; 7: the middleware's traffic for zenoh and dds, and by kind
+CACHE_FORMAT = 7
+# The robots' goal messages: the port every robot's messenger listens on (node.launch's
 # --goal-port, which a run leaves at its default), and each middleware's framing on it
-# (testbed.analysis.mwframing). A middleware without an entry is not counted as a class.
+# (testbed.analysis.mwframing, testbed.analysis.rtps). A middleware without an entry is not
+# counted as a class.
 GOAL_PORT = 5101
-MIDDLEWARE_FRAMING = {"nanomsg": "sp", "zeromq": "zmtp", "zeromq-reqrep": "zmtp"}
+MIDDLEWARE_FRAMING = {
+    "nanomsg": "sp", "zeromq": "zmtp", "zeromq-reqrep": "zmtp", "zenoh": "zenoh", "dds": "rtps",
+}  # fmt: skip
+# Cyclone DDS's unicast ports with Ports/Base = the goal port (node/messaging/dds.py): the
+# discovery port and the data port of participant index 0, every robot's in the testbed.
+DDS_PORTS = (GOAL_PORT + 10, GOAL_PORT + 11)
+DATAGRAM_FRAMINGS = {"rtps"}  # over UDP; the others over TCP
 DEFAULT_MIDDLEWARE = "nanomsg"  # the only one before there was a choice
 
 _FIELDS = (
@@ -108,6 +120,9 @@ _FIELDS = (
     "ip.id",  # with the addresses, protocol and TCP sequence: a packet's identity across hops
     "tcp.payload",  # hex; the middleware's framing is read from it
 )
+# Asked for only when the middleware is DDS (its RTPS is read from it): written for every
+# UDP frame, map floods included, it costs tshark a tenth more time on a large run.
+_UDP_PAYLOAD = "udp.payload"
 
 
 @dataclass(frozen=True)
@@ -131,6 +146,7 @@ class Frame:
     interface: int = 0
     ip_id: int | None = None
     tcp_payload: bytes = b""
+    udp_payload: bytes = b""  # only when asked for (read_pcaps' udp_payload)
 
 
 def _int(s: str, top: int = 0xFFFF) -> int | None:
@@ -175,7 +191,7 @@ def parse_fields(text: str) -> list[Frame]:
         if not line:
             continue
         f = line.split("\t")
-        f += [""] * (len(_FIELDS) - len(f))
+        f += [""] * (len(_FIELDS) + 1 - len(f))
         try:
             if not f[1]:
                 raise ValueError("no frame length")
@@ -201,6 +217,7 @@ def parse_fields(text: str) -> list[Frame]:
                     interface=_int(f[17], _U32) or 0,
                     ip_id=_hex_int(f[18]),
                     tcp_payload=bytes.fromhex(f[19]),
+                    udp_payload=bytes.fromhex(f[20]),
                 )
             )
         except ValueError:
@@ -208,25 +225,27 @@ def parse_fields(text: str) -> list[Frame]:
     return frames
 
 
-def _tshark_argv(path: str) -> list[str]:
+def _tshark_argv(path: str, udp_payload: bool = False) -> list[str]:
     argv = ["tshark", "-n", "-r", path, "-T", "fields", "-E", "separator=/t"]
     argv += ["-E", "occurrence=f"]
-    for name in _FIELDS:
+    for name in _FIELDS + ((_UDP_PAYLOAD,) if udp_payload else ()):
         argv += ["-e", name]
     return argv
 
 
-def read_pcap(path: str | Path) -> list[Frame]:
-    """All frames of one capture (one tshark process)."""
-    r = subprocess.run(_tshark_argv(str(path)), capture_output=True, text=True)
+def read_pcap(path: str | Path, udp_payload: bool = False) -> list[Frame]:
+    """All frames of one capture (one tshark process); with `udp_payload`, UDP's payload
+    too."""
+    r = subprocess.run(_tshark_argv(str(path), udp_payload), capture_output=True, text=True)
     if r.returncode != 0:
         # tshark exits 2 on a capture cut short (a run killed mid-write); keep what it read.
         log.warning("tshark on %s: status %d: %s", path, r.returncode, r.stderr.strip()[-200:])
     return parse_fields(r.stdout)
 
 
-def read_pcaps(paths: dict[int, Path]) -> dict[int, list[Frame]]:
-    """All frames of several captures, by key, with one tshark process.
+def read_pcaps(paths: dict[int, Path], udp_payload: bool = False) -> dict[int, list[Frame]]:
+    """All frames of several captures, by key, with one tshark process (`udp_payload` as
+    for read_pcap).
 
     tshark spends 0.3-0.4 s starting up (its dissectors) and a robot's capture takes it a
     tenth of that to read, so a run's captures are read together: mergecap joins them into one
@@ -236,7 +255,7 @@ def read_pcaps(paths: dict[int, Path]) -> dict[int, list[Frame]]:
     everything every file holds."""
     keys = sorted(paths)
     if len(keys) < 2:
-        return {k: read_pcap(paths[k]) for k in keys}
+        return {k: read_pcap(paths[k], udp_payload) for k in keys}
     with tempfile.TemporaryFile() as merge_err:
         merge = subprocess.Popen(
             ["mergecap", "-I", "none", "-F", "pcapng", "-w", "-", *(str(paths[k]) for k in keys)],
@@ -245,7 +264,10 @@ def read_pcaps(paths: dict[int, Path]) -> dict[int, list[Frame]]:
         )
         try:
             r = subprocess.run(
-                _tshark_argv("-"), stdin=merge.stdout, capture_output=True, text=True
+                _tshark_argv("-", udp_payload),
+                stdin=merge.stdout,
+                capture_output=True,
+                text=True,
             )
         finally:
             merge.stdout.close()
@@ -256,7 +278,8 @@ def read_pcaps(paths: dict[int, Path]) -> dict[int, list[Frame]]:
         why = why or r.stderr.strip()
         log.warning("merged read of %d captures failed (%s); reading each", len(keys), why[-200:])
         with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-            return dict(zip(keys, pool.map(read_pcap, (paths[k] for k in keys)), strict=True))
+            read = pool.map(lambda k: read_pcap(paths[k], udp_payload), keys)
+            return dict(zip(keys, read, strict=True))
     out: dict[int, list[Frame]] = {k: [] for k in keys}
     for f in parse_fields(r.stdout):
         out[keys[f.interface]].append(f)
@@ -356,12 +379,13 @@ def _robot_counts(frames: list[Frame], addr: str, port: int, traffic: _Traffic) 
                 r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
                 if port == CONTROL_PORTS["aodv"]:
                     r["aodv_tx_by_type"][_aodv_kind(f)] += 1
-            if f.ip_src == addr and f.tcp_len and f.ip_dst != addr and f.ip_proto == 6:
+            segment = f.tcp_len and f.tcp_seq is not None and f.ip_proto == 6  # (seq: a match)
+            if f.ip_src == addr and segment and f.ip_dst != addr:
                 r["tcp_segments_sent"] += traffic.transmitted(f)
         else:
             r["rx_packets"] += 1
             r["control_rx_packets"] += control
-            to_me = f.ip_dst == addr and f.tcp_len and f.ip_proto == 6
+            to_me = f.ip_dst == addr and f.tcp_len and f.tcp_seq is not None and f.ip_proto == 6
             if to_me and f.ip_src in traffic.sources:
                 traffic.got(f)
     r["aodv_tx_by_type"] = dict(r["aodv_tx_by_type"])
@@ -502,7 +526,7 @@ def compute(
     duration = (traffic.t_max - traffic.t_min) if traffic.t_max > traffic.t_min else 0.0
     index = relaylag.LagIndex(lags) if lags is not None else None
     delivery = _deliveries(traffic, index, {a: k for k, a in addrs.items()})
-    framing = MIDDLEWARE_FRAMING.get(middleware)
+    framing = MIDDLEWARE_FRAMING.get(middleware)  # rtps: the frames need UDP's payload
     if framing is not None:
         for k, frames in captures.items():
             r = robots[f"r{k}"]
@@ -543,15 +567,17 @@ def _stream(segments: list[tuple[int, bytes]]) -> tuple[bytes, int]:
     return bytes(out), sum(len(d) for rel, d in pieces if rel > len(out))
 
 
-def _middleware_counts(frames: list[Frame], addr: str, mac: str | None, framing: str) -> dict:
-    """What one robot transmitted on the goal port (see the module docstring)."""
-    r = dict.fromkeys(MIDDLEWARE_COUNTS, 0)
+def middleware_ports(framing: str) -> tuple[str, tuple[int, ...]]:
+    """The transport and ports a framing's traffic is counted on."""
+    return ("udp", DDS_PORTS) if framing in DATAGRAM_FRAMINGS else ("tcp", (GOAL_PORT,))
+
+
+def _tcp_split(frames: list[Frame], r: dict, framing: str) -> mwframing.Split:
+    """The robot's TCP frames on the goal port counted into `r`, their payload walked."""
     flows: dict[tuple, list[tuple[int, bytes]]] = defaultdict(list)
     seen: set[tuple] = set()
     for f in frames:
-        if mac is None or f.eth_src != mac or f.ip_src != addr or f.ip_proto != 6:
-            continue
-        if GOAL_PORT not in (f.tcp_sport, f.tcp_dport):
+        if f.ip_proto != 6 or GOAL_PORT not in (f.tcp_sport, f.tcp_dport):
             continue
         r["tx_packets"] += 1
         r["tx_bytes"] += f.length
@@ -574,10 +600,48 @@ def _middleware_counts(frames: list[Frame], addr: str, mac: str | None, framing:
         part = mwframing.split(framing, stream)
         part.unparsed += after_gap
         whole.add(part)
+    return whole
+
+
+def _udp_split(frames: list[Frame], r: dict) -> mwframing.Split:
+    """The robot's UDP datagrams on DDS's ports counted into `r`, each one's RTPS walked."""
+    whole = mwframing.Split()
+    seen: set[tuple] = set()
+    for f in frames:
+        if f.ip_proto != 17 or not (f.udp_sport in DDS_PORTS or f.udp_dport in DDS_PORTS):
+            continue
+        size = max(len(f.udp_payload), (f.udp_len or 8) - 8)
+        r["tx_packets"] += 1
+        r["tx_bytes"] += f.length
+        r["data_packets"] += 1
+        r["data_bytes"] += f.length
+        r["payload_bytes"] += size
+        part = rtps.split(f.udp_payload, seen)
+        part.unparsed += size - len(f.udp_payload)  # (UDP's payload not read)
+        whole.add(part)
+    r["retransmitted_payload_bytes"] += whole.retransmitted
+    return whole
+
+
+def _middleware_counts(frames: list[Frame], addr: str, mac: str | None, framing: str) -> dict:
+    """What one robot transmitted on the middleware's ports (see the module docstring)."""
+    r = dict.fromkeys(MIDDLEWARE_COUNTS, 0)
+    mine = [f for f in frames if mac is not None and f.eth_src == mac and f.ip_src == addr]
+    udp = framing in DATAGRAM_FRAMINGS
+    whole = _udp_split(mine, r) if udp else _tcp_split(mine, r, framing)
     r["messages"] = whole.messages
     r["message_bytes"] = whole.payload
     r["protocol_bytes"] = whole.protocol
     r["unparsed_bytes"] = whole.unparsed
+    return _with_shares(r, whole.kinds)
+
+
+def _with_shares(r: dict, kinds: dict[str, list[int]]) -> dict:
+    """`r` with what follows from its counts: the bytes that were not the robots' messages,
+    their share, and the middleware's own bytes by kind."""
+    r["own_bytes"] = r["tx_bytes"] - r["message_bytes"]
+    r["message_fraction_bytes"] = r["message_bytes"] / r["tx_bytes"] if r["tx_bytes"] else None
+    r["protocol_by_kind"] = {k: {"count": n, "bytes": b} for k, (n, b) in sorted(kinds.items())}
     return r
 
 
@@ -587,12 +651,18 @@ def _middleware_totals(middleware: str, framing: str | None, robots: dict[str, d
     out: dict = {"name": middleware, "port": GOAL_PORT, "framing": framing}
     if framing is None:
         return out
+    out["transport"], out["ports"] = middleware_ports(framing)
+    out["ports"] = list(out["ports"])
+    counted = [r["middleware"] for r in robots.values() if "middleware" in r]
     for key in MIDDLEWARE_COUNTS:
-        out[key] = sum(r["middleware"][key] for r in robots.values() if "middleware" in r)
-    out["message_fraction_bytes"] = (
-        out["message_bytes"] / out["tx_bytes"] if out["tx_bytes"] else None
-    )
-    return out
+        out[key] = sum(r[key] for r in counted)
+    kinds: dict[str, list[int]] = {}
+    for r in counted:
+        for kind, v in r["protocol_by_kind"].items():
+            k = kinds.setdefault(kind, [0, 0])
+            k[0] += v["count"]
+            k[1] += v["bytes"]
+    return _with_shares(out, kinds)
 
 
 # ---------------------------------------------------------------- the AODV daemons' counters
@@ -741,10 +811,13 @@ def run_metrics(
         if partial:
             log.warning("%s: a record cut short at its end (%d bytes) left out", lag_path, partial)
     middleware = run.config.extra.get("middleware") if run is not None else None
-    captures = read_pcaps(pcaps)
+    if not isinstance(middleware, str):
+        middleware = DEFAULT_MIDDLEWARE
+    rtps_read = MIDDLEWARE_FRAMING.get(middleware) in DATAGRAM_FRAMINGS
+    captures = read_pcaps(pcaps, udp_payload=True) if rtps_read else read_pcaps(pcaps)
     metrics = compute(
         captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654),
-        lags=lags, middleware=middleware if isinstance(middleware, str) else DEFAULT_MIDDLEWARE,
+        lags=lags, middleware=middleware,
     )  # fmt: skip
     metrics["pcaps"] = stamp
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))

@@ -18,7 +18,9 @@ the robot would run it, and each middleware whose Python package is installed is
 
 Last, one short `testbed run --middleware zeromq` team run on a small map, captured: it
 finishes, its results carry the messenger's counters, and the captures' middleware class
-agrees with them.
+agrees with them; and a short captured 2-robot run over Zenoh and over DDS each, whose
+captures hold exactly the messages each robot sent and its teammate received (DDS's RTPS
+walked as tshark's dissector reads it).
 """
 
 import json
@@ -268,3 +270,74 @@ def test_a_team_run_over_zeromq_finishes_and_counts_its_messages(tmp_path):
     assert team["received"] <= wire["messages"] <= team["sent"], (team, wire)
     assert wire["unparsed_bytes"] == 0 and wire["protocol_bytes"] >= 64 * 2
     assert 0 < wire["message_fraction_bytes"] < 1
+
+
+# The captures' classes of the two middlewares not over the goal port's framings of TCP.
+CAPTURED = [_param(m) for m in ("zenoh", "dds")]
+
+
+def _tshark_submessages(pcap: str, addr: str) -> list[tuple[list[int], bytes]]:
+    """What tshark's own RTPS dissector finds in the DDS datagrams `addr` transmitted: each
+    one's submessage ids, and its UDP payload."""
+    ports = " || ".join(f"udp.dstport == {p}" for p in pcapmetrics.DDS_PORTS)
+    argv = ["tshark", "-n", "-r", pcap, "-Y", f"ip.src == {addr} && !icmp && ({ports})", "-T",
+            "fields", "-E", "occurrence=a", "-e", "rtps.sm.id", "-e", "udp.payload"]  # fmt: skip
+    out = subprocess.run(argv, capture_output=True, text=True, check=True).stdout
+    rows = [line.split("\t") for line in out.splitlines()]
+    return [([int(i, 16) for i in ids.split(",")], bytes.fromhex(p)) for ids, p in rows]
+
+
+@pytest.mark.parametrize("middleware", CAPTURED)
+def test_a_captured_team_run_counts_as_many_messages_as_the_robots_sent(tmp_path, middleware):
+    """A 2-robot run within range (no loss): each robot's messages in its capture are those
+    its messenger sent (`sent`: sends the middleware took), and all arrived (`received`)."""
+    from testbed.analysis import rtps
+
+    name = "mwp" + uuid.uuid4().hex[:5]
+    out = str(tmp_path / "run")
+    argv = [
+        os.path.join(PROJECT_ROOT, ".venv", "bin", "testbed"), "run", "--robots", "2",
+        "--comm-range", "20", "--time-scale", "5", "--max-steps", "300", "--middleware",
+        middleware, "--capture", "--name", name, "--out", out, "--quiet",
+    ]  # fmt: skip
+    try:
+        r = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    finally:
+        destroy(name)
+    # 300 steps explore part of the map: the run ends at its step cap (exit status 1).
+    assert r.returncode in (0, 1), r.stderr[-2000:]
+    with open(os.path.join(out, "result.json")) as f:
+        result = json.load(f)
+    assert result["status"] in ("complete", "step_cap"), result["status_detail"]
+    msg = result["messaging"]
+    metrics = pcapmetrics.run_metrics(out)
+    wire = metrics["middleware"]
+    assert (wire["name"], wire["framing"]) == (
+        middleware,
+        pcapmetrics.MIDDLEWARE_FRAMING[middleware],
+    )
+    assert msg["team"]["sent"] > 0 and msg["team"]["received"] == msg["team"]["sent"]
+    for k, teammate in ((1, 2), (2, 1)):
+        mine = metrics["robots"][f"r{k}"]["middleware"]
+        assert mine["messages"] == msg["robots"][f"r{k}"]["sent"], (k, mine, msg)
+        assert mine["messages"] == msg["robots"][f"r{teammate}"]["received"]
+        assert mine["unparsed_bytes"] == 0 and 0 < mine["message_fraction_bytes"] < 1
+    assert wire["messages"] == msg["team"]["sent"]
+    kinds = wire["protocol_by_kind"]
+    assert wire["protocol_bytes"] == sum(v["bytes"] for v in kinds.values())
+    if middleware == "zenoh":
+        assert kinds["handshake"]["count"] >= 4 and kinds["keep_alive"]["count"] > 0
+        assert kinds["message_headers"]["count"] == wire["messages"]
+        return
+    assert wire["ports"] == [5111, 5112] and wire["tcp_control_packets"] == 0
+    assert kinds["spdp"]["count"] > 0 and kinds["sedp"]["count"] > 0
+    assert kinds["data_headers"]["count"] == wire["messages"]
+    # The walk reads each datagram's submessages as tshark's RTPS dissector does.
+    datagrams = 0
+    for k in (1, 2):
+        pcap = os.path.join(out, "pcaps", f"r{k}.pcap")
+        for ids, payload in _tshark_submessages(pcap, pcapmetrics.robot_address(k)):
+            subs, walked = rtps.submessages(payload)
+            assert [s[0] for s in subs] == ids and walked == len(payload)
+            datagrams += 1
+    assert datagrams == wire["tx_packets"] == kinds["rtps_header"]["count"]

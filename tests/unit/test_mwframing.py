@@ -1,6 +1,7 @@
-"""The middleware's traffic as its own class of the capture metrics: the framings of nanomsg
-and ZeroMQ walked (testbed.analysis.mwframing), and pcapmetrics' middleware counts on
-hand-made frames. (tests/integration/test_middleware.py checks them on a real capture.)"""
+"""The middleware's traffic as its own class of the capture metrics: the framings of nanomsg,
+ZeroMQ and Zenoh walked (testbed.analysis.mwframing), and pcapmetrics' middleware counts on
+hand-made frames. (DDS's RTPS: test_rtps.py; tests/integration/test_middleware.py checks
+them on real captures.)"""
 
 import struct
 
@@ -78,10 +79,8 @@ def test_the_captures_count_the_middleware_apart_from_tcp_and_the_messages_apart
     assert team["message_fraction_bytes"] == len(GOAL) / mw["tx_bytes"]
     # The routing metrics still count all TCP, the middleware's included.
     assert m["tcp_segments_sent"] == 3
-    other = pm.compute(
-        {1: r1}, {1: A1}, 654, middleware="dds"
-    )  # no framing known here: not a class
-    assert other["middleware"] == {"name": "dds", "port": pm.GOAL_PORT, "framing": None}
+    other = pm.compute({1: r1}, {1: A1}, 654, middleware="pigeon")  # no framing: not a class
+    assert other["middleware"] == {"name": "pigeon", "port": pm.GOAL_PORT, "framing": None}
     assert "middleware" not in other["robots"]["r1"]
 
 
@@ -89,3 +88,61 @@ def test_the_goal_port_is_the_robots():
     from node.launch import NodeArgs
 
     assert NodeArgs(robot=1, robots=1, body="b").goal_port == pm.GOAL_PORT
+
+
+def test_every_framing_counts_its_own_bytes_by_kind():
+    sp = mwframing.split("sp", SP_PUSH + sp_message(GOAL) + sp_message(GOAL))
+    assert sp.kinds == {"sp_header": [1, 8], "length_prefix": [2, 16]}
+    request = b"\x01\x00" + b"\x00" + bytes([len(GOAL)]) + GOAL
+    zmtp = mwframing.split("zmtp", ZMTP_GREETING + READY + request + b"\x01\x00\x00\x00")
+    assert zmtp.kinds == {
+        "greeting": [1, 64], "command": [1, len(READY)], "empty_frame": [3, 6],
+        "frame_header": [1, 2],
+    }  # fmt: skip
+    for s in (sp, zmtp):
+        assert sum(b for _, b in s.kinds.values()) == s.protocol
+
+
+# Zenoh over TCP, from a captured run (zenoh 1.10): the dialling side's INIT, a keep-alive, a
+# FRAME holding a PUSH whose PUT carries a goal message, and a CLOSE; each batch after its
+# 2-byte little-endian length.
+ZENOH_INIT = bytes.fromhex("1900c109f104ae620b942da310be6babd4a1024bcb0a88fe812701")
+ZENOH_KEEP_ALIVE = bytes.fromhex("010004")
+ZENOH_CLOSE = bytes.fromhex("02000300")
+ZENOH_GOAL = (
+    b'{"k": "goal", "from": 1, "step": 25, "goal": [0.8500000000000001, 4.75], '
+    b'"cost": 1.879, "n": 2}'
+)
+ZENOH_PUT = bytes.fromhex("6a0025fc9ebc649d012115015f") + ZENOH_GOAL
+
+
+def zenoh_batch(body: bytes) -> bytes:
+    return struct.pack("<H", len(body)) + body
+
+
+def test_zenoh_bytes_are_batches_around_the_messages_found_by_their_length_and_body():
+    assert len(ZENOH_GOAL) == 0x5F and len(ZENOH_PUT) == 2 + 0x6A
+    stream = ZENOH_INIT + ZENOH_KEEP_ALIVE + ZENOH_PUT + ZENOH_CLOSE
+    s = mwframing.split("zenoh", stream)
+    assert (s.messages, s.payload, s.unparsed) == (1, len(ZENOH_GOAL), 0)
+    assert s.protocol == len(stream) - len(ZENOH_GOAL)
+    assert s.kinds == {
+        "batch_length": [4, 8], "handshake": [1, 25], "keep_alive": [1, 1],
+        "message_headers": [1, 0x6A - len(ZENOH_GOAL)], "close": [1, 2],
+    }  # fmt: skip
+    # Two puts in one FRAME; a body of 200 bytes has a 2-byte length (c8 01).
+    long = b'{"k": "replan", "pad": "' + b"x" * 174 + b'"}'
+    assert len(long) == 200
+    two = zenoh_batch(b"\xa5\x01\x9d\x01\x01\x5f" + ZENOH_GOAL + b"\x9d\x01\x01\xc8\x01" + long)
+    s = mwframing.split("zenoh", ZENOH_INIT + two)
+    assert (s.messages, s.payload) == (2, len(ZENOH_GOAL) + 200)
+    assert s.kinds["message_headers"] == [2, 6 + 5]
+    # Not a message: a JSON body after a length that is not its own, one without "k" first,
+    # one that is not JSON; then the batch is a FRAME of the middleware's own.
+    for body in (b"\x05\x01\x60" + ZENOH_GOAL, b'\x05\x01\x0a{"x": "goal"}', b'\x05\x01\x05{"k":'):
+        s = mwframing.split("zenoh", ZENOH_INIT + zenoh_batch(body))
+        assert (s.messages, s.kinds["frames"]) == (0, [1, len(body)])
+    # A stream whose first batch is not an INIT (its start not captured), or cut short.
+    assert mwframing.split("zenoh", ZENOH_PUT).unparsed == len(ZENOH_PUT)
+    cut = mwframing.split("zenoh", ZENOH_INIT + ZENOH_PUT[:-1])
+    assert (cut.messages, cut.unparsed) == (0, len(ZENOH_PUT) - 1)

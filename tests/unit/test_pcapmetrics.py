@@ -119,6 +119,14 @@ def test_icmp_quoting_port_654_is_not_aodv():
     assert m["control_tx_packets"] == 1 and m["tx_packets"] == 2
 
 
+def test_a_segment_without_a_sequence_number_is_not_matched_with_one_that_has_one():
+    sent = tcp(1.0, M1, M2, A1, A2, 1000, 100)
+    unnumbered = Frame(1.1, 166, M1, M2, A1, A2, 6, 64, tcp_sport=40000, tcp_dport=5555,
+                       tcp_len=100)  # fmt: skip
+    m = pm.compute({1: [sent], 2: [unnumbered]}, {1: A1, 2: A2})
+    assert (m["tcp_segments_sent"], m["tcp_segments_delivered"]) == (1, 0)
+
+
 def test_babel_port():
     caps = {1: [udp(0.0, M1, BCAST_MAC, A1, "ff02::1:6", None, port=6696)]}
     caps[1].append(udp(0.1, M1, BCAST_MAC, A1, "255.255.255.255", 1))

@@ -53,7 +53,7 @@ def test_routing_json_says_what_its_numbers_mean_and_gives_emulated_time(tmp_pat
     monkeypatch.setattr(pcapmetrics, "robot_address", lambda k: tp.ADDRS[k])
     m = pcapmetrics.run_metrics(d)
     doc = json.loads((d / "routing.json").read_text())
-    assert doc["format"] == pcapmetrics.CACHE_FORMAT == 6
+    assert doc["format"] == pcapmetrics.CACHE_FORMAT == 7
     assert set(doc["about"]) == {"pdf", "segment_delivery", "delay", "time"}
     assert "0.957 against 1.0" in doc["about"]["segment_delivery"]
     assert "mean far above the median" in doc["about"]["delay"]
