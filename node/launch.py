@@ -18,6 +18,8 @@ from node import coordination
 from node.flood import MODES
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
+from node.messaging.maps import DEFAULT as DEFAULT_MAPS
+from node.messaging.maps import MAPS
 from topology.argtypes import number
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
@@ -46,6 +48,7 @@ class NodeArgs:
     coordination: str = coordination.DEFAULT  # how goals are agreed: "paper" or "ours"
     goal_port: int = 5101
     middleware: str = DEFAULT_MIDDLEWARE  # what carries goals and requests (node.messaging)
+    maps: str = DEFAULT_MAPS  # how maps are shared: floods, or the middleware's pub/sub
     bind: str | None = None  # address for the goal socket (default: the robot's)
     out_dir: str | None = None  # display: where snapshots and the video go
     snapshots: frozenset[int] = frozenset()  # display: steps with a PNG snapshot
@@ -149,6 +152,13 @@ def parser() -> argparse.ArgumentParser:
         choices=MIDDLEWARES,
         default=DEFAULT_MIDDLEWARE,
         help="what carries goals and re-plan requests (node.messaging)",
+    )
+    p.add_argument(
+        "--maps",
+        choices=MAPS,
+        default=DEFAULT_MAPS,
+        help="map sharing: UDP floods (default) or the middleware's publish/subscribe "
+        "(zenoh, dds; node.messaging.maps)",
     )
     p.add_argument("--bind", help="address for the goal socket (default: the robot's)")
     p.add_argument("--out-dir", help="display: where snapshots and the video go")

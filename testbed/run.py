@@ -58,6 +58,7 @@ from dataclasses import dataclass
 
 from node import body, messaging
 from node.launch import NodeArgs
+from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
 from node.sched import deadline_priority
 from testbed import isolation, runresults
 from testbed.errors import TestbedError
@@ -205,6 +206,8 @@ class Run:
         # Started first, so that its imports overlap the network's bring-up.
         laser = [self.cfg.laser_range, self.cfg.laser_rays, prep.truth.cell]
         preload = [*NODE_PRELOAD, messaging.module_of(self.cfg.middleware)]
+        if self.cfg.maps == "pubsub":
+            preload.append(MAP_TOPIC_MODULES[self.cfg.middleware])
         forks = ForkServer(preload, env=env, label=prep.out,
                            warm=[["node.rays", "warm", laser]])  # fmt: skip
         stack.callback(forks.close)
@@ -276,7 +279,7 @@ class Run:
             cell=truth.cell, laser_range=cfg.laser_range, laser_rays=cfg.laser_rays,
             speed=cfg.speed, radius=cfg.radius, plan_period=cfg.plan_period,
             map_period=cfg.map_period, time_scale=cfg.time_scale, flood=cfg.flood,
-            coordination=cfg.coordination, middleware=cfg.middleware, **role,
+            coordination=cfg.coordination, middleware=cfg.middleware, maps=cfg.maps, **role,
         )  # fmt: skip
 
     def _display_args(self, server: BodyServer) -> NodeArgs:

@@ -18,6 +18,9 @@ from node import coordination
 from node.flood import MODES as FLOOD_MODES
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
+from node.messaging.maps import DEFAULT as DEFAULT_MAPS
+from node.messaging.maps import MAPS
+from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
@@ -175,6 +178,12 @@ class RunConfig:
         "see docs/middleware.md", DEFAULT_MIDDLEWARE, choices=MIDDLEWARES,
         sweep={GRID, RUN}, newer=True, grid=GridDim(10, medium_label, VARIED),
     )  # fmt: skip
+    maps: str = option(
+        str, "how robots share their maps: flood, UDP broadcast relayed with self-pruning (the "
+        "paper's), or pubsub, published on the middleware's topics (zenoh or dds only; see "
+        "docs/middleware.md)", DEFAULT_MAPS, choices=MAPS, sweep={GRID, RUN}, newer=True,
+        grid=GridDim(11, str, VARIED),
+    )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip
@@ -293,6 +302,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if cfg.isolate and cfg.medium != "veth":
         raise UsageError("--isolate needs the veth medium: on ns3-wifi the channel decides "
                          "who hears whom")  # fmt: skip
+    why = maps_refusal(cfg.maps, cfg.middleware)
+    if why:
+        raise UsageError(why)
     _view(cfg.view)
     return cfg
 
