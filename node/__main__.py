@@ -1,6 +1,10 @@
 """`python -m node --robot r3 --robots 5 --body PATH ...`: one robot (or the display) process.
 
 Started by `testbed run` inside the robot's namespace. Bad arguments: one line, exit 2.
+
+The maps travel by UDP flood (node.flood) or, with `--maps pubsub`, on the map topic of the
+middleware's session (node.messaging.maps): then every robot opens its messenger with the
+display among its peers, and the display opens one too, for its map topic alone.
 """
 
 from __future__ import annotations
@@ -13,7 +17,21 @@ from node import body
 from node.events import EventLog
 from node.flood import Flooder
 from node.launch import NodeArgs
+from node.messaging.maps import refusal as maps_refusal
 from node.timing import RobotTimings
+
+
+def _open_messenger(args: NodeArgs, timing: RobotTimings, team: tuple[int, ...]):
+    """The node's messenger (node.messaging), or MiddlewareUnavailable."""
+    from node.messaging import open_messenger
+    from topology.names import robot_addr
+
+    me = args.robot
+    return open_messenger(
+        args.middleware, me=me, bind_addr=args.bind or robot_addr(me), port=args.goal_port,
+        addr_of=robot_addr, team=team, send_timeout_ms=timing.goal_send_timeout_ms,
+        reconnect_ms=(timing.goal_reconnect_min_ms, timing.goal_reconnect_max_ms),
+    )  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,6 +50,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.role == "display" and not args.out_dir:
         sys.stderr.write("node: the display needs --out-dir\n")
         return 2
+    why = maps_refusal(args.maps, args.middleware)
+    if why:
+        sys.stderr.write(f"node: {why}\n")
+        return 2
+    pubsub = args.maps == "pubsub"
+    # With pubsub the display (robot N+1) is a peer of every robot's session: it subscribes.
+    team = tuple(range(1, args.robots + (2 if pubsub else 1)))
     events = EventLog(args.events)
     stop = {"robot": None}
 
@@ -41,59 +66,60 @@ def main(argv: list[str] | None = None) -> int:
             r.stopping.set()
 
     signal.signal(signal.SIGTERM, on_term)
+    from node.messaging import MiddlewareUnavailable
+
+    link = messenger = None
     try:
         role = body.ROLE_DISPLAY if args.role == "display" else body.ROLE_ROBOT
         link = body.BodyClient(args.body, me, role)
-        flooder = Flooder(me, args.flood_port, args.iface or None, mode=args.flood,
-                          hold=timing.neighbour_hold_s)  # fmt: skip
-    except OSError as e:
-        sys.stderr.write(f"node: r{me}: cannot start: {e}\n")
-        return 1
-    if args.role == "display":
-        from node.display import Display
+        if args.role == "robot" or pubsub:
+            messenger = _open_messenger(args, timing, team)
+        if pubsub:
+            maps = messenger.map_topic()
+        else:
+            maps = Flooder(me, args.flood_port, args.iface or None, mode=args.flood,
+                           hold=timing.neighbour_hold_s)  # fmt: skip
+    except (OSError, MiddlewareUnavailable) as e:
+        unavailable = isinstance(e, MiddlewareUnavailable)
+        sys.stderr.write(
+            f"node: r{me}: {e}\n" if unavailable else f"node: r{me}: cannot start: {e}\n"
+        )
+        for opened in (messenger, link, events):
+            if opened is not None:
+                opened.close()
+        return 2 if unavailable else 1
+    try:
+        if args.role == "display":
+            from node.display import Display
 
-        d = Display(
-            me, args.map_size, args.cell, link, flooder, events, args.out_dir,
-            args.snapshots, args.video_every, map_period=args.map_period,
-            time_scale=args.time_scale,
-        )  # fmt: skip
-        stop["robot"] = d
-        log.info("display up")
-        d.run()
-    else:
-        from node.messaging import MiddlewareUnavailable, open_messenger
-        from node.robot import Robot, RobotConfig
-        from topology.names import robot_addr
-
-        cfg = RobotConfig(
-            robot=me, robots=args.robots, shape=args.map_size, cell=args.cell,
-            laser_range=args.laser_range, laser_rays=args.laser_rays, speed=args.speed,
-            radius=args.radius, plan_period=args.plan_period, map_period=args.map_period,
-            timing=timing, phase=max(0, args.timer_phase), coordination=args.coordination,
-        )  # fmt: skip
-        try:
-            goals = open_messenger(
-                args.middleware, me=me, bind_addr=args.bind or robot_addr(me),
-                port=args.goal_port, addr_of=robot_addr, team=tuple(range(1, args.robots + 1)),
-                send_timeout_ms=timing.goal_send_timeout_ms,
-                reconnect_ms=(timing.goal_reconnect_min_ms, timing.goal_reconnect_max_ms),
+            d = Display(
+                me, args.map_size, args.cell, link, maps, events, args.out_dir,
+                args.snapshots, args.video_every, map_period=args.map_period,
+                time_scale=args.time_scale,
             )  # fmt: skip
-        except MiddlewareUnavailable as e:
-            sys.stderr.write(f"node: r{me}: {e}\n")
-            flooder.close()
-            link.close()
-            events.close()
-            return 2
-        r = Robot(cfg, link, flooder, goals, events)
-        stop["robot"] = r
-        log.info("robot up: team of %d, laser %.1f m", args.robots, args.laser_range)
-        try:
+            stop["robot"] = d
+            log.info("display up (maps by %s)", args.maps)
+            d.run()
+        else:
+            from node.robot import Robot, RobotConfig
+
+            cfg = RobotConfig(
+                robot=me, robots=args.robots, shape=args.map_size, cell=args.cell,
+                laser_range=args.laser_range, laser_rays=args.laser_rays, speed=args.speed,
+                radius=args.radius, plan_period=args.plan_period, map_period=args.map_period,
+                timing=timing, phase=max(0, args.timer_phase), coordination=args.coordination,
+            )  # fmt: skip
+            r = Robot(cfg, link, maps, messenger, events)
+            stop["robot"] = r
+            log.info("robot up: team of %d, laser %.1f m, maps by %s", args.robots,
+                     args.laser_range, args.maps)  # fmt: skip
             r.run()
-        finally:
-            goals.close()
-    flooder.close()
-    link.close()
-    events.close()
+    finally:
+        if messenger is not None:
+            messenger.close()  # the map topic with it
+        maps.close()
+        link.close()
+        events.close()
     return 0
 
 

@@ -5,6 +5,8 @@ network, with no body: its body link only carries the world's clock). Its inbox 
 floods and relays them like any robot; message processing merges them into the display's map
 and records each robot's position from its floods; every `map_period` steps it floods a small
 beacon so that robots notice when it comes back into reach (and send it their whole maps).
+With `--maps pubsub` it is given its middleware's map topic instead of the flooder
+(node.messaging.maps): it subscribes to the robots' maps and publishes its beacon there.
 Visualization renders the merged map with the robots' paths (node.render): a video
 frame every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
 """
@@ -91,7 +93,7 @@ class Display:
                 "summary", self.step, received={f"r{k}": v for k, v in self.received.items()},
                 known_free_cells=known, video=os.path.basename(self.video.path),
                 video_frames=self.video.frames, malformed=self.malformed,
-                flood=dict(self.flooder.counts),
+                flood=dict(self.flooder.counts), maps=self.flooder.stats.as_dict(),
                 lateness={"frame_done_ms": self.frame_lateness.as_dict()},
                 cpu_s=round(time.process_time(), 3),
             )  # fmt: skip

@@ -23,7 +23,8 @@ Whether a robot rebroadcasts is the flooding *mode*:
   would have brought; the map floods are periodic and whole maps follow reunions.
 
 `Flooder` owns the socket, the cache and the neighbour table; it never blocks on send (a full
-buffer drops the datagram, as a radio would).
+buffer drops the datagram, as a radio would). Its `stats` count the maps it originated and
+delivered (node.mapstats), as the publish/subscribe transport's do (node.messaging.maps).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import time
 from collections import Counter
 
 from node import wire
+from node.mapstats import MapStats
 
 log = logging.getLogger(__name__)
 
@@ -90,6 +92,7 @@ class Flooder:
         self.cache_lock = threading.Lock()  # the inbox relays while the timer originates
         self.heard: dict[int, float] = {}  # neighbour -> when a datagram from it last came
         self.counts: Counter[str] = Counter()
+        self.stats = MapStats("flood")
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
@@ -126,7 +129,11 @@ class Flooder:
             self.cache.seen(self.me, self.seq)
             nb = tuple(self.neighbours())
         h = wire.FloodHeader(kind, self.ttl, self.me, self.seq, step, self.me, nb)
-        self._send(wire.pack_flood(h, payload))
+        data = wire.pack_flood(h, payload)
+        t0 = time.monotonic()
+        ok = self._send(data)
+        if kind == wire.KIND_MAP:
+            self.stats.note_publish(len(data), ok, time.monotonic() - t0)
         return self.seq
 
     def receive(self) -> list[tuple[wire.FloodHeader, bytes]]:
@@ -174,6 +181,8 @@ class Flooder:
                 self.counts["relayed"] += 1
             elif ttl > 1:
                 self.counts["pruned"] += 1
+            if data[4] == wire.KIND_MAP:
+                self.stats.note_receive(origin, len(data))
             out.append(data)
 
     def close(self) -> None:

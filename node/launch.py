@@ -20,15 +20,24 @@ from node import coordination
 from node.flood import MODES
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
+from node.messaging.maps import DEFAULT as DEFAULT_MAPS
+from node.messaging.maps import MAPS
 from topology.argtypes import number
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
 
 
-def arg(default=dataclasses.MISSING, help: str = "", *, kind: type | None = None,
-        parse: Callable[[str], Any] | None = None, above: float | None = None,
-        minimum: float | None = None, choices: tuple[str, ...] | None = None,
-        run: bool = False) -> Any:
+def arg(
+    default=dataclasses.MISSING,
+    help: str = "",
+    *,
+    kind: type | None = None,
+    parse: Callable[[str], Any] | None = None,
+    above: float | None = None,
+    minimum: float | None = None,
+    choices: tuple[str, ...] | None = None,
+    run: bool = False,
+) -> Any:
     """A NodeArgs field and its flag: the default, the help, how the text is read (`parse`,
     or a number of `kind` within `above`/`minimum`, or one of `choices`), and whether a run
     passes its RunConfig field of the same name through (`run`: testbed.run does, and
@@ -69,6 +78,9 @@ class NodeArgs:
     goal_port: int = arg(5101, "port of the goal messages", kind=int, above=0)
     middleware: str = arg(DEFAULT_MIDDLEWARE, "what carries goals and re-plan requests "
                           "(node.messaging)", choices=MIDDLEWARES, run=True)  # fmt: skip
+    maps: str = arg(DEFAULT_MAPS, "map sharing: UDP floods, or the middleware's publish/"
+                    "subscribe (zenoh, dds; node.messaging.maps)", choices=MAPS,
+                    run=True)  # fmt: skip
     bind: str | None = arg(None, "address for the goal socket (default: the robot's)")
     out_dir: str | None = arg(None, "display: where snapshots and the video go")
     snapshots: frozenset[int] = arg(frozenset(), "display: steps, e.g. 100,500",

@@ -21,6 +21,10 @@ Five threads:
 - inbox: receives from the network (UDP floods, relayed on the way; the messenger) and hands
   each new message to message processing through a bounded queue (full: dropped, counted).
 
+With `--maps pubsub` the "flooder" the robot is given is its middleware's map topic
+(node.messaging.maps): the same interface, maps published and received end to end instead of
+flooded, the same messages into the same inbox; nothing below tells the two apart.
+
 A teammate is *reachable* while its map floods keep arriving (within `reach_steps`): a flood
 only arrives over a path that exists. Every plan, send and receipt goes to the event log with
 the step, which is what the run's results and checks are built from.
@@ -301,6 +305,7 @@ class Robot:
             send_failed=dict(self.failed),
             malformed=self.malformed + self.flooder.counts["malformed"],
             flood=dict(self.flooder.counts),
+            maps=self.flooder.stats.as_dict(),
             frames=self.frames,
             frames_skipped=self.skipped,
             order_timeouts=self.order_timeouts,

@@ -334,6 +334,7 @@ class RunResult:
     robots: tuple[RobotResult, ...] = ()  # in the file's order
     cpu_s: Mapping = field(default_factory=lambda: _EMPTY)
     messaging: Mapping | None = None  # the goals' middleware and its counters (None: older)
+    maps: Mapping | None = None  # how maps were shared and the counters (None: older)
     fidelity: Mapping = field(default_factory=lambda: _EMPTY)  # {} : made before verdicts
     network_timers: Mapping | None = None
 
@@ -501,6 +502,7 @@ class RunResult:
             robots=tuple(RobotResult.from_dict(k, v) for k, v in _mapping(doc, "robots").items()),
             cpu_s=_mapping(doc, "cpu_s"),
             messaging=_mapping(doc, "messaging") if doc.get("messaging") is not None else None,
+            maps=_mapping(doc, "maps") if doc.get("maps") is not None else None,
             fidelity=fidelity,
             network_timers=None if timers is None else _mapping(doc, "network_timers"),
         )

@@ -58,6 +58,7 @@ from dataclasses import dataclass
 
 from node import body, messaging
 from node.launch import NodeArgs, run_params
+from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
 from node.sched import deadline_priority
 from testbed import isolation, runresults
 from testbed.errors import TestbedError
@@ -205,6 +206,8 @@ class Run:
         # Started first, so that its imports overlap the network's bring-up.
         laser = [self.cfg.laser_range, self.cfg.laser_rays, prep.truth.cell]
         preload = [*NODE_PRELOAD, messaging.module_of(self.cfg.middleware)]
+        if self.cfg.maps == "pubsub":
+            preload.append(MAP_TOPIC_MODULES[self.cfg.middleware])
         forks = ForkServer(preload, env=env, label=prep.out,
                            warm=[["node.rays", "warm", laser]])  # fmt: skip
         stack.callback(forks.close)

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from node.launch import bounds as robot
+from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
 from testbed import runoptions
@@ -172,6 +173,12 @@ class RunConfig:
         "see docs/middleware.md", **robot("middleware"),
         sweep={GRID, RUN}, newer=True, grid=GridDim(10, medium_label, VARIED),
     )  # fmt: skip
+    maps: str = option(
+        str, "how robots share their maps: flood, UDP broadcast relayed with self-pruning (the "
+        "paper's), or pubsub, published on the middleware's topics (zenoh or dds only; see "
+        "docs/middleware.md)", **robot("maps"), sweep={GRID, RUN}, newer=True,
+        grid=GridDim(12, str, VARIED),
+    )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip
@@ -290,6 +297,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if cfg.isolate and cfg.medium != "veth":
         raise UsageError("--isolate needs the veth medium: on ns3-wifi the channel decides "
                          "who hears whom")  # fmt: skip
+    why = maps_refusal(cfg.maps, cfg.middleware)
+    if why:
+        raise UsageError(why)
     _view(cfg.view)
     return cfg
 

@@ -78,6 +78,7 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     is created then)."""
     out = os.path.abspath(out)
     check_middleware(cfg.middleware)
+    check_maps(cfg.maps, cfg.middleware)
     truth = load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
     check_laser(cfg.laser_range, truth.size_m)
     rng = np.random.default_rng(cfg.seed)
@@ -114,6 +115,15 @@ def check_middleware(name: str) -> None:
     from node.messaging import unavailable
 
     why = unavailable(name)
+    if why:
+        raise UsageError(why)
+
+
+def check_maps(maps: str, middleware: str) -> None:
+    """UsageError for maps over publish/subscribe on a middleware without them."""
+    from node.messaging.maps import refusal
+
+    why = refusal(maps, middleware)
     if why:
         raise UsageError(why)
 

@@ -36,6 +36,7 @@ log = logging.getLogger(__name__)
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
     "frames", "latency_ms", "thread_cpu_s", "lateness", "middleware", "messenger", "arrivals",
+    "maps",
 )  # fmt: skip
 # The team's messaging totals (result.json's "messaging"): these are summed over the robots,
 # the others are the largest of any robot.
@@ -43,6 +44,9 @@ MESSAGING_SUMS = (
     "sent", "failed", "received", "blocked_s", "sending", "messages", "duplicates", "late",
 )  # fmt: skip
 MESSAGING_MAX = ("blocked_max_s", "delay_steps_max")
+# The team's map sharing totals (result.json's "maps"), likewise.
+MAPS_SUMS = ("published", "failed", "bytes_published", "received", "bytes_received", "blocked_s")
+MAPS_MAX = ("blocked_max_s",)
 PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
 
 
@@ -160,6 +164,12 @@ def contents(rec: RunRecord) -> RunResult:
         messaging=messaging(
             rec.config.get("middleware", "nanomsg"), {r.name: sm for r, sm in robots}
         ),
+        maps=map_sharing(
+            rec.config.get("maps", "flood"),
+            rec.config.get("middleware", "nanomsg"),
+            {r.name: sm for r, sm in robots},
+            display.get("maps"),
+        ),  # fmt: skip
         fidelity=verdict,
         network_timers=rec.network_timers,
     )
@@ -184,6 +194,30 @@ def messaging(middleware: str, summaries: dict[str, dict]) -> dict:
     for key in ("blocked_s", "blocked_max_s"):
         team[key] = round(team[key], 6)
     return {"middleware": middleware, "team": team, "robots": robots}
+
+
+def map_sharing(
+    transport: str, middleware: str, summaries: dict[str, dict], display: dict | None
+) -> dict:
+    """How the robots shared their maps (`--maps`: flood, or pubsub on `middleware`) and what
+    that did: each robot's map counters (node.mapstats; None for a robot that left none),
+    the team's totals over the robots that did, and the display's counters."""
+    robots = {k: sm.get("maps") for k, sm in summaries.items()}
+    counted = [v for v in robots.values() if v is not None]
+    team: dict = {"robots": len(counted)}
+    for key in MAPS_SUMS:
+        team[key] = sum(v.get(key) or 0 for v in counted)
+    for key in MAPS_MAX:
+        team[key] = max((v.get(key) or 0 for v in counted), default=0)
+    for key in ("blocked_s", "blocked_max_s"):
+        team[key] = round(team[key], 6)
+    return {
+        "transport": transport,
+        "middleware": middleware if transport == "pubsub" else None,
+        "team": team,
+        "robots": robots,
+        "display": display,
+    }
 
 
 def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:

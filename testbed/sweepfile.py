@@ -19,6 +19,7 @@ for every run of the sweep::
                                   # paper's empty terrain; else as run.map)
     medium = ["veth", "ns3-wifi"] # optional: the radio medium as a grid dimension
     middleware = ["nanomsg", "zeromq"]  # optional: the goals' middleware as a grid dimension
+    maps = ["flood", "pubsub"]    # optional: how maps are shared, as a grid dimension
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -39,6 +40,8 @@ for every run of the sweep::
     wifi_loss = "range"           # ns3-wifi only: range | logdistance
     middleware = "zeromq"         # nanomsg | zeromq | zeromq-reqrep | zenoh | dds, default
                                   # nanomsg (docs/middleware.md)
+    maps = "pubsub"               # flood | pubsub, default flood; pubsub needs every
+                                  # middleware of the sweep to be zenoh or dds
     seed = 0                      # optional base mixed into every derived seed
 
 The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
@@ -74,6 +77,8 @@ import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from node.messaging.maps import PUBSUB_MIDDLEWARES
+from node.messaging.maps import refusal as maps_refusal
 from testbed.errors import UsageError
 from testbed.runconfig import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
 from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
@@ -305,6 +310,14 @@ def _run(path, run: dict, grid: dict, robots: tuple[int, ...]) -> dict:
     wifi = [k for k in ("wifi_loss", "wifi_standard", "wifi_rate") if k in run]
     if wifi and "ns3-wifi" not in (grid.get("medium") or [run.get("medium", _DEFAULT.medium)]):
         raise _fail(path, f"run.{wifi[0]}", "needs medium ns3-wifi (in [run] or grid.medium)")
+    maps = grid.get("maps") or [run.get("maps", _DEFAULT.maps)]
+    if "pubsub" in maps:
+        for middleware in grid.get("middleware") or [run.get("middleware", _DEFAULT.middleware)]:
+            if maps_refusal("pubsub", middleware):
+                where = "grid.maps" if "maps" in grid else "run.maps"
+                need = " or ".join(PUBSUB_MIDDLEWARES)
+                raise _fail(path, where, f"pubsub needs middleware {need} (the sweep has "
+                            f"{middleware})")  # fmt: skip
     if "load_limit" in run:
         kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
     if "seed" in run:

@@ -4,7 +4,8 @@ The robot (node.robot) holds one messenger and never asks which middleware it is
 connects to its teammates, sends each a message with a bounded wait, receives what is
 waiting when the messenger's descriptor is readable, and closes it at the end. The class of
 each middleware (node.messaging's registry) has exactly these members; this Protocol is
-for type checking and for the reader, nothing inherits from it.
+for type checking and for the reader, nothing inherits from it. The Zenoh and DDS
+messengers also offer `map_topic()`, the robots' maps on their session (node.messaging.maps).
 """
 
 from __future__ import annotations

@@ -228,6 +228,8 @@ class DdsMessenger:
         self._inbox = Inbox()
         self._writers: dict[int, tuple[Publisher, DataWriter]] = {}
         self._entities: list = []  # made here, deleted in reverse order by close()
+        self._send_timeout_ms = send_timeout_ms
+        self._maps = None  # the map topic in this participant (map_topic())
         self._closed = False
         try:
             self._domain = self._made(Domain(me, self.config))
@@ -311,9 +313,20 @@ class DdsMessenger:
         self.stats.received += len(out)
         return out
 
+    def map_topic(self):
+        """The robots' maps in this participant (node.messaging.dds_maps), made on the first
+        call; its entities are deleted with this messenger's, and close() closes it."""
+        if self._maps is None:
+            from node.messaging.dds_maps import DdsMapTopic
+
+            self._maps = DdsMapTopic(self._participant, self.me, self._send_timeout_ms,
+                                     self._made)  # fmt: skip
+        return self._maps
+
     def close(self) -> None:
-        """Delete every entity, children first (the reader's listener is done when its reader
-        is deleted), then the domain (Cyclone's threads end), then the eventfd."""
+        """Delete every entity (the map topic's too), children first (the readers' listeners
+        are done when their readers are deleted), then the domain (Cyclone's threads end),
+        then the eventfds."""
         if self._closed:
             return
         self._closed = True
@@ -324,3 +337,5 @@ class DdsMessenger:
         self._entities.clear()
         self._writers.clear()
         self._inbox.close()
+        if self._maps is not None:
+            self._maps.close()

@@ -156,6 +156,7 @@ class ZenohMessenger:
         )
         self._inbox = Inbox()
         self._publishers: dict[int, zenoh.Publisher] = {}
+        self._maps = None  # the map topic on this session (map_topic())
         self._closed = False
         try:
             self._session = zenoh.open(zenoh.Config.from_json5(json.dumps(self.config)))
@@ -220,11 +221,23 @@ class ZenohMessenger:
         self.stats.received += len(out)
         return out
 
+    def map_topic(self):
+        """The robots' maps on this session (node.messaging.zenoh_maps), made on the first
+        call; close() closes it."""
+        if self._maps is None:
+            from node.messaging.zenoh_maps import ZenohMapTopic
+
+            self._maps = ZenohMapTopic(self._session, self.me)
+        return self._maps
+
     def close(self) -> None:
-        """Undeclare, close the session (its callback thread ends), then the eventfd."""
+        """Undeclare (the map topic's entities too), close the session (its callback thread
+        ends), then the eventfds."""
         if self._closed:
             return
         self._closed = True
+        if self._maps is not None:
+            self._maps.undeclare()
         for e in [self._subscriber, *self._publishers.values()]:
             with contextlib.suppress(zenoh.ZError):
                 e.undeclare()
@@ -232,3 +245,5 @@ class ZenohMessenger:
         with contextlib.suppress(zenoh.ZError):
             self._session.close()
         self._inbox.close()
+        if self._maps is not None:
+            self._maps.close()

@@ -28,6 +28,10 @@ def run(argv):
          "--kill", "r9:10"],
         ["-m", "testbed.run", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
          "--map", "/nonexistent.png"],
+        ["-m", "node", "--robot", "r1", "--robots", "2", "--body", "/nonexistent", "--maps",
+         "pubsub", "--middleware", "zeromq"],
+        ["-m", "node", "--robot", "r1", "--robots", "2", "--body", "/nonexistent", "--maps",
+         "gossip"],
     ],
 )  # fmt: skip
 def test_bad_arguments_exit_2_with_one_line(argv):
@@ -35,3 +39,13 @@ def test_bad_arguments_exit_2_with_one_line(argv):
     assert p.returncode == 2, p.stderr
     assert len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_the_robot_refuses_maps_pubsub_without_a_pubsub_middleware():
+    p = run(["-m", "node", "--robot", "r1", "--robots", "2", "--body", "/nonexistent",
+             "--maps", "pubsub", "--middleware", "nanomsg"])  # fmt: skip
+    assert p.returncode == 2
+    assert p.stderr.strip().splitlines() == [
+        "node: --maps pubsub needs --middleware zenoh or dds (not nanomsg): maps are published "
+        "on their topics"
+    ]

@@ -13,7 +13,7 @@ def test_every_field_round_trips_through_argv_with_non_default_values():
         map_size=(300, 250), cell=0.1, laser_range=1.5, laser_rays=180, speed=0.075,
         radius=0.2, plan_period=15, map_period=7, time_scale=3.75, timer_phase=11,
         iface="", flood_port=6000, flood="blind", coordination="paper", goal_port=6001,
-        middleware="zeromq", bind="127.0.0.1",
+        middleware="zenoh", maps="pubsub", bind="127.0.0.1",
         out_dir="/tmp/d", snapshots=frozenset({600, 200}), video_every=4,
     )  # fmt: skip
     defaults = NodeArgs(robot=1, robots=1, body="b")

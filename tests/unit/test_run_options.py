@@ -2,6 +2,8 @@
 the sweep file checks and the argv a sweep hands a run all made from it, as a closed loop."""
 
 import dataclasses
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -49,6 +51,7 @@ def test_every_option_round_trips_through_argv_with_non_default_values():
     veth = dataclasses.replace(
         cfg, medium="veth", wifi_loss="range", wifi_standard="80211a", wifi_rate="",
         isolate=(Outage(3, 200, 100), Outage(5, 10, 1), Outage(3, 250, 20)),
+        middleware="dds", maps="pubsub",
     )  # fmt: skip
     for opt in OPTIONS:  # every option non-default in one of the two
         assert opt.default != getattr(cfg, opt.name) or opt.default != getattr(veth, opt.name)
@@ -220,3 +223,46 @@ def test_the_robots_parameters_are_declared_once_in_node_launch():
                 assert getattr(opt, key) == value, (name, key)
     assert "laser_rays" in run_params() and BY_NAME["laser_rays"].minimum == 4
     assert NodeArgs(robot=1, robots=1, body="b").laser_rays == BY_NAME["laser_rays"].default
+
+
+def test_maps_pubsub_is_refused_without_a_pubsub_middleware(capsys):
+    """--maps pubsub with a middleware that has no topics: one line, exit 2, from `testbed
+    run` and from a sweep file (grid or run), before anything is made."""
+    assert parse_run(["--robots", "2", "--comm-range", "5"]).maps == "flood"
+    for mw in ("zenoh", "dds"):
+        cfg = parse_run(["--robots", "2", "--comm-range", "5", "--maps", "pubsub",
+                         "--middleware", mw])  # fmt: skip
+        assert (cfg.maps, cfg.middleware) == ("pubsub", mw)
+    for mw in ("nanomsg", "zeromq", "zeromq-reqrep"):
+        with pytest.raises(UsageError) as e:
+            parse_run(["--robots", "2", "--comm-range", "5", "--maps", "pubsub",
+                       "--middleware", mw])  # fmt: skip
+        assert str(e.value) == (
+            f"--maps pubsub needs --middleware zenoh or dds (not {mw}): maps are published "
+            "on their topics"
+        )
+    with pytest.raises(UsageError, match="--maps pubsub needs --middleware zenoh or dds"):
+        parse_run(["--robots", "2", "--comm-range", "5", "--maps", "pubsub"])  # nanomsg
+    out = subprocess.run(
+        [sys.executable, "-m", "testbed.cli", "run", "--robots", "2", "--comm-range", "5",
+         "--maps", "pubsub", "--middleware", "zeromq", "--out", "/nonexistent/mwm"],
+        capture_output=True, text=True, cwd=REPO, timeout=60,
+    )  # fmt: skip
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines() == [
+        "testbed: error: --maps pubsub needs --middleware zenoh or dds (not zeromq): maps are "
+        "published on their topics"
+    ]
+    grid = GOOD.replace("[grid]", '[grid]\nmaps = ["flood", "pubsub"]')
+    with pytest.raises(UsageError, match=r"s.toml: grid.maps: pubsub needs middleware zenoh or "
+                       r"dds \(the sweep has nanomsg\)"):  # fmt: skip
+        sweepfile.parse(tomllib.loads(grid), "s.toml")
+    ok = grid.replace("[grid]", '[grid]\nmiddleware = ["zenoh", "dds"]')
+    runs = sweepfile.expand(sweepfile.parse(tomllib.loads(ok), "s.toml"))
+    assert {(r.config.maps, r.config.middleware) for r in runs} == {
+        (m, mw) for m in ("flood", "pubsub") for mw in ("zenoh", "dds")
+    }
+    assert any("-zenoh-pubsub-" in r.run_id for r in runs), [r.run_id for r in runs]
+    fixed = GOOD + 'maps = "pubsub"\nmiddleware = "zeromq"\n'
+    with pytest.raises(UsageError, match="s.toml: run.maps: pubsub needs middleware"):
+        sweepfile.parse(tomllib.loads(fixed), "s.toml")
