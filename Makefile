@@ -31,7 +31,7 @@ STEPCORE := build/libstepcore.so
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
-	experiment-protocols experiment-media experiment-media-rise \
+	experiment-protocols experiment-media experiment-media-rise experiment-middleware \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test clean
 
 setup: apt venv $(NS3_MEDIUM) $(STEPCORE)
@@ -118,6 +118,13 @@ experiment-media-rise: setup
 	$(VENV)/bin/testbed report results/media-rise
 	$(VENV)/bin/testbed sweep testbed/experiments/media-rise-slow.toml --out results/media-rise-slow --resume
 	$(VENV)/bin/testbed report results/media-rise-slow
+
+# The paper's Section 3: the five middlewares at teams 2, 5, 10, ranges 5 and 20 m, with and
+# without a robot killed at mid-run (120 runs, about half an hour; docs/middleware.md).
+experiment-middleware: setup
+	$(NEED_ROOT)
+	$(VENV)/bin/testbed sweep testbed/experiments/middleware.toml --out results/middleware --resume
+	$(VENV)/bin/testbed report results/middleware
 
 experiment-ablation: setup
 	$(NEED_ROOT)

@@ -371,7 +371,7 @@ class StepLoop:
         self.robots = robots
         self.n = len(robots)
         kills: dict[int, list[int]] = {}
-        for k, s in prep.cfg.kill:
+        for k, s in prep.cfg.kills:
             kills.setdefault(s, []).append(k)
         self.kills = kills
         self.timing = StepTiming()

@@ -18,7 +18,7 @@ from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
-from testbed import runoptions
+from testbed import failures, runoptions
 from testbed.errors import UsageError
 from testbed.isolation import Outage
 from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
@@ -179,6 +179,12 @@ class RunConfig:
         "docs/middleware.md)", **robot("maps"), sweep={GRID, RUN}, newer=True,
         grid=GridDim(12, str, VARIED),
     )  # fmt: skip
+    battery_failure: str = option(
+        str, "one robot's battery fails: none, or midrun, robot rN killed at the team's "
+        "mid-run step (testbed.failures: half of a typical finishing step for the team size "
+        "and laser; docs/middleware.md)", "none", choices=failures.BATTERY_FAILURES,
+        sweep={GRID, RUN}, newer=True, grid=GridDim(11, str, CHANGED),
+    )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip
@@ -216,6 +222,12 @@ class RunConfig:
         str, "serve a live view of the run at [HOST:]PORT (127.0.0.1 unless a host is given)",
         None, metavar="[HOST:]PORT", default_text="none",
     )  # fmt: skip
+
+    @property
+    def kills(self) -> tuple[tuple[int, int], ...]:
+        """Every (robot, step) the run kills: --kill's, then the battery failure's."""
+        planned = failures.battery_kill(self.battery_failure, self.robots, self.laser_range)
+        return self.kill + ((planned,) if planned else ())
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -291,6 +303,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     for k, _ in cfg.kill:
         if not 1 <= k <= cfg.robots:
             raise UsageError(f"--kill names robot {k}, but the team is r1..r{cfg.robots}")
+    why = failures.refusal(cfg.battery_failure, cfg.robots)
+    if why:
+        raise UsageError(why)
     for o in cfg.isolate:
         if not 1 <= o.robot <= cfg.robots:
             raise UsageError(f"--isolate names robot {o.robot}, but the team is r1..r{cfg.robots}")

@@ -25,6 +25,7 @@ import numpy as np
 
 from node.rays import Laser
 from testbed.errors import UsageError
+from testbed.failures import battery_kill
 from testbed.runconfig import RunConfig, network_fields
 from testbed.runfiles import claim_directory, make_directory
 from testbed.world.world import World
@@ -99,6 +100,9 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
                   timer_phases=list(phases), display=cfg.robots + 1,
                   display_pos=list(display_pos), name=name,
                   snapshots=sorted(cfg.snapshots or DEFAULT_SNAPSHOTS))  # fmt: skip
+    planned = battery_kill(cfg.battery_failure, cfg.robots, cfg.laser_range)
+    if planned:  # the step the battery failure was fixed at (testbed.failures)
+        config["battery_kill"] = f"r{planned[0]}:{planned[1]}"
     prepared = PreparedRun(cfg, out, name, truth, world, phases, display_pos, spec, config)
     try:
         write_json_atomic(prepared.path("config.json"), prepared.config)

@@ -20,6 +20,8 @@ for every run of the sweep::
     medium = ["veth", "ns3-wifi"] # optional: the radio medium as a grid dimension
     middleware = ["nanomsg", "zeromq"]  # optional: the goals' middleware as a grid dimension
     maps = ["flood", "pubsub"]    # optional: how maps are shared, as a grid dimension
+    battery_failure = ["none", "midrun"]  # optional: midrun kills robot rN mid-run
+                                  # (testbed.failures); every team size must be 2 or more
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -42,6 +44,7 @@ for every run of the sweep::
                                   # nanomsg (docs/middleware.md)
     maps = "pubsub"               # flood | pubsub, default flood; pubsub needs every
                                   # middleware of the sweep to be zenoh or dds
+    battery_failure = "midrun"    # none | midrun, default none
     seed = 0                      # optional base mixed into every derived seed
 
 The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
@@ -61,8 +64,9 @@ several sweep files. The file itself is a regular UTF-8 file of at most MAX_FILE
 Expansion (`expand`) turns the spec into `PlannedRun`s. A run's id and seed are functions of
 its parameters and run index only, so they are the same every time the file is expanded
 (a routing, map, medium or middleware grid names its value in every id, `-aodv`,
-`-moffice`, `-ns3wifi`, `-zeromqreqrep`; the variants of a point share their seeds, so
-protocols, maps, media and middlewares are compared on the same draws):
+`-moffice`, `-ns3wifi`, `-zeromqreqrep`; a battery failure only when there is one,
+`-midrun`; the variants of a point share their seeds, so protocols, maps, media,
+middlewares and failures are compared on the same draws):
 that is what lets an interrupted sweep resume without redoing a finished run. Runs are
 ordered run index first, so an interrupted sweep has covered every point once before it
 covers any point twice.
@@ -79,6 +83,7 @@ from pathlib import Path
 
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 from node.messaging.maps import refusal as maps_refusal
+from testbed import failures
 from testbed.errors import UsageError
 from testbed.runconfig import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
 from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
@@ -337,7 +342,13 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
     kw = {"description": _description(path, data)}
     kw.update(_grid(path, grid, run))
     kw.update(_run(path, run, grid, kw["robots"]))
-    return SweepSpec.of(**kw)
+    spec = SweepSpec.of(**kw)
+    for failure in spec.values("battery_failure"):
+        why = failures.refusal(failure, min(spec.values("robots")))
+        if why:
+            where = "grid" if spec.varies("battery_failure") else "run"
+            raise _fail(path, f"{where}.battery_failure", why.replace("--battery-failure ", ""))
+    return spec
 
 
 def _map_path(path, m: str) -> str:

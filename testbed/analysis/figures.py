@@ -12,7 +12,9 @@ failed are left out and counted by the report, and so are runs not faithful to t
 scale (testbed.fidelity) unless `testbed report --include-unfaithful`. The paper's
 figures use the unimpaired runs (loss 0, delay 0) of one routing on one map (AODV on the
 empty terrain where it ran; a protocols sweep compares the others in its own section); the
-impairment figures exist when a sweep varies loss or delay.
+impairment figures exist when a sweep varies loss or delay. A sweep that varies the middleware
+or a battery failure has them drawn for the default middleware without a failure
+(testbed.analysis.middlewares compares them all).
 
 - Fig. 2(a)/(b): exploration steps of a run (mean over robots of finish_step) against team
   size, one line per communication range; the point is the mean over runs, the error bar its
@@ -38,7 +40,16 @@ import shutil
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from testbed.analysis import ablation, media, pathsfig, pcapmetrics, plots, protocols, tables
+from testbed.analysis import (
+    ablation,
+    media,
+    middlewares,
+    pathsfig,
+    pcapmetrics,
+    plots,
+    protocols,
+    tables,
+)
 from testbed.analysis.runs import FinishedRun, load_runs
 from testbed.analysis.tables import MetricsOf, write_table
 
@@ -135,6 +146,18 @@ def _media_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made
     write_table(made["tables"]["media"], figdir / "media")
 
 
+def _middleware_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path,
+                       made: dict) -> None:  # fmt: skip
+    """The middlewares' comparison (the paper's Section 3), when the sweep ran more than
+    one middleware."""
+    if len({middlewares.middleware_of(r) for r in all_runs if r.usable}) < 2:
+        return
+    per_run, rows = middlewares.tables(all_runs, metrics)
+    made["tables"]["middlewares_runs"], made["tables"]["middlewares"] = per_run, rows
+    write_table(per_run, figdir / "middlewares_runs")
+    write_table(rows, figdir / "middlewares")
+
+
 def _routing_figures(runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
     """Section 2.4's routing metrics, and the impairments when loss or delay varied."""
     per_run = tables.routing_per_run(runs, lambda run: metrics[run.run_id])
@@ -163,12 +186,15 @@ def make_all(
     figdir.mkdir(parents=True, exist_ok=True)
     all_runs = load_runs(sweep_dir, unfaithful=unfaithful)
     network = tables.main_network(all_runs)
-    runs = [r for r in all_runs if r.network == network]
+    messaging = middlewares.main_messaging(all_runs)
+    runs = [r for r in all_runs if r.network == network
+            and (middlewares.middleware_of(r), middlewares.failure_of(r)) == messaging]  # fmt: skip
     made: dict = {"files": [], "runs": all_runs, "tables": {}}
     _paper_figures(runs, figdir, made)
     metrics = _all_metrics(all_runs, metrics_of or capture_metrics)
     _protocol_tables(all_runs, metrics, figdir, made)
     _media_tables(all_runs, metrics, figdir, made)
+    _middleware_tables(all_runs, metrics, figdir, made)
     _routing_figures(runs, metrics, figdir, made)
     made["files"] += collect_paths(runs, figdir / "paths")
     return made

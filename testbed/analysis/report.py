@@ -24,6 +24,7 @@ from testbed.analysis import (
     figures,
     htmlreport,
     media,
+    middlewares,
     pcapmetrics,
     protocols,
     runreport,
@@ -97,6 +98,7 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     out += ablation.section(tables.get("fig2_all", []), tables.get("ablation_thirds", []))
     out += protocols.section(tables.get("protocols", []))
     out += media.section(tables.get("media", []))
+    out += middlewares.section(tables.get("middlewares", []))
     out += ["## Figures", ""]
     for name, data, caption in (
         ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),

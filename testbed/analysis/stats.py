@@ -67,3 +67,14 @@ def runs_to_resolve(diff: float, sd: float) -> int | None:
     if diff == 0 or not math.isfinite(diff) or not math.isfinite(sd):
         return None
     return max(2, math.ceil(2 * ((Z975 + Z80) * sd / abs(diff)) ** 2))
+
+
+def share_ci(hits: int, n: int) -> tuple[float, float, float] | None:
+    """(share, low, high): the 95% Wilson score interval of a share of `hits` in `n` runs
+    (a share of whole runs, where a t interval would leave [0, 1]); None for no runs."""
+    if n < 1:
+        return None
+    p, z2 = hits / n, Z975**2
+    centre = (p + z2 / (2 * n)) / (1 + z2 / n)
+    half = Z975 * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
+    return p, max(0.0, centre - half), min(1.0, centre + half)
