@@ -72,6 +72,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from testbed.analysis import mwframing, relaylag, routingnotes, rtps, runs
+from testbed.resultfile import DEFAULT_ROUTING
 from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
@@ -801,7 +802,7 @@ def run_metrics(
         routing = run.config.routing
         scale = run.time_scale_achieved or run.time_scale_requested or run.config.time_scale
     else:
-        routing, scale = network or (runs.DEFAULT_ROUTING, None)
+        routing, scale = network or (DEFAULT_ROUTING, None)
     lags = None
     if lag_path.is_file():
         try:
