@@ -127,6 +127,11 @@ class Shared:
     plan_pending: bool = False
     plan_asked: int = -1  # the step at which the pending plan was asked for
     plan_fresh: int | None = None  # a plan not yet applied: the step it was asked for
+    # The planner was inside its goal sends when the pending plan was asked for: the plan
+    # waits on the middleware (as long at any time scale), not on a processor.
+    planner_sending: bool = False
+    plan_asked_while_sending: bool = False
+    plan_fresh_waited: bool = False  # the same, for the plan not yet applied
     finished: bool = False
     teammates: dict[int, Teammate] = field(default_factory=dict)
 
@@ -252,6 +257,9 @@ class Robot:
         # timer's lateness in steps, a frame's answer in emulated ms after the world sent it.
         self.lateness = {
             "plan_age_steps": Lateness(),
+            # the same for plans asked for while the planner was blocked in a goal send: late
+            # because the middleware held it, at any time scale (not in the verdict)
+            "plan_age_blocked_steps": Lateness(),
             "plan_timer_steps": Lateness(),
             "map_timer_steps": Lateness(),
             "frame_answer_ms": Lateness(MS_BOUNDS),
@@ -377,8 +385,7 @@ class Robot:
                 s.scans.append((f.step, f.x, f.y, f.ranges))
                 target = None if behind else self._follow(moved)
                 if not behind and s.plan_fresh is not None:
-                    self.lateness["plan_age_steps"].add(f.step - s.plan_fresh - 1)
-                    s.plan_fresh = None
+                    self._plan_applied(f.step)
             if behind:
                 self.skipped += 1  # a newer frame is waiting: act on that one
             else:
@@ -395,6 +402,14 @@ class Robot:
             if not started:
                 started = True
                 self.request("start")
+
+    def _plan_applied(self, step: int) -> None:
+        """The fresh plan is applied at frame `step` (lock held): its age, in the verdict's
+        measure unless the middleware held the planner when the plan was asked for."""
+        s = self.s
+        age = "plan_age_blocked_steps" if s.plan_fresh_waited else "plan_age_steps"
+        self.lateness[age].add(step - s.plan_fresh - 1)
+        s.plan_fresh = None
 
     def _keep_step_order(self, f: body.Frame) -> None:
         """Hold frame `f` until the robot's other threads finished the previous step's work.
@@ -414,7 +429,10 @@ class Robot:
         def caught_up() -> bool:
             if self.stopping.is_set() or s.step < 0:
                 return True
-            return self.timer_seen >= s.step and not (s.plan_pending and s.plan_asked < f.step)
+            # A plan the planner cannot start while its send waits on the middleware would
+            # not come sooner at time scale 1 either: no point holding the frame for it.
+            waiting = s.plan_pending and s.plan_asked < f.step and not s.planner_sending
+            return self.timer_seen >= s.step and not waiting
 
         with self.lock:
             if caught_up():
@@ -486,6 +504,7 @@ class Robot:
                 return
             self.s.plan_pending = True
             self.s.plan_asked = self.s.step
+            self.s.plan_asked_while_sending = self.s.planner_sending
         self.requests.put(cause)
 
     def _planning(self) -> None:
@@ -522,6 +541,7 @@ class Robot:
             with self.lock:
                 s.plan, s.wp = p, 0
                 s.plan_fresh = s.plan_asked
+                s.plan_fresh_waited = s.plan_asked_while_sending
                 s.last_plan_step = step
                 s.plan_pending = False
                 if p.status == "done":
@@ -545,8 +565,16 @@ class Robot:
                 continue  # no goal selected, nothing to announce: it waits (coordination)
             data = wire.goal_msg(cfg.robot, step, p.goal, p.cost, p.status == "fallback",
                                  next(self.msg_numbers))  # fmt: skip
-            for j in reach:
-                self._send(j, "goal", data, step)
+            with self.lock:
+                s.planner_sending = True
+                self.caught_up.notify_all()  # a frame held for a plan need not wait for it
+            try:
+                for j in reach:
+                    self._send(j, "goal", data, step)
+            finally:
+                with self.lock:
+                    s.planner_sending = False
+                    self.caught_up.notify_all()
 
     def _send(self, j: int, kind: str, data: bytes, step: int) -> None:
         if self.goals.send(j, data):

@@ -92,3 +92,30 @@ def test_a_frame_already_past_its_wait_does_not_wait():
     r._keep_step_order(_frame(4, t0 - 1.0))  # sent a second ago
     assert time.monotonic() - t0 < 0.5  # not the wait of a frame sent now
     assert r.order_timeouts == 1
+
+
+def test_a_plan_held_up_by_the_planners_own_send_is_not_waited_for_nor_judged_late():
+    """A plan asked for while the planner waits in a goal send (a middleware that blocks:
+    zeromq-reqrep to a dead teammate) would be as late at time scale 1: the frame is not
+    held for it, and its age goes to plan_age_blocked_steps, outside the fidelity verdict."""
+    r = _robot(time_scale=0.1)  # three quarters of a step: 0.75 s, far above the bound below
+    _at_step(r, 3, timer_seen=3)
+    r.s.planner_sending = True
+    r.request("timer")  # asked at step 3 while the planner sends
+    assert r.s.plan_pending and r.s.plan_asked_while_sending
+    t0 = time.monotonic()
+    r._keep_step_order(_frame(4, time.monotonic()))
+    assert time.monotonic() - t0 < 0.2 and r.lateness["order_wait_ms"].n == 0
+    # installed later (as _planning does), applied five steps on: apart from the verdict's
+    with r.lock:
+        r.s.plan_fresh, r.s.plan_fresh_waited = r.s.plan_asked, r.s.plan_asked_while_sending
+        r.s.plan_pending = False
+        r._plan_applied(9)
+    assert r.lateness["plan_age_blocked_steps"].n == 1 and r.lateness["plan_age_steps"].n == 0
+    # the same request with the planner idle is waited for, as before
+    r2 = _robot(time_scale=10.0)
+    _at_step(r2, 3, timer_seen=3)
+    r2.request("timer")
+    assert not r2.s.plan_asked_while_sending
+    r2._keep_step_order(_frame(4, time.monotonic()))
+    assert r2.order_timeouts == 1  # nobody installs it: it waited its three quarters
