@@ -39,7 +39,6 @@ send timeout is 50 ms and the redial ceiling 500 ms, scaled with them.
 """
 
 import logging
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
@@ -296,16 +295,9 @@ class DdsMessenger:
     def send(self, j: int, data: bytes) -> bool:
         """Write `data` for teammate j; False if its reader is not matched or the write gave
         up after the send timeout (max_blocking_time)."""
-        t0 = time.monotonic()
+        token = self.stats.send_started()
         ok = self._write(j, data)
-        took = time.monotonic() - t0
-        s = self.stats
-        s.blocked_s += took
-        s.blocked_max_s = max(s.blocked_max_s, took)
-        if ok:
-            s.sent += 1
-        else:
-            s.failed += 1
+        self.stats.send_ended(token, ok)
         return ok
 
     def receive(self) -> list[bytes]:

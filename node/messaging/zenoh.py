@@ -44,7 +44,6 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import time
 from collections.abc import Callable, Sequence
 
 import zenoh
@@ -204,16 +203,9 @@ class ZenohMessenger:
     def send(self, j: int, data: bytes) -> bool:
         """Hand `data` to Zenoh for teammate j; False if no subscriber of j is known or the
         put failed. Never waits longer than the send timeout (congestion control DROP)."""
-        t0 = time.monotonic()
+        token = self.stats.send_started()
         ok = self._put(j, data)
-        took = time.monotonic() - t0
-        s = self.stats
-        s.blocked_s += took
-        s.blocked_max_s = max(s.blocked_max_s, took)
-        if ok:
-            s.sent += 1
-        else:
-            s.failed += 1
+        self.stats.send_ended(token, ok)
         return ok
 
     def receive(self) -> list[bytes]:
