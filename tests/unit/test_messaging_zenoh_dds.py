@@ -217,6 +217,12 @@ def test_close_is_idempotent_and_leaves_no_thread(kind):
     while not set(threading.enumerate()) <= python_before and time.monotonic() < deadline:
         time.sleep(0.05)
     assert set(threading.enumerate()) <= python_before
+    # Native threads too may take a moment to end on a loaded machine (seen: one of Zenoh's
+    # under two busy loops); given the same 2 s, the count comes back.
+    expected = native[0] if kind == "dds" else native[1]
+    while native[2] > expected and time.monotonic() < deadline + 2.0:
+        time.sleep(0.05)
+        native[2] = _native_threads()
     if kind == "dds":
         assert native[2] == native[1] == native[0], native  # Cyclone ends all its threads
     else:
