@@ -11,7 +11,7 @@ import sys
 from dataclasses import fields, replace
 
 from aodv.params import PROFILES, Params, profile
-from topology.argtypes import number
+from common.argtypes import number
 
 EXIT_USAGE = 2
 EXIT_FAILURE = 1

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 
 from aodv import seqnum
-from topology.jsonfile import read_json, write_json_atomic
+from common.jsonfile import read_json, write_json_atomic
 
 log = logging.getLogger(__name__)
 

@@ -8,7 +8,7 @@ import signal
 import time
 from collections import Counter
 
-from topology.jsonfile import write_json_atomic
+from common.jsonfile import write_json_atomic
 
 TIMER_BOUNDS_MS = (10, 25, 50, 100, 200)  # emulated ms late: histogram bounds
 

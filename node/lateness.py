@@ -8,7 +8,7 @@ each event was (in emulated steps or emulated milliseconds: the unit is the call
 count, a running maximum and a histogram over fixed bounds; nothing is kept per event, so a
 run of any length costs the same few integers, and recording changes nothing of what the
 robot does. `as_dict()` is what the robot's summary (and so robots/rK.json) says;
-testbed.fidelity judges a run from those.
+testbed.run.fidelity judges a run from those.
 """
 
 from __future__ import annotations

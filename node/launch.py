@@ -16,13 +16,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from common.argtypes import number
 from node import coordination
 from node.flood import MODES
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from node.messaging.maps import DEFAULT as DEFAULT_MAPS
 from node.messaging.maps import MAPS
-from topology.argtypes import number
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
 
@@ -40,8 +40,8 @@ def arg(
 ) -> Any:
     """A NodeArgs field and its flag: the default, the help, how the text is read (`parse`,
     or a number of `kind` within `above`/`minimum`, or one of `choices`), and whether a run
-    passes its RunConfig field of the same name through (`run`: testbed.run does, and
-    testbed.runconfig takes the default and bounds of that option from here). No default:
+    passes its RunConfig field of the same name through (`run`: testbed.run.execute does, and
+    testbed.run.config takes the default and bounds of that option from here). No default:
     the flag is required."""  # fmt: skip
     meta = {"help": help, "kind": kind, "parse": parse, "above": above, "minimum": minimum,
             "choices": choices, "run": run}  # fmt: skip

@@ -510,7 +510,7 @@ class Robot:
     def _planning(self) -> None:
         cfg = self.cfg
         # A test hook: wall seconds the planner waits before installing each plan, so that
-        # plans arrive late in emulated time (tests of the fidelity verdict, testbed.fidelity).
+        # plans arrive late in emulated time (tests of the fidelity verdict, testbed.run.fidelity).
         delay = float(os.environ.get("NODE_PLAN_DELAY_MS", "0") or 0) / 1000
         while not self.stopping.is_set():
             try:

@@ -6,7 +6,7 @@ wall clock, so every duration that belongs to emulated time is divided by K, her
 here: the robot's parts take their durations from a `RobotTimings`, never from the time
 scale. Durations that are the machine's, not the emulated world's (a thread's switch
 interval, a poll's timeout while nothing happens), are not scaled and do not live here.
-The world's side of the same clock (testbed.stepclock, and the run's config and fidelity
+The world's side of the same clock (testbed.run.stepclock, and the run's config and fidelity
 verdict) imports STEP_S from this module.
 """
 

@@ -1,9 +1,9 @@
-"""result.json as one type: `RunResult`, which testbed.runresults writes and everyone reads.
+"""result.json as one type: `RunResult`, which testbed.run.results writes and everyone reads.
 
 Theory of operation. A run's result.json (docs/run-results.md says what every key means) is
 written by one module and read by many: the run's own last line, the sweep (is a run done,
 how did it fare, how much CPU did it take), Slurm tasks, the replay, the causality check,
-the benchmarks and the whole analysis. All of them go through this module: testbed.runresults
+the benchmarks and the whole analysis. All of them go through this module: testbed.run.results
 builds a `RunResult` and writes `to_json()`; the readers call `RunResult.from_json(path or
 dict)` (or `read`, which answers None where a reader must carry on past a bad file) and use
 its fields and properties. Nobody else spells the file's name or picks its keys out of
@@ -257,7 +257,7 @@ class ResultConfig:
 
 @dataclass(frozen=True)
 class HostStalls:
-    """Stalls of the whole machine during the run (testbed/stalls.py)."""
+    """Stalls of the whole machine during the run (testbed/run/stalls.py)."""
 
     events: int = 0
     stalled_s: float = 0.0
@@ -277,7 +277,7 @@ class HostStalls:
 
 @dataclass(frozen=True)
 class Isolated:
-    """A radio outage the run made (--isolate, testbed.isolation): robot `robot` out of
+    """A radio outage the run made (--isolate, testbed.run.isolation): robot `robot` out of
     everyone's range from `from_step`, back at `back_step` (None: the run ended first)."""
 
     robot: str
@@ -342,7 +342,7 @@ class RunResult:
 
     @property
     def faithful(self) -> bool | None:
-        """Its fidelity verdict (testbed.fidelity): None for a run made before verdicts."""
+        """Its fidelity verdict (testbed.run.fidelity): None for a run made before verdicts."""
         return self.fidelity.get("ok")
 
     @property
@@ -419,7 +419,7 @@ class RunResult:
 
     def write(self, run_dir: str | Path) -> None:
         """result.json in `run_dir`, atomically (a temporary file, then rename)."""
-        from topology.jsonfile import write_json_atomic
+        from common.jsonfile import write_json_atomic
 
         write_json_atomic(str(result_path(run_dir)), self.to_json())
 

@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 from pyroute2.netlink.exceptions import NetlinkError
 
+from common.errors import TestbedError
 from topology import netns
-from topology.errors import TestbedError
 from topology.spec import Impairment
 
 log = logging.getLogger(__name__)

@@ -32,7 +32,7 @@ read or written here; topology.medium probes the namespace and writes what `plan
 write, what that amounts to in emulated time, and whether it is dilated within `TOLERANCE`,
 limited by the kernel, missing or refused) and one `FixedTimer` per compiled-in timer with
 its wall and emulated length. result.json (`network_timers`) and `net up`'s network.json
-carry it (`to_dict`); testbed.fidelity judges it (`tcp_dilated`). At K = 1 nothing is
+carry it (`to_dict`); testbed.run.fidelity judges it (`tcp_dilated`). At K = 1 nothing is
 written.
 """
 

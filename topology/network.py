@@ -34,11 +34,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 
+from common.errors import TestbedError, UsageError
+from common.jsonfile import write_json_atomic
 from topology import capture, names, netns, processes, ranges, routing, state
-from topology.errors import TestbedError, UsageError
 from topology.forkserver import ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
-from topology.jsonfile import write_json_atomic
 from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX
 from topology.ns3medium import medium_for

@@ -38,8 +38,8 @@ import struct
 import subprocess
 import time
 
+from common.errors import TestbedError, UsageError
 from topology import names, netns, processes, rtnl, state
-from topology.errors import TestbedError, UsageError
 from topology.medium import WLAN_INDEX, Medium, port_index
 from topology.spec import Impairment, NetworkSpec, Position
 

@@ -19,9 +19,9 @@ import logging
 import sys
 import time
 
+from common.argtypes import number
+from common.errors import TestbedError
 from topology import mobility
-from topology.argtypes import number
-from topology.errors import TestbedError
 from topology.network import Network
 
 log = logging.getLogger("topology.player")

@@ -28,8 +28,8 @@ import stat
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from topology.errors import UsageError
-from topology.jsonfile import write_json_atomic
+from common.errors import UsageError
+from common.jsonfile import write_json_atomic
 from topology.names import NAME_PATTERN
 from topology.spec import Impairment, NetworkSpec
 

@@ -9,7 +9,7 @@ results. It returns the runs and the tables, which the report decides its verdic
 Which runs count: runs whose status is `complete` or `step_cap` (a run that hit the step cap
 counts its unfinished robots at the final step, as the contract says). Runs that crashed or
 failed are left out and counted by the report, and so are runs not faithful to their time
-scale (testbed.fidelity) unless `testbed report --include-unfaithful`. The paper's
+scale (testbed.run.fidelity) unless `testbed report --include-unfaithful`. The paper's
 figures use the unimpaired runs (loss 0, delay 0) of one routing on one map (AODV on the
 empty terrain where it ran; a protocols sweep compares the others in its own section); the
 impairment figures exist when a sweep varies loss or delay. A sweep that varies the middleware

@@ -71,9 +71,9 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from common.jsonfile import write_json_atomic
 from testbed.analysis import mwframing, relaylag, routingnotes, rtps, runs
 from testbed.resultfile import DEFAULT_ROUTING
-from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
 

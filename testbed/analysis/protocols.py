@@ -19,9 +19,9 @@ from __future__ import annotations
 import statistics
 from pathlib import Path
 
+from common.jsonfile import read_json
 from testbed.analysis import stats
 from testbed.analysis.runs import FinishedRun
-from topology.jsonfile import read_json
 from topology.spec import ROUTINGS
 
 PROTOCOL_ORDER = ROUTINGS  # the report lists protocols in the order of the choices

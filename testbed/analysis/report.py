@@ -19,6 +19,7 @@ import logging
 import sys
 from pathlib import Path
 
+from common.errors import UsageError
 from testbed.analysis import (
     ablation,
     figures,
@@ -32,7 +33,6 @@ from testbed.analysis import (
 )
 from testbed.analysis.runs import ResultError, load_run
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
-from testbed.errors import UsageError
 from testbed.resultfile import has_result
 
 log = logging.getLogger(__name__)
@@ -133,7 +133,7 @@ def _routing_section(tables: dict) -> list[str]:
     ]
     rows = tables["routing"]
     # PDF and delay of rows at different time scales are set side by side only where TCP
-    # kept emulated time (testbed.fidelity.network_verdict): else their cells are marked.
+    # kept emulated time (testbed.run.fidelity.network_verdict): else their cells are marked.
     mixed = len({s for r in rows for s in r.get("time_scales", [])}) > 1
     marked = [r for r in rows if mixed and not r.get("tcp_emulated", True)]
     for r in rows:

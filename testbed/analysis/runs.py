@@ -19,7 +19,7 @@ defaults of older files applied there) plus its run id and directory:
   header.
 
 Which runs count (`FinishedRun.usable`): status `complete` or `step_cap`, and faithful to
-its time scale (result.json's `fidelity`, testbed.fidelity; a run written before verdicts
+its time scale (result.json's `fidelity`, testbed.run.fidelity; a run written before verdicts
 counts) unless `load_runs(..., unfaithful=True)` keeps those too; a run that hit the step
 cap counts its unfinished robots at the final step (`exploration_steps`), and a robot
 stopped on purpose (`--kill`) is not counted at all.

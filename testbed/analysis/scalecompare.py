@@ -36,9 +36,9 @@ import statistics
 import sys
 from pathlib import Path
 
+from common.errors import UsageError
 from testbed.analysis import media, pcapmetrics, stats
 from testbed.analysis.runs import FinishedRun, ResultError, load_runs
-from testbed.errors import UsageError
 
 # (key, name, format)
 MEASURES = (

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from common.jsonfile import read_json
 from testbed.analysis.runs import FinishedRun
-from topology.jsonfile import read_json
 
 
 def seconds(x: float) -> str:
@@ -91,7 +91,7 @@ def _finished_lines(runs: list[FinishedRun], planned: list[dict]) -> list[str]:
 
 
 def _fidelity_lines(runs: list[FinishedRun]) -> list[str]:
-    """The runs whose fidelity verdict (testbed.fidelity) says time dilation changed them."""
+    """The runs whose fidelity verdict (testbed.run.fidelity) says time dilation changed them."""
     bad = [r for r in runs if r.faithful is False]
     if not bad:
         return []

@@ -6,7 +6,7 @@
   200, see node/planner.py). Also the per-frame map update.
 - 10-robot runs (empty terrain, comm range 20 m, babel) capped at RUN_STEPS steps (the
   start, when all ten explore at once, is the busiest part) at increasing time scales: the
-  fraction of step deadlines missed (world and robots, see testbed/run.py) at each, and the
+  fraction of step deadlines missed (world and robots, see testbed/run/execute.py) at each, and the
   highest scale missing under 1 % (best of two attempts per scale), searched three times:
   the median is the result, since a host that steals CPU time for a minute (recorded per
   run from /proc/stat) decides one search alone. Per robot: CPU (fraction of a core, ms per
@@ -104,7 +104,7 @@ def _stats(v: list[float]) -> dict:
 
 
 def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
-    from testbed.run import RunConfig, run
+    from testbed.run.execute import RunConfig, run
     from topology.network import destroy
 
     name = "tn" + uuid.uuid4().hex[:6]
@@ -133,7 +133,7 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
         "deadline_miss_fraction": r.deadline_miss_fraction,
         "deadlines_missed_world": r.deadlines_missed_world,
         # For reading, not for the search (which counts every miss): how many of the misses
-        # fell while the host held the machine (testbed/stalls.py).
+        # fell while the host held the machine (testbed/run/stalls.py).
         "deadline_miss_fraction_outside_stalls": r.deadline_miss_fraction_outside_stalls,
         "host_stalls": r.host_stalls.to_dict(),
         "world_cpu_ms_per_step": round(

@@ -15,8 +15,8 @@ import urllib.request
 import uuid
 
 from testbed.bench.common import write
-from testbed.run import RunConfig
-from testbed.run import run as run_once
+from testbed.run.execute import RunConfig
+from testbed.run.execute import run as run_once
 from topology.network import destroy
 
 REPEATS = 5
@@ -58,7 +58,7 @@ def one(view: bool) -> tuple[float, int]:
     finally:
         stop.set()
         destroy(name)
-    # Outside host stalls: the machine stopping (testbed.stalls) is not the view's doing, and
+    # Outside host stalls: the machine stopping (testbed.run.stalls) is not the view's doing, and
     # on this shared host it dominated the misses of some runs either way.
     return result.deadline_miss_fraction_outside_stalls, len(frames)
 

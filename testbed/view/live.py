@@ -19,9 +19,9 @@ import time
 
 from aiohttp import web
 
+from common.jsonfile import read_json
 from testbed.view import server
 from testbed.view.served import snapshot_steps
-from topology.jsonfile import read_json
 
 FRAME_S = 0.1  # 10 frames a second at most
 SEND_TIMEOUT_S = 1.0  # a browser that takes longer to accept a frame is dropped

@@ -165,7 +165,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    from testbed.errors import UsageError
+    from common.errors import UsageError
 
     try:
         return serve(args.run_dir, args.view)

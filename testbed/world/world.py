@@ -7,7 +7,7 @@ short of any obstacle (a move that would put its disc into an obstacle is refuse
 as a collision); then every robot's noiseless laser is cast from its new position. The cells
 those rays cross are the union of what the team has seen, from which coverage of free space
 is computed. Robots are discs that do not collide with each other (as in the paper's
-simulation). The world never touches the network: `testbed.run` feeds its positions to the
+simulation). The world never touches the network: `testbed.run.execute` feeds its positions to the
 topology controller and its scans to the robots' body links.
 """
 

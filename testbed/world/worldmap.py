@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from testbed.errors import UsageError
+from common.errors import UsageError
 from topology import pngmap
 
 CELL = 0.05  # metres

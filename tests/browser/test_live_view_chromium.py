@@ -104,7 +104,7 @@ def check_drawn_page(driver) -> None:
 def live_run(tmp_path_factory):
     """A 3-robot run on the office map with --view, and the browser on its page while it
     runs. Yields (driver, port, run directory, box with the result once the run is over)."""
-    from testbed.run import RunConfig, run
+    from testbed.run.execute import RunConfig, run
     from topology.network import destroy
 
     out = tmp_path_factory.mktemp("live") / "run"
@@ -240,8 +240,8 @@ def test_net_up_view_draws_robots_on_the_edge_whole(tmp_path):
 
 def test_report_html_renders_with_its_figures(tmp_path):
     """report.html of a (synthetic) sweep, opened from disk as a reader would."""
-    from testbed import sweepfile
     from testbed.analysis import report
+    from testbed.sweep import file as sweepfile
     from tests.unit.test_sweep_synthetic import make_sweep
 
     spec = sweepfile.SweepSpec.of(robots=(1, 2, 3), comm_range=(5.0,), laser_range=(2.0,), runs=2)

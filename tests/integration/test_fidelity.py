@@ -1,4 +1,4 @@
-"""Time dilation against its ground truth (testbed.fidelity): a lone robot is
+"""Time dilation against its ground truth (testbed.run.fidelity): a lone robot is
 deterministic, so at two time scales where its verdict says faithful it must drive exactly
 the same path; a run whose plans come late (the planner held back by a test hook) must be
 judged unfaithful, and `testbed run` must say so in one line; and the network's timers are

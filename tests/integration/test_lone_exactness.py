@@ -11,7 +11,7 @@ import uuid
 
 import pytest
 
-from testbed.run import RunConfig, run
+from testbed.run.execute import RunConfig, run
 from topology.network import destroy
 
 DATA = os.path.join(os.path.dirname(__file__), "..", "data", "lone-k5")

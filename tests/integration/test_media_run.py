@@ -12,7 +12,7 @@ import pytest
 
 from testbed.analysis import figures, media
 from testbed.analysis.runs import load_run
-from testbed.run import RunConfig, run
+from testbed.run.execute import RunConfig, run
 from topology import netns, state
 from topology.ns3medium import NS3_HEADER
 

@@ -37,7 +37,7 @@ import pytest
 
 from node import messaging
 from testbed.analysis import pcapmetrics
-from testbed.run import PROJECT_ROOT
+from testbed.run.execute import PROJECT_ROOT
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 

@@ -13,9 +13,9 @@ import uuid
 
 import pytest
 
+from common.errors import TestbedError
 from testbed.analysis import pcapmetrics, relaylag
 from topology import names, netns, state
-from topology.errors import TestbedError
 from topology.network import Network, destroy
 from topology.ns3medium import NS3_HEADER
 from topology.spec import NetworkSpec

@@ -15,7 +15,7 @@ import uuid
 import pytest
 
 from testbed.analysis import runcheck
-from testbed.run import RunConfig, run
+from testbed.run.execute import RunConfig, run
 from topology.network import destroy
 
 

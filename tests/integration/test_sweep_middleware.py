@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from testbed import failures, sweepfile
+from testbed.run import failures
+from testbed.sweep import file as sweepfile
 from tests.integration.test_sweep_short import results, run_testbed
 
 REPO = Path(__file__).resolve().parents[2]

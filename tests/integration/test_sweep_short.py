@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from testbed import sweepfile
-from testbed.rundir import plan_dict
+from testbed.sweep import file as sweepfile
+from testbed.sweep.rundir import plan_dict
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = REPO / "testbed" / "experiments" / "short.toml"
@@ -195,7 +195,7 @@ def test_interrupted_sweep_resumes_to_the_same_results(tmp_path, sig):
     }
     for rid, doc in final.items():
         # The same point as planned; the time scale may be lower: on a slow machine the sweep
-        # slows its runs down (testbed.sweeprunner), which changes how fast, not what is run.
+        # slows its runs down (testbed.sweep.runner), which changes how fast, not what is run.
         want = {k: v for k, v in plan[rid].items() if k != "time_scale"}
         assert {k: doc["config"][k] for k in want} == want
         assert doc["config"]["time_scale"] <= plan[rid]["time_scale"]

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from testbed import sweepfile
 from testbed.analysis.runs import ResultError, load_run, load_runs
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import result_doc, timer_plans, write_run
 
 

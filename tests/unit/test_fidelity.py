@@ -1,11 +1,11 @@
-"""The fidelity verdict (testbed.fidelity) and the lateness records it reads (node.lateness)."""
+"""The fidelity verdict (testbed.run.fidelity) and the lateness records it reads (node.lateness)."""
 
 import pytest
 
 from node.lateness import MS_BOUNDS, Lateness
-from testbed import fidelity
-from testbed.fidelity import Measures, Thresholds, measures, verdict
 from testbed.resultfile import ResultError, RunResult
+from testbed.run import fidelity
+from testbed.run.fidelity import Measures, Thresholds, measures, verdict
 from topology import nettimers
 
 
@@ -120,7 +120,7 @@ def test_a_results_verdict_is_read_as_it_was_written():
 
 def test_hello_limit_is_half_the_lateness_that_breaks_a_link_in_every_aodv_profile():
     from aodv.params import PROFILES, profile
-    from testbed.fidelity import HELLO_LATE_LIMIT_MS
+    from testbed.run.fidelity import HELLO_LATE_LIMIT_MS
 
     for name in PROFILES:
         p = profile(name)
@@ -129,7 +129,7 @@ def test_hello_limit_is_half_the_lateness_that_breaks_a_link_in_every_aodv_profi
 
 
 def test_the_channels_mean_relay_lag_is_judged_against_one_percent_of_a_step():
-    from testbed.fidelity import CHANNEL_LAG_LIMIT_MS, measures, verdict
+    from testbed.run.fidelity import CHANNEL_LAG_LIMIT_MS, measures, verdict
 
     assert CHANNEL_LAG_LIMIT_MS == 1.0  # a frame d ms late lands a step late with odds d/100
     on_time = measures(0.0, [], None, [], {"frames": 900, "mean_ms": 0.45, "max_ms": 30.0})
@@ -144,7 +144,7 @@ def test_the_channels_mean_relay_lag_is_judged_against_one_percent_of_a_step():
 
 
 def test_a_run_without_the_channel_or_with_a_malformed_counter_is_not_judged_on_it():
-    from testbed.fidelity import measures, verdict
+    from testbed.run.fidelity import measures, verdict
 
     for channel in (None, {}, {"frames": 3, "mean_ms": "late"}, ["x"]):
         m = measures(0.0, [], None, [], channel)

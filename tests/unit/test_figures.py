@@ -9,9 +9,9 @@ import pytest
 from matplotlib.container import ErrorbarContainer
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from testbed import sweepfile
 from testbed.analysis import figures, pathsfig, plots, tables
 from testbed.analysis.runs import load_runs
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 

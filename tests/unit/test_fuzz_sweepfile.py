@@ -1,4 +1,4 @@
-"""Sweep files from anywhere (testbed.sweepfile), fuzzed with Hypothesis: every file ends in
+"""Sweep files from anywhere (testbed.sweep.file), fuzzed with Hypothesis: every file ends in
 exactly one of two ways. Either it is accepted and sane (at most MAX_RUNS runs, expanded to
 exactly the product of its lists, unique run ids, every number finite), or it is refused
 with a `UsageError` of one printable line naming the file. Nothing else: no other
@@ -17,8 +17,8 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from testbed import sweepfile
-from testbed.errors import UsageError
+from common.errors import UsageError
+from testbed.sweep import file as sweepfile
 
 BASE = settings(deadline=2000, suppress_health_check=[HealthCheck.too_slow], database=None)
 

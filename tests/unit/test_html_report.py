@@ -1,7 +1,7 @@
 """report.html: the markdown report as one self-contained page."""
 
-from testbed import sweepfile
 from testbed.analysis import htmlreport, report
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep
 
 

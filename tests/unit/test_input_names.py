@@ -3,8 +3,8 @@ a suffix never slips past a check that `testbed clean` and the kernel rely on.""
 
 import pytest
 
+from common.errors import UsageError
 from testbed.cli import build_parser
-from testbed.errors import UsageError
 from topology import names
 from topology.spec import NetworkSpec
 

@@ -3,8 +3,8 @@
 
 import pytest
 
+from common.errors import UsageError
 from testbed.cli import build_parser
-from testbed.errors import UsageError
 from topology.spec import MAX_COORD_M, NetworkSpec
 
 

@@ -8,8 +8,8 @@ import subprocess
 
 import pytest
 
+from common.errors import UsageError
 from topology import state
-from topology.errors import UsageError
 from topology.network import destroy
 from topology.spec import NetworkSpec
 

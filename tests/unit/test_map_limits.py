@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 import pytest
 
-from testbed.errors import UsageError
-from testbed.runconfig import RunConfig, config_from_args
+from common.errors import UsageError
+from testbed.run.config import RunConfig, config_from_args
 from testbed.world.worldmap import empty_terrain, load_png
 from topology.los import MapError, Walls
 
@@ -55,7 +55,7 @@ def test_a_huge_png_is_refused_from_its_header_without_decoding(tmp_path):
     huge_white_png(big, 20000)  # 400 million pixels: 849 MB to decode
     out, err = in_child(f"""
         import json
-        from testbed.errors import UsageError
+        from common.errors import UsageError
         from testbed.world.worldmap import load_png
         from topology.los import MapError, Walls
         said = []
@@ -100,7 +100,7 @@ def test_a_truncated_png_is_one_line_of_ours_and_nothing_from_libpng(tmp_path, c
     bad.write_bytes(data[: int(len(data) * cut)] if cut > 0 else data[:cut])
     out, err = in_child(f"""
         import json
-        from testbed.errors import UsageError
+        from common.errors import UsageError
         from testbed.world.worldmap import load_png
         try:
             load_png({str(bad)!r}, 0.05)
@@ -159,7 +159,7 @@ def test_a_laser_beyond_30_m_or_the_maps_diagonal_is_refused():
     import argparse
 
     from testbed.cli import build_parser
-    from testbed.runprepare import check_laser
+    from testbed.run.prepare import check_laser
 
     with pytest.raises(UsageError, match="laser range must be at most 30, not 100"):
         build_parser(["run"]).parse_args(["run", "--robots", "1", "--comm-range", "5",
@@ -246,8 +246,8 @@ def test_prepare_stops_at_once_on_sigint():
 
 
 def test_a_config_records_the_laser_bound_for_sweeps():
-    from testbed.runconfig import BY_NAME
-    from testbed.runoptions import check_value
+    from testbed.run.config import BY_NAME
+    from testbed.run.options import check_value
 
     assert (
         check_value(BY_NAME["laser_range"], 31) == "value 31 out of range (must be > 0 and <= 30)"

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from testbed import sweepfile
 from testbed.analysis import figures, media, protocols, report
+from testbed.sweep import file as sweepfile
 from tests.unit.test_analysis_runs import channel_doc
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 

@@ -208,7 +208,7 @@ def test_a_run_with_a_missing_middleware_package_refuses_in_one_line(tmp_path):
 
 
 def test_result_json_gets_the_middleware_each_robots_counters_and_the_teams_totals():
-    from testbed.runresults import messaging as totals
+    from testbed.run.results import messaging as totals
 
     def summary(sent, blocked_max, late):
         return {

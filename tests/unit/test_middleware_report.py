@@ -4,10 +4,10 @@ synthetic sweep with known numbers and on the rule's own cases."""
 
 import pytest
 
-from testbed import sweepfile
 from testbed.analysis import figures, middlewares, report, stats
 from testbed.analysis.verdicts import FAILS, HOLDS, TOO_FEW
-from testbed.rundir import plan_dict
+from testbed.sweep import file as sweepfile
+from testbed.sweep.rundir import plan_dict
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 CAP = 3000

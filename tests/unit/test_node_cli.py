@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from testbed.run import PROJECT_ROOT
+from testbed.run.execute import PROJECT_ROOT
 
 
 def run(argv):
@@ -20,13 +20,13 @@ def run(argv):
         ["-m", "node", "--robot", "x3", "--robots", "2", "--body", "/nonexistent"],
         ["-m", "node", "--robot", "r1", "--robots", "0", "--body", "/nonexistent"],
         ["-m", "node", "--robot", "r1", "--robots", "2", "--body", "/x", "--map-size", "4"],
-        ["-m", "testbed.run", "--robots", "2", "--comm-range", "-5", "--out", "/tmp/x"],
-        ["-m", "testbed.run", "--robots", "two", "--comm-range", "5", "--out", "/tmp/x"],
-        ["-m", "testbed.run", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
+        ["-m", "testbed.run.execute", "--robots", "2", "--comm-range", "-5", "--out", "/tmp/x"],
+        ["-m", "testbed.run.execute", "--robots", "two", "--comm-range", "5", "--out", "/tmp/x"],
+        ["-m", "testbed.run.execute", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
          "--routing", "olsr"],
-        ["-m", "testbed.run", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
+        ["-m", "testbed.run.execute", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
          "--kill", "r9:10"],
-        ["-m", "testbed.run", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
+        ["-m", "testbed.run.execute", "--robots", "2", "--comm-range", "5", "--out", "/tmp/x",
          "--map", "/nonexistent.png"],
         ["-m", "node", "--robot", "r1", "--robots", "2", "--body", "/nonexistent", "--maps",
          "pubsub", "--middleware", "zeromq"],

@@ -113,7 +113,7 @@ def test_medium_for_picks_the_specs_medium():
 
 
 def test_a_medium_without_its_process_is_one_clear_error(tmp_path, monkeypatch):
-    from topology.errors import TestbedError
+    from common.errors import TestbedError
 
     monkeypatch.setenv("TESTBED_STATE_DIR", str(tmp_path))
     wifi = ns3medium.Ns3Medium(spec(medium="ns3-wifi"))

@@ -1,8 +1,8 @@
 """The protocols section of the report: each protocol beside the oracle, and the verdict on
 the paper's choice of AODV, on a synthetic protocols sweep with known numbers."""
 
-from testbed import sweepfile
 from testbed.analysis import figures, protocols, report
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 # Steps and control packets per (routing): AODV as fast as babel, quieter; batman slower.

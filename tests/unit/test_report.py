@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from testbed import sweepfile
 from testbed.analysis import report, sweepinfo, tables, verdicts
 from testbed.analysis.runs import load_runs
 from testbed.analysis.verdicts import FAILS, HOLDS, NO_DATA, PARTLY, TOO_FEW
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
 REPO = Path(__file__).resolve().parents[2]

@@ -1,12 +1,12 @@
-"""Runs not faithful to their time scale (result.json's `fidelity`, testbed.fidelity): the
+"""Runs not faithful to their time scale (result.json's `fidelity`, testbed.run.fidelity): the
 analysis reads the verdict, leaves such runs out of the figures and verdicts by default,
 and the report names and counts them."""
 
 import json
 
-from testbed import sweepfile
 from testbed.analysis import report
 from testbed.analysis.runs import load_run, load_runs
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep
 
 

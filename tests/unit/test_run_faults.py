@@ -4,11 +4,11 @@ averages over robots leave it out; an isolated robot has no link, whatever the p
 
 import pytest
 
-from testbed import isolation
-from testbed.isolation import Outage
-from testbed.run import final_status, over
-from testbed.runrecord import RobotRecord, RunRecord
-from testbed.stepclock import ClockSummary
+from testbed.run import isolation
+from testbed.run.execute import final_status, over
+from testbed.run.isolation import Outage
+from testbed.run.record import RobotRecord, RunRecord
+from testbed.run.stepclock import ClockSummary
 from topology.network import Network
 from topology.spec import NetworkSpec
 

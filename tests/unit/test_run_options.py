@@ -1,4 +1,4 @@
-"""The run options (testbed.runconfig, testbed.runoptions): one table, and the command line,
+"""The run options (testbed.run.config, testbed.run.options): one table, and the command line,
 the sweep file checks and the argv a sweep hands a run all made from it, as a closed loop."""
 
 import dataclasses
@@ -9,11 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from testbed import cli, sweepfile
-from testbed.errors import UsageError
-from testbed.isolation import Outage
-from testbed.runconfig import NET_OPTIONS, OPTIONS, RunConfig, config_from_args, to_argv
-from testbed.rundir import plan_dict, run_argv
+from common.errors import UsageError
+from testbed import cli
+from testbed.run.config import NET_OPTIONS, OPTIONS, RunConfig, config_from_args, to_argv
+from testbed.run.isolation import Outage
+from testbed.sweep import file as sweepfile
+from testbed.sweep.rundir import plan_dict, run_argv
 from topology.spec import ROUTINGS
 
 REPO = Path(__file__).resolve().parents[2]
@@ -206,7 +207,7 @@ def test_the_robots_parameters_are_declared_once_in_node_launch():
     bounds from NodeArgs' one declaration, so they cannot disagree."""
     from node.launch import NodeArgs, bounds, parser, run_params
     from node.robot import RobotConfig
-    from testbed.runconfig import BY_NAME
+    from testbed.run.config import BY_NAME
 
     robot_defaults = {f.name: f.default for f in dataclasses.fields(RobotConfig)}
     run_defaults = {f.name: f.default for f in dataclasses.fields(RunConfig)}

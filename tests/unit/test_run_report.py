@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from testbed import sweepfile
 from testbed.analysis import pcapmetrics, routingnotes, runreport
 from testbed.analysis.runs import load_run
+from testbed.sweep import file as sweepfile
 from tests.unit import test_pcapmetrics as tp
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 

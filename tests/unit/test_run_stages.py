@@ -1,19 +1,19 @@
 """The run's stages without a network: the output directory's claim, the files, the
-record's finishing steps, the final status and the last line (testbed.runfiles,
-testbed.runrecord, testbed.run, testbed.runprogress)."""
+record's finishing steps, the final status and the last line (testbed.run.files,
+testbed.run.record, testbed.run.execute, testbed.run.progress)."""
 
 import csv
 import os
 
 import pytest
 
-from testbed.errors import UsageError
+from common.errors import UsageError
 from testbed.resultfile import ResultConfig, RunResult
-from testbed.run import final_status
-from testbed.runfiles import RunFiles, claim_directory, holds_run, make_directory
-from testbed.runprogress import summary_line
-from testbed.runrecord import RobotRecord, RunRecord
-from testbed.stepclock import ClockSummary
+from testbed.run.execute import final_status
+from testbed.run.files import RunFiles, claim_directory, holds_run, make_directory
+from testbed.run.progress import summary_line
+from testbed.run.record import RobotRecord, RunRecord
+from testbed.run.stepclock import ClockSummary
 
 
 def _old_run(d):

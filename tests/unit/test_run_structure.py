@@ -1,4 +1,4 @@
-"""The shape of a run's code: testbed/run.py's classes set their attributes in `__init__`
+"""The shape of a run's code: testbed/run/execute.py's classes set their attributes in `__init__`
 only (what changes during a run lives in the clock, the records and the files), and the
 run's modules stay small (no function over 80 lines, no module over 600)."""
 
@@ -7,11 +7,8 @@ from pathlib import Path
 
 import pytest
 
-TESTBED = Path(__file__).resolve().parents[2] / "testbed"
-RUN_MODULES = [
-    "run.py", "runprepare.py", "runfiles.py", "runrecord.py", "runresults.py",
-    "runprogress.py", "stepclock.py", "stalls.py",
-]  # fmt: skip
+RUN = Path(__file__).resolve().parents[2] / "testbed" / "run"
+RUN_MODULES = sorted(p.name for p in RUN.glob("*.py"))
 
 
 def _targets(node: ast.AST):
@@ -59,12 +56,12 @@ def test_the_check_sees_what_it_must():
 
 
 def test_run_classes_set_attributes_only_in_init():
-    assert attributes_set_outside_init((TESTBED / "run.py").read_text()) == []
+    assert attributes_set_outside_init((RUN / "execute.py").read_text()) == []
 
 
 @pytest.mark.parametrize("module", RUN_MODULES)
 def test_run_modules_are_small(module):
-    source = (TESTBED / module).read_text()
+    source = (RUN / module).read_text()
     assert len(source.splitlines()) <= 600
     long = [
         (fn.name, fn.end_lineno - fn.lineno + 1)
@@ -76,8 +73,8 @@ def test_run_modules_are_small(module):
 
 
 def test_runresults_does_not_know_the_run():
-    tree = ast.parse((TESTBED / "runresults.py").read_text())
+    tree = ast.parse((RUN / "results.py").read_text())
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module} | {
         a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
     }
-    assert "testbed.run" not in imported
+    assert "testbed.run.execute" not in imported

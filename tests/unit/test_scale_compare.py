@@ -2,9 +2,9 @@
 
 import dataclasses
 
-from testbed import sweepfile
 from testbed.analysis import scalecompare as sc
 from testbed.analysis.runs import load_run
+from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 

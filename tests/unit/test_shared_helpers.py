@@ -7,8 +7,8 @@ import os
 
 import pytest
 
-from topology import jsonfile
-from topology.argtypes import number
+from common import jsonfile
+from common.argtypes import number
 from topology.routing import keep_daemon_files
 
 # -- number arguments -------------------------------------------------------------------------

@@ -3,8 +3,8 @@
 import json
 from pathlib import Path
 
-from testbed import slurm
-from testbed.runconfig import RunConfig
+from testbed.run.config import RunConfig
+from testbed.sweep import slurm
 
 
 def test_resources_grow_with_team_and_time_scale_and_fit_a_node():
@@ -22,7 +22,7 @@ def test_resources_grow_with_team_and_time_scale_and_fit_a_node():
 def test_batch_script_runs_one_task_of_the_list_with_this_python(tmp_path):
     text = slurm.batch_script(tmp_path / "out dir", tmp_path / "tasks-1.txt")
     assert text.startswith("#!/bin/sh\n")
-    assert "-m testbed.slurm task" in text and '"$SLURM_ARRAY_TASK_ID"' in text
+    assert "-m testbed.sweep.slurm task" in text and '"$SLURM_ARRAY_TASK_ID"' in text
     assert "'" + str(tmp_path / "out dir") + "'" in text  # quoted: paths may hold spaces
     assert str(Path(slurm.__file__).resolve().parents[1]) in text
     assert "exec sudo -n " in slurm.batch_script(tmp_path, tmp_path / "t.txt", sudo=True)
@@ -53,7 +53,7 @@ def test_submit_makes_one_array_per_team_size_from_the_planned_configs(tmp_path,
     import json
     import os
 
-    from testbed import sweepfile
+    from testbed.sweep import file as sweepfile
 
     bindir = tmp_path / "bin"
     bindir.mkdir()

@@ -1,6 +1,6 @@
-"""Host stalls (testbed.stalls): which missed deadlines the host caused."""
+"""Host stalls (testbed.run.stalls): which missed deadlines the host caused."""
 
-from testbed.stalls import STALL_S, StallTracker
+from testbed.run.stalls import STALL_S, StallTracker
 
 
 def test_a_late_wake_up_covers_the_steps_it_ate_and_one_more():

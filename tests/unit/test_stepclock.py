@@ -1,10 +1,10 @@
-"""The step clock (testbed.stepclock): deadlines, lateness, misses and the achieved scale,
+"""The step clock (testbed.run.stepclock): deadlines, lateness, misses and the achieved scale,
 with made-up times (the clock never reads the time itself)."""
 
 import pytest
 
-from testbed.stalls import STALL_S
-from testbed.stepclock import MAX_MISSED_STEPS_KEPT, StepClock, no_clock
+from testbed.run.stalls import STALL_S
+from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, StepClock, no_clock
 
 T0 = 1000.0
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from testbed import sweepfile
-from testbed.errors import UsageError
-from testbed.rundir import plan_dict
+from common.errors import UsageError
+from testbed.sweep import file as sweepfile
+from testbed.sweep.rundir import plan_dict
 
 REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = REPO / "testbed" / "experiments"
@@ -193,7 +193,7 @@ def test_cli_bad_file_one_line_exit_2(tmp_path):
     f = tmp_path / "s.toml"
     f.write_text(GOOD.replace("robots = [1, 2]", "robots = []"))
     r = subprocess.run(
-        [sys.executable, "-m", "testbed.sweep", str(f), "--out", str(tmp_path / "out")],
+        [sys.executable, "-m", "testbed.sweep.command", str(f), "--out", str(tmp_path / "out")],
         capture_output=True,
         text=True,
         cwd=REPO,

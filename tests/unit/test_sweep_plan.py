@@ -5,7 +5,11 @@ import json
 
 import pytest
 
-from testbed import rundir, sweepfile, sweepplan, sweepprogress, sweeprunner
+from testbed.sweep import file as sweepfile
+from testbed.sweep import plan as sweepplan
+from testbed.sweep import progress as sweepprogress
+from testbed.sweep import rundir
+from testbed.sweep import runner as sweeprunner
 from tests.unit.test_sweep_synthetic import write_run
 
 

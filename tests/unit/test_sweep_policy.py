@@ -1,10 +1,10 @@
-"""The sweep's rules for late runs (testbed.sweeppolicy), one test per rule, pure."""
+"""The sweep's rules for late runs (testbed.sweep.policy), one test per rule, pure."""
 
 import copy
 
 import pytest
 
-from testbed.sweeppolicy import (
+from testbed.sweep.policy import (
     CLEAN_RUNS_TO_SPEED_UP,
     MIN_SCALE_FACTOR,
     SLOWDOWN,
@@ -118,7 +118,7 @@ def test_decide_changes_nothing_it_is_given():
 
 
 def test_calibration_goes_up_while_clean_and_down_while_late():
-    from testbed.sweeppolicy import MAX_SCALE_FACTOR, calibrated, calibration_next
+    from testbed.sweep.policy import MAX_SCALE_FACTOR, calibrated, calibration_next
 
     assert calibration_next([]) == 1.0
     up = [(1.0, 0.0)]
@@ -136,7 +136,7 @@ def test_calibration_goes_up_while_clean_and_down_while_late():
 
 
 def test_a_calibrated_ceiling_above_the_file_lets_a_slowed_team_climb_back_to_it():
-    from testbed.sweeppolicy import Outcome, State, decide
+    from testbed.sweep.policy import Outcome, State, decide
 
     s = State(jobs=1, scale_factors={3: 1.5}, ceilings={3: 2.0})
     for _ in range(3):
@@ -185,7 +185,7 @@ def test_rule7_an_unfaithful_run_is_not_clean():
 
 
 def test_calibration_climbs_only_while_its_trials_stay_faithful():
-    from testbed.sweeppolicy import calibrated, calibration_next
+    from testbed.sweep.policy import calibrated, calibration_next
 
     up = [(1.0, 0.0, True), (1.176, 0.0, True)]
     assert calibration_next(up) > 1.176

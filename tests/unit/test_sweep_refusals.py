@@ -99,8 +99,8 @@ def test_a_grid_of_100k_runs_is_refused_before_it_is_expanded(env, tmp_path):  #
     huge.write_text(big.read_text().replace("25000", "1000000000000"))
     code = textwrap.dedent(f"""
         import time
-        from testbed import sweepfile
-        from testbed.errors import UsageError
+        from testbed.sweep import file as sweepfile
+        from common.errors import UsageError
         t = time.monotonic()
         try:
             sweepfile.expand(sweepfile.load({str(huge)!r}))
@@ -174,8 +174,8 @@ def test_a_middleware_whose_package_is_missing_refuses_the_sweep_before_any_run(
     out = tmp_path / "out"
     code = (
         "import runpy, sys; sys.modules['zmq'] = None; "  # as if pyzmq were not installed
-        f"sys.argv = ['testbed.sweep', {str(grid)!r}, '--out', {str(out)!r}]; "
-        "runpy.run_module('testbed.sweep', run_name='__main__')"
+        f"sys.argv = ['testbed.sweep.command', {str(grid)!r}, '--out', {str(out)!r}]; "
+        "runpy.run_module('testbed.sweep.command', run_name='__main__')"
     )
     r = subprocess.run([sys.executable, "-c", code], env=env["env"], cwd=REPO,
                        capture_output=True, text=True, timeout=60)  # fmt: skip

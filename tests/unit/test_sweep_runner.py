@@ -109,7 +109,15 @@ def env(tmp_path):
 
 
 def sweep_argv(env, out, *extra):
-    return [sys.executable, "-m", "testbed.sweep", str(env["file"]), "--out", str(out), *extra]
+    return [
+        sys.executable,
+        "-m",
+        "testbed.sweep.command",
+        str(env["file"]),
+        "--out",
+        str(out),
+        *extra,
+    ]
 
 
 def run_sweep(env, out, *extra, **env_over):
@@ -389,7 +397,8 @@ def test_calibrate_climbs_only_while_its_trials_are_faithful(env, tmp_path):
 
 
 def test_jobs_auto_is_one_at_a_time_on_two_cores_and_more_on_big_machines():
-    from testbed import sweepfile, sweepplan
+    from testbed.sweep import file as sweepfile
+    from testbed.sweep import plan as sweepplan
 
     runs = sweepfile.expand(sweepfile.load(REPO / "testbed" / "experiments" / "paper.toml"))
     assert sweepplan.auto_jobs(runs, cores=2) == 1

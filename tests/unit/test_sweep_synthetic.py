@@ -5,8 +5,8 @@ import json
 import os
 from pathlib import Path
 
-from testbed import sweepfile
-from testbed.rundir import plan_dict
+from testbed.sweep import file as sweepfile
+from testbed.sweep.rundir import plan_dict
 
 
 def paper_like_steps(robots: int, comm: float, laser: float, index: int) -> float:

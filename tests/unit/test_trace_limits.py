@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from common.errors import UsageError
 from testbed.cli import build_parser
-from testbed.errors import UsageError
 from topology import mobility, player
 
 REPO = Path(__file__).resolve().parents[2]

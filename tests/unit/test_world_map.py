@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from testbed.errors import UsageError
+from common.errors import UsageError
 from testbed.world.worldmap import empty_terrain, free_space, load_png, start_positions
 
 

@@ -6,10 +6,10 @@ its missed deadlines). A robot is *stopped* when the run itself killed it (`--ki
 battery failure on purpose) and *crashed* when its process died unasked; either way it is
 gone for the rest of the run, but only a crash is a failure of the run, and a stopped
 robot's exploration is cut short on purpose, so the averages over robots leave it out.
-When the run ends, `Run.execute` (testbed.run) freezes everything the results
+When the run ends, `Run.execute` (testbed.run.execute) freezes everything the results
 need into a `RunRecord`: the configuration, the status, the world, each robot's
-`RobotOutcome`, the clock's summary (testbed.stepclock) and the wall time of each stage.
-testbed.runresults writes result.json and the per-robot files from that record alone.
+`RobotOutcome`, the clock's summary (testbed.run.stepclock) and the wall time of each stage.
+testbed.run.results writes result.json and the per-robot files from that record alone.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import subprocess
 import time
 from dataclasses import dataclass, field
 
-from testbed.stepclock import MAX_MISSED_STEPS_KEPT, ClockSummary
+from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, ClockSummary
 from testbed.world.world import World
 
 
@@ -112,7 +112,7 @@ class WallParts:
 
 @dataclass(frozen=True)
 class RunRecord:
-    """Everything the results of one run are written from (testbed.runresults)."""
+    """Everything the results of one run are written from (testbed.run.results)."""
 
     out: str
     config: dict  # config.json's contents
@@ -127,7 +127,7 @@ class RunRecord:
     priority: str | None  # what the step loop's thread got
     t_start: float  # CLOCK_MONOTONIC when the run began
     network_timers: dict | None = None  # topology.nettimers' record; None: no network came up
-    outages: tuple = ()  # testbed.isolation.Outage: the radio outages asked for (--isolate)
+    outages: tuple = ()  # testbed.run.isolation.Outage: the radio outages asked for (--isolate)
 
     @property
     def steps(self) -> int:

@@ -1,9 +1,9 @@
 """The sweep runner: runs the runs of a sweep directory as child processes, resumably.
 
-Theory of operation. The sweep file expands (testbed.sweepfile) into planned runs, each with an
+Theory of operation. The sweep file expands (testbed.sweep.file) into planned runs, each with an
 id derived from its parameters. Run `R` lives in `DIR/runs/R/` and is *done* iff
-`DIR/runs/R/result.json` exists (testbed.rundir: `testbed run` writes that file last and
-atomically, so the file system alone says what is finished). testbed.sweepplan sorts the
+`DIR/runs/R/result.json` exists (testbed.sweep.rundir: `testbed run` writes that file last and
+atomically, so the file system alone says what is finished). testbed.sweep.plan sorts the
 planned runs into done, to do (absent, or partial: a directory without result.json, deleted
 before the run is redone) and skipped (points this machine cannot run, e.g. delay without
 sch_netem, with the reason recorded); `Sweep.run` takes the runs to do.
@@ -29,7 +29,7 @@ load is (robots + 1) x time_scale, the process-steps it asks of the machine per 
 gives a large one the machine alone. The queue is served first-fit: the first waiting run
 that fits starts. What happens when a run misses step deadlines (the concurrency backs off,
 a team size's time scale goes down and up again, a run is redone) is decided by the pure
-rules of testbed.sweeppolicy; `Sweep._finish` only applies them.
+rules of testbed.sweep.policy; `Sweep._finish` only applies them.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -51,16 +51,16 @@ from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from testbed import sweeppolicy
-from testbed.errors import TestbedError
+from common.errors import TestbedError
+from common.jsonfile import read_json, write_json_atomic
 from testbed.resultfile import RESULT_NAME, RunResult
-from testbed.runconfig import RunConfig
-from testbed.rundir import is_done, plan_dict, run_argv, run_dir
-from testbed.sweepfile import PlannedRun
-from testbed.sweepplan import run_load
-from testbed.sweepprogress import Progress
+from testbed.run.config import RunConfig
+from testbed.sweep import policy as sweeppolicy
+from testbed.sweep.file import PlannedRun
+from testbed.sweep.plan import run_load
+from testbed.sweep.progress import Progress
+from testbed.sweep.rundir import is_done, plan_dict, run_argv, run_dir
 from topology.forkserver import ForkServer, ForkServerError, python_env
-from topology.jsonfile import read_json, write_json_atomic
 from topology.state import is_alive, proc_start_time
 
 log = logging.getLogger(__name__)
@@ -68,7 +68,13 @@ log = logging.getLogger(__name__)
 # Environment variable naming the command that runs one run (tests use a stand-in program).
 RUN_COMMAND_ENV = "TESTBED_SWEEP_RUN_COMMAND"
 # What the run server imports once for every run (testbed.cli imports the rest on demand).
-RUN_PRELOAD = ["testbed.cli", "testbed.run", "pyroute2", "topology.rtnl", "topology.network"]
+RUN_PRELOAD = [
+    "testbed.cli",
+    "testbed.run.execute",
+    "pyroute2",
+    "topology.rtnl",
+    "topology.network",
+]
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
 GRACE_INT = 30.0
 GRACE_TERM = 10.0
@@ -297,7 +303,7 @@ class Sweep:
         outcome = sweeppolicy.Outcome(
             robots=n,
             miss=miss,
-            # Misses while the host stalled the whole machine (testbed.stalls) are told apart.
+            # Misses while the host stalled the whole machine (testbed.run.stalls) are told apart.
             miss_outside_stalls=result.deadline_miss_fraction_outside_stalls if result else None,
             shared=child.shared,
             load_seen=child.load_seen,
@@ -356,7 +362,7 @@ class Sweep:
 
     def _trial(self, run: PlannedRun, factor: float, k: int) -> tuple[float, bool]:
         """One calibration run: the fraction of its step deadlines missed outside stalls,
-        and whether it was faithful (testbed.fidelity; a run without a verdict is)."""
+        and whether it was faithful (testbed.run.fidelity; a run without a verdict is)."""
         c = run.config
         config = replace(c, max_steps=CALIBRATION_STEPS,
                       time_scale=round(c.time_scale * factor, 3))  # fmt: skip

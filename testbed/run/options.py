@@ -1,6 +1,6 @@
 """Run options: each declared once, on its `RunConfig` field, and everything else generated.
 
-Theory of operation. A field of `testbed.runconfig.RunConfig` that the user may set is
+Theory of operation. A field of `testbed.run.config.RunConfig` that the user may set is
 declared with `option(...)`: its kind, bounds, choices, unit and help ride on the dataclass
 field (its `metadata`), next to the default. `options()` reads them back as `Option`s, the
 one table from which are made:
@@ -12,7 +12,7 @@ one table from which are made:
 - the argv that parses back into a given config (`to_argv`), which a sweep hands each run;
 - the checks of a sweep file's `[run]` values and `[grid]` lists (`check_value`), for the
   options marked `sweep`; and for those a sweep may vary, their `GridDim`: where they sit in
-  the grid, their part of a run's id and whether they feed its seed (testbed.sweepfile
+  the grid, their part of a run's id and whether they feed its seed (testbed.sweep.file
   expands a grid from these alone).
 
 A unit test holds the loop table -> argparse -> RunConfig -> argv -> argparse closed, as
@@ -28,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from topology.argtypes import number
+from common.argtypes import number
 
 GRID = "grid"  # a sweep file may vary the option in [grid]
 RUN = "run"  # a sweep file may fix the option in [run]

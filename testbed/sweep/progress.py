@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 import time
 
-from testbed.sweepfile import PlannedRun
+from testbed.sweep.file import PlannedRun
 
 
 def _hms(seconds: float) -> str:

@@ -1,7 +1,7 @@
 """The plan of a sweep: which planned runs are done, to do, partial or skipped, whether a
 finished run was made with other settings, and how many runs to start at once.
 
-Pure functions of the planned runs and the sweep directory (testbed.rundir's contract);
+Pure functions of the planned runs and the sweep directory (testbed.sweep.rundir's contract);
 nothing here starts a process.
 """
 
@@ -11,11 +11,11 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from common.jsonfile import read_json
 from testbed.resultfile import RunResult
-from testbed.runconfig import RunConfig
-from testbed.rundir import is_done, plan_dict, run_dir
-from testbed.sweepfile import PlannedRun
-from topology.jsonfile import read_json
+from testbed.run.config import RunConfig
+from testbed.sweep.file import PlannedRun
+from testbed.sweep.rundir import is_done, plan_dict, run_dir
 
 
 @dataclass
@@ -68,7 +68,7 @@ def other_sweep(out: Path, runs: list[PlannedRun]) -> str | None:
 
     A directory belongs to one sweep: every run its sweep.json plans, and every run
     directory it holds, must be a run of `runs` with the same config (its time scale aside:
-    a sweep may run slower, testbed.sweeprunner). A plan that only adds runs (more `runs`
+    a sweep may run slower, testbed.sweep.runner). A plan that only adds runs (more `runs`
     per point, a value more in a list) extends the sweep and is the same one."""
     planned = {r.run_id: r.config for r in runs}
     state = read_json(out / "sweep.json")
@@ -109,9 +109,9 @@ def _plan_difference(recorded: dict, config: RunConfig) -> str | None:
 
 def auto_jobs(runs: list[PlannedRun], cores: int | None = None) -> int:
     """--jobs auto: the cores divided by the CPUs the sweep's most demanding run needs
-    (testbed.slurm.resources: its robots' CPU per step at its time scale, and a core for the
+    (testbed.sweep.slurm.resources: its robots' CPU per step at its time scale, and a core for the
     world), at least 1. On the 2-core development machine: 1."""
-    from testbed.slurm import resources
+    from testbed.sweep.slurm import resources
 
     cores = cores or os.cpu_count() or 1
     need = max((resources(r.config)[0] for r in runs), default=1)

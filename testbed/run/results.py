@@ -1,7 +1,7 @@
 """What a finished run writes about itself: robots/rK.json, paths.png and its RunResult.
 
 `write(record)` reads what the robot processes logged (robots/rK.events.jsonl) and the
-run's frozen record (testbed.runrecord: what the world and its clock saw), writes each
+run's frozen record (testbed.run.record: what the world and its clock saw), writes each
 robot's detailed record and the picture of the paths, and, last and atomically, result.json
 from a `RunResult` (testbed.resultfile, the file's one type; docs/run-results.md says what
 every key means). A picture that cannot be drawn is logged, never a reason to lose the
@@ -21,14 +21,14 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from common.jsonfile import read_json, write_json_atomic
 from node import render, stepcore
-from testbed import fidelity, isolation
 from testbed.resultfile import HostStalls, Plan, ResultConfig, RobotResult, RunResult
+from testbed.run import fidelity, isolation
 from testbed.world.world import World
-from topology.jsonfile import read_json, write_json_atomic
 
 if TYPE_CHECKING:
-    from testbed.runrecord import RobotOutcome, RunRecord
+    from testbed.run.record import RobotOutcome, RunRecord
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +143,7 @@ def contents(rec: RunRecord) -> RunResult:
         deadlines_missed=clock.deadlines_missed,
         deadline_miss_fraction=clock.miss_fraction,
         deadlines_missed_world=clock.missed_world,
-        # Misses while the host stalled the whole machine (testbed.stalls), and the fraction
+        # Misses while the host stalled the whole machine (testbed.run.stalls), and the fraction
         # without them: what a lower time scale could have avoided.
         host_stalls=HostStalls(**clock.stalls),
         deadline_miss_fraction_outside_stalls=clock.miss_fraction_outside_stalls,
@@ -223,7 +223,7 @@ def map_sharing(
 def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:
     """CPU seconds of the run's processes (the robots', the display's, the world's step
     loop, the AODV daemons'), and all of it per robot-step in ms: what a cluster's run
-    needs per robot (testbed.slurm)."""
+    needs per robot (testbed.sweep.slurm)."""
     parts = {
         "robots": sum(sm.get("cpu_s") or 0.0 for sm in summaries),
         "display": display.get("cpu_s") or 0.0,

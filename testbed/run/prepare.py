@@ -7,11 +7,11 @@ namespace per robot plus one for the display, robot N+1, which does not explore)
 checks everything that can be checked before anything exists: the middleware's Python
 package (node.messaging), the network's description, root and tools
 (topology.network.preflight), a testbed name nobody uses, the kernel features the
-impairments need, the live view's address, and the output directory (testbed.runfiles: a
+impairments need, the live view's address, and the output directory (testbed.run.files: a
 directory holding a run is refused unless `replace`). Each is a
 UsageError (one line, exit 2) that leaves nothing behind. Only then it makes the directory
 and writes config.json, the first file of the run-results contract (docs/run-results.md),
-and returns a frozen `PreparedRun`, which the next stage (testbed.run.Run) takes.
+and returns a frozen `PreparedRun`, which the next stage (testbed.run.execute.Run) takes.
 """
 
 from __future__ import annotations
@@ -23,11 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.errors import UsageError
+from common.jsonfile import write_json_atomic
 from node.rays import Laser
-from testbed.errors import UsageError
-from testbed.failures import battery_kill
-from testbed.runconfig import RunConfig, network_fields
-from testbed.runfiles import claim_directory, make_directory
+from testbed.run.config import RunConfig, network_fields
+from testbed.run.failures import battery_kill
+from testbed.run.files import claim_directory, make_directory
 from testbed.world.world import World
 from testbed.world.worldmap import (
     GroundTruth,
@@ -36,7 +37,6 @@ from testbed.world.worldmap import (
     load_png,
     start_positions,
 )
-from topology.jsonfile import write_json_atomic
 from topology.spec import NetworkSpec
 
 DEFAULT_SNAPSHOTS = (100, 250, 500, 1000, 2000)  # display PNGs (plus one at the end)
@@ -101,7 +101,7 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
                   display_pos=list(display_pos), name=name,
                   snapshots=sorted(cfg.snapshots or DEFAULT_SNAPSHOTS))  # fmt: skip
     planned = battery_kill(cfg.battery_failure, cfg.robots, cfg.laser_range)
-    if planned:  # the step the battery failure was fixed at (testbed.failures)
+    if planned:  # the step the battery failure was fixed at (testbed.run.failures)
         config["battery_kill"] = f"r{planned[0]}:{planned[1]}"
     prepared = PreparedRun(cfg, out, name, truth, world, phases, display_pos, spec, config)
     try:

@@ -8,12 +8,12 @@ the schedule does not try to catch up by running steps back to back, which would
 the robots), so the achieved time scale shows the slip. A robot misses a deadline when it
 has not answered the step's frame by then; the step loop counts those and tells the clock.
 
-Every miss is counted; the ones that fall in a host stall (testbed.stalls: the machine
+Every miss is counted; the ones that fall in a host stall (testbed.run.stalls: the machine
 itself stopped, the world at real-time priority woke too late) are also counted apart.
 
 The clock never reads the time: every method that needs "now" is given it, so the
 arithmetic is tested with made-up times (tests/unit/test_stepclock.py), and the step loop
-(testbed.run) is the one place that reads CLOCK_MONOTONIC. `summary()` computes, once, what
+(testbed.run.execute) is the one place that reads CLOCK_MONOTONIC. `summary()` computes, once, what
 result.json says of the clock: steps, wall seconds, achieved scale, misses and stalls.
 """
 
@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from node.timing import STEP_S
-from testbed.stalls import StallTracker
+from testbed.run.stalls import StallTracker
 
 MAX_MISSED_STEPS_KEPT = 1000  # per robot, and for the world: which steps were missed
 NO_STALLS = {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0}

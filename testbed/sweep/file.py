@@ -21,7 +21,7 @@ for every run of the sweep::
     middleware = ["nanomsg", "zeromq"]  # optional: the goals' middleware as a grid dimension
     maps = ["flood", "pubsub"]    # optional: how maps are shared, as a grid dimension
     battery_failure = ["none", "midrun"]  # optional: midrun kills robot rN mid-run
-                                  # (testbed.failures); every team size must be 2 or more
+                                  # (testbed.run.failures); every team size must be 2 or more
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -47,7 +47,7 @@ for every run of the sweep::
     battery_failure = "midrun"    # none | midrun, default none
     seed = 0                      # optional base mixed into every derived seed
 
-The keys are the run options marked for sweeps (testbed.runconfig: `sweep={GRID}` may be
+The keys are the run options marked for sweeps (testbed.run.config: `sweep={GRID}` may be
 varied, `sweep={RUN}` fixed), and each value is checked by its option's own rules (type,
 bounds, choices), the same as `testbed run` checks the flag. Validation is strict: an
 unknown key, a value of the wrong type or an empty grid list is a `UsageError` whose
@@ -81,18 +81,18 @@ import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from common.errors import UsageError
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 from node.messaging.maps import refusal as maps_refusal
-from testbed import failures
-from testbed.errors import UsageError
-from testbed.runconfig import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
-from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
+from testbed.run import failures
+from testbed.run.config import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
+from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
 from topology import boundedfile
 from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
 # The run options a sweep file may vary or fix (RunConfig fields marked so), and its own keys:
-# grid.runs, run.seed (the base of every derived seed), run.load_limit (testbed.sweep).
+# grid.runs, run.seed (the base of every derived seed), run.load_limit (testbed.sweep.command).
 # The grid's dimensions in their order (GridDim.order): the nesting of the expansion, the
 # order of a run id's parts and of a point's values.
 _GRID_OPTIONS = tuple(sorted((opt for opt in OPTIONS if GRID in opt.sweep),

@@ -2,9 +2,9 @@
 
 `RunConfig` is the whole description of a run; `config.json` is its `to_dict()` plus what
 the run derived from it (start positions, timer phases), so a run can be repeated from its
-directory. Each run option is declared once, on its field (`option(...)`, testbed.runoptions):
+directory. Each run option is declared once, on its field (`option(...)`, testbed.run.options):
 `testbed run`'s flags, the `net up` flags it shares, a sweep file's keys and the argv a sweep
-hands a run are all made from these declarations. The run itself is testbed.run.
+hands a run are all made from these declarations. The run itself is testbed.run.execute.
 """
 
 from __future__ import annotations
@@ -14,14 +14,15 @@ import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from common.errors import UsageError
 from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
-from testbed import failures, runoptions
-from testbed.errors import UsageError
-from testbed.isolation import Outage
-from testbed.runoptions import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
+from testbed.run import failures
+from testbed.run import options as runoptions
+from testbed.run.isolation import Outage
+from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import (
     AODV_PROFILES,
@@ -92,7 +93,7 @@ SEED_HELP = (
 @dataclass(frozen=True)
 class RunConfig:
     """One run's description. Fields made with `option(...)` are the run options (see
-    testbed.runoptions): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
+    testbed.run.options): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
 
     robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=50, metavar="N",
                          sweep={GRID},
@@ -181,7 +182,7 @@ class RunConfig:
     )  # fmt: skip
     battery_failure: str = option(
         str, "one robot's battery fails: none, or midrun, robot rN killed at the team's "
-        "mid-run step (testbed.failures: half of a typical finishing step for the team size "
+        "mid-run step (testbed.run.failures: half of a typical finishing step for the team size "
         "and laser; docs/middleware.md)", "none", choices=failures.BATTERY_FAILURES,
         sweep={GRID, RUN}, newer=True, grid=GridDim(11, str, CHANGED),
     )  # fmt: skip

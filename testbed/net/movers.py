@@ -14,8 +14,8 @@ import subprocess
 import sys
 import time
 
-from testbed.errors import TestbedError, UsageError
-from topology.argtypes import number
+from common.argtypes import number
+from common.errors import TestbedError, UsageError
 from topology.mobility import LIMITS_TEXT, MIN_TICK_S
 
 READY_TIMEOUT_S = 10.0
@@ -149,7 +149,7 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
 def _record_mapping(capture_dir: str, path: str, trace, robots: int) -> None:
     """Add to the capture's network.json which trace file was played and which of its nodes
     is which robot: {"mobility": {"file": path, "robot_of_node": {"6": 1, ...}}}."""
-    from topology.jsonfile import read_json, write_json_atomic
+    from common.jsonfile import read_json, write_json_atomic
 
     about_path = os.path.join(capture_dir, "daemons", "network.json")
     about = read_json(about_path)

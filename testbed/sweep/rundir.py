@@ -4,7 +4,7 @@ done, and the `testbed run` command line that makes it.
 Run `R` of a sweep in DIR lives in `DIR/runs/R/` and is done iff `DIR/runs/R/result.json`
 exists and does not say the run was interrupted: `testbed run` writes that file last and
 atomically (docs/run-results.md), so the file system alone says what is finished. The local
-runner (testbed.sweeprunner) and the Slurm tasks (testbed.slurm) both start runs with
+runner (testbed.sweep.runner) and the Slurm tasks (testbed.sweep.slurm) both start runs with
 `run_argv` and judge them with `is_done`, and neither imports the other.
 
 A run's plan, as `sweep.json` records it (`plan_dict`), holds the options a sweep file sets;
@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from testbed.resultfile import RunResult, has_result
-from testbed.runconfig import OPTIONS, RunConfig, to_argv
+from testbed.run.config import OPTIONS, RunConfig, to_argv
 
 # The options a sweep's plan always names (the rest only when not the default): those of the
 # sweep file, and the seed (each run's own, derived from the file's base seed).

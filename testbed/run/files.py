@@ -22,7 +22,7 @@ import json
 import os
 import shutil
 
-from testbed.errors import UsageError
+from common.errors import UsageError
 from testbed.resultfile import RESULT_NAME
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by

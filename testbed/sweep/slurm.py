@@ -9,7 +9,7 @@ run`); `DIR/sweep.json` holds the plan. DIR must be on a filesystem every node s
 `submit` writes, for the runs still to do, one task list and one batch script per team size
 under `DIR/slurm/`, and submits each as a Slurm job array (`sbatch --array=1-N`): Slurm gives
 every task of an array the same CPUs and time limit, and those depend on the team size
-(`resources`). Array task i runs `python -m testbed.slurm task DIR LIST i` on whatever node
+(`resources`). Array task i runs `python -m testbed.sweep.slurm task DIR LIST i` on whatever node
 it lands on: it reads the i-th run id of LIST, finds the run's configuration in the plan,
 removes a partial directory an earlier attempt left, and runs `testbed run` in-process,
 which tears its namespaces down on SIGTERM (what `scancel` and a time limit send first).
@@ -32,12 +32,12 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from testbed.errors import TestbedError, UsageError
+from common.errors import TestbedError, UsageError
+from common.jsonfile import read_json, write_json_atomic
 from testbed.resultfile import RESULT_NAME, RunResult
-from testbed.runconfig import RunConfig
-from testbed.rundir import is_done, run_argv, run_dir
-from testbed.sweepfile import PlannedRun
-from topology.jsonfile import read_json, write_json_atomic
+from testbed.run.config import RunConfig
+from testbed.sweep.file import PlannedRun
+from testbed.sweep.rundir import is_done, run_argv, run_dir
 
 # CPU the whole run uses per robot-step: robots, display, the world's step loop and the
 # routing daemons together (result.json's cpu_s.per_robot_step_ms). Measured 1.0-1.5 ms for
@@ -140,10 +140,10 @@ def batch_script(out: Path, task_list: Path, sudo: bool = False) -> str:
     repo = shlex.quote(str(Path(__file__).resolve().parents[1]))
     return (
         "#!/bin/sh\n"
-        "# One run of a testbed sweep per array task (testbed/slurm.py). Needs root on the\n"
+        "# One run of a testbed sweep per array task (testbed/sweep/slurm.py). Needs root on the\n"
         "# node: network namespaces.\n"
         f"cd {repo} || exit 1\n"
-        f"exec {python} -m testbed.slurm task {shlex.quote(str(out))} "
+        f"exec {python} -m testbed.sweep.slurm task {shlex.quote(str(out))} "
         f'{shlex.quote(str(task_list))} "$SLURM_ARRAY_TASK_ID"\n'
     )
 
@@ -247,7 +247,7 @@ def _mark_interrupted(rdir: Path) -> None:
     """A task cancelled or out of time gets SIGTERM, and so do its run's helper processes
     (Slurm signals the whole step): the run may end with an error of its own ("the fork
     server died") rather than as interrupted. It did not end on its own, so it is recorded
-    as interrupted, which `--resume` redoes (testbed.rundir.is_done)."""
+    as interrupted, which `--resume` redoes (testbed.sweep.rundir.is_done)."""
     result = RunResult.read(rdir)
     if result is None or result.status == "interrupted":
         return
@@ -261,5 +261,5 @@ def _mark_interrupted(rdir: Path) -> None:
 if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "task" and sys.argv[4].isdigit():
         sys.exit(task_main(Path(sys.argv[2]), Path(sys.argv[3]), int(sys.argv[4])))
-    print("usage: python -m testbed.slurm task DIR TASK_LIST INDEX", file=sys.stderr)
+    print("usage: python -m testbed.sweep.slurm task DIR TASK_LIST INDEX", file=sys.stderr)
     sys.exit(2)

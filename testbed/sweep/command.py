@@ -1,12 +1,12 @@
 """`testbed sweep FILE --out DIR`: run every run of a sweep file, resumably; `--slurm` submits
 them to a cluster instead, `--status DIR` shows where a sweep stands.
 
-A sweep in parts: testbed.sweepfile reads the file and expands it into planned runs (each a
-RunConfig with a stable id); testbed.rundir is the run directory contract (where a run lives,
-when it is done, the `testbed run` command line that makes it); testbed.sweepplan sorts the
-planned runs by what is on disk; testbed.sweeprunner runs them here (its docstring tells how:
-the fork server, concurrency, signals, back-off through testbed.sweeppolicy) with
-testbed.sweepprogress's line; testbed.slurm runs them on a cluster. This module is the
+A sweep in parts: testbed.sweep.file reads the file and expands it into planned runs (each a
+RunConfig with a stable id); testbed.sweep.rundir is the run directory contract (where a run lives,
+when it is done, the `testbed run` command line that makes it); testbed.sweep.plan sorts the
+planned runs by what is on disk; testbed.sweep.runner runs them here (its docstring tells how:
+the fork server, concurrency, signals, back-off through testbed.sweep.policy) with
+testbed.sweep.progress's line; testbed.sweep.slurm runs them on a cluster. This module is the
 command line that joins them.
 """
 
@@ -19,16 +19,16 @@ import shutil
 import sys
 from pathlib import Path
 
-from testbed import sweepfile
-from testbed.errors import UsageError
-from testbed.runconfig import RunConfig
-from testbed.rundir import is_done, run_dir
-from testbed.sweepfile import PlannedRun
-from testbed.sweepplan import Plan, auto_jobs, config_mismatch, default_jobs, other_sweep, plan
-from testbed.sweeprunner import Sweep, wait_for_orphans
-from topology.argtypes import number
+from common.argtypes import number
+from common.errors import UsageError
+from common.jsonfile import read_json
+from testbed.run.config import RunConfig
+from testbed.sweep import file as sweepfile
+from testbed.sweep.file import PlannedRun
+from testbed.sweep.plan import Plan, auto_jobs, config_mismatch, default_jobs, other_sweep, plan
+from testbed.sweep.rundir import is_done, run_dir
+from testbed.sweep.runner import Sweep, wait_for_orphans
 from topology.impair import kernel_has_netem
-from topology.jsonfile import read_json
 
 log = logging.getLogger(__name__)
 
@@ -100,7 +100,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _print_status(out: Path) -> int:
-    from testbed import slurm
+    from testbed.sweep import slurm
 
     state = read_json(out / "sweep.json")
     if state is None:
@@ -121,7 +121,7 @@ def _print_status(out: Path) -> int:
 
 
 def _submit(args, spec, runs: list[PlannedRun], out: Path, p: Plan) -> int:
-    from testbed import slurm
+    from testbed.sweep import slurm
 
     in_queue = slurm.queued(out) if args.resume else {}
     todo = [r for r in p.todo if r.run_id not in in_queue]
@@ -156,7 +156,7 @@ def _check_maps(spec: sweepfile.SweepSpec) -> None:
     """Every map of the sweep, and every laser on it, as a run would check them, before the
     first run: a map that is missing, not a PNG or too large, or a laser longer than a map's
     diagonal, stops the sweep now instead of failing each of its runs."""
-    from testbed.runprepare import check_laser
+    from testbed.run.prepare import check_laser
     from testbed.world.worldmap import CELL, empty_terrain, png_cells
 
     for m in dict.fromkeys(spec.values("map")):
@@ -176,7 +176,7 @@ def _check_maps(spec: sweepfile.SweepSpec) -> None:
 def _check_middlewares(runs: list[PlannedRun]) -> None:
     """Every middleware of the sweep can be opened here (its Python package installed), before
     the first run: a missing one stops the sweep now instead of failing each of its runs."""
-    from testbed.runprepare import check_middleware
+    from testbed.run.prepare import check_middleware
 
     for name in dict.fromkeys(r.config.middleware for r in runs):
         try:
@@ -261,7 +261,7 @@ def main(args: argparse.Namespace) -> int:
     return sweep.run(p.todo, p.done, p.skipped)
 
 
-if __name__ == "__main__":  # `python -m testbed.sweep` is `testbed sweep`
+if __name__ == "__main__":  # `python -m testbed.sweep.command` is `testbed sweep`
     from testbed.cli import main as cli_main
 
     sys.exit(cli_main(["sweep", *sys.argv[1:]]))

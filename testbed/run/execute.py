@@ -3,7 +3,7 @@
 Theory of operation. A run goes through four stages, each producing the value the next one
 takes:
 
-- `prepare()` (testbed.runprepare) builds the world and the description of the testbed
+- `prepare()` (testbed.run.prepare) builds the world and the description of the testbed
   network, checks that this machine can do the run and that DIR may be written, makes the
   directory and writes config.json. It returns a frozen `PreparedRun`.
 - `Run.start()` brings the network up, starts `python -m node` in every namespace (forked
@@ -11,7 +11,7 @@ takes:
   dozen processes are ready in a fraction of a second instead of each paying for numpy),
   waits until each has connected to the world's body link (a Unix socket, off the emulated
   network) and returns the frozen `Started` (network, body server, open files, processes).
-- `StepLoop` runs the steps. Each is one tick of the clock (testbed.stepclock: 100 ms of
+- `StepLoop` runs the steps. Each is one tick of the clock (testbed.run.stepclock: 100 ms of
   emulated time, `time_scale` times faster in wall time): it collects the robots' commands
   until the step's deadline, moves each robot toward the target its process last
   commanded, feeds all positions to the topology controller (links follow before the step
@@ -19,8 +19,8 @@ takes:
   display its clock. The loop runs at real-time priority (SCHED_RR 2): it is the clock, and
   a robot woken by its frame must not preempt the world before the other robots' frames
   are out. It returns the run's status.
-- `Run.finish()` freezes what the run saw into a `RunRecord` (testbed.runrecord), from
-  which testbed.runresults writes robots/rK.json, paths.png and, last, result.json.
+- `Run.finish()` freezes what the run saw into a `RunRecord` (testbed.run.record), from
+  which testbed.run.results writes robots/rK.json, paths.png and, last, result.json.
 
 `Run.execute()` starts, steps and finishes, and turns a failure into a recorded status:
 whatever happens after `prepare()`, result.json is written (docs/run-results.md: config.json
@@ -33,8 +33,8 @@ over steps x (robots + 1). The run ends when every robot that is still in it has
 (no reachable frontier on its own map), or at the step cap. A robot process that dies
 unasked before the end is recorded with its exit status and step (status `robot_crashed`);
 one the run kills on purpose (`--kill`) is *stopped*: the others carry on and decide the
-status, and the averages over robots leave it out (testbed.runrecord). `--isolate` takes a
-robot's radio out of range for a window of steps (testbed.isolation): the step loop tells
+status, and the averages over robots leave it out (testbed.run.record). `--isolate` takes a
+robot's radio out of range for a window of steps (testbed.run.isolation): the step loop tells
 the topology controller which robots are out before it feeds the step's positions. See
 docs/architecture.md for the process tree.
 
@@ -56,22 +56,23 @@ import sys
 import time
 from dataclasses import dataclass
 
+from common.errors import TestbedError
+from common.jsonfile import write_json_atomic
 from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
 from node.sched import deadline_priority
-from testbed import isolation, runresults
-from testbed.errors import TestbedError
 from testbed.resultfile import RunResult
-from testbed.runconfig import RunConfig, add_arguments, config_from_args
-from testbed.runfiles import RunFiles
-from testbed.runprepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
-from testbed.runprogress import ProgressLine, summary_line
-from testbed.runrecord import RobotRecord, RunRecord, WallParts
-from testbed.stepclock import StepClock, StepTiming, no_clock
+from testbed.run import isolation
+from testbed.run import results as runresults
+from testbed.run.config import RunConfig, add_arguments, config_from_args
+from testbed.run.files import RunFiles
+from testbed.run.prepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
+from testbed.run.progress import ProgressLine, summary_line
+from testbed.run.record import RobotRecord, RunRecord, WallParts
+from testbed.run.stepclock import StepClock, StepTiming, no_clock
 from testbed.world.bodylink import BodyServer
 from topology.forkserver import ForkServer, ForkServerError, python_env
-from topology.jsonfile import write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +108,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def fidelity_warning(result: RunResult) -> str | None:
-    """The one line `testbed run` prints for a run its verdict (testbed.fidelity) found
+    """The one line `testbed run` prints for a run its verdict (testbed.run.fidelity) found
     unfaithful to the time scale; None for a faithful one."""
     if result.faithful is not False:
         return None
@@ -120,7 +121,7 @@ def fidelity_warning(result: RunResult) -> str | None:
 
 def network_note(result: RunResult) -> str | None:
     """The one line `testbed run` prints for a dilated run whose TCP could not be dilated
-    (testbed.fidelity.network_verdict); None otherwise."""
+    (testbed.run.fidelity.network_verdict); None otherwise."""
     if result.network_faithful is not False:
         return None
     return (
@@ -347,7 +348,7 @@ class Run:
     def finish(
         self, status: tuple[str, str], loop: StepLoop | None, priority, network_timers=None
     ) -> RunRecord:
-        """The run's frozen record, for testbed.runresults to write."""
+        """The run's frozen record, for testbed.run.results to write."""
         return RunRecord(
             out=self.prep.out, config=self.prep.config, time_scale=self.cfg.time_scale,
             status=status[0], detail=status[1], world=self.prep.world,
@@ -558,7 +559,7 @@ def final_status(status: tuple[str, str], robots: list[RobotRecord]) -> tuple[st
     return "robot_crashed", what + (f"; {len(crashed) - 1} more" if len(crashed) > 1 else "")
 
 
-if __name__ == "__main__":  # `python -m testbed.run` is `testbed run`
+if __name__ == "__main__":  # `python -m testbed.run.execute` is `testbed run`
     from testbed.cli import main as cli_main
 
     sys.exit(cli_main(["run", *sys.argv[1:]]))

@@ -2,9 +2,9 @@
 `decide(outcome, state)`.
 
 Theory of operation. A run records the fraction of step deadlines it missed, its fidelity
-verdict (testbed.fidelity: whether its plans and timers came late in emulated time), and
-how much of its misses fell in host stalls (testbed.stalls: the machine itself stopped, so
-no slower clock would have helped). When a run ends, the sweep (testbed.sweep, the
+verdict (testbed.run.fidelity: whether its plans and timers came late in emulated time), and
+how much of its misses fell in host stalls (testbed.run.stalls: the machine itself stopped, so
+no slower clock would have helped). When a run ends, the sweep (testbed.sweep.command, the
 mechanism) describes it as an `Outcome`, hands it with the sweep's `State` to `decide`, and
 applies the `Decision`: the new state, the back-off records for sweep.json, whether to
 redo the run, and the words for the progress line. `decide` reads no clock, does no IO
@@ -26,7 +26,7 @@ The rules, in the order they are tried (each is cited at its branch below):
    run is redone (3 attempts) if it missed more than REDO_MISS, else kept. Only this team
    size: a small team is bound by the latency of a step's round trip, a large one by CPU,
    so one says little about the other; each finds its own scale.
-6. Within the limit, but not faithful (testbed.fidelity: plans applied late, timers
+6. Within the limit, but not faithful (testbed.run.fidelity: plans applied late, timers
    late): the load made emulated time run ahead of the work, as with missed deadlines, so
    rules 3 to 5 apply as they would to a late run, and the run is redone once (2 attempts)
    at the backed-off scale or concurrency: its results changed with the dilation.
@@ -68,7 +68,7 @@ class Outcome:
     miss: float | None  # deadline_miss_fraction (None: the run did not say)
     miss_outside_stalls: float | None
     shared: bool = False  # another run was in flight at some time during this one
-    load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.run_load)
+    load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.command.run_load)
     jobs_at_start: int = 1  # the concurrency allowed when it started
     attempts: int = 1  # how many times it has been started, this one included
     faithful: bool | None = None  # its fidelity verdict (None: the run did not say)

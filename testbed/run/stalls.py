@@ -12,7 +12,7 @@ have saved it: a stall of 30 ms eats 30 ms at any scale.
 `StallTracker` follows the step loop: `late(step, s)` reports the world's lateness for a
 step, `covers(step)` says whether a miss at that step falls in a stall (the steps the stall
 spanned, plus one). Every miss is still counted in the run's `deadline_miss_fraction`; the
-ones in stalls are also counted apart, so that the sweep (testbed.sweep) slows a team size
+ones in stalls are also counted apart, so that the sweep (testbed.sweep.command) slows a team size
 down only for the misses a slower clock would have avoided.
 """
 
