@@ -51,6 +51,7 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 
+from node.messaging.dds_take import samples
 from node.messaging.inbox import Inbox
 from node.messaging.stats import MessengerStats
 
@@ -251,15 +252,12 @@ class DdsMessenger:
         self._entities.append(entity)
         return entity
 
-    def _on_data(self, reader: DataReader) -> None:
-        while samples := reader.take(N=TAKE_BATCH):
-            for s in samples:
-                if not isinstance(s, GoalSample):
-                    continue  # an InvalidSample: a teammate's writer went away, no data
-                if s.dst == self.me:
-                    self._inbox.put(bytes(s.payload))
-                else:
-                    self.misaddressed += 1
+    def _on_data(self, reader: DataReader | None) -> None:
+        for s in samples(reader, GoalSample, TAKE_BATCH):
+            if s.dst == self.me:
+                self._inbox.put(bytes(s.payload))
+            else:
+                self.misaddressed += 1
 
     def fileno(self) -> int:
         return self._inbox.fileno()

@@ -38,6 +38,7 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 
+from node.messaging.dds_take import samples
 from node.messaging.maps import MapTopic
 
 log = logging.getLogger(__name__)
@@ -79,11 +80,9 @@ class DdsMapTopic(MapTopic):
             super().close()
             raise
 
-    def _on_data(self, reader: DataReader) -> None:
-        while samples := reader.take(N=TAKE_BATCH):
-            for s in samples:
-                if isinstance(s, MapSample):  # else an InvalidSample: a writer went away
-                    self._arrived(bytes(s.payload))
+    def _on_data(self, reader: DataReader | None) -> None:
+        for s in samples(reader, MapSample, TAKE_BATCH):
+            self._arrived(bytes(s.payload))
 
     def _publish(self, data: bytes) -> bool:
         try:

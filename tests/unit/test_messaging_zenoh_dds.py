@@ -172,6 +172,7 @@ def test_a_stopped_teammate_never_holds_a_send_past_the_timeout(kind):
         # Large messages fill the queues (Zenoh's TCP link, Cyclone's writer) while the
         # teammate reads nothing, until its lease expires and it is given up.
         data = b"g" * 8000
+        m.stats.blocked_max_s = 0.0  # this loop's sends only (the first send made a writer)
         t0 = time.monotonic()
         outcomes, longest = [], 0.0
         while time.monotonic() - t0 < 3 * LEASE_S + 1.0 and any(outcomes[-100:] or [True]):
@@ -217,16 +218,19 @@ def test_close_is_idempotent_and_leaves_no_thread(kind):
     while not set(threading.enumerate()) <= python_before and time.monotonic() < deadline:
         time.sleep(0.05)
     assert set(threading.enumerate()) <= python_before
-    # Native threads too may take a moment to end on a loaded machine (seen: one of Zenoh's
-    # under two busy loops); given the same 2 s, the count comes back.
+    # Native threads too may take a moment to end: Cyclone's on a loaded machine (given the
+    # same 2 s); Zenoh's runtime (tokio) starts a blocking-pool thread when it needs one and
+    # keeps it idle for 10 s before it ends (measured: 12 threads, 9 at 10.0 s), so a second
+    # session may briefly show one more: given 11 s, the count comes back.
     expected = native[0] if kind == "dds" else native[1]
-    while native[2] > expected and time.monotonic() < deadline + 2.0:
+    wait_s = 2.0 if kind == "dds" else 11.0
+    while native[2] > expected and time.monotonic() < deadline + wait_s:
         time.sleep(0.05)
         native[2] = _native_threads()
     if kind == "dds":
         assert native[2] == native[1] == native[0], native  # Cyclone ends all its threads
     else:
-        assert native[2] == native[1], native  # Zenoh's runtime stays, shared by sessions
+        assert native[2] <= native[1], native  # Zenoh's runtime stays, shared by sessions
 
 
 def test_the_intervals_follow_the_arguments():
@@ -264,3 +268,27 @@ def test_ddss_intervals_follow_the_arguments():
     assert (at10.heartbeat_us, at10.nack_delay_us, at10.ack_delay_us) == (10_000, 10_000, 1000)
     assert (at1.lease_us, at1.spdp_interval_us) == (2_000_000, 500_000)
     assert (at10.lease_us, at10.spdp_interval_us) == (200_000, 50_000)
+
+
+def test_dds_callbacks_take_nothing_from_a_reader_being_made_or_deleted():
+    """Cyclone hands a listener None for a reader it is making or deleting, and a take on a
+    reader being deleted raises: neither may raise from the callback (a native thread)."""
+    from cyclonedds.core import DDSException
+
+    from node.messaging.dds_take import samples
+
+    class Reader:
+        def __init__(self, batches):
+            self.batches = list(batches)
+
+        def take(self, N):
+            if not self.batches:
+                return []
+            b = self.batches.pop(0)
+            if isinstance(b, Exception):
+                raise b
+            return b[:N]
+
+    assert list(samples(None, int, 16)) == []
+    assert list(samples(Reader([DDSException(-1)]), int, 16)) == []
+    assert list(samples(Reader([[1, "invalid", 2], [3], DDSException(-1)]), int, 16)) == [1, 2, 3]
