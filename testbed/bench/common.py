@@ -6,7 +6,9 @@ import platform
 import statistics
 import time
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from testbed import PROJECT_ROOT
+
+REPO = PROJECT_ROOT
 BENCH_DIR = os.path.join(REPO, "results", "bench")
 
 

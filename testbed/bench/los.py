@@ -10,12 +10,13 @@ import os
 import random
 import time
 
+from testbed import PROJECT_ROOT
 from testbed.bench.common import median, write
 from topology import ranges
 from topology.los import Walls
 
 STEPS = 2000
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REPO = PROJECT_ROOT
 OFFICE = os.path.join(REPO, "testbed", "experiments", "maps", "office.png")
 
 

@@ -78,14 +78,13 @@ log = logging.getLogger(__name__)
 
 WORLD_RT_PRIORITY = 2  # the step loop's SCHED_RR priority (robots' motion control: 1)
 WORLD_NICE = -10  # its nice value where real-time priority is refused
-PROJECT_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # What the fork server imports once for every robot and the display (topology.forkserver);
 # the run's middleware module (node.messaging) is added to it.
 NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "topology.names"]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
 END_GRACE_S = 15.0  # for the processes to write their logs after END
 __all__ = [
-    "DEFAULT_SNAPSHOTS", "PROJECT_ROOT", "PreparedRun", "Run", "RunConfig", "add_arguments",
+    "DEFAULT_SNAPSHOTS", "PreparedRun", "Run", "RunConfig", "add_arguments",
     "main", "prepare", "run",
 ]  # fmt: skip
 

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from common.errors import TestbedError, UsageError
 from common.jsonfile import read_json, write_json_atomic
+from testbed import PROJECT_ROOT
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
 from testbed.sweep.file import PlannedRun
@@ -137,7 +138,7 @@ def batch_script(out: Path, task_list: Path, sudo: bool = False) -> str:
     """The array task's script; with `sudo`, it runs the task through `sudo -n` (for sites
     whose jobs run as the user, with sudo allowed for this command)."""
     python = ("sudo -n " if sudo else "") + shlex.quote(sys.executable)
-    repo = shlex.quote(str(Path(__file__).resolve().parents[1]))
+    repo = shlex.quote(PROJECT_ROOT)
     return (
         "#!/bin/sh\n"
         "# One run of a testbed sweep per array task (testbed/sweep/slurm.py). Needs root on the\n"

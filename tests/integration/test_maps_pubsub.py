@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from node import messaging
-from testbed.run.execute import PROJECT_ROOT
+from testbed import PROJECT_ROOT
 from topology.network import destroy
 
 ROBOTS = 3

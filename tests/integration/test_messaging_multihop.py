@@ -18,7 +18,7 @@ import uuid
 import pytest
 
 from node.timing import RobotTimings
-from testbed.run.execute import PROJECT_ROOT
+from testbed import PROJECT_ROOT
 from topology import names, netns
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec

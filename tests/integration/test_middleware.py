@@ -36,8 +36,8 @@ import numpy as np
 import pytest
 
 from node import messaging
+from testbed import PROJECT_ROOT
 from testbed.analysis import pcapmetrics
-from testbed.run.execute import PROJECT_ROOT
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 

@@ -17,7 +17,7 @@ import uuid
 import pytest
 
 from node import wire
-from testbed.run.execute import PROJECT_ROOT
+from testbed import PROJECT_ROOT
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 

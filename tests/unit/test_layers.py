@@ -9,6 +9,7 @@ testbed...`, a fork server's module, import_module).
 import ast
 import os
 import re
+from pathlib import Path
 
 import pytest
 
@@ -227,3 +228,16 @@ def test_the_harness_is_in_named_parts():
         names = os.listdir(os.path.join(REPO, "testbed", part))
         prefixed = [n for n in names if n.startswith(part) and n.endswith(".py")]
         assert not prefixed, f"testbed/{part}/ repeats its name in {prefixed}"
+
+
+def test_the_project_root_is_the_checkout():
+    """Moving a module deeper once broke a root computed from its own path: one definition."""
+    from testbed import PROJECT_ROOT
+    from testbed.sweep.slurm import batch_script
+
+    assert os.path.samefile(PROJECT_ROOT, REPO)
+    assert os.path.isfile(os.path.join(PROJECT_ROOT, "pyproject.toml"))
+    assert f"cd {PROJECT_ROOT} ||" in batch_script(Path("/out"), Path("/out/tasks"))
+    # (topology/, below the harness, finds the checkout from its own depth: one level.)
+    roots = [p for p in modules("testbed") if "dirname(os.path.dirname(" in open(p).read()]
+    assert not roots, f"take the checkout from testbed.PROJECT_ROOT: {roots}"

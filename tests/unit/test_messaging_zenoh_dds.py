@@ -24,7 +24,7 @@ import time
 
 import pytest
 
-from testbed.run.execute import PROJECT_ROOT
+from testbed import PROJECT_ROOT
 
 SEND_TIMEOUT_MS = 50
 RECONNECT_MS = (20, 100)  # lease: 4 x 100 ms

@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from testbed.run.execute import PROJECT_ROOT
+from testbed import PROJECT_ROOT
 
 
 def run(argv):
