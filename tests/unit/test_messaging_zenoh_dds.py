@@ -174,13 +174,16 @@ def test_a_stopped_teammate_never_holds_a_send_past_the_timeout(kind):
         data = b"g" * 8000
         m.stats.blocked_max_s = 0.0  # this loop's sends only (the first send made a writer)
         t0 = time.monotonic()
-        outcomes, longest = [], 0.0
+        outcomes, longest, held = [], 0.0, 0.0
         while time.monotonic() - t0 < 3 * LEASE_S + 1.0 and any(outcomes[-100:] or [True]):
-            t1 = time.monotonic()
+            t1, queued = time.monotonic(), _runqueue_wait_s()
             outcomes.append(m.send(2, data))
-            longest = max(longest, time.monotonic() - t1)
-        said = f"{kind}: {len(outcomes)} sends, {sum(outcomes)} taken, longest {longest:.4f} s"
-        assert longest <= SEND_TIMEOUT_MS / 1000 + SLACK_S, said
+            took = time.monotonic() - t1
+            longest = max(longest, took)
+            held = max(held, took - (_runqueue_wait_s() - queued))
+        said = (f"{kind}: {len(outcomes)} sends, {sum(outcomes)} taken, longest {longest:.4f} s, "
+                f"{held:.4f} s of it not waiting for a CPU")  # fmt: skip
+        assert held <= SEND_TIMEOUT_MS / 1000 + SLACK_S, said
         assert m.stats.blocked_max_s <= longest, said  # measured inside send
         assert outcomes[0] and not outcomes[-1], said  # taken first; given up by the lease
         if kind == "zenoh":
@@ -193,6 +196,14 @@ def test_a_stopped_teammate_never_holds_a_send_past_the_timeout(kind):
         peer.wait()
         if m is not None:
             m.close()
+
+
+def _runqueue_wait_s() -> float:
+    """Seconds this thread has waited, runnable, for a CPU (the kernel's schedstat): on a
+    loaded machine a send may take long only because its thread was not running, which no
+    middleware's timeout can bound; that time is taken out of what a send is judged by."""
+    with open("/proc/thread-self/schedstat") as f:
+        return int(f.read().split()[1]) / 1e9
 
 
 def _native_threads() -> int:
