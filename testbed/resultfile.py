@@ -45,6 +45,8 @@ CONFIG_KEYS = (
 DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
 DEFAULT_ROUTING = "aodv"
 DEFAULT_MEDIUM = "veth"
+# The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
+CPU_PARTS = ("robots", "display", "world", "routing")
 _EMPTY: Mapping = MappingProxyType({})
 _NUM = (int, float)
 
@@ -370,6 +372,19 @@ class RunResult:
     def cpu_per_robot_step_ms(self) -> float | None:
         ms = self.cpu_s.get("per_robot_step_ms")
         return ms if isinstance(ms, int | float) and not isinstance(ms, bool) else None
+
+    @property
+    def cores_while_stepping(self) -> float | None:
+        """Cores the run kept busy while it stepped: the CPU seconds of its parts (robots,
+        display, world, routing) over the wall seconds of its step loop (wall_parts_s'
+        `steps`). What a sweep packs runs by (testbed.sweep.cores). None when the file
+        lacks either (older runs, a run that never stepped)."""
+        cpu = [self.cpu_s.get(part) for part in CPU_PARTS]
+        cpu = [s for s in cpu if isinstance(s, int | float) and not isinstance(s, bool)]
+        wall = self.wall_parts_s.get("steps")
+        if not cpu or not isinstance(wall, int | float) or isinstance(wall, bool) or wall <= 0:
+            return None
+        return sum(cpu) / wall
 
     @property
     def unimpaired(self) -> bool:

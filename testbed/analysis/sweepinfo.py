@@ -173,12 +173,15 @@ def _backoff_lines(state: dict) -> list[str]:
     """What the sweep changed as runs missed deadlines: its concurrency, its time scales."""
     out = []
     backoffs = state.get("backoffs") or []
-    concurrency = [b for b in backoffs if "jobs" in b or "load_limit" in b]
+    concurrency = [b for b in backoffs if {"jobs", "load_limit", "cpu_limit"} & set(b)]
     if concurrency:
+        now = f"{state.get('jobs')} job(s) at most"
+        cpu_limit = state.get("cpu_limit")
+        if isinstance(cpu_limit, int | float) and not isinstance(cpu_limit, bool):
+            now += f", within {cpu_limit:g} cores"
         out.append(
             f"The sweep lowered its concurrency {len(concurrency)} time(s) because runs "
-            f"missed step deadlines or were not faithful (now {state.get('jobs')} job(s) at "
-            "most)."
+            f"missed step deadlines or were not faithful (now {now})."
         )
     scale = [b for b in backoffs if "time_scale_factor" in b]
     if scale:

@@ -25,7 +25,7 @@ from common.jsonfile import read_json
 from testbed.run.config import RunConfig
 from testbed.sweep import file as sweepfile
 from testbed.sweep.file import PlannedRun
-from testbed.sweep.plan import Plan, auto_jobs, config_mismatch, default_jobs, other_sweep, plan
+from testbed.sweep.plan import Plan, config_mismatch, default_jobs, jobs_cap, other_sweep, plan
 from testbed.sweep.rundir import is_done, run_dir
 from testbed.sweep.runner import Sweep, wait_for_orphans
 from topology.impair import kernel_has_netem
@@ -53,8 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="J",
         help=f"runs at once, or 'auto' (from the cores and the CPU the sweep's largest run "
-        f"needs); default {default_jobs()} on this machine; lowered automatically when runs "
-        "miss step deadlines",
+        f"needs); default {default_jobs()} on this machine, or the core count when the sweep "
+        "file sets cpu_limit; lowered automatically when runs miss step deadlines",
     )
     parser.add_argument(
         "--view",
@@ -196,6 +196,14 @@ def _check_same_sweep(out: Path, runs: list[PlannedRun], sweep_file: str) -> Non
         )
 
 
+def _concurrency(jobs: int, spec: sweepfile.SweepSpec) -> str:
+    """How many runs at once, for the sweep's first line."""
+    if spec.cpu_limit is None:
+        return f", {jobs} at a time"
+    cores = "core" if spec.cpu_limit == 1 else "cores"
+    return f", up to {jobs} at a time within {spec.cpu_limit:g} {cores} (cpu_limit)"
+
+
 def main(args: argparse.Namespace) -> int:
     if args.status:
         return _print_status(Path(args.status))
@@ -233,7 +241,7 @@ def main(args: argparse.Namespace) -> int:
                     f"--out {out}: run {r.run_id} was made with other settings ({diff}); "
                     "use a new directory"
                 )
-    jobs = auto_jobs(runs) if args.jobs == "auto" else args.jobs or default_jobs()
+    jobs = jobs_cap(args.jobs, runs, spec.cpu_limit)
     netem = kernel_has_netem() if any(d > 0 for d in spec.values("delay_ms")) else False
     out.mkdir(parents=True, exist_ok=True)
     (out / "runs").mkdir(exist_ok=True)
@@ -253,7 +261,7 @@ def main(args: argparse.Namespace) -> int:
         f"sweep {args.file}: {len(runs)} runs, {len(p.done)} done, {len(p.todo)} to do"
         + (f" ({len(p.partial)} partial, redone)" if p.partial else "")
         + (f", {len(p.skipped)} skipped" if p.skipped else "")
-        + f", {jobs} at a time",
+        + _concurrency(jobs, spec),
         file=sys.stderr,
     )
     sweep = Sweep(spec, runs, out, jobs, netem, sweep_file=str(args.file),

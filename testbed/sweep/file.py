@@ -29,6 +29,9 @@ for every run of the sweep::
     # time_scale = { 1 = 12.0, 2 = 10.0, 3 = 8.0 }
     load_limit = 60               # optional: runs share the machine while the sum of their
                                   # loads, (robots + 1) x time_scale, stays within this
+    cpu_limit = 1.8               # optional: runs share the machine while the sum of their
+                                  # estimated cores stays within this (testbed.sweep.cores;
+                                  # lowered when a shared run comes out late or unfaithful)
     routing = "aodv"              # aodv | babel | batman | oracle | none, default aodv
     aodv_profile = "rfc"          # rfc | ns3 (AODV parameters), default rfc
     max_steps = 3000              # default 3000
@@ -92,7 +95,8 @@ from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
 # The run options a sweep file may vary or fix (RunConfig fields marked so), and its own keys:
-# grid.runs, run.seed (the base of every derived seed), run.load_limit (testbed.sweep.command).
+# grid.runs, run.seed (the base of every derived seed), run.load_limit and run.cpu_limit
+# (testbed.sweep.runner).
 # The grid's dimensions in their order (GridDim.order): the nesting of the expansion, the
 # order of a run id's parts and of a point's values.
 _GRID_OPTIONS = tuple(sorted((opt for opt in OPTIONS if GRID in opt.sweep),
@@ -100,7 +104,7 @@ _GRID_OPTIONS = tuple(sorted((opt for opt in OPTIONS if GRID in opt.sweep),
 GRID_NAMES = tuple(opt.name for opt in _GRID_OPTIONS)
 _RUN_OPTIONS = tuple(opt for opt in OPTIONS if RUN in opt.sweep)
 _GRID_KEYS = {opt.name for opt in _GRID_OPTIONS} | {"runs"}
-_RUN_KEYS = {opt.name for opt in _RUN_OPTIONS} | {"seed", "load_limit"}
+_RUN_KEYS = {opt.name for opt in _RUN_OPTIONS} | {"seed", "load_limit", "cpu_limit"}
 _GRID_REQUIRED = ("robots", "comm_range", "laser_range")
 _DEFAULT = RunConfig(robots=1, comm_range=1.0)  # the required fields always come from the grid
 MAX_RUNS = 10_000
@@ -117,6 +121,7 @@ class SweepSpec:
     runs: int = 1
     time_scale_by_robots: tuple[tuple[int, float], ...] = ()  # else base.time_scale
     load_limit: float | None = None
+    cpu_limit: float | None = None  # cores (testbed.sweep.cores)
     seed_base: int = 0  # [run] seed: mixed into every derived seed
     description: str = ""
 
@@ -127,6 +132,7 @@ class SweepSpec:
         runs: int = 1,
         time_scale_by_robots=(),
         load_limit=None,
+        cpu_limit=None,
         seed: int = 0,
         description: str = "",
         **fields,
@@ -142,7 +148,8 @@ class SweepSpec:
             raise TypeError(f"{unknown[0]} is not a grid dimension")
         base = replace(_DEFAULT, **{k: v for k, v in fields.items() if k not in grid})
         return cls(tuple((k, grid[k]) for k in GRID_NAMES if k in grid), base, runs,
-                   tuple(time_scale_by_robots), load_limit, seed, description)  # fmt: skip
+                   tuple(time_scale_by_robots), load_limit, cpu_limit, seed,
+                   description)  # fmt: skip
 
     def values(self, name: str) -> tuple:
         """The values field `name` takes in this sweep: the grid's, else [run]'s one."""
@@ -159,6 +166,7 @@ class SweepSpec:
             "runs": self.runs,
             "time_scale_by_robots": {str(n): v for n, v in self.time_scale_by_robots},
             "load_limit": self.load_limit,
+            "cpu_limit": self.cpu_limit,
             "seed": self.seed_base,
             "description": self.description,
         }
@@ -237,6 +245,14 @@ def _positive(path, key: str, v) -> float:
     if v <= 0:
         raise _fail(path, key, f"must be > 0, got {v}")
     return float(v)
+
+
+def _positive_finite(path, key: str, v) -> float:
+    """A number of cores: TOML's inf and nan are numbers too, but no machine has them."""
+    cores = _positive(path, key, v)
+    if not math.isfinite(cores):
+        raise _fail(path, key, f"expected a finite number of cores, got {v}")
+    return cores
 
 
 def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
@@ -325,6 +341,8 @@ def _run(path, run: dict, grid: dict, robots: tuple[int, ...]) -> dict:
                             f"{middleware})")  # fmt: skip
     if "load_limit" in run:
         kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
+    if "cpu_limit" in run:
+        kw["cpu_limit"] = _positive_finite(path, "run.cpu_limit", run["cpu_limit"])
     if "seed" in run:
         if not _is_int(run["seed"]):
             raise _fail(path, "run.seed", f"expected an integer, got {run['seed']!r}")

@@ -14,6 +14,7 @@ from pathlib import Path
 from common.jsonfile import read_json
 from testbed.resultfile import RunResult
 from testbed.run.config import RunConfig
+from testbed.sweep.cores import load
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, plan_dict, run_dir
 
@@ -124,7 +125,26 @@ def default_jobs(cores: int | None = None) -> int:
     return max(1, cores // 2)
 
 
+def jobs_cap(
+    requested: int | str | None,
+    runs: list[PlannedRun],
+    cpu_limit: float | None,
+    cores: int | None = None,
+) -> int:
+    """The most runs at once: --jobs J as given, --jobs auto (auto_jobs); without --jobs, the
+    core count when the sweep packs runs by their estimated cores (cpu_limit: the estimate
+    decides, and a cap of half the cores would keep two runs apart on two cores), else
+    default_jobs."""
+    if requested == "auto":
+        return auto_jobs(runs, cores)
+    if requested:
+        return int(requested)
+    if cpu_limit is not None:
+        return max(1, cores or os.cpu_count() or 1)
+    return default_jobs(cores)
+
+
 def run_load(run: PlannedRun) -> float:
     """What a run asks of the machine: process-steps (robots, plus the display) per 100 ms of
-    emulated time."""
-    return (run.config.robots + 1) * run.config.time_scale
+    wall time, at the sweep file's time scale (testbed.sweep.cores.load)."""
+    return load(run.config.robots, run.config.time_scale)

@@ -16,9 +16,12 @@ The rules, in the order they are tried (each is cited at its branch below):
 2. Over the limit, but within it once the misses in host stalls are left out: the host,
    not the load, is to blame. The time scale is kept; the run is redone (at most 3
    attempts) only if it missed more than REDO_MISS in all, else kept as it is.
-3. Over the limit outside stalls while another run shared the machine, under a load limit:
-   the limit falls to 80% of the most load in flight while this run ran; redo (2 attempts).
-4. The same without a load limit, when more than one run was allowed at its start: one run
+3. Over the limit outside stalls while another run shared the machine, under a load limit
+   or a cpu limit (or both): each limit falls to 80% of the most of its measure that was in
+   flight while this run ran, the load limit below the load seen, the cpu limit below the
+   estimated cores seen (testbed.sweep.cores); redo (2 attempts). Once the cpu limit is
+   below what two runs need, the sweep runs one at a time.
+4. The same without either limit, when more than one run was allowed at its start: one run
    fewer at a time; redo (2 attempts).
 5. Over the limit outside stalls while alone: the machine is slower than the sweep file's
    time scales assume (a shared machine varies). Later runs of this team size get their
@@ -56,7 +59,7 @@ MIN_SCALE_FACTOR = 0.25
 REDO_MISS = 0.05  # a run alone that missed more than this is redone (slower); less is kept
 CLEAN_MISS = 0.005  # a run this clean counts towards speeding up again
 CLEAN_RUNS_TO_SPEED_UP = 3
-LOAD_BACKOFF = 0.8  # rule 3: the new load limit, as a share of the load the late run saw
+LOAD_BACKOFF = 0.8  # rule 3: the new load (or cpu) limit, as a share of what the late run saw
 MAX_SCALE_FACTOR = 4.0  # calibration may take a team size up to 4 times the file's scale
 
 
@@ -68,7 +71,8 @@ class Outcome:
     miss: float | None  # deadline_miss_fraction (None: the run did not say)
     miss_outside_stalls: float | None
     shared: bool = False  # another run was in flight at some time during this one
-    load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.command.run_load)
+    load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.plan.run_load)
+    cpu_seen: float = 0.0  # the most estimated cores in flight while it ran (testbed.sweep.cores)
     jobs_at_start: int = 1  # the concurrency allowed when it started
     attempts: int = 1  # how many times it has been started, this one included
     faithful: bool | None = None  # its fidelity verdict (None: the run did not say)
@@ -81,6 +85,7 @@ class State:
 
     jobs: int
     load_limit: float | None = None
+    cpu_limit: float | None = None  # cores
     scale_factors: dict[int, float] = field(default_factory=dict)  # robots -> factor
     clean_runs: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
     ceilings: dict[int, float] = field(default_factory=dict)  # robots -> highest factor
@@ -114,16 +119,29 @@ def _back_off(o: Outcome, state: State, change: dict, what: str, attempts: int) 
     return Decision(state, (record,), redo, words)
 
 
+def _lower_limits(o: Outcome, state: State) -> Decision:
+    """Rule 3: each limit the sweep has falls below what this shared run saw in flight (the
+    run could not tell which of them was too high), never up."""
+    change: dict = {}
+    words = []
+    if state.load_limit is not None:
+        change["load_limit"] = round(min(state.load_limit, LOAD_BACKOFF * o.load_seen), 1)
+        words.append(f"load limit down to {change['load_limit']:g}")
+    if state.cpu_limit is not None:
+        change["cpu_limit"] = round(min(state.cpu_limit, LOAD_BACKOFF * o.cpu_seen), 2)
+        words.append(f"cpu limit down to {change['cpu_limit']:g} cores")
+    return _back_off(o, replace(state, **change), change, ", ".join(words), attempts=2)
+
+
 def _relieve(o: Outcome, state: State) -> Decision:
-    """Rules 3 to 5: less load (a lower load limit, fewer jobs) or, alone, a lower time scale
-    for this team size; an unfaithful run is redone at least once."""
+    """Rules 3 to 5: less load (a lower load or cpu limit, fewer jobs) or, alone, a lower
+    time scale for this team size; an unfaithful run is redone at least once."""
     n, miss = o.robots, o.miss
-    if state.load_limit is not None and o.shared:
-        # Rule 3: shared under a load limit: the limit falls below what this run saw.
-        limit = round(min(state.load_limit, LOAD_BACKOFF * o.load_seen), 1)
-        return _back_off(o, replace(state, load_limit=limit), {"load_limit": limit},
-                         f"load limit down to {limit:g}", attempts=2)  # fmt: skip
-    if state.load_limit is None and o.jobs_at_start > 1:
+    limited = state.load_limit is not None or state.cpu_limit is not None
+    if limited and o.shared:
+        # Rule 3: shared under a load or cpu limit: the limits fall below what this run saw.
+        return _lower_limits(o, state)
+    if not limited and o.jobs_at_start > 1:
         # Rule 4: shared by job count: one run fewer at a time.
         jobs = max(1, min(state.jobs, o.jobs_at_start) - 1)
         return _back_off(o, replace(state, jobs=jobs), {"jobs": jobs},

@@ -24,12 +24,17 @@ A run that finishes during that grace period still counts.
 
 Concurrency: at most --jobs runs at once (default from the core count) and, when the sweep file
 sets `load_limit`, only while the loads of the runs in flight add up to at most that: a run's
-load is (robots + 1) x time_scale, the process-steps it asks of the machine per emulated
-100 ms, so a sweep whose time scale falls with team size packs small teams side by side and
-gives a large one the machine alone. The queue is served first-fit: the first waiting run
-that fits starts. What happens when a run misses step deadlines (the concurrency backs off,
-a team size's time scale goes down and up again, a run is redone) is decided by the pure
-rules of testbed.sweep.policy; `Sweep._finish` only applies them.
+load is (robots + 1) x time_scale, the process-steps it asks of the machine per 100 ms of
+wall time, so a sweep whose time scale falls with team size packs small teams side by side
+and gives a large one the machine alone. With `cpu_limit` (cores), only while the estimated
+cores of the runs in flight add up to at most that: c x load at the time scale the run will
+get, c learnt from what the sweep's finished runs measured (testbed.sweep.cores); without
+--jobs the cap is then the core count, so that the estimate alone decides. A run must fit
+every limit set, and a run always starts when none is in flight. The queue is served
+first-fit: the first waiting run that fits starts. What happens when a run misses step
+deadlines (the concurrency backs off, a team size's time scale goes down and up again, a run
+is redone) is decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only
+applies them.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -55,6 +60,7 @@ from common.errors import TestbedError
 from common.jsonfile import read_json, write_json_atomic
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
+from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
@@ -130,6 +136,8 @@ class _Child:
     load: float = 0.0
     shared: bool = False  # another run was in flight at some time during this one
     load_seen: float = 0.0  # the most load in flight while this one ran
+    cores: float = 0.0  # its estimated cores when it started (testbed.sweep.cores)
+    cpu_seen: float = 0.0  # the most estimated cores in flight while this one ran
 
 
 class Sweep:
@@ -155,6 +163,13 @@ class Sweep:
         self.jobs_requested = jobs
         self.load_limit = getattr(spec, "load_limit", None)
         self.load_limit_requested = self.load_limit
+        self.cpu_limit = getattr(spec, "cpu_limit", None)
+        self.cpu_limit_requested = self.cpu_limit
+        # What the sweep's finished runs measured, for estimating the cores of the next ones,
+        # and the cores per unit of load that makes per team size (the queue is scanned every
+        # tenth of a second, each median only once per measurement).
+        self.measured: list[sweepcores.Measured] = []
+        self._rates: dict[int, float] = {}
         # Per team size, applied to its runs' time scales (see _finish): a large team that
         # runs short of CPU says nothing about a lone robot, which is bound by latency.
         self.scale_factors: dict[int, float] = {}
@@ -187,6 +202,8 @@ class Sweep:
             "jobs": self.jobs,
             "load_limit_requested": self.load_limit_requested,
             "load_limit": self.load_limit,
+            "cpu_limit_requested": self.cpu_limit_requested,
+            "cpu_limit": self.cpu_limit,
             "time_scale_factor": {
                 str(n): round(f, 3) for n, f in sorted(self.scale_factors.items())
             },
@@ -215,7 +232,8 @@ class Sweep:
 
     def _show(self, queue, event=None) -> None:
         done, running, failed = self._counts()
-        jobs = self.jobs if self.load_limit is None else self.progress.parallelism()
+        limited = self.load_limit is not None or self.cpu_limit is not None
+        jobs = self.progress.parallelism() if limited else self.jobs
         eta = self.progress.eta(list(queue), running, jobs)
         self.progress.update(done, running, failed, eta, event)
 
@@ -250,11 +268,38 @@ class Sweep:
             )
         return proc, log_file
 
-    def _start(self, run: PlannedRun) -> _Child:
+    def _scaled(self, run: PlannedRun) -> RunConfig:
+        """`run`'s config at the time scale it gets now: the file's times its team size's
+        factor (testbed.sweep.policy)."""
         config = run.config
         factor = self._factor(config.robots)
         if factor != 1.0:
             config = replace(config, time_scale=round(config.time_scale * factor, 3))
+        return config
+
+    def _estimate(self, run: PlannedRun) -> float:
+        """The cores `run` is expected to keep busy, at the time scale it gets now
+        (testbed.sweep.cores.estimate)."""
+        config = self._scaled(run)
+        n = config.robots
+        if n not in self._rates:
+            self._rates[n] = sweepcores.cores_per_load(n, self.measured)
+        return self._rates[n] * sweepcores.load(n, config.time_scale)
+
+    def _measure(self, result: RunResult | None, st: dict) -> None:
+        """Learn from a finished run's result (None: unreadable) what its cores were, and
+        record them in its status entry `st`."""
+        cores = result.cores_while_stepping if result else None
+        if cores is not None:
+            st["cores_measured"] = round(cores, 3)
+        measured = sweepcores.measure(result) if result else None
+        if measured is not None:
+            self.measured.append(measured)
+            self._rates.clear()
+
+    def _start(self, run: PlannedRun) -> _Child:
+        config = self._scaled(run)
+        estimate = self._estimate(run)
         if self.view and self.view_owner is None:
             config = replace(config, view=self.view)
             self.view_owner = run.run_id
@@ -267,9 +312,11 @@ class Sweep:
             "pid": proc.pid,
             "pid_start": proc_start_time(proc.pid),
             "attempts": self.status[run.run_id].get("attempts", 0) + 1,
+            "cores_estimated": round(estimate, 3),
         }
-        child = _Child(run, proc, time.monotonic(), self.jobs, log_file, load=run_load(run))
-        child.load_seen = child.load
+        child = _Child(run, proc, time.monotonic(), self.jobs, log_file, load=run_load(run),
+                       cores=estimate)  # fmt: skip
+        child.load_seen, child.cpu_seen = child.load, child.cores
         return child
 
     def _finish(self, child: _Child, queue: deque) -> str:
@@ -298,6 +345,7 @@ class Sweep:
         faithful = result.faithful if result else None
         if faithful is not None:
             st["faithful"] = faithful
+        self._measure(result, st)
         n = run.config.robots
         self.progress.record(n, wall)
         outcome = sweeppolicy.Outcome(
@@ -307,6 +355,7 @@ class Sweep:
             miss_outside_stalls=result.deadline_miss_fraction_outside_stalls if result else None,
             shared=child.shared,
             load_seen=child.load_seen,
+            cpu_seen=child.cpu_seen,
             jobs_at_start=child.jobs_at_start,
             attempts=st["attempts"],
             faithful=faithful,
@@ -320,6 +369,7 @@ class Sweep:
         return sweeppolicy.State(
             jobs=self.jobs,
             load_limit=self.load_limit,
+            cpu_limit=self.cpu_limit,
             scale_factors=dict(self.scale_factors),
             clean_runs=dict(self.clean_runs),
             ceilings=dict(self.ceilings),
@@ -328,6 +378,7 @@ class Sweep:
     def _apply(self, d: sweeppolicy.Decision, run: PlannedRun, st: dict, queue: deque) -> None:
         """Carry out what the policy decided about `run` (status entry `st`)."""
         self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
+        self.cpu_limit = d.state.cpu_limit
         self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
         self.backoffs += [{"run": run.run_id, **record} for record in d.backoffs]
         if d.redo:
@@ -402,14 +453,26 @@ class Sweep:
             if st["status"] == "failed" and not is_done(self.out, rid):
                 st["status"] = "interrupted"
 
+    def _fits(self, run: PlannedRun, children: dict) -> bool:
+        """Whether `run` fits beside the runs in flight: their loads and its own within the
+        load limit, their estimated cores and its own within the cpu limit (each when set)."""
+        if self.load_limit is not None:
+            in_flight = sum(c.load for c in children.values())
+            if in_flight + run_load(run) > self.load_limit + 1e-9:
+                return False
+        if self.cpu_limit is not None:
+            in_flight = sum(c.cores for c in children.values())
+            if in_flight + self._estimate(run) > self.cpu_limit + 1e-9:
+                return False
+        return True
+
     def _next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
-        """Take the first waiting run that fits under the load limit (any run, when nothing
-        is in flight); None when none fits."""
-        if self.load_limit is None or not children:
+        """Take the first waiting run that fits (any run, when nothing is in flight); None
+        when none fits."""
+        if not children:
             return queue.popleft()
-        room = self.load_limit - sum(c.load for c in children.values())
         for i, run in enumerate(queue):
-            if run_load(run) <= room + 1e-9:
+            if self._fits(run, children):
                 del queue[i]
                 return run
         return None
@@ -421,6 +484,7 @@ class Sweep:
             self.status[r.run_id] = {"status": "done", "previous_sweep": True}
             res = RunResult.read(run_dir(self.out, r.run_id))
             self.status[r.run_id]["result_status"] = res.status if res else None
+            self._measure(res, self.status[r.run_id])
         for rid, reason in skipped.items():
             self.status[rid] = {"status": "skipped", "reason": reason}
         self.progress.total = len(self.runs) - len(skipped)
@@ -441,10 +505,12 @@ class Sweep:
                         break
                     child = self._start(run)
                     children[run.run_id] = child
-                    in_flight = sum(c.load for c in children.values())
+                    load = sum(c.load for c in children.values())
+                    cores = sum(c.cores for c in children.values())
                     for c in children.values():
                         c.shared = c.shared or len(children) > 1
-                        c.load_seen = max(c.load_seen, in_flight)
+                        c.load_seen = max(c.load_seen, load)
+                        c.cpu_seen = max(c.cpu_seen, cores)
                     self._write_state()
                     self._show(queue)
                 exited = [rid for rid, c in children.items() if c.proc.poll() is not None]

@@ -51,9 +51,9 @@ SCALARS = st.one_of(
 )
 GRID_KEYS = ["robots", "comm_range", "laser_range", "loss_pct", "delay_ms", "coordination",
              "start", "routing", "medium", "runs", "bogus", "bad\nkey", "\x1b[2J"]  # fmt: skip
-RUN_KEYS = ["time_scale", "load_limit", "routing", "aodv_profile", "max_steps", "capture",
-            "range_model", "wall_loss_pct", "medium", "wifi_loss", "wifi_standard", "wifi_rate",
-            "seed", "other", "²"]  # fmt: skip
+RUN_KEYS = ["time_scale", "load_limit", "cpu_limit", "routing", "aodv_profile", "max_steps",
+            "capture", "range_model", "wall_loss_pct", "medium", "wifi_loss", "wifi_standard",
+            "wifi_rate", "seed", "other", "²"]  # fmt: skip
 
 
 def value(inner=SCALARS):
@@ -169,6 +169,7 @@ def check(tmp_path, content: bytes) -> None:
         for x in (c.comm_range, c.laser_range, c.loss_pct, c.delay_ms, c.time_scale):
             assert math.isfinite(x) and x >= 0
         assert 1 <= c.robots <= 50
+    assert spec.cpu_limit is None or (math.isfinite(spec.cpu_limit) and spec.cpu_limit > 0)
 
 
 @settings(BASE, max_examples=300)

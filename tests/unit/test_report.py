@@ -264,6 +264,18 @@ def test_sweep_section_tells_time_scale_changes_from_concurrency_changes(tmp_pat
     assert "0.85 for 1, 0.72 for 10" in text
 
 
+def test_sweep_section_counts_a_lowered_cpu_limit_as_a_concurrency_change(tmp_path):
+    state = {
+        "jobs": 2,
+        "cpu_limit": 1.2,
+        "backoffs": [{"run": "a", "deadline_miss_fraction": 0.0, "cpu_limit": 1.2}],
+    }
+    (tmp_path / "sweep.json").write_text(json.dumps(state))
+    text = " ".join(sweepinfo.lines(tmp_path, []))
+    assert "lowered its concurrency 1 time(s)" in text
+    assert "now 2 job(s) at most, within 1.2 cores" in text
+
+
 def test_sweep_section_gives_short_stalls_in_their_own_precision(tmp_path):
     # 0.076 s of host stalls was reported as "0 s in all"
     spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)

@@ -57,6 +57,12 @@ def parse(text: str):
         (GOOD.replace("time_scale = 4", "time_scale = { 1 = 8, 2 = -1 }"), "run.time_scale.2"),
         (GOOD.replace("time_scale = 4", "time_scale = { 1 = 8, two = 4 }"), "run.time_scale.two"),
         (GOOD + "load_limit = 0\n", "run.load_limit"),
+        (GOOD + "cpu_limit = 0\n", "run.cpu_limit"),
+        (GOOD + "cpu_limit = -1.5\n", "run.cpu_limit"),
+        (GOOD + "cpu_limit = nan\n", "run.cpu_limit"),
+        (GOOD + "cpu_limit = inf\n", "run.cpu_limit"),
+        (GOOD + 'cpu_limit = "2"\n', "run.cpu_limit"),
+        (GOOD + "cpu_limit = true\n", "run.cpu_limit"),
         (GOOD.replace("capture = true", 'capture = "yes"'), "run.capture"),
         (GOOD + 'routing = "olsr"\n', "run.routing"),
         (GOOD + "max_steps = true\n", "run.max_steps"),
@@ -201,6 +207,29 @@ def test_cli_bad_file_one_line_exit_2(tmp_path):
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "grid.robots" in lines[0], r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_cpu_limit_is_a_number_of_cores_recorded_with_the_spec():
+    spec = parse(GOOD + "cpu_limit = 1.8\nload_limit = 40\n")
+    assert spec.cpu_limit == 1.8 and spec.load_limit == 40.0
+    assert spec.to_dict()["cpu_limit"] == 1.8
+    assert parse(GOOD + "cpu_limit = 2\n").cpu_limit == 2.0
+    assert parse(GOOD).cpu_limit is None
+
+
+def test_cli_bad_cpu_limit_one_line_exit_2(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text(GOOD + "cpu_limit = nan\n")
+    r = subprocess.run(
+        [sys.executable, "-m", "testbed.sweep.command", str(f), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "run.cpu_limit" in lines[0] and "finite" in lines[0], r.stderr
     assert not (tmp_path / "out").exists()
 
 

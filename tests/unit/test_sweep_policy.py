@@ -56,6 +56,38 @@ def test_rule3_a_shared_run_under_a_load_limit_lowers_it_to_80_percent_of_what_i
                   State(jobs=4, load_limit=20.0)).state.load_limit == 20.0  # fmt: skip
 
 
+def test_rule3_a_shared_unfaithful_run_under_a_cpu_limit_lowers_it_to_80_percent_of_what_it_saw():
+    state = State(jobs=2, cpu_limit=1.8)
+    d = decide(outcome(0.0, faithful=False, shared=True, cpu_seen=1.5, jobs_at_start=2), state)
+    assert d.state.cpu_limit == 1.2 and d.state.jobs == 2 and d.redo
+    assert d.state.scale_factors == {} and d.state.load_limit is None
+    assert d.backoffs == ({"deadline_miss_fraction": 0.0, "cpu_limit": 1.2, "faithful": False},)
+    assert d.words.endswith("; cpu limit down to 1.2 cores, redoing it")
+    assert not decide(outcome(0.0, faithful=False, shared=True, cpu_seen=1.5, attempts=2),
+                      state).redo  # fmt: skip
+    # Late rather than unfaithful: the same; and never up.
+    assert decide(outcome(0.02, shared=True, cpu_seen=1.5), state).state.cpu_limit == 1.2
+    assert decide(outcome(0.02, shared=True, cpu_seen=1.5),
+                  State(jobs=2, cpu_limit=0.9)).state.cpu_limit == 0.9  # fmt: skip
+
+
+def test_rule3_with_both_limits_lowers_each_below_what_the_run_saw():
+    d = decide(outcome(0.02, shared=True, load_seen=40.0, cpu_seen=1.5),
+               State(jobs=2, load_limit=50.0, cpu_limit=1.8))  # fmt: skip
+    assert (d.state.load_limit, d.state.cpu_limit) == (32.0, 1.2) and d.redo
+    assert d.words.endswith("; load limit down to 32, cpu limit down to 1.2 cores, redoing it")
+
+
+def test_a_run_alone_under_a_cpu_limit_slows_its_team_size_down_as_rule5_says():
+    """Alone, the limit is not to blame (rule 5), even when two runs were allowed at its
+    start; rule 4's one job fewer is for sweeps without limits."""
+    state = State(jobs=2, cpu_limit=1.8)
+    d = decide(outcome(0.0, faithful=False, cpu_seen=0.9, jobs_at_start=2), state)
+    assert d.state.cpu_limit == 1.8 and d.state.jobs == 2
+    assert d.state.scale_factors == {5: SLOWDOWN} and d.redo
+    assert d.backoffs == decide(outcome(0.0, faithful=False), State(jobs=1)).backoffs
+
+
 def test_rule4_without_a_load_limit_one_run_fewer_at_a_time():
     d = decide(outcome(0.02, shared=True, jobs_at_start=3), State(jobs=3))
     assert d.state.jobs == 2 and d.redo

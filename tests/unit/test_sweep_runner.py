@@ -70,6 +70,12 @@ if above and a.time_scale > float(above):
                                               "(40.0%, limit 1.0%)"}
 elif above:
     res["fidelity"] = {"ok": True}
+per_load = os.environ.get("STANDIN_CORES_PER_LOAD")  # the CPU it says it used while stepping
+if per_load:
+    wall = float(os.environ.get("STANDIN_SLEEP", "0.05"))
+    cores = float(per_load) * (a.robots + 1) * a.time_scale
+    res["cpu_s"] = {"robots": cores * wall, "display": 0.0, "world": 0.0, "routing": 0.0}
+    res["wall_parts_s"] = {"steps": wall}
 tmp = os.path.join(a.out, "result.json.tmp")
 with open(tmp, "w") as f:
     json.dump(res, f)
@@ -274,6 +280,94 @@ def test_load_limit_packs_small_teams_and_never_overloads(env):
     assert overlapped  # the small teams did share the machine
     state = json.loads((out / "sweep.json").read_text())
     assert state["load_limit"] == 45 and state["spec"]["time_scale_by_robots"]["3"] == 6
+
+
+def lone_robots(env, comm, cpu_limit=1.0):
+    """lone_robot_sweep (time scale 5: a load of 10 each) under a cpu limit."""
+    packed = lone_robot_sweep(env, comm)
+    packed["file"].write_text(packed["file"].read_text() + f"cpu_limit = {cpu_limit}\n")
+    return packed
+
+
+def spans_by_run(env, times: Path) -> dict[str, tuple[float, float]]:
+    """run id -> (start, end) of every stand-in that ran to its end (STANDIN_PIDS says which
+    run a process made)."""
+    out = {}
+    for p in times.iterdir():
+        t0, t1, _, _ = p.read_text().split()
+        rid = Path((env["pids"] / p.name).read_text()).name
+        out[rid] = (float(t0), float(t1))
+    return out
+
+
+def packed_sweep(env, cpu_limit: float, *extra):
+    """Six lone robots at scale 5 (a load of 10) that measure 0.04 cores per unit of load,
+    0.4 cores each, under `cpu_limit`: (the result, sweep.json, each run's span and its
+    estimated cores)."""
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(lone_robots(env, comm=(5, 10, 15, 20, 25, 30), cpu_limit=cpu_limit), out,
+                  *extra, STANDIN_SLEEP="0.5", STANDIN_TIMES=str(times),
+                  STANDIN_CORES_PER_LOAD="0.04")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    state = json.loads((out / "sweep.json").read_text())
+    estimated = {e["id"]: e["cores_estimated"] for e in state["runs"]}
+    spans = [(t0, t1, estimated[rid]) for rid, (t0, t1) in spans_by_run(env, times).items()]
+    assert len(spans) == 6
+    return r, state, spans
+
+
+def most_in_flight(spans) -> tuple[int, float]:
+    """The most runs, and the most estimated cores, in flight when a run started."""
+    runs, cores = 0, 0.0
+    for t0, _, _ in spans:
+        now = [c for s0, s1, c in spans if s0 <= t0 < s1]
+        runs, cores = max(runs, len(now)), max(cores, sum(now))
+    return runs, cores
+
+
+def test_cpu_limit_packs_runs_by_their_estimated_cores(env):
+    """Under a cpu limit of 1.0: first at the prior's estimate (0.225 cores each), then, once
+    a run has measured 0.4, two at a time; never more estimated cores in flight than that."""
+    r, state, spans = packed_sweep(env, 1.0, "--jobs", "4")
+    assert "up to 4 at a time within 1 core (cpu_limit)" in r.stderr
+    assert state["cpu_limit_requested"] == state["cpu_limit"] == 1.0
+    assert {e["cores_measured"] for e in state["runs"]} == {0.4}
+    estimated = sorted(e["cores_estimated"] for e in state["runs"])
+    assert estimated[0] == pytest.approx(0.225) and estimated[-1] == 0.4
+    runs, cores = most_in_flight(spans)
+    assert runs > 1 and cores <= 1.0 + 1e-9
+
+
+def test_cpu_limit_keeps_runs_apart_when_two_do_not_fit(env):
+    """A limit under two runs' estimate (0.45 at the prior, 0.8 measured): one at a time,
+    though four jobs are allowed."""
+    _, state, spans = packed_sweep(env, 0.4, "--jobs", "4")
+    assert most_in_flight(spans)[0] == 1
+    assert state["cpu_limit"] == 0.4 and not state["backoffs"]
+
+
+def test_cpu_limit_is_capped_by_an_explicit_jobs(env):
+    assert most_in_flight(packed_sweep(env, 2.0, "--jobs", "1")[2])[0] == 1
+
+
+def test_a_shared_run_late_under_a_cpu_limit_lowers_it_and_is_redone(env):
+    out = env["tmp"] / "out"
+    r = run_sweep(lone_robots(env, comm=(5, 10)), out, "--jobs", "2", STANDIN_SLEEP="0.3",
+                  STANDIN_CORES_PER_LOAD="0.04", STANDIN_MISS="0.05",
+                  STANDIN_MISS_IDS="n01-c5-l2-k1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "cpu limit down to 0.36 cores, redoing it" in r.stderr  # 80% of 2 x 0.225
+    state = json.loads((out / "sweep.json").read_text())
+    assert state["cpu_limit_requested"] == 1.0 and state["cpu_limit"] <= 0.36
+    assert state["backoffs"][0] == {"run": "n01-c5-l2-k1", "deadline_miss_fraction": 0.05,
+                                    "cpu_limit": 0.36}  # fmt: skip
+    assert {e["id"]: e["attempts"] for e in state["runs"]}["n01-c5-l2-k1"] == 2
+    # The redo (0.4 cores measured) does not fit beside the other run under 0.36: it ran
+    # alone, late again, and that is the team's time scale (rule 5), not the limit.
+    assert [set(b) - {"run", "deadline_miss_fraction"} for b in state["backoffs"]] == [
+        {"cpu_limit"}, {"robots", "time_scale_factor"}]  # fmt: skip
 
 
 def test_a_run_late_alone_slows_the_sweep_down(env):
