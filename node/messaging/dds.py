@@ -51,7 +51,7 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 
-from node.messaging.dds_take import samples
+from node.messaging.dds_common import has_readers, samples
 from node.messaging.inbox import Inbox
 from node.messaging.stats import MessengerStats
 
@@ -282,7 +282,7 @@ class DdsMessenger:
             return False
         try:
             w = self._writer(j)
-            if not w.get_matched_subscriptions():
+            if not has_readers(w):
                 return False
             w.write(GoalSample(dst=j, src=self.me, payload=data))
             return True

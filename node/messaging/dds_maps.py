@@ -38,7 +38,7 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 
-from node.messaging.dds_take import samples
+from node.messaging.dds_common import has_readers, samples
 from node.messaging.maps import MapTopic
 
 log = logging.getLogger(__name__)
@@ -86,7 +86,7 @@ class DdsMapTopic(MapTopic):
 
     def _publish(self, data: bytes) -> bool:
         try:
-            if not self._writer.get_matched_subscriptions():
+            if not has_readers(self._writer):
                 return False
             self._writer.write(MapSample(src=self.me, payload=data))
             return True

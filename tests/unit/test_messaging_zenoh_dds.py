@@ -286,7 +286,7 @@ def test_dds_callbacks_take_nothing_from_a_reader_being_made_or_deleted():
     reader being deleted raises: neither may raise from the callback (a native thread)."""
     from cyclonedds.core import DDSException
 
-    from node.messaging.dds_take import samples
+    from node.messaging.dds_common import samples
 
     class Reader:
         def __init__(self, batches):

@@ -24,7 +24,8 @@ def test_batch_script_runs_one_task_of_the_list_with_this_python(tmp_path):
     assert text.startswith("#!/bin/sh\n")
     assert "-m testbed.sweep.slurm task" in text and '"$SLURM_ARRAY_TASK_ID"' in text
     assert "'" + str(tmp_path / "out dir") + "'" in text  # quoted: paths may hold spaces
-    assert str(Path(slurm.__file__).resolve().parents[1]) in text
+    checkout = Path(__file__).resolve().parents[2]  # the tasks start in the checkout
+    assert f"cd {checkout} ||" in text
     assert "exec sudo -n " in slurm.batch_script(tmp_path, tmp_path / "t.txt", sudo=True)
 
 
