@@ -3,7 +3,7 @@
 `add_parsers` adds the `net` and `clean` subcommands to the `testbed` command line (its
 parser class, a UsageError on bad input, is the one testbed.cli gives) and `run` carries
 one of them out. The trace player's and the live feed's own options and subcommands are
-testbed.net.movers'. Nothing here imports numpy, matplotlib or the run: `net` starts fast.
+testbed.net.movers'. The network options are `testbed run`'s own (testbed.run.config).
 """
 
 import argparse
