@@ -195,9 +195,11 @@ def test_expansion_covers_every_point_once_before_repeating():
     assert (first.coordination, first.start) == ("ours", "corner")
 
 
-def test_cli_bad_file_one_line_exit_2(tmp_path):
+def _refused_line(tmp_path, text: str) -> str:
+    """`testbed sweep` of a file holding `text`: exit 2, one line on stderr (returned), and
+    no output directory."""
     f = tmp_path / "s.toml"
-    f.write_text(GOOD.replace("robots = [1, 2]", "robots = []"))
+    f.write_text(text)
     r = subprocess.run(
         [sys.executable, "-m", "testbed.sweep.command", str(f), "--out", str(tmp_path / "out")],
         capture_output=True,
@@ -206,8 +208,13 @@ def test_cli_bad_file_one_line_exit_2(tmp_path):
     )
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and "grid.robots" in lines[0], r.stderr
+    assert len(lines) == 1, r.stderr
     assert not (tmp_path / "out").exists()
+    return lines[0]
+
+
+def test_cli_bad_file_one_line_exit_2(tmp_path):
+    assert "grid.robots" in _refused_line(tmp_path, GOOD.replace("robots = [1, 2]", "robots = []"))
 
 
 def test_cpu_limit_is_a_number_of_cores_recorded_with_the_spec():
@@ -219,17 +226,8 @@ def test_cpu_limit_is_a_number_of_cores_recorded_with_the_spec():
 
 
 def test_cli_bad_cpu_limit_one_line_exit_2(tmp_path):
-    f = tmp_path / "s.toml"
-    f.write_text(GOOD + "cpu_limit = nan\n")
-    r = subprocess.run(
-        [sys.executable, "-m", "testbed.sweep.command", str(f), "--out", str(tmp_path / "out")],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-    )
-    assert r.returncode == 2
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and "run.cpu_limit" in lines[0] and "finite" in lines[0], r.stderr
+    line = _refused_line(tmp_path, GOOD + "cpu_limit = nan\n")
+    assert "run.cpu_limit" in line and "finite" in line, line
     assert not (tmp_path / "out").exists()
 
 
