@@ -240,19 +240,14 @@ def _grid_list(path, opt: Option, value) -> tuple:
 
 
 def _positive(path, key: str, v) -> float:
+    """A limit (load, cores): TOML's inf and nan are numbers too, but no machine has them."""
     if not _is_number(v):
         raise _fail(path, key, f"expected a number, got {v!r}")
+    if not math.isfinite(v):
+        raise _fail(path, key, f"expected a finite number, got {v}")
     if v <= 0:
         raise _fail(path, key, f"must be > 0, got {v}")
     return float(v)
-
-
-def _positive_finite(path, key: str, v) -> float:
-    """A number of cores: TOML's inf and nan are numbers too, but no machine has them."""
-    cores = _positive(path, key, v)
-    if not math.isfinite(cores):
-        raise _fail(path, key, f"expected a finite number of cores, got {v}")
-    return cores
 
 
 def _scale_table(path, table: dict, robots: tuple[int, ...]) -> tuple[tuple[int, float], ...]:
@@ -342,7 +337,7 @@ def _run(path, run: dict, grid: dict, robots: tuple[int, ...]) -> dict:
     if "load_limit" in run:
         kw["load_limit"] = _positive(path, "run.load_limit", run["load_limit"])
     if "cpu_limit" in run:
-        kw["cpu_limit"] = _positive_finite(path, "run.cpu_limit", run["cpu_limit"])
+        kw["cpu_limit"] = _positive(path, "run.cpu_limit", run["cpu_limit"])
     if "seed" in run:
         if not _is_int(run["seed"]):
             raise _fail(path, "run.seed", f"expected an integer, got {run['seed']!r}")

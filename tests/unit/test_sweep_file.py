@@ -61,6 +61,7 @@ def parse(text: str):
         (GOOD + "cpu_limit = -1.5\n", "run.cpu_limit"),
         (GOOD + "cpu_limit = nan\n", "run.cpu_limit"),
         (GOOD + "cpu_limit = inf\n", "run.cpu_limit"),
+        (GOOD + "load_limit = nan\n", "run.load_limit"),
         (GOOD + 'cpu_limit = "2"\n', "run.cpu_limit"),
         (GOOD + "cpu_limit = true\n", "run.cpu_limit"),
         (GOOD.replace("capture = true", 'capture = "yes"'), "run.capture"),
