@@ -11,7 +11,7 @@ import sys
 from dataclasses import fields, replace
 
 from aodv.params import PROFILES, Params, profile
-from common.argtypes import number
+from common.argtypes import checked, number
 
 EXIT_USAGE = 2
 EXIT_FAILURE = 1
@@ -35,11 +35,9 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(EXIT_USAGE)
 
 
+@checked
 def _network(text: str) -> str:
-    try:
-        return str(ipaddress.IPv4Network(text))
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+    return str(ipaddress.IPv4Network(text))
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

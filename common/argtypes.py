@@ -3,13 +3,18 @@
 `number(kind, what, ...)` is an argparse `type=`: it turns the text into an int or a float
 and rejects, in one line that names the value and what it is for, anything that is not a
 number, not finite, or out of range. argparse then prints that line and exits with status 2.
+`checked(check)` makes an argparse type of any check that raises ValueError with such a line.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 from collections.abc import Callable
+from typing import TypeVar
+
+T = TypeVar("T")
 
 
 def number(
@@ -42,5 +47,19 @@ def number(
                 f"{what} must be within {magnitude:,.0f} of 0, not {text}"
             )
         return value
+
+    return parse
+
+
+def checked(check: Callable[[str], T]) -> Callable[[str], T]:
+    """An argparse `type=` from `check`, which raises ValueError with a one-line reason: that
+    reason is the line argparse prints (for a ValueError it would say only "invalid value")."""
+
+    @functools.wraps(check)
+    def parse(text: str) -> T:
+        try:
+            return check(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
 
     return parse

@@ -11,11 +11,12 @@ import logging
 import os
 import sys
 
-from common.argtypes import number
+from common.argtypes import checked, number
 from common.errors import UsageError
 from testbed.net import movers
 from testbed.run import options as runoptions
 from testbed.run.config import NET_OPTIONS, network_fields
+from topology.names import check_name, parse_robot_ref
 from topology.spec import LAYOUTS, LOS_MODELS, MAX_COORD_M
 
 log = logging.getLogger("testbed")
@@ -33,13 +34,7 @@ def _robot_count(text: str) -> int:
     return n
 
 
-def _robot_ref(text: str) -> int:
-    from topology.names import parse_robot_ref
-
-    try:
-        return parse_robot_ref(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+_robot_ref = checked(parse_robot_ref)
 
 
 def _positions(text: str) -> list[tuple[float, float]]:
@@ -58,13 +53,7 @@ def _positions(text: str) -> list[tuple[float, float]]:
     return out
 
 
-def _name(text: str) -> str:
-    from topology.names import check_name
-
-    try:
-        return check_name(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+_name = checked(check_name)
 
 
 # -- net ---------------------------------------------------------------------------------------

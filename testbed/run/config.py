@@ -14,6 +14,7 @@ import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from common.argtypes import checked
 from common.errors import UsageError
 from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
@@ -42,11 +43,7 @@ def _kill(text: str) -> tuple[int, int]:
     return int(m[1]), int(m[2])
 
 
-def _isolate(text: str) -> Outage:
-    try:
-        return Outage.parse(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+_isolate = checked(Outage.parse)
 
 
 def _point(text: str) -> tuple[float, float]:

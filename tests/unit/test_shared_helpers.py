@@ -8,7 +8,7 @@ import os
 import pytest
 
 from common import jsonfile
-from common.argtypes import number
+from common.argtypes import checked, number
 from topology.routing import keep_daemon_files
 
 # -- number arguments -------------------------------------------------------------------------
@@ -48,6 +48,20 @@ def test_number_rejects_with_one_line_naming_the_value(kind, kw, text, words):
 
 
 # -- atomic JSON ------------------------------------------------------------------------------
+
+
+def test_checked_prints_the_checks_own_reason_as_a_usage_error():
+    def even(text: str) -> int:
+        if int(text) % 2:
+            raise ValueError(f"{text} is odd")
+        return int(text)
+
+    parse = checked(even)
+    assert parse("4") == 4 and parse.__name__ == "even"
+    with pytest.raises(argparse.ArgumentTypeError, match="^3 is odd$"):
+        parse("3")
+    with pytest.raises(argparse.ArgumentTypeError, match="invalid literal"):
+        parse("x")  # int()'s own ValueError, its own words
 
 
 def test_json_round_trip_and_format(tmp_path):
