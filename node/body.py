@@ -14,14 +14,11 @@ without crossing the emulated network. Messages (one datagram each, network byte
     robot -> world  DONE   'D' u32 step               (no reachable frontier left)
 
 A robot answers every frame it acts on with one CMD carrying that frame's step: the world
-counts a frame not answered before the next one as a missed step deadline. The display
-answers nothing and acts only every few steps (a beacon, a video frame, a snapshot): the
-world sends it only those steps' frames (`display_steps`), and the last step's before END.
+counts a frame not answered before the next one as a missed step deadline.
 """
 
 from __future__ import annotations
 
-import math
 import select
 import socket
 import struct
@@ -45,19 +42,6 @@ class Frame:
     theta: float
     ranges: np.ndarray
     sent: float = 0.0
-
-
-class DisplaySteps:
-    """The steps whose frame the display is sent: every `every` steps (the greatest common
-    divisor of its map beacon's and video's periods) and its snapshot steps. A frame costs
-    the display a wake-up, and it has nothing to do at the other steps."""
-
-    def __init__(self, map_period: int, video_every: int, snapshots) -> None:
-        self.every = math.gcd(max(1, map_period), max(1, video_every))
-        self.snapshots = frozenset(snapshots)
-
-    def __contains__(self, step: int) -> bool:
-        return step % self.every == 0 or step in self.snapshots
 
 
 def hello(robot: int, role: int) -> bytes:

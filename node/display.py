@@ -9,8 +9,6 @@ With `--maps pubsub` it is given its middleware's map topic instead of the flood
 (node.messaging.maps): it subscribes to the robots' maps and publishes its beacon there.
 Visualization renders the merged map with the robots' paths (node.render): a video
 frame every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
-The world sends the display only the frames of the steps it acts on (node.body.DisplaySteps,
-and the last step's), so what it logs between them carries the last frame's step.
 """
 
 from __future__ import annotations

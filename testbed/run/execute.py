@@ -378,9 +378,6 @@ class StepLoop:
         self.progress = ProgressLine(progress, prep.cfg.max_steps, self.n)
         self.positions: list = []  # the robots' positions at the last step
         self.scans = [self.world.scan(i) for i in range(self.n)]
-        self.display_steps = body.DisplaySteps(prep.cfg.map_period, NodeArgs.video_every,
-                                               prep.snapshots)  # fmt: skip
-        self.display_step = -1  # the last step whose frame the display was sent
         self.cpu0 = time.process_time()
         self.clock = StepClock(prep.cfg.time_scale, self.n, time.monotonic())
 
@@ -393,7 +390,6 @@ class StepLoop:
         status = None
         while status is None:
             status = self.step()
-        self._send_display(time.monotonic())  # its final snapshot is of the last step
         self.clock.stop(time.monotonic())
         self.timing.world_cpu_s = time.process_time() - self.cpu0
         self.progress.end()
@@ -510,14 +506,6 @@ class StepLoop:
                 continue
             b = self.world.bodies[k - 1]
             self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
-        if step in self.display_steps:
-            self._send_display(now)
-
-    def _send_display(self, now: float) -> None:
-        step = self.clock.step
-        if step == self.display_step:
-            return
-        self.display_step = step
         x, y = self.prep.display_pos
         self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None, now), True)
 

@@ -39,9 +39,6 @@ def check_contract(out: str, result: dict, robots: int) -> None:
         assert os.path.exists(os.path.join(out, "robots", f"r{k}.log"))
     assert any(f.startswith("run.") for f in os.listdir(os.path.join(out, "display")))
     assert any(f.startswith("step-") for f in os.listdir(os.path.join(out, "display")))
-    # The display is sent only the frames it acts on, and the last step's: its final
-    # snapshot is of that step.
-    assert os.path.exists(os.path.join(out, "display", f"step-{result['steps']:05d}.png"))
     with open(os.path.join(out, "result.json")) as f:
         assert json.load(f) == result
     with open(os.path.join(out, "config.json")) as f:

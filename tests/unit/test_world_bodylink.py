@@ -42,12 +42,3 @@ def test_body_link_round_trip(tmp_path):
         display.close()
     finally:
         server.close()
-
-
-def test_display_steps_are_those_it_acts_on():
-    steps = body.DisplaySteps(map_period=4, video_every=10, snapshots=[7, 100])
-    assert steps.every == 2  # beacons every 4, video every 10: both on even steps
-    assert [s for s in range(12) if s in steps] == [0, 2, 4, 6, 7, 8, 10]
-    assert 100 in steps and 101 not in steps
-    assert body.DisplaySteps(10, 10, ()).every == 10
-    assert body.DisplaySteps(3, 10, ()).every == 1  # coprime periods: every step
