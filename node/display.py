@@ -9,6 +9,10 @@ With `--maps pubsub` it is given its middleware's map topic instead of the flood
 (node.messaging.maps): it subscribes to the robots' maps and publishes its beacon there.
 Visualization renders the merged map with the robots' paths (node.render): a video
 frame every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
+A video frame costs some 1.4 ms to draw and encode, against well under 0.1 ms to keep what it
+shows (the ternary map and how long each path was), so the frames are kept while the robots
+run and drawn and encoded once they have stopped; only a backlog over VIDEO_BACKLOG_BYTES (a
+run of many thousand steps) is drawn as it goes, a frame for each frame kept.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ import os
 import select
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 
 import cv2
 import numpy as np
@@ -30,6 +34,9 @@ from node.grid import FREE, OccupancyGrid
 from node.lateness import MS_BOUNDS, Lateness
 
 log = logging.getLogger(__name__)
+
+# The most memory the video frames kept for after the run may take (one byte per cell each).
+VIDEO_BACKLOG_BYTES = 64 << 20
 
 
 class Display:
@@ -73,6 +80,9 @@ class Display:
         os.makedirs(out_dir, exist_ok=True)
         size = (shape[1], shape[0])  # video frames at one pixel per cell, snapshots at `scale`
         self.video = render.Video(os.path.join(out_dir, "run"), size)
+        # Video frames to draw: (step, ternary map, each robot's path length) at that step.
+        self.video_backlog: deque[tuple[int, np.ndarray, dict[int, int]]] = deque()
+        self.video_backlog_max = max(16, VIDEO_BACKLOG_BYTES // max(1, shape[0] * shape[1]))
 
     def run(self) -> None:
         t = threading.Thread(target=self._inbox, name="inbox", daemon=True)
@@ -85,6 +95,8 @@ class Display:
             os.write(self.wake_w, b"x")
             t.join(timeout=2.0)
             self._snapshot(self.step, final=True)
+            while self.video_backlog:
+                self._draw_video_frame()
             self.video.close()
             with self.lock:
                 known = int(np.count_nonzero(self.grid.ternary() == FREE))
@@ -116,18 +128,36 @@ class Display:
             if step in self.snapshots:
                 self._snapshot(step)
             if step % self.video_every == 0 and not self.link.pending():
-                self.video.add(self._frame(step, 1))
+                self._keep_video_frame(step)
             if msg[1].sent > 0:
                 late_s = time.monotonic() - msg[1].sent
                 self.frame_lateness.add(late_s * 1000 * self.time_scale)
 
     def _frame(self, step: int, scale: int | None = None) -> np.ndarray:
-        scale = scale or self.scale
         with self.lock:
             t = self.grid.ternary()
             paths = {k: list(v) for k, v in self.paths.items()}
+        return self._picture(step, t, paths, scale or self.scale)
+
+    def _picture(self, step: int, t: np.ndarray, paths, scale: int) -> np.ndarray:
         img = render.draw_paths(render.map_image(t, scale), paths, self.cell, scale)
         return render.caption(img, f"step {step}")
+
+    def _keep_video_frame(self, step: int) -> None:
+        with self.lock:
+            t = self.grid.ternary()
+            lengths = {k: len(v) for k, v in self.paths.items()}
+        self.video_backlog.append((step, t, lengths))
+        if len(self.video_backlog) > self.video_backlog_max:
+            self._draw_video_frame()
+
+    def _draw_video_frame(self) -> None:
+        """Draw and encode the oldest kept video frame (paths only grow: a prefix is the path
+        as it was at that step)."""
+        step, t, lengths = self.video_backlog.popleft()
+        with self.lock:
+            paths = {k: self.paths[k][:n] for k, n in lengths.items()}
+        self.video.add(self._picture(step, t, paths, 1))
 
     def _snapshot(self, step: int, final: bool = False) -> None:
         if step < 0:
