@@ -18,7 +18,12 @@ one team size of a group; steps are the mean over runs of the exploration steps)
   same sense.
 - 5.1 a shorter laser needs more steps at the same steps-to-team ratio: for each range and
   team, the shorter laser needs more steps, and the ratio of the two lasers' steps is the same
-  across team sizes (coefficient of variation at most RATIO_CV_MAX).
+  across team sizes: their coefficient of variation is at most RATIO_CV_MAX beyond the noise.
+  The noise: each point's mean drawn CV_DRAWS times from its sampling distribution (normal,
+  its runs' standard deviation over the square root of their number), the CV of each draw's
+  ratios; "same" when 97.5% of the draws' CVs are at most RATIO_CV_MAX, "varies" when 97.5%
+  are above, undecided (within the noise) otherwise. The draws add the noise to means that
+  carry it already, so they lean to larger CVs: "same" is the harder verdict to reach.
 - 5.2 a single robot plans on the timer: at least TIMER_SHARE_MIN of a lone robot's plan
   generations (after its first) have cause "timer".
 - 5.2 on-request plan generations grow with team size: the Spearman rank correlation between
@@ -28,8 +33,10 @@ A claim holds when it holds in every group that has the data, partly when in som
 not hold when in none. The two claims tested against the run-to-run noise (fall then rise, a
 smaller range) cannot be decided in a group where a point has one run: its noise is unknown,
 so neither a rise nor its absence is shown. Such a group counts as undecided, and a claim
-with no decided group is "too few runs to decide", not "does not hold". The claims decided
-on the means alone say so in their evidence when a point rests on one run.
+with no decided group is "too few runs to decide", not "does not hold". The same ratio of the
+shorter laser's claim is undecided in a range where it is within the noise or a point has one
+run. The claims decided on the means alone say so in their evidence when a point rests on one
+run.
 """
 
 from __future__ import annotations
@@ -37,12 +44,15 @@ from __future__ import annotations
 import statistics
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from testbed.analysis import ablation, stats
 
 HOLDS, PARTLY, FAILS, NO_DATA = "holds", "partly holds", "does not hold", "not enough data"
 TOO_FEW = "too few runs to decide"
 MIN_RUNS = 2  # runs a point needs before its noise (and so a noise-aware test) is known
 RATIO_CV_MAX = 0.15
+CV_DRAWS = 2000  # draws of the points' means for the noise of the ratios' CV
 TIMER_SHARE_MIN = 0.95
 RHO_MIN = 0.8
 
@@ -59,7 +69,9 @@ RULES = (
     "difference d with run-to-run standard deviation s (5% significance, 80% power): "
     "2 ((1.96 + 0.84) s / d)^2;",
     "shorter laser: the shorter laser needs more steps at every (range, team), and the ratio of "
-    f"the two lasers' steps varies across team sizes by at most {RATIO_CV_MAX:.0%} (CV);",
+    f"the two lasers' steps varies across team sizes by at most {RATIO_CV_MAX:.0%} (CV) "
+    "beyond the noise (97.5% of the CVs of the ratios of means drawn from each point's "
+    "sampling distribution at most that; undecided when they straddle it);",
     f"timer: at least {TIMER_SHARE_MIN:.0%} of a lone robot's plan generations after its first "
     "are on the timer;",
     "on request: the mean number of on-request plan generations per run rises with team size "
@@ -235,42 +247,77 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     if len(lasers) < 2:
         return v
     short, long_ = lasers[0], lasers[-1]
-    by: dict[tuple, dict[float, float]] = {}
+    by: dict[tuple, dict[float, dict]] = {}
     for r in fig2:
-        by.setdefault((r["comm_range"], r["robots"]), {})[r["laser_range"]] = r["mean"]
-    more, ratios_by_range = [], {}
+        by.setdefault((r["comm_range"], r["robots"]), {})[r["laser_range"]] = r
+    more, pairs_by_range = [], {}
     for (comm, _robots), pts in sorted(by.items()):
         if short in pts and long_ in pts:
-            more.append(pts[short] > pts[long_])
-            ratios_by_range.setdefault(comm, []).append(pts[short] / pts[long_])
+            more.append(pts[short]["mean"] > pts[long_]["mean"])
+            pairs_by_range.setdefault(comm, []).append((pts[short], pts[long_]))
     if not more:
         return v
-    same_ratio = []
+    same_ratio: list[bool | None] = []
     v.evidence.append(
         f"laser {_f(short)} m needs more steps than laser {_f(long_)} m in {sum(more)} of "
         f"{len(more)} (range, team) points"
     )
-    for comm, ratios in sorted(ratios_by_range.items()):
-        if len(ratios) < 2:
+    for comm, pairs in sorted(pairs_by_range.items()):
+        if len(pairs) < 2:
             continue
+        ratios = [a["mean"] / b["mean"] for a, b in pairs]
         mean = statistics.fmean(ratios)
         cv = statistics.pstdev(ratios) / mean
-        same_ratio.append(cv <= RATIO_CV_MAX)
+        band = _ratio_cv_band(pairs)
+        if band is None:
+            same, why = None, "a point has one run -> too few runs"
+        else:
+            lo, hi = band
+            same = True if hi <= RATIO_CV_MAX else False if lo > RATIO_CV_MAX else None
+            word = {True: "same", False: "varies", None: "within the noise"}[same]
+            why = f"noise band {lo:.2f}-{hi:.2f} -> {word}"
+        same_ratio.append(same)
         v.evidence.append(
             f"range {_f(comm)} m: steps ratio {_f(short)} m / {_f(long_)} m = "
             f"{min(ratios):.2f}-{max(ratios):.2f} over team sizes (mean {mean:.2f}, "
-            f"CV {cv:.2f}) -> {'same' if cv <= RATIO_CV_MAX else 'varies'}"
+            f"CV {cv:.2f}; {why})"
         )
     parts = [_overall(more), _overall(same_ratio) if same_ratio else NO_DATA]
+    undecided = sum(1 for same in same_ratio if same is None)
     if parts == [HOLDS, HOLDS]:
         v.verdict = HOLDS
+        if undecided:
+            v.evidence.append(
+                f"the same ratio is shown at {len(same_ratio) - undecided} of "
+                f"{len(same_ratio)} ranges and undecided at the others"
+            )
     elif parts[0] == FAILS:
         v.verdict = FAILS
+    elif parts == [HOLDS, TOO_FEW]:
+        v.verdict = TOO_FEW
+        v.evidence.append("more steps: holds; same ratio across team sizes: undecided")
     else:
         v.verdict = PARTLY
         v.evidence.append(f"more steps: {parts[0]}; same ratio across team sizes: {parts[1]}")
     v.evidence += _single_run_note(fig2)
     return v
+
+
+def _ratio_cv_band(pairs: list[tuple[dict, dict]]) -> tuple[float, float] | None:
+    """The 2.5 and 97.5 percentiles of the CV of the (shorter / longer laser) steps ratios
+    over team sizes when each point's mean is drawn from its sampling distribution; None
+    when a point has fewer than MIN_RUNS runs (its noise is unknown)."""
+    rows = [row for pair in pairs for row in pair]
+    if any(r["n"] < MIN_RUNS or r.get("std") is None for r in rows):
+        return None
+    rng = np.random.default_rng(0)  # the same report from the same runs
+    means = np.array([r["mean"] for r in rows])
+    sems = np.array([r["std"] / np.sqrt(r["n"]) for r in rows])
+    draws = rng.normal(means, sems, size=(CV_DRAWS, len(rows)))
+    ratios = draws[:, 0::2] / draws[:, 1::2]
+    cvs = ratios.std(axis=1) / ratios.mean(axis=1)
+    lo, hi = np.percentile(cvs, [2.5, 97.5])
+    return float(lo), float(hi)
 
 
 def verdict_single_robot_timer(plans: list[dict]) -> Verdict:

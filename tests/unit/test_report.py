@@ -119,6 +119,45 @@ def test_partly_when_only_some_groups_agree():
     assert any("varies" in e for e in v.evidence)
 
 
+def zigzag_ratio(n, c, la):
+    """The shorter laser needs 1.2 or 1.8 times the steps, alternating with team size: a
+    ratio whose CV over team sizes is 0.2."""
+    return 1000.0 * ((1.2 if (1, 2, 3, 5, 8, 10).index(n) % 2 else 1.8) if la == 1.5 else 1.0)
+
+
+def test_a_ratio_that_varies_beyond_the_noise_varies_and_within_it_is_undecided():
+    tight = verdicts.verdict_shorter_laser(rows(zigzag_ratio, noise=0.01))
+    assert tight.verdict == PARTLY
+    assert all("CV 0.20" in e and "-> varies" in e for e in tight.evidence if "range" in e[:6])
+    # The same means from runs that differ by +-30%: a CV of 0.2 is within their noise.
+    loose = verdicts.verdict_shorter_laser(rows(zigzag_ratio, noise=0.3))
+    assert loose.verdict == TOO_FEW
+    ranges = [e for e in loose.evidence if e.startswith("range")]
+    assert len(ranges) == 2 and all("-> within the noise" in e for e in ranges)
+
+
+def test_a_ratio_shown_the_same_at_some_ranges_holds_and_says_where_it_is_undecided():
+    fig2 = rows(paper, comms=(5.0,)) + rows(paper, comms=(20.0,), noise=0.3)
+    v = verdicts.verdict_shorter_laser(fig2)
+    assert v.verdict == HOLDS
+    assert "the same ratio is shown at 1 of 2 ranges and undecided at the others" in v.evidence
+
+
+def test_the_same_ratio_needs_runs_to_be_decided():
+    fig2 = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(paper)]
+    v = verdicts.verdict_shorter_laser(fig2)
+    assert v.verdict == TOO_FEW
+    assert any("rest on one run" in e for e in v.evidence)
+    assert all(e.endswith("-> too few runs)") for e in v.evidence if e.startswith("range"))
+
+
+def test_the_noise_band_is_the_same_for_the_same_runs():
+    fig2 = rows(zigzag_ratio, noise=0.1)
+    assert verdicts.verdict_shorter_laser(fig2).evidence == (
+        verdicts.verdict_shorter_laser(fig2).evidence
+    )
+
+
 def test_not_enough_data():
     one_point = rows(paper, robots=(3,), comms=(5.0,), lasers=(2.0,))
     for f in (
