@@ -308,7 +308,7 @@ def _ratio_cv_band(pairs: list[tuple[dict, dict]]) -> tuple[float, float] | None
     over team sizes when each point's mean is drawn from its sampling distribution; None
     when a point has fewer than MIN_RUNS runs (its noise is unknown)."""
     rows = [row for pair in pairs for row in pair]
-    if any(r["n"] < MIN_RUNS or r.get("std") is None for r in rows):
+    if _few(rows):
         return None
     rng = np.random.default_rng(0)  # the same report from the same runs
     means = np.array([r["mean"] for r in rows])

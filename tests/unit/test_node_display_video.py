@@ -2,6 +2,7 @@
 map and the paths as they were at its step, exactly as a frame drawn at that step would."""
 
 import numpy as np
+import pytest
 
 from node.display import Display
 from node.grid import FREE, OCC, UNKNOWN
@@ -46,18 +47,11 @@ def run_steps(d: Display, seed: int) -> list[np.ndarray]:
     return at_step
 
 
-def test_frames_kept_for_after_the_run_are_those_of_their_step(tmp_path):
-    d = display(tmp_path, "later", backlog=10_000)
+@pytest.mark.parametrize("backlog", [10_000, 3], ids=["kept-to-the-end", "full-backlog"])
+def test_frames_kept_for_after_the_run_are_those_of_their_step(tmp_path, backlog):
+    d = display(tmp_path, "video", backlog)
     at_step = run_steps(d, seed=4)
     assert d.video.frames == 20
     assert len({img.tobytes() for img in at_step}) == 20  # the frames do differ
-    for kept, drawn in zip(d.video.images, at_step, strict=True):
-        assert np.array_equal(kept, drawn)
-
-
-def test_a_full_backlog_draws_as_it_goes_and_the_frames_stay_the_same(tmp_path):
-    d = display(tmp_path, "bounded", backlog=3)
-    at_step = run_steps(d, seed=4)
-    assert d.video.frames == 20
     for kept, drawn in zip(d.video.images, at_step, strict=True):
         assert np.array_equal(kept, drawn)
