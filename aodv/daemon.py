@@ -67,6 +67,7 @@ from aodv.params import Params
 from aodv.persist import CounterStore
 from aodv.sim import warm_up
 from aodv.stats import Stats
+from common.sched import deadline_priority
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +75,8 @@ IP_RECVTTL = 12  # linux/in.h; not in Python 3.11's socket module
 IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
 BROADCAST = "255.255.255.255"
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
+LOOP_RT_PRIORITY = 1  # the loop's SCHED_RR priority (a robot's motion control's)
+LOOP_NICE = -5  # its nice value where real-time priority is refused
 _U32 = struct.Struct("!I")
 ICMP_DEST_UNREACH = 3
 _I32 = struct.Struct("i")  # a received TTL's cmsg data (native int)
@@ -291,7 +294,10 @@ class Daemon:
 
     # -- the loop ------------------------------------------------------------------------
     def _loop(self) -> None:
-        with selectors.DefaultSelector() as sel:
+        # The HELLO and expiry timers are the daemon's deadlines (the fidelity verdict reads
+        # how late they fired): real-time priority 1, as each robot's motion control and
+        # planner, while the loop serves; back as it was when it ends.
+        with deadline_priority(LOOP_RT_PRIORITY, LOOP_NICE), selectors.DefaultSelector() as sel:
             self._serve(sel)
 
     def _serve(self, sel: selectors.BaseSelector) -> None:
@@ -309,7 +315,7 @@ class Daemon:
             if now >= deadline:
                 kind = "hello" if deadline == self.core.next_hello else "expiry"
                 late_ms = (now - deadline) * 1000 * self.p.time_scale
-                self.stats.timer_lateness[kind].add(late_ms)
+                self.stats.timer_lateness[kind].add(late_ms, deadline, now)
                 # What already waits in the sockets happened before the timer is handled: a
                 # daemon that was descheduled past a neighbour's timeout reads that
                 # neighbour's HELLO first, instead of expiring a neighbour that spoke.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import heapq
 import json
 import os
 import signal
@@ -11,25 +12,36 @@ from collections import Counter
 from common.jsonfile import write_json_atomic
 
 TIMER_BOUNDS_MS = (10, 25, 50, 100, 200)  # emulated ms late: histogram bounds
+WORST_KEPT = 128  # the latest firings kept with their times
 
 
 class TimerLateness:
     """How late one kind of timer fired, in emulated ms: count, maximum and a histogram over
-    TIMER_BOUNDS_MS (O(1) per firing; the same shape as node.lateness, which aodv may not
-    import)."""
+    TIMER_BOUNDS_MS (the same shape as node.lateness, which aodv may not import), and the
+    WORST_KEPT latest firings with when each was due and when it fired (CLOCK_MONOTONIC
+    seconds, the clock every process of a run shares), so that a run can judge the timers
+    that were late while its robots stepped apart from those of its start and end.
+    O(log WORST_KEPT) per firing."""
 
     def __init__(self) -> None:
         self.n = 0
         self.late = 0
         self.max = 0.0
         self.counts = [0] * (len(TIMER_BOUNDS_MS) + 1)
+        self.worst: list[tuple[float, float, float]] = []  # a min-heap: (ms late, due, fired)
 
-    def add(self, late_ms: float) -> None:
+    def add(self, late_ms: float, due: float | None = None, fired: float | None = None) -> None:
         self.n += 1
         self.late += late_ms > 0
         self.max = max(self.max, late_ms)
         i = next((i for i, b in enumerate(TIMER_BOUNDS_MS) if late_ms <= b), -1)
         self.counts[i] += 1
+        if due is None or fired is None:
+            return
+        if len(self.worst) < WORST_KEPT:
+            heapq.heappush(self.worst, (late_ms, due, fired))
+        elif late_ms > self.worst[0][0]:
+            heapq.heapreplace(self.worst, (late_ms, due, fired))
 
     def as_dict(self) -> dict:
         labels = [f"<={b}" for b in TIMER_BOUNDS_MS] + [f">{TIMER_BOUNDS_MS[-1]}"]
@@ -38,6 +50,11 @@ class TimerLateness:
             "late": self.late,
             "max": round(self.max, 3),
             "hist": dict(zip(labels, self.counts, strict=True)),
+            # [due, fired, ms late], in the order they were due
+            "worst": [
+                [round(d, 4), round(f, 4), round(ms, 3)]
+                for ms, d, f in sorted(self.worst, key=lambda w: w[1])
+            ],
         }
 
 

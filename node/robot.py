@@ -45,7 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from node import body, coordination, planner, sched, stepcore, wire
+from common import sched
+from node import body, coordination, planner, stepcore, wire
 from node.events import EventLog
 from node.flood import Flooder
 from node.grid import FREE, OCC, OccupancyGrid
@@ -76,8 +77,10 @@ FLOOD, MESSAGE = "flood", "message"  # what the inbox hands message processing
 STOP = "stop"  # put in the queues by stop()
 INBOX_LIMIT = 10_000  # messages waiting for processing; beyond, the inbox drops
 STUCK_FRAMES = 5
-MOTION_RT_PRIORITY = 1  # the motion-control thread's SCHED_RR priority (the world's is 2)
-MOTION_NICE = -5  # its nice value where real-time priority is refused
+# The SCHED_RR priority of the parts with deadlines (motion control, planner, timer; the
+# world's is 2), and their nice value where real-time priority is refused.
+PART_RT_PRIORITY = 1
+PART_NICE = -5
 
 
 @dataclass(frozen=True)
@@ -158,6 +161,7 @@ class TimerWork:
 
 
 THREAD_CPU: dict[str, float] = {}  # CPU seconds of each part's thread, when it ended
+PRIORITY: dict[str, str] = {}  # the scheduling each part with deadlines got (sched)
 
 
 def _fatal_on_error(fn, name: str):
@@ -323,6 +327,7 @@ class Robot:
             max_rss_mb=peak_rss_mb(),
             busy_s={k: round(v, 3) for k, v in self.busy.items()},
             thread_cpu_s=thread_cpu,
+            priority=dict(PRIORITY),
             lateness={k: v.as_dict() for k, v in self.lateness.items()},
             latency_ms={
                 k: {
@@ -339,12 +344,12 @@ class Robot:
         )
 
     def _motion(self) -> None:
-        # A robot's motion control answers every frame within its step, while its planner (and
-        # on this shared machine, other robots' planners) may compute for longer: on hardware
-        # a control loop has its own CPU and they would not compete. So this thread runs at
-        # real-time priority 1, one below the world's clock (it works ~0.5 ms per frame, then
-        # blocks on the next one), else at nice -5; without root, at the default.
-        sched.raise_priority(MOTION_RT_PRIORITY, MOTION_NICE)
+        # A robot's motion control answers every frame within its step while, on this shared
+        # machine, other robots' merges and inboxes compete for the CPU: on hardware a control
+        # loop has its own. So this thread runs at real-time priority 1, one below the world's
+        # clock (it works a fraction of a millisecond per frame, then blocks on the next one),
+        # else at nice -5; without root, at the default. So do the planner and the timer.
+        PRIORITY["motion"] = sched.raise_priority(PART_RT_PRIORITY, PART_NICE)
         started = False
         last_xy = None
         while not self.stopping.is_set():
@@ -512,6 +517,9 @@ class Robot:
         # A test hook: wall seconds the planner waits before installing each plan, so that
         # plans arrive late in emulated time (tests of the fidelity verdict, testbed.run.fidelity).
         delay = float(os.environ.get("NODE_PLAN_DELAY_MS", "0") or 0) / 1000
+        # A plan is due by the next frame (the fidelity verdict counts late ones): real-time
+        # priority like motion control's, above the merges and inboxes of every robot.
+        PRIORITY["planner"] = sched.raise_priority(PART_RT_PRIORITY, PART_NICE)
         while not self.stopping.is_set():
             try:
                 cause = self.requests.get(timeout=0.5)
@@ -638,7 +646,8 @@ class Robot:
     def _timer(self) -> None:
         """The timer part: asks for the plans and floods the maps that _tick found due, in
         step order; its lateness (the step it acted at against the step the work was due) is
-        what the fidelity verdict reads."""
+        what the fidelity verdict reads, so it runs at the planner's priority."""
+        PRIORITY["timer"] = sched.raise_priority(PART_RT_PRIORITY, PART_NICE)
         while not self.stopping.is_set():
             with self.lock:
                 while not self.timer_work and not self.stopping.is_set():

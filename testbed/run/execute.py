@@ -58,10 +58,10 @@ from dataclasses import dataclass
 
 from common.errors import TestbedError
 from common.jsonfile import write_json_atomic
+from common.sched import deadline_priority
 from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
-from node.sched import deadline_priority
 from testbed.resultfile import RunResult
 from testbed.run import isolation
 from testbed.run import results as runresults

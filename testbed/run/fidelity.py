@@ -40,11 +40,13 @@ The verdict: a run is faithful when, over all its robots and daemons,
   for teams", measures it).
   A calibration trial (300 steps, ~15 plans a robot) must have none;
 - no AODV HELLO timer fired more than HELLO_LATE_LIMIT_MS emulated ms late, and no expiry
-  timer more than EXPIRY_LATE_LIMIT_MS. A neighbour drops a link after ALLOWED_HELLO_LOSS x
-  HELLO_INTERVAL (2 s) of silence, so a HELLO breaks a link that exists only when it comes
-  one HELLO_INTERVAL (1 s) late; the limit is half that. An expiry timer that fires late
-  detects a true break, or drops a dead route, that much later (against 2-3 s): its limit
-  is a quarter of HELLO_INTERVAL;
+  timer more than EXPIRY_LATE_LIMIT_MS, while the robots stepped (a timer late before step 0
+  or after the last step, while the processes start or write their results, changes no
+  robot's run; each daemon keeps its latest firings with their times: `_late_within`). A
+  neighbour drops a link after ALLOWED_HELLO_LOSS x HELLO_INTERVAL (2 s) of silence, so a
+  HELLO breaks a link that exists only when it comes one HELLO_INTERVAL (1 s) late; the
+  limit is half that. An expiry timer that fires late detects a true break, or drops a dead
+  route, that much later (against 2-3 s): its limit is a quarter of HELLO_INTERVAL;
 - the display handled at most DISPLAY_LATE_LIMIT of its frames more than two steps late
   (its beacons, which tell robots it is back in reach, follow its frames);
 - on ns3-wifi, the channel relayed frames at most CHANNEL_LAG_LIMIT_MS late on average
@@ -142,16 +144,35 @@ def _late_over(hist: dict, bound: float) -> int:
     return total
 
 
+def _late_within(timer: dict, stepping: tuple[float, float] | None) -> float:
+    """The most a daemon's timer of one kind (its `timer_lateness_ms` entry) was late while
+    the robots stepped (`stepping`: CLOCK_MONOTONIC seconds of the first and last step): the
+    latest of its kept firings whose lateness overlapped the steps. When the daemon fired
+    more than it kept, one it did not keep was at most as late as its least late kept one,
+    which bounds the answer from above. Without times (an older daemon) or steps, its
+    maximum over its whole life."""
+    worst = timer.get("worst")
+    if stepping is None or not isinstance(worst, list):
+        return float(timer.get("max", 0.0))
+    t0, t1 = stepping
+    inside = [ms for due, fired, ms in worst if fired >= t0 and due <= t1]
+    if worst and timer.get("n", 0) > len(worst):
+        inside.append(min(ms for _, _, ms in worst))
+    return float(max(inside, default=0.0))
+
+
 def measures(
     miss_fraction: float | None,
     robots: Iterable[dict | None],
     display: dict | None = None,
     daemons: Iterable[dict | None] = (),
     channel: dict | None = None,
+    stepping: tuple[float, float] | None = None,
 ) -> Measures:
     """Fold the records into Measures: `robots` are the robots' `lateness` dicts (None: the
     robot left none), `display` the display's, `daemons` the AODV daemons'
-    `timer_lateness_ms` dicts, `channel` the ns3-wifi channel's `relay_lag` (medium.json)."""
+    `timer_lateness_ms` dicts (judged within `stepping`, `_late_within`), `channel` the
+    ns3-wifi channel's `relay_lag` (medium.json)."""
     plans = late_plans = timers = late_timers = 0
     age_max = timer_max = 0.0
     for r in robots:
@@ -169,8 +190,8 @@ def measures(
         if not isinstance(d, dict):
             continue
         h, e = d.get("hello") or {}, d.get("expiry") or {}
-        hello = max(hello or 0.0, h.get("max", 0.0))
-        expiry = max(expiry or 0.0, e.get("max", 0.0))
+        hello = max(hello or 0.0, _late_within(h, stepping))
+        expiry = max(expiry or 0.0, _late_within(e, stepping))
     frames = late_frames = 0
     f = (display or {}).get("frame_done_ms")
     if f:

@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
     "frames", "latency_ms", "thread_cpu_s", "lateness", "middleware", "messenger", "arrivals",
-    "maps",
+    "maps", "priority",
 )  # fmt: skip
 # The team's messaging totals (result.json's "messaging"): these are summed over the robots,
 # the others are the largest of any robot.
@@ -123,6 +123,7 @@ def contents(rec: RunRecord) -> RunResult:
             display.get("lateness"),
             [d.get("timer_lateness_ms") for d in daemons],
             channel_relay_lag(rec.out),
+            clock.stepping,
         )
     )
     # Whether TCP kept emulated time, from the robots' network timers (topology.nettimers).

@@ -40,6 +40,7 @@ class ClockSummary:
     missed_robots: int
     stalls: dict = field(default_factory=lambda: dict(NO_STALLS))
     world_missed_steps: tuple = ()  # (step, ms late) of the world's misses, the first 1000
+    stepping: tuple[float, float] | None = None  # CLOCK_MONOTONIC s of step 0 and the end
 
     @property
     def deadlines_missed(self) -> int:
@@ -141,6 +142,7 @@ class StepClock:
             missed_robots=self.missed_robots,
             stalls=self.stalls.summary(),
             world_missed_steps=tuple(self.world_missed_steps),
+            stepping=(self.t0, self.stopped_at) if stopped else None,
         )
 
 

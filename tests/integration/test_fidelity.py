@@ -55,6 +55,18 @@ def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(
     assert high["fidelity"]["measures"]["late_plans"] == 0
     assert high["fidelity"]["measures"]["plans"] >= 10
     assert "not faithful" not in r.stderr
+    # The parts with deadlines ran at real-time priority wherever the world's clock did
+    # (common.sched), and the daemons kept their latest timer firings with their times.
+    out = tmp_path / f"x{high['time_scale_requested']:g}"
+    with open(out / "robots" / "r1.json") as fh:
+        priority = json.load(fh)["priority"]
+    assert set(priority) == {"motion", "planner", "timer"}
+    if high["world_priority"].startswith("SCHED_RR"):
+        assert set(priority.values()) == {"SCHED_RR 1"}
+    with open(out / "aodv" / "r1.json") as fh:
+        hello = json.load(fh)["timer_lateness_ms"]["hello"]
+    assert hello["n"] > 0 and 0 < len(hello["worst"]) <= hello["n"]
+    assert all(fired >= due and ms >= 0 for due, fired, ms in hello["worst"])
 
 
 def test_plans_that_come_late_make_a_run_unfaithful_and_testbed_run_says_so(tmp_path, tb_name):

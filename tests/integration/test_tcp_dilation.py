@@ -25,7 +25,7 @@ import time
 
 import pytest
 
-from node.sched import deadline_priority
+from common.sched import deadline_priority
 from topology import names, netns
 from topology.network import Network
 from topology.spec import Impairment, NetworkSpec

@@ -2,6 +2,7 @@
 
 import pytest
 
+from aodv.stats import WORST_KEPT, TimerLateness
 from node.lateness import MS_BOUNDS, Lateness
 from testbed.resultfile import ResultError, RunResult
 from testbed.run import fidelity
@@ -101,6 +102,59 @@ def test_daemons_and_display_are_folded_in():
     assert (m.display_frames, m.display_late_frames) == (10, 2)
     v = verdict(m)
     assert v["ok"] is False and "expiry" in v["reason"] and "display" in v["reason"]
+
+
+def _daemon(firings: list[tuple[float, float]], scale: float = 10.0) -> dict:
+    """A daemon's timer_lateness_ms after HELLOs due at `firings` (monotonic s, emulated ms
+    late) at time scale `scale`."""
+    timer = TimerLateness()
+    for due, ms in firings:
+        timer.add(ms, due, due + ms / 1000 / scale)
+    return {"hello": timer.as_dict(), "expiry": TimerLateness().as_dict()}
+
+
+def test_timers_late_outside_the_steps_are_not_judged():
+    # Steps from t = 100 to t = 160; a HELLO 900 ms late at the start-up and one 700 ms late
+    # while the processes wrote their results, 40 ms at most in between.
+    firings = [(95.0, 900.0), (120.0, 40.0), (130.0, 12.0), (161.0, 700.0)]
+    daemon = _daemon(firings)
+    assert measures(0.0, [], None, [daemon]).hello_late_max_ms == 900.0  # no steps given
+    m = measures(0.0, [], None, [daemon], stepping=(100.0, 160.0))
+    assert m.hello_late_max_ms == 40.0
+    assert verdict(m)["ok"] is True
+    # Due before the last step and fired after it: it was late while the robots stepped.
+    late_at_end = _daemon([(159.99, 400.0)], scale=1.0)
+    assert (
+        measures(0.0, [], None, [late_at_end], stepping=(100.0, 160.0)).hello_late_max_ms == 400.0
+    )
+    # Due before step 0 and still late after it: the same.
+    late_at_start = _daemon([(99.9, 300.0)], scale=1.0)
+    assert (
+        measures(0.0, [], None, [late_at_start], stepping=(100.0, 160.0)).hello_late_max_ms == 300.0
+    )
+
+
+def test_a_daemon_that_kept_only_its_latest_firings_is_judged_on_their_bound():
+    # 300 firings, only the 128 latest kept (all of them outside the steps): one not kept may
+    # have been inside, at most as late as the least late kept one.
+    firings = [(200.0 + i, float(i)) for i in range(300)]
+    m = measures(0.0, [], None, [_daemon(firings)], stepping=(0.0, 100.0))
+    assert m.hello_late_max_ms == 172.0  # the 128th latest of 0..299
+    # An older daemon's file, without times: its maximum over its whole life.
+    old = {"hello": {"n": 3, "max": 640.0}}
+    assert measures(0.0, [], None, [old], stepping=(0.0, 100.0)).hello_late_max_ms == 640.0
+
+
+def test_the_worst_firings_are_kept_with_their_times():
+    timer = TimerLateness()
+    for i in range(WORST_KEPT + 50):
+        timer.add(float(i % 97), due=float(i), fired=float(i) + 0.001)
+    worst = timer.as_dict()["worst"]
+    assert len(worst) == WORST_KEPT
+    assert [w[0] for w in worst] == sorted(w[0] for w in worst)  # in the order they were due
+    assert min(w[2] for w in worst) == sorted(float(i % 97) for i in range(WORST_KEPT + 50))[50]
+    assert max(w[2] for w in worst) == 96.0
+    assert all(abs(f - d - 0.001) < 1e-6 for d, f, _ in worst)
 
 
 CONFIG = {"robots": 2, "comm_range": 5.0, "laser_range": 2.0}

@@ -1,5 +1,11 @@
-"""Scheduling priority for the threads that keep step deadlines (the world's clock, each
-robot's motion control): round-robin real-time priority where allowed, else a nice value.
+"""Scheduling priority for the threads that keep deadlines: round-robin real-time priority
+where allowed, else a nice value.
+
+Who gets it (docs/architecture.md, "The process tree and its priorities"): the world's step
+loop at 2, the clock; at 1 whatever has a deadline the fidelity verdict checks, each robot's
+motion control, planner and timer, the display's frame loop and each AODV daemon's loop (its
+HELLO and expiry timers). The bulk work stays at normal priority and takes what is left: map
+merges and the inboxes, the middleware's threads, the captures, the fork servers.
 
 The priority is the calling thread's alone and never leaks: real-time priority is set with
 SCHED_RESET_ON_FORK, so a process forked while it holds (a fork server, a routing daemon)

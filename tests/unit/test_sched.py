@@ -1,4 +1,4 @@
-"""node.sched: the deadline threads' priority, the switch that turns real time off, and that
+"""common.sched: the deadline threads' priority, the switch that turns real time off, and that
 the priority neither outlives its block nor passes to children."""
 
 import os
@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from node.sched import deadline_priority, raise_priority
+from common.sched import deadline_priority, raise_priority
 
 needs_root = pytest.mark.skipif(os.geteuid() != 0, reason="real-time priority needs root")
 
