@@ -67,7 +67,7 @@ from aodv.params import Params
 from aodv.persist import CounterStore
 from aodv.sim import warm_up
 from aodv.stats import Stats
-from common.sched import deadline_priority
+from common.sched import DEADLINE_PRIORITY, deadline_priority
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +75,6 @@ IP_RECVTTL = 12  # linux/in.h; not in Python 3.11's socket module
 IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
 BROADCAST = "255.255.255.255"
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
-LOOP_RT_PRIORITY = 1  # the loop's SCHED_RR priority (a robot's motion control's)
-LOOP_NICE = -5  # its nice value where real-time priority is refused
 _U32 = struct.Struct("!I")
 ICMP_DEST_UNREACH = 3
 _I32 = struct.Struct("i")  # a received TTL's cmsg data (native int)
@@ -297,7 +295,7 @@ class Daemon:
         # The HELLO and expiry timers are the daemon's deadlines (the fidelity verdict reads
         # how late they fired): real-time priority 1, as each robot's motion control and
         # planner, while the loop serves; back as it was when it ends.
-        with deadline_priority(LOOP_RT_PRIORITY, LOOP_NICE), selectors.DefaultSelector() as sel:
+        with deadline_priority(*DEADLINE_PRIORITY), selectors.DefaultSelector() as sel:
             self._serve(sel)
 
     def _serve(self, sel: selectors.BaseSelector) -> None:

@@ -21,6 +21,10 @@ import contextlib
 import os
 from collections.abc import Iterator
 
+# (SCHED_RR priority, nice where real-time priority is refused)
+CLOCK_PRIORITY = (2, -10)  # the world's step loop: the clock everything is measured against
+DEADLINE_PRIORITY = (1, -5)  # every part with a deadline the fidelity verdict checks
+
 
 def raise_priority(rt_priority: int, nice: int) -> str:
     """Give the calling thread SCHED_RR `rt_priority` (reset in its children), else nice

@@ -38,8 +38,6 @@ log = logging.getLogger(__name__)
 
 # The most memory the video frames kept for after the run may take (one byte per cell each).
 VIDEO_BACKLOG_BYTES = 64 << 20
-FRAME_RT_PRIORITY = 1  # the frame loop's SCHED_RR priority (a robot's motion control's)
-FRAME_NICE = -5  # its nice value where real-time priority is refused
 
 
 class Display:
@@ -95,7 +93,7 @@ class Display:
             # Each frame is handled within two steps or counts as late (the fidelity verdict):
             # real-time priority like the robots' motion control, while the robots run; the
             # video drawn afterwards takes what is left, at normal priority.
-            with sched.deadline_priority(FRAME_RT_PRIORITY, FRAME_NICE):
+            with sched.deadline_priority(*sched.DEADLINE_PRIORITY):
                 self._visualization()
         finally:
             self.stopping.set()

@@ -77,10 +77,6 @@ FLOOD, MESSAGE = "flood", "message"  # what the inbox hands message processing
 STOP = "stop"  # put in the queues by stop()
 INBOX_LIMIT = 10_000  # messages waiting for processing; beyond, the inbox drops
 STUCK_FRAMES = 5
-# The SCHED_RR priority of the parts with deadlines (motion control, planner, timer; the
-# world's is 2), and their nice value where real-time priority is refused.
-PART_RT_PRIORITY = 1
-PART_NICE = -5
 
 
 @dataclass(frozen=True)
@@ -349,7 +345,7 @@ class Robot:
         # loop has its own. So this thread runs at real-time priority 1, one below the world's
         # clock (it works a fraction of a millisecond per frame, then blocks on the next one),
         # else at nice -5; without root, at the default. So do the planner and the timer.
-        PRIORITY["motion"] = sched.raise_priority(PART_RT_PRIORITY, PART_NICE)
+        PRIORITY["motion"] = sched.raise_priority(*sched.DEADLINE_PRIORITY)
         started = False
         last_xy = None
         while not self.stopping.is_set():
@@ -519,7 +515,7 @@ class Robot:
         delay = float(os.environ.get("NODE_PLAN_DELAY_MS", "0") or 0) / 1000
         # A plan is due by the next frame (the fidelity verdict counts late ones): real-time
         # priority like motion control's, above the merges and inboxes of every robot.
-        PRIORITY["planner"] = sched.raise_priority(PART_RT_PRIORITY, PART_NICE)
+        PRIORITY["planner"] = sched.raise_priority(*sched.DEADLINE_PRIORITY)
         while not self.stopping.is_set():
             try:
                 cause = self.requests.get(timeout=0.5)
@@ -647,7 +643,7 @@ class Robot:
         """The timer part: asks for the plans and floods the maps that _tick found due, in
         step order; its lateness (the step it acted at against the step the work was due) is
         what the fidelity verdict reads, so it runs at the planner's priority."""
-        PRIORITY["timer"] = sched.raise_priority(PART_RT_PRIORITY, PART_NICE)
+        PRIORITY["timer"] = sched.raise_priority(*sched.DEADLINE_PRIORITY)
         while not self.stopping.is_set():
             with self.lock:
                 while not self.timer_work and not self.stopping.is_set():

@@ -58,7 +58,7 @@ from dataclasses import dataclass
 
 from common.errors import TestbedError
 from common.jsonfile import write_json_atomic
-from common.sched import deadline_priority
+from common.sched import CLOCK_PRIORITY, deadline_priority
 from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
@@ -76,8 +76,6 @@ from topology.forkserver import ForkServer, ForkServerError, python_env
 
 log = logging.getLogger(__name__)
 
-WORLD_RT_PRIORITY = 2  # the step loop's SCHED_RR priority (robots' motion control: 1)
-WORLD_NICE = -10  # its nice value where real-time priority is refused
 # What the fork server imports once for every robot and the display (topology.forkserver);
 # the run's middleware module (node.messaging) is added to it.
 NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "topology.names"]
@@ -179,7 +177,7 @@ class Run:
             with contextlib.ExitStack() as stack:  # routing logs kept, network down, closed
                 started = self.start(stack)
                 network_timers = started.network_timers
-                with deadline_priority(WORLD_RT_PRIORITY, WORLD_NICE) as priority:
+                with deadline_priority(*CLOCK_PRIORITY) as priority:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
                 self.parts.mark("steps")
