@@ -12,13 +12,13 @@ from collections import Counter
 from common.jsonfile import write_json_atomic
 
 TIMER_BOUNDS_MS = (10, 25, 50, 100, 200)  # emulated ms late: histogram bounds
-WORST_KEPT = 128  # the latest firings kept with their times
+WORST_KEPT = 128  # the most late firings, kept with their times
 
 
 class TimerLateness:
     """How late one kind of timer fired, in emulated ms: count, maximum and a histogram over
     TIMER_BOUNDS_MS (the same shape as node.lateness, which aodv may not import), and the
-    WORST_KEPT latest firings with when each was due and when it fired (CLOCK_MONOTONIC
+    WORST_KEPT most late firings with when each was due and when it fired (CLOCK_MONOTONIC
     seconds, the clock every process of a run shares), so that a run can judge the timers
     that were late while its robots stepped apart from those of its start and end.
     O(log WORST_KEPT) per firing."""

@@ -42,7 +42,7 @@ The verdict: a run is faithful when, over all its robots and daemons,
 - no AODV HELLO timer fired more than HELLO_LATE_LIMIT_MS emulated ms late, and no expiry
   timer more than EXPIRY_LATE_LIMIT_MS, while the robots stepped (a timer late before step 0
   or after the last step, while the processes start or write their results, changes no
-  robot's run; each daemon keeps its latest firings with their times: `_late_within`). A
+  robot's run; each daemon keeps its most late firings with their times: `_late_within`). A
   neighbour drops a link after ALLOWED_HELLO_LOSS x HELLO_INTERVAL (2 s) of silence, so a
   HELLO breaks a link that exists only when it comes one HELLO_INTERVAL (1 s) late; the
   limit is half that. An expiry timer that fires late detects a true break, or drops a dead
@@ -147,7 +147,7 @@ def _late_over(hist: dict, bound: float) -> int:
 def _late_within(timer: dict, stepping: tuple[float, float] | None) -> float:
     """The most a daemon's timer of one kind (its `timer_lateness_ms` entry) was late while
     the robots stepped (`stepping`: CLOCK_MONOTONIC seconds of the first and last step): the
-    latest of its kept firings whose lateness overlapped the steps. When the daemon fired
+    most late of its kept firings whose lateness overlapped the steps. When the daemon fired
     more than it kept, one it did not keep was at most as late as its least late kept one,
     which bounds the answer from above. Without times (an older daemon) or steps, its
     maximum over its whole life."""

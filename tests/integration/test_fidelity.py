@@ -56,7 +56,7 @@ def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(
     assert high["fidelity"]["measures"]["plans"] >= 10
     assert "not faithful" not in r.stderr
     # The parts with deadlines ran at real-time priority wherever the world's clock did
-    # (common.sched), and the daemons kept their latest timer firings with their times.
+    # (common.sched), and the daemons kept their most late timer firings with their times.
     out = tmp_path / f"x{high['time_scale_requested']:g}"
     with open(out / "robots" / "r1.json") as fh:
         priority = json.load(fh)["priority"]

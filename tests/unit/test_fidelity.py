@@ -135,7 +135,7 @@ def test_timers_late_outside_the_steps_are_not_judged():
 
 
 def test_a_daemon_that_kept_only_its_latest_firings_is_judged_on_their_bound():
-    # 300 firings, only the 128 latest kept (all of them outside the steps): one not kept may
+    # 300 firings, only the 128 most late kept (all of them outside the steps): one not kept may
     # have been inside, at most as late as the least late kept one.
     firings = [(200.0 + i, float(i)) for i in range(300)]
     m = measures(0.0, [], None, [_daemon(firings)], stepping=(0.0, 100.0))
