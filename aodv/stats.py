@@ -30,14 +30,12 @@ class TimerLateness:
         self.counts = [0] * (len(TIMER_BOUNDS_MS) + 1)
         self.worst: list[tuple[float, float, float]] = []  # a min-heap: (ms late, due, fired)
 
-    def add(self, late_ms: float, due: float | None = None, fired: float | None = None) -> None:
+    def add(self, late_ms: float, due: float, fired: float) -> None:
         self.n += 1
         self.late += late_ms > 0
         self.max = max(self.max, late_ms)
         i = next((i for i, b in enumerate(TIMER_BOUNDS_MS) if late_ms <= b), -1)
         self.counts[i] += 1
-        if due is None or fired is None:
-            return
         if len(self.worst) < WORST_KEPT:
             heapq.heappush(self.worst, (late_ms, due, fired))
         elif late_ms > self.worst[0][0]:

@@ -43,7 +43,8 @@ def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(
         if slow[1]["fidelity"]["ok"]:
             break
     for scale in HIGHER:
-        fast = lone_run(tmp_path / f"x{scale}", tb_name, scale)
+        fast_out = tmp_path / f"x{scale}"
+        fast = lone_run(fast_out, tb_name, scale)
         verdicts.append((scale, fast[1]["fidelity"].get("reason")))
         if fast[1]["fidelity"]["ok"]:
             break
@@ -57,13 +58,12 @@ def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(
     assert "not faithful" not in r.stderr
     # The parts with deadlines ran at real-time priority wherever the world's clock did
     # (common.sched), and the daemons kept their most late timer firings with their times.
-    out = tmp_path / f"x{high['time_scale_requested']:g}"
-    with open(out / "robots" / "r1.json") as fh:
+    with open(fast_out / "robots" / "r1.json") as fh:
         priority = json.load(fh)["priority"]
     assert set(priority) == {"motion", "planner", "timer"}
     if high["world_priority"].startswith("SCHED_RR"):
         assert set(priority.values()) == {"SCHED_RR 1"}
-    with open(out / "aodv" / "r1.json") as fh:
+    with open(fast_out / "aodv" / "r1.json") as fh:
         hello = json.load(fh)["timer_lateness_ms"]["hello"]
     assert hello["n"] > 0 and 0 < len(hello["worst"]) <= hello["n"]
     assert all(fired >= due and ms >= 0 for due, fired, ms in hello["worst"])
