@@ -20,7 +20,7 @@ APT_OPTIONAL := babeld batmand nanomsg-utils iperf3 libns3-dev
 ACTIONLINT := $(VENV)/bin/actionlint
 ACTIONLINT_VERSION := 1.7.12
 
-# The ns3-wifi radio medium (medium/ns3, docs/ns3-medium.md): one binary, rebuilt when its
+# The ns3-wifi radio medium (native/ns3wifi, docs/ns3-medium.md): one binary, rebuilt when its
 # source changes. Debian's pkg-config file for ns-3 is broken: the libraries are named here.
 NS3_MEDIUM := build/tb-ns3-wifi
 NS3_LIBS := -lns3-wifi -lns3-fd-net-device -lns3-mobility -lns3-propagation -lns3-network \
@@ -39,12 +39,12 @@ setup: apt venv $(NS3_MEDIUM) $(STEPCORE)
 # The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
 # float rounds as in numpy and the two agree cell for cell.
-$(STEPCORE): node/native/stepcore.cc
+$(STEPCORE): native/stepcore/stepcore.cc
 	@command -v g++ >/dev/null || { echo "g++ not found: the per-step work runs in numpy (slower); install g++ and run make setup"; exit 0; }
 	@mkdir -p $(@D)
 	g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<
 
-$(NS3_MEDIUM): medium/ns3/wifi-medium.cc | apt
+$(NS3_MEDIUM): native/ns3wifi/wifi-medium.cc | apt
 	@[ -e /usr/include/ns3/wifi-module.h ] || { echo "ns3-wifi medium not built: this distribution has no libns3-dev (--medium ns3-wifi will say so)"; exit 0; }
 	@mkdir -p $(@D)
 	g++ -std=c++17 -O2 -Wall -o $@ $< $(NS3_LIBS)

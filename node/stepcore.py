@@ -1,6 +1,6 @@
 """The per-step work in compiled code, loaded when it was built, numpy otherwise.
 
-Theory of operation: node/native/stepcore.cc holds compiled twins of the functions that run
+Theory of operation: native/stepcore/stepcore.cc holds compiled twins of the functions that run
 every step or every plan (the world's laser cast, a scan into the robot's maps, classifying
 and merging maps, and the planner). `make setup` builds it with g++ into
 build/libstepcore.so; this module loads it with ctypes (a plain C ABI: no Python headers, no

@@ -2,7 +2,7 @@
 
 Theory of operation (docs/ns3-medium.md). Where the veth medium (topology.medium) joins the
 robots by links switched on and off, this medium has one shared channel: the program
-build/tb-ns3-wifi (medium/ns3/wifi-medium.cc), one process per testbed, running ns-3's
+build/tb-ns3-wifi (native/ns3wifi/wifi-medium.cc), one process per testbed, running ns-3's
 real-time simulator in the medium namespace. Robot K's `wlan0` is, as with veth, one end of a
 veth pair whose other end `rpK` lies in the medium namespace; here `rpK` is in no bridge: the
 ns-3 process reads and writes it through an AF_PACKET socket and relays the frames to and from

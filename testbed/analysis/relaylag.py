@@ -31,7 +31,7 @@ from pathlib import Path
 LAG_NAME = "relay-lag.bin"  # topology.ns3medium.LAG_FILE
 MAGIC = b"TBRLAG01"
 # written_ns, in_ns, out_ns, receiver, sender, ethertype, ip_id, ip_src, ip_dst, tcp_seq,
-# ip_proto, tcp_flags, reserved (medium/ns3/wifi-medium.cc, LagRecord)
+# ip_proto, tcp_flags, reserved (native/ns3wifi/wifi-medium.cc, LagRecord)
 RECORD = struct.Struct("<QIIHHHH4s4sIBBH")
 ETH_IPV4 = 0x0800
 # How far a record's write may lie outside the capture times it is matched with: the
