@@ -73,6 +73,26 @@ def binary() -> str:
     return os.environ.get(BINARY_ENV) or os.path.join(repo_root(), "build", "tb-ns3-wifi")
 
 
+def unbuilt_reason() -> str | None:
+    """Why the medium is not here, in one line, or None where it is (or should be).
+
+    `make setup` leaves the medium out where it cannot build it and writes its one line into
+    build/tb-ns3-wifi.unbuilt; without libns3-dev there is nothing to build. Where ns-3 is
+    installed and no such line was written, a missing program is a defect, not a reason."""
+    if os.access(binary(), os.X_OK):
+        return None
+    try:
+        with open(os.path.join(repo_root(), "build", "tb-ns3-wifi.unbuilt")) as f:
+            line = f.readline(500).strip()
+    except OSError:
+        line = ""
+    if line:
+        return line
+    if not os.path.exists(NS3_HEADER):
+        return "ns-3 is not installed (Debian's libns3-dev)"
+    return None
+
+
 def robot_mac(k: int) -> str:
     """Robot K's MAC, on wlan0 and on its WiFi device: locally administered, 10.0.0.K-like."""
     if not 1 <= k <= 0xFFFF:
@@ -199,10 +219,8 @@ class Ns3Medium(Medium):
         records it (its pid) with the testbed."""
         exe = binary()
         if not os.access(exe, os.X_OK):
-            raise UsageError(
-                f"the ns3-wifi medium is not built ({exe}): run `sudo make setup` "
-                "(it needs Debian's libns3-dev)"
-            )
+            why = unbuilt_reason() or "run `sudo make setup` (it needs Debian's libns3-dev)"
+            raise UsageError(f"the ns3-wifi medium is not built ({exe}): {why}")
         os.makedirs(os.path.dirname(self.sock_path), exist_ok=True)
         logp = os.path.join(state.run_dir(self.testbed), "ns3-wifi.log")
         with open(logp, "w") as logf:

@@ -247,12 +247,62 @@ def test_name_in_use_is_refused_and_left_intact(tb_name):
         tb("net", "down", tb_name)
 
 
+# Runs its arguments as uid 65534 in a mount namespace of its own, where every directory the
+# caller names (the checkout, the interpreter's) is readable to that user at its own path: a
+# checkout in a 0700 directory (a home on Debian 13, `mktemp -d`) is otherwise unreadable to
+# anyone else, and the command would fail on an import before it could say "not root". The
+# topmost ancestor that user cannot enter is covered by a 0755 tmpfs holding only the paths
+# down to bind mounts of the named directories; nothing outside the namespace changes.
+AS_NOBODY = r"""
+set -eu
+nobody() { setpriv --reuid=65534 --regid=65534 --clear-groups "$@"; }
+keep=()
+while [ "$1" != -- ]; do keep+=("$1"); shift; done; shift
+stage=$(mktemp -d /dev/shm/tb-nobody.XXXXXX)
+trap 'umount -R "$stage" 2>/dev/null || true; rmdir "$stage"/* "$stage" 2>/dev/null || true' EXIT
+covered=()
+for dir in "${keep[@]}"; do
+    p=""
+    for part in $(echo "$dir" | tr / ' '); do
+        p=$p/$part
+        nobody test -x "$p" && continue
+        i=${#covered[@]}; mkdir "$stage/$i"; mount --bind "$dir" "$stage/$i"
+        covered+=("$p|$dir|$stage/$i")
+        break
+    done
+done
+for c in "${covered[@]}"; do
+    top=${c%%|*}; rest=${c#*|}; dir=${rest%%|*}; from=${rest#*|}
+    mountpoint -q "$top" && [ "$(stat -c %a "$top")" = 755 ] ||
+        mount -t tmpfs -o mode=0755 tb-nobody "$top"
+    mkdir -p "$dir"; mount --move "$from" "$dir"
+done
+nobody "$@"
+"""
+
+
+def _as_nobody(argv: list[str], keep: list[str], **kw) -> subprocess.CompletedProcess:
+    script = [
+        "unshare",
+        "--mount",
+        "--propagation",
+        "private",
+        "bash",
+        "-c",
+        AS_NOBODY,
+        "as-nobody",
+    ]
+    return subprocess.run([*script, *keep, "--", *argv], **kw)
+
+
 def test_not_root_is_a_one_line_error(tb_name):
-    if shutil.which("setpriv") is None:
-        pytest.skip("setpriv (util-linux) not installed")
-    r = subprocess.run(
-        ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", *TESTBED,
-         "net", "up", tb_name, "--robots", "2", "--comm-range", "10"],
+    for tool in ("setpriv", "unshare", "mountpoint"):
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} (util-linux) not installed")
+    python_home = os.path.dirname(os.path.dirname(os.path.realpath(sys.executable)))
+    r = _as_nobody(
+        [*TESTBED, "net", "up", tb_name, "--robots", "2", "--comm-range", "10"],
+        keep=[REPO, python_home],
         capture_output=True, text=True, cwd=REPO, env={**os.environ, "HOME": "/tmp"},
     )  # fmt: skip
     _one_line_error(r, "root", "sudo")
