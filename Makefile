@@ -39,7 +39,7 @@ NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespac
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
 	experiment-protocols experiment-media experiment-media-rise experiment-middleware \
-	experiment-paper-literal bench lint format vm-test slurm-test browser-test clean
+	experiment-paper-literal bench lint format vm-test slurm-test browser-test distro-test clean
 
 setup: apt venv $(NS3_MEDIUM) $(STEPCORE)
 
@@ -214,6 +214,18 @@ format: venv
 vm-test: setup
 	$(NEED_ROOT)
 	bash tests/vm/run-netem-tests
+
+# A fresh clone's `make test` in a minimal root file system of each release in DISTRO (built
+# once with debootstrap and cached in /var/cache/testbed-distro; tests/distro/run-distro-test).
+# Each release says in its last line whether it passed; the target fails if any did not.
+DISTRO ?= bookworm trixie
+DISTRO_TARGET ?= test
+
+distro-test:
+	$(NEED_ROOT)
+	@failed=; for d in $(DISTRO); do bash tests/distro/run-distro-test $$d $(DISTRO_TARGET) \
+		|| failed="$$failed $$d"; done; \
+	[ -z "$$failed" ] || { echo "distro-test failed on:$$failed"; exit 1; }
 
 clean:
 	$(NEED_ROOT)
