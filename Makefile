@@ -86,6 +86,9 @@ apt:
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml constraints.txt
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null || { \
+		echo "the testbed needs Python 3.11 or newer ($(PYTHON) is $$($(PYTHON) -V 2>&1)):" \
+		"install python3.11-venv (Ubuntu 22.04) and run make with PYTHON=python3.11"; exit 2; }
 	@[ -x $(PY) ] || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev,middleware]'
 	@touch $(STAMP)
