@@ -15,7 +15,8 @@ The rules, in the order they are tried (each is cited at its branch below):
 1. A run that missed at most DEADLINE_MISS_LIMIT of its deadlines is kept; nothing changes.
 2. Over the limit, but within it once the misses in host stalls are left out: the host,
    not the load, is to blame. The time scale is kept; the run is redone (at most 3
-   attempts) only if it missed more than REDO_MISS in all, else kept as it is.
+   attempts) only if it missed more than REDO_MISS in all or was not faithful, else kept
+   as it is.
 3. Over the limit outside stalls while another run shared the machine, under a load limit
    or a cpu limit (or both): each limit falls to 80% of the most of its measure that was in
    flight while this run ran, the load limit below the load seen, the cpu limit below the
@@ -26,7 +27,8 @@ The rules, in the order they are tried (each is cited at its branch below):
 5. Over the limit outside stalls while alone: the machine is slower than the sweep file's
    time scales assume (a shared machine varies). Later runs of this team size get their
    time scale multiplied by SLOWDOWN (down to MIN_SCALE_FACTOR of the file's), and this
-   run is redone (3 attempts) if it missed more than REDO_MISS, else kept. Only this team
+   run is redone (3 attempts) if it missed more than REDO_MISS, else kept (an unfaithful
+   one is redone once, at the lowest factor too). Only this team
    size: a small team is bound by the latency of a step's round trip, a large one by CPU,
    so one says little about the other; each finds its own scale.
 6. Within the limit, but not faithful (testbed.run.fidelity: plans applied late, timers
@@ -160,6 +162,9 @@ def _relieve(o: Outcome, state: State) -> Decision:
             f"time scales of teams of {n} down to {new:.0%} of the file's",
             attempts=3 if bad else 2 if o.faithful is False else 1,
         )  # fmt: skip
+    if o.faithful is False:
+        # Rule 5 at the lowest factor: nothing left to relieve, but its results changed.
+        return _back_off(o, state, {"robots": n}, "at the lowest time scale", attempts=2)
     return Decision(state)
 
 
@@ -173,7 +178,7 @@ def decide(o: Outcome, state: State) -> Decision:
             words += f" ({miss - ours:.1%} in host stalls)"
         if _number(ours) and ours <= DEADLINE_MISS_LIMIT:
             # Rule 2: the host's stalls, not the load: the scale stays; redo only a bad run.
-            if miss > REDO_MISS:
+            if miss > REDO_MISS or o.faithful is False:
                 d = _back_off(o, state, {"in_host_stalls": True},
                               "the host's stalls, time scale kept", attempts=3)  # fmt: skip
         else:

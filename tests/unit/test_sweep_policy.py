@@ -1,6 +1,7 @@
 """The sweep's rules for late runs (testbed.sweep.policy), one test per rule, pure."""
 
 import copy
+from dataclasses import replace
 
 import pytest
 
@@ -231,3 +232,26 @@ def test_calibration_climbs_only_while_its_trials_stay_faithful():
     down += [(0.7225, 0.001, True)]
     assert calibration_next(down) is None and calibrated(down) == 0.7225
     assert calibrated([(1.0, 0.0, False), (0.85, 0.0, False)]) == 0.85  # the lowest tried
+
+
+def test_a_run_judged_not_faithful_is_redone_whatever_the_cause():
+    """Its results changed with the dilation: whether its misses fell in host stalls, it ran
+    shared or alone, or its team size is at its lowest scale, it is run again (once at
+    least), never kept (the paper sweep kept n02-c15-l2-k3 at 25: its misses were in stalls)."""
+    states = [
+        State(jobs=1),
+        State(jobs=2),
+        State(jobs=1, load_limit=2.0, cpu_limit=1.5),
+        State(jobs=1, scale_factors={2: MIN_SCALE_FACTOR}),
+    ]
+    seen = 0
+    for state in states:
+        for miss, outside in ((0.0, 0.0), (0.02, 0.0), (0.02, 0.005), (0.2, 0.1), (0.02, 0.02)):
+            for shared in (False, True):
+                o = outcome(miss, outside, faithful=False, robots=2, shared=shared,
+                            jobs_at_start=2, load_seen=3.0, cpu_seen=1.8)  # fmt: skip
+                d = decide(o, state)
+                assert d.redo, (state, o, d)
+                assert not decide(replace(o, attempts=3), state).redo
+                seen += 1
+    assert seen == 40
