@@ -35,7 +35,8 @@ smaller range) cannot be decided in a group where a point has one run: its noise
 so neither a rise nor its absence is shown. Such a group counts as undecided, and a claim
 with no decided group is "too few runs to decide", not "does not hold". The same ratio of the
 shorter laser's claim is undecided in a range where it is within the noise or a point has one
-run. The claims decided on the means alone say so in their evidence when a point rests on one
+run; undecided in every range, its headline names the cause: "within the run-to-run noise"
+where any range had the runs to measure the noise, "too few runs" where none had. The claims decided on the means alone say so in their evidence when a point rests on one
 run.
 """
 
@@ -50,6 +51,7 @@ from testbed.analysis import ablation, stats
 
 HOLDS, PARTLY, FAILS, NO_DATA = "holds", "partly holds", "does not hold", "not enough data"
 TOO_FEW = "too few runs to decide"
+WITHIN_NOISE = "undecided: within the run-to-run noise"
 MIN_RUNS = 2  # runs a point needs before its noise (and so a noise-aware test) is known
 RATIO_CV_MAX = 0.15
 CV_DRAWS = 2000  # draws of the points' means for the noise of the ratios' CV
@@ -258,6 +260,7 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     if not more:
         return v
     same_ratio: list[bool | None] = []
+    noisy = 0  # ranges whose points have their runs, undecided because of the noise
     v.evidence.append(
         f"laser {_f(short)} m needs more steps than laser {_f(long_)} m in {sum(more)} of "
         f"{len(more)} (range, team) points"
@@ -275,6 +278,7 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
             lo, hi = band
             same = True if hi <= RATIO_CV_MAX else False if lo > RATIO_CV_MAX else None
             word = {True: "same", False: "varies", None: "within the noise"}[same]
+            noisy += same is None
             why = f"noise band {lo:.2f}-{hi:.2f} -> {word}"
         same_ratio.append(same)
         v.evidence.append(
@@ -294,7 +298,9 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     elif parts[0] == FAILS:
         v.verdict = FAILS
     elif parts == [HOLDS, TOO_FEW]:
-        v.verdict = TOO_FEW
+        # Undecided everywhere: the headline names the cause (the noise, where any range had
+        # the runs to measure it; too few runs only where none had).
+        v.verdict = WITHIN_NOISE if noisy else TOO_FEW
         v.evidence.append("more steps: holds; same ratio across team sizes: undecided")
     else:
         v.verdict = PARTLY
