@@ -36,8 +36,8 @@ so neither a rise nor its absence is shown. Such a group counts as undecided, an
 with no decided group is "too few runs to decide", not "does not hold". The same ratio of the
 shorter laser's claim is undecided in a range where it is within the noise or a point has one
 run; undecided in every range, its headline names the cause: "within the run-to-run noise"
-where any range had the runs to measure the noise, "too few runs" where none had. The claims decided on the means alone say so in their evidence when a point rests on one
-run.
+where any range had the runs to measure the noise, "too few runs" where none had. The claims
+decided on the means alone say so in their evidence when a point rests on one run.
 """
 
 from __future__ import annotations
