@@ -161,9 +161,12 @@ experiment-paper-literal: setup
 	$(VENV)/bin/testbed sweep testbed/experiments/paper-literal.toml --out results/paper-literal --resume
 	$(VENV)/bin/testbed report results/paper-literal
 
+# BENCH: only these benchmarks (e.g. `make bench BENCH=ns3wifi`); all of them by default.
+BENCH ?=
+
 bench: setup
 	$(NEED_ROOT)
-	$(PY) -m testbed.bench
+	$(PY) -m testbed.bench $(BENCH)
 
 # $(call test_packages,PACKAGES,AFTER): install those of the Debian PACKAGES a test target
 # needs that are missing (no recommends), then run the shell command AFTER (may be empty).
@@ -221,12 +224,13 @@ vm-test: setup
 # A fresh clone's `make test` in a minimal root file system of each release in DISTRO (built
 # once with debootstrap and cached in /var/cache/testbed-distro; tests/distro/run-distro-test).
 # Each release says in its last line whether it passed; the target fails if any did not.
+# DISTRO_TARGET: what runs there instead of `test`, e.g. DISTRO_TARGET="bench BENCH=ns3wifi".
 DISTRO ?= bookworm trixie
 DISTRO_TARGET ?= test
 
 distro-test:
 	$(NEED_ROOT)
-	@failed=; for d in $(DISTRO); do bash tests/distro/run-distro-test $$d $(DISTRO_TARGET) \
+	@failed=; for d in $(DISTRO); do bash tests/distro/run-distro-test $$d "$(DISTRO_TARGET)" \
 		|| failed="$$failed $$d"; done; \
 	[ -z "$$failed" ] || { echo "distro-test failed on:$$failed"; exit 1; }
 
