@@ -31,7 +31,7 @@ def number(
 
     def parse(text: str) -> int | float:
         try:
-            value = kind(text)
+            value: int | float = kind(text)
         except ValueError:
             noun = "a whole number" if kind is int else "a number"
             raise argparse.ArgumentTypeError(f"{what} must be {noun}, not {text!r}") from None
