@@ -85,6 +85,13 @@ class Option:
     grid: GridDim | None = None  # with sweep={GRID}: how it varies in a sweep
 
     @property
+    def grid_dim(self) -> GridDim:
+        """`grid` of an option a sweep may vary (options() holds that each has one)."""
+        if self.grid is None:
+            raise TypeError(f"option {self.name} is not a grid dimension")
+        return self.grid
+
+    @property
     def flag(self) -> str:
         return self.cli or "--" + self.name.replace("_", "-")
 
