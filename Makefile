@@ -203,6 +203,7 @@ browser-test: setup
 lint: venv $(ACTIONLINT)
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 	$(ACTIONLINT) .github/workflows/*.yml
 
 $(ACTIONLINT): | venv

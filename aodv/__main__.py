@@ -9,6 +9,7 @@ import logging
 import os
 import sys
 from dataclasses import fields, replace
+from typing import NoReturn
 
 from aodv.params import PROFILES, Params, profile
 from common.argtypes import checked, number
@@ -30,7 +31,7 @@ class RobotFormatter(logging.Formatter):
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, exit status 2
+    def error(self, message: str) -> NoReturn:  # one line, exit status 2
         print(f"aodv: error: {message}", file=sys.stderr)
         sys.exit(EXIT_USAGE)
 

@@ -130,8 +130,9 @@ class DiscoveryDone:
     repair: bool = False  # a local repair (RFC 6.12), not a discovery of our own
 
 
-Action = Unicast | Broadcast | InstallRoute | DeleteRoute | ReleasePackets | DropPackets
-Action = Action | DiscoveryDone
+Action = (
+    Unicast | Broadcast | InstallRoute | DeleteRoute | ReleasePackets | DropPackets | DiscoveryDone
+)
 
 
 @dataclass
@@ -696,7 +697,7 @@ class AodvCore:
         rreq = Rreq(
             rreq_id=self.rreq_id,
             dest=d.dest,
-            dest_seq=old.seq if known else 0,
+            dest_seq=old.seq if old is not None and known else 0,
             orig=self.addr,
             orig_seq=self.seq,
             hop_count=0,
@@ -762,7 +763,7 @@ class AodvCore:
                 # destination is greater than the hop count of the previously known route
                 # the node SHOULD issue a RERR message for the destination, with the 'N'
                 # bit set."
-                if repair and r.hops > d.repair_hops and r.precursors:
+                if d.repair_hops is not None and r.hops > d.repair_hops and r.precursors:
                     self._send_rerr(now, [r], out, fallback=False, no_delete=True)
 
     # == RFC 6.12 local repair ============================================================
@@ -977,7 +978,9 @@ class AodvCore:
         # through `on_no_route`, which finds the valid entry and installs it. RREP-ACKs
         # (RFC 6.8, only ever awaited for NEXT_HOP_WAIT) go last, after the releases
         # and DiscoveryDone: nobody's discovery waits for them.
-        sends, rest, acks = [], [], []
+        sends: list[Action] = []
+        rest: list[Action] = []
+        acks: list[Action] = []
         for a in out:
             if isinstance(a, (Unicast, Broadcast)):
                 (acks if isinstance(a.msg, RrepAck) else sends).append(a)

@@ -170,20 +170,27 @@ class Daemon:
         self._poll_started = 0.0
         # When the newest RREQ of our own for each destination went to sendto().
         self._rreq_sent: dict[str, float] = {}
-        # Made by run(), in this order, and undone in the reverse order by its ExitStack.
-        self.routes: KernelRoutes | None = None  # rtnetlink: our kernel routes
-        self.addr: str | None = None  # our address on `iface`
-        self.stats: Stats | None = None
-        self.tun: Tun | None = None  # packets that found no kernel route
-        self.monitor: UseMonitor | None = None  # nftables set of route uses
-        self.reader: SetReader | None = None  # reads that set over NETLINK_NETFILTER
-        self.sock: socket.socket | None = None  # UDP 654, control messages
+        # Made by run(), in this order, and undone in the reverse order by its ExitStack
+        # (declared here, set there: nothing reads them before).
+        self.routes: KernelRoutes  # rtnetlink: our kernel routes
+        self.addr: str  # our address on `iface`
+        self.stats: Stats
+        self.tun: Tun  # packets that found no kernel route
+        self.monitor: UseMonitor  # nftables set of route uses
+        self.reader: SetReader  # reads that set over NETLINK_NETFILTER
+        self.sock: socket.socket  # UDP 654, control messages
         self._ttl: int | None = None  # the IP TTL `sock` sends with now
-        self.raw: socket.socket | None = None  # re-sends buffered packets
-        self.icmp: socket.socket | None = None  # ICMP errors about our datagrams
-        self._wake_r: socket.socket | None = None  # signal wake-up (set_wakeup_fd)
-        self._wake_w: socket.socket | None = None
-        self.core: AodvCore | None = None
+        self.raw: socket.socket  # re-sends buffered packets
+        self.icmp: socket.socket  # ICMP errors about our datagrams
+        self._wake_r: socket.socket  # signal wake-up (set_wakeup_fd)
+        self._wake_w: socket.socket
+        self.core: AodvCore | None = None  # None until the end of start-up
+
+    @property
+    def _core(self) -> AodvCore:
+        """The protocol core, for the loop (which runs only once start-up made it)."""
+        assert self.core is not None
+        return self.core
 
     # -- lifecycle -----------------------------------------------------------------------
     def run(self) -> int:
@@ -309,9 +316,9 @@ class Daemon:
         next_stats = time.monotonic()
         while not self._stop:
             now = time.monotonic()
-            deadline = self.core.next_deadline()
+            deadline = self._core.next_deadline()
             if now >= deadline:
-                kind = "hello" if deadline == self.core.next_hello else "expiry"
+                kind = "hello" if deadline == self._core.next_hello else "expiry"
                 late_ms = (now - deadline) * 1000 * self.p.time_scale
                 self.stats.timer_lateness[kind].add(late_ms, deadline, now)
                 # What already waits in the sockets happened before the timer is handled: a
@@ -320,8 +327,8 @@ class Daemon:
                 for key, _ in sel.select(0):
                     key.data()
                 now = time.monotonic()
-                self._execute(self.core.on_timer(now), now)
-                deadline = self.core.next_deadline()
+                self._execute(self._core.on_timer(now), now)
+                deadline = self._core.next_deadline()
             if now >= next_poll:
                 next_poll = now + self._poll_period()
                 self._poll_use(now)
@@ -352,7 +359,7 @@ class Daemon:
         if self.reader.busy and now - self._poll_started > 5 * self._poll_period():
             log.warning("route-use poll got no answer; asking again")
             self.reader.busy = False
-        if self.reader.busy or not self.core.routes():
+        if self.reader.busy or not self._core.routes():
             return
         try:
             self.reader.request()
@@ -373,7 +380,7 @@ class Daemon:
         now = time.monotonic()
         for addr in used:
             self.stats.route_uses += 1
-            self._execute(self.core.on_route_used(self._poll_started, addr), now)
+            self._execute(self._core.on_route_used(self._poll_started, addr), now)
 
     def _on_udp(self) -> None:
         for _ in range(64):
@@ -398,7 +405,7 @@ class Daemon:
             self.stats.received[kind] += 1
             now = time.monotonic()
             try:
-                self._execute(self.core.on_control(now, src, ttl, msg), now)
+                self._execute(self._core.on_control(now, src, ttl, msg), now)
             except Exception:  # a bug must not kill the daemon; count it loudly
                 self.stats.dropped["error"] += 1
                 log.exception("error handling %s from %s", kind, src)
@@ -432,6 +439,7 @@ class Daemon:
         """Every address a peer names must be a host of our network (integer math: the
         ipaddress module cost 50 us a message; addresses that passed are remembered, as a
         few robots' addresses come back in every message)."""
+        addrs: tuple[str, ...]
         if isinstance(msg, (wire.Rreq, wire.Rrep)):
             addrs = (src, msg.dest, msg.orig)
         elif isinstance(msg, wire.Rerr):
@@ -472,13 +480,13 @@ class Daemon:
             if src == self.addr:
                 self.stats.packets_buffered += 1
             now = time.monotonic()
-            self._execute(self.core.on_no_route(now, src, dst, pkt), now)
+            self._execute(self._core.on_no_route(now, src, dst, pkt), now)
 
     # -- actions -------------------------------------------------------------------------
     def _execute(self, actions: list, now: float) -> None:
         if self.store:
             # RFC 6.13: the numbers these messages carry are on disk before they leave.
-            self.store.cover(self.core.seq, self.core.rreq_id)
+            self.store.cover(self._core.seq, self._core.rreq_id)
         routed = now  # when the last route change of this batch was in the kernel
         # In the core's order (AodvCore._finish): control messages, route changes,
         # releases, RREP-ACKs. Installs are rtnetlink writes whose acknowledgements the

@@ -203,7 +203,7 @@ class KernelRoutes:
         self._seq += 1
         seq = self._seq
         self._send(nl.route_dump(seq), "dump")
-        found = []
+        found: list[tuple[str, int]] = []
         for _ in range(100):
             for mtype, mseq, data, start, end in self._messages(timeout=0.05):
                 if mseq != seq:

@@ -111,7 +111,9 @@ class Rreq(NamedTuple):
     dest_only: bool = False
     unknown_seq: bool = False
 
-    type_name = "RREQ"
+    @property  # not a class attribute: NamedTuple would make it a field for mypy
+    def type_name(self) -> str:
+        return "RREQ"
 
     def encode(self) -> bytes:
         flags = (
@@ -150,7 +152,9 @@ class Rrep(NamedTuple):
     prefix_size: int = 0
     hello_interval_ms: int | None = None
 
-    type_name = "RREP"
+    @property  # not a class attribute: NamedTuple would make it a field for mypy
+    def type_name(self) -> str:
+        return "RREP"
 
     def encode(self) -> bytes:
         if not 0 <= self.prefix_size <= 31:
@@ -180,7 +184,9 @@ class Rerr(NamedTuple):
     unreachable: tuple[tuple[str, int], ...]
     no_delete: bool = False
 
-    type_name = "RERR"
+    @property  # not a class attribute: NamedTuple would make it a field for mypy
+    def type_name(self) -> str:
+        return "RERR"
 
     def encode(self) -> bytes:
         if not 1 <= len(self.unreachable) <= 0xFF:
@@ -197,7 +203,9 @@ class Rerr(NamedTuple):
 class RrepAck(NamedTuple):
     """Route Reply Acknowledgment (RFC 3561 section 5.4)."""
 
-    type_name = "RREP-ACK"
+    @property  # not a class attribute: NamedTuple would make it a field for mypy
+    def type_name(self) -> str:
+        return "RREP-ACK"
 
     def encode(self) -> bytes:
         return bytes((RREP_ACK_TYPE, 0))

@@ -185,7 +185,7 @@ class Params:
         """Scaled seconds to the RFC milliseconds carried in a Lifetime field (32 bits)."""
         return min(0xFFFFFFFF, max(0, int(round(seconds * self.time_scale * 1000))))
 
-    def from_ms(self, ms: int) -> float:
+    def from_ms(self, ms: float) -> float:
         """A Lifetime field (RFC milliseconds) to scaled seconds."""
         return self._s(ms)
 

@@ -56,6 +56,7 @@ class CounterStore:
         """Make sure the marks on disk are above `seq` and `rreq_id` (call before sending)."""
         if (
             self._seq_mark is not None
+            and self._id_mark is not None
             and seqnum.newer(self._seq_mark, seq)
             and seqnum.newer(self._id_mark, rreq_id)
         ):

@@ -11,6 +11,7 @@ nftables set). Time only moves in `run_until`, jumping to the next event or core
 
 from __future__ import annotations
 
+import functools
 import heapq
 import itertools
 import logging
@@ -118,6 +119,7 @@ class Medium:
                 _, _, fn = heapq.heappop(self._events)
                 fn()
             else:
+                assert node is not None  # t_timer < t_ev: a node's deadline, not the default
                 self._apply(node, node.core.on_timer(self.now))
 
     def send_data(self, src: str, dst: str, payload: bytes = b"x") -> None:
@@ -149,7 +151,9 @@ class Medium:
         raw = wire.encode(msg)
         for r in receivers:
             if (src, r) in self.links and r in self.nodes:
-                self.at(self.now + self.hop_delay, lambda r=r: self._receive(r, src, ttl, raw))
+                self.at(
+                    self.now + self.hop_delay, functools.partial(self._receive, r, src, ttl, raw)
+                )
 
     def _receive(self, at: str, src: str, ttl: int, raw: bytes) -> None:
         node = self.nodes[at]

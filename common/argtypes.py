@@ -15,21 +15,22 @@ from collections.abc import Callable
 from typing import TypeVar
 
 T = TypeVar("T")
+Number = TypeVar("Number", int, float)
 
 
 def number(
-    kind: type,
+    kind: type[Number],
     what: str,
     *,
     minimum: float | None = None,
     above: float | None = None,
     magnitude: float | None = None,
-) -> Callable[[str], int | float]:
+) -> Callable[[str], Number]:
     """An argparse type for a finite `kind` (int or float) that is at least `minimum`,
     greater than `above` and at most `magnitude` in absolute value (each when given): e.g.
     `number(float, "comm range", above=0)`."""
 
-    def parse(text: str) -> int | float:
+    def parse(text: str) -> Number:
         try:
             value = kind(text)
         except ValueError:

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import json
 import os
+from typing import Any
 
 
-def write_json_atomic(path, obj, *, sort_keys: bool = False, mode: int | None = None) -> None:
+def write_json_atomic(
+    path: str | os.PathLike[str], obj: Any, *, sort_keys: bool = False, mode: int | None = None
+) -> None:
     """`path` holds `obj` (indent 1, newline-terminated) or what it held before, never a part:
     the text goes to a temporary file of this process first and is renamed over `path`.
     `mode`: the file's permissions, whatever the umask (else the umask decides)."""
@@ -34,7 +37,7 @@ def write_json_atomic(path, obj, *, sort_keys: bool = False, mode: int | None = 
         raise
 
 
-def read_json(path):
+def read_json(path: str | os.PathLike[str]) -> Any:
     """The JSON in `path`, or None when it is missing, unreadable or not valid JSON (nested
     deeper than the parser's recursion allows included)."""
     try:

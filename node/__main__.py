@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import signal
 import sys
+from typing import TYPE_CHECKING
 
 from node import body
 from node.events import EventLog
@@ -19,6 +20,10 @@ from node.flood import Flooder
 from node.launch import NodeArgs
 from node.messaging.maps import refusal as maps_refusal
 from node.timing import RobotTimings
+
+if TYPE_CHECKING:
+    from node.display import Display
+    from node.robot import Robot
 
 
 def _open_messenger(args: NodeArgs, timing: RobotTimings, team: tuple[int, ...]):
@@ -58,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     # With pubsub the display (robot N+1) is a peer of every robot's session: it subscribes.
     team = tuple(range(1, args.robots + (2 if pubsub else 1)))
     events = EventLog(args.events)
-    stop = {"robot": None}
+    stop: dict[str, Display | Robot | None] = {"robot": None}
 
     def on_term(signum, frame):
         r = stop["robot"]
@@ -75,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.role == "robot" or pubsub:
             messenger = _open_messenger(args, timing, team)
         if pubsub:
+            assert messenger is not None  # opened just above
             maps = messenger.map_topic()
         else:
             maps = Flooder(me, args.flood_port, args.iface or None, mode=args.flood,
@@ -92,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.role == "display":
             from node.display import Display
 
+            assert args.out_dir is not None  # a display without one was refused above
             d = Display(
                 me, args.map_size, args.cell, link, maps, events, args.out_dir,
                 args.snapshots, args.video_every, map_period=args.map_period,
@@ -109,6 +116,7 @@ def main(argv: list[str] | None = None) -> int:
                 radius=args.radius, plan_period=args.plan_period, map_period=args.map_period,
                 timing=timing, phase=max(0, args.timer_phase), coordination=args.coordination,
             )  # fmt: skip
+            assert messenger is not None  # opened above for a robot
             r = Robot(cfg, link, maps, messenger, events)
             stop["robot"] = r
             log.info("robot up: team of %d, laser %.1f m, maps by %s", args.robots,

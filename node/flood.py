@@ -153,7 +153,7 @@ class Flooder:
 
         A copy of a flood already seen costs a header read and a dictionary update (its
         sender is a neighbour); nothing else is built for it."""
-        out = []
+        out: list[bytes] = []
         recvfrom, seen, me, heard = self.sock.recvfrom, self.cache.seen, self.me, self.heard
         now = self.clock()
         while True:

@@ -65,10 +65,10 @@ class Video:
 
     def __init__(self, path_no_ext: str, size: tuple[int, int], fps: float = 10.0):
         self.path = path_no_ext + ".mp4"
-        self.w = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
+        self.w = cv2.VideoWriter(self.path, cv2.VideoWriter.fourcc(*"mp4v"), fps, size)
         if not self.w.isOpened():
             self.path = path_no_ext + ".avi"
-            self.w = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*"MJPG"), fps, size)
+            self.w = cv2.VideoWriter(self.path, cv2.VideoWriter.fourcc(*"MJPG"), fps, size)
         self.size = size
         self.frames = 0
 

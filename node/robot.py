@@ -40,7 +40,7 @@ import os
 import queue
 import threading
 import time
-from collections import Counter, deque
+from collections import Counter, defaultdict, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,7 +151,7 @@ class TimerWork:
     flood (`map_late` steps after its period, None for the first)."""
 
     plan: bool
-    due_step: int
+    due_step: int | None  # None: no plan (before the first, no tick is set)
     flood: bool
     map_late: int | None
 
@@ -222,7 +222,7 @@ class Robot:
         # thread is woken on this condition only for a step with work: a plan to ask for or a
         # map to flood. timer_work holds those steps in order.
         self.tick = threading.Condition(self.lock)
-        self.timer_work: deque[tuple[int, TimerWork]] = deque()
+        self.timer_work: deque[tuple[int, TimerWork | None]] = deque()
         self.timer_busy = False
         self.timer_state = TimerState()
         # Step order (see _keep_step_order): the timer and the planner say on this condition
@@ -249,7 +249,7 @@ class Robot:
         self.full_wanted = False  # set when someone comes back into reach
         self.last_heard: dict[int, int] = {}  # origin -> my step when its last flood came
         self.plan_ms: list[float] = []
-        self.busy: Counter[str] = Counter()  # thread CPU seconds per part
+        self.busy: defaultdict[str, float] = defaultdict(float)  # thread CPU seconds per part
         # Wall seconds: world send -> frame received; frame received -> command sent.
         self.latency: dict[str, list[float]] = {"delivery": [], "answer": []}
         # Lateness in emulated time (node.lateness), for the run's fidelity verdict: a plan's
@@ -409,6 +409,7 @@ class Robot:
         measure unless the middleware held the planner when the plan was asked for."""
         s = self.s
         age = "plan_age_blocked_steps" if s.plan_fresh_waited else "plan_age_steps"
+        assert s.plan_fresh is not None  # the caller checks
         self.lateness[age].add(step - s.plan_fresh - 1)
         s.plan_fresh = None
 
@@ -529,10 +530,9 @@ class Robot:
                 pose, step = s.pose, s.step
                 reach = self._reachable()
                 goals = [
-                    s.teammates[j].goal
-                    for j in reach
-                    if s.teammates[j].goal is not None
-                    and step - s.teammates[j].goal_step <= cfg.goal_fresh_steps
+                    tm.goal
+                    for tm in (s.teammates[j] for j in reach)
+                    if tm.goal is not None and step - tm.goal_step <= cfg.goal_fresh_steps
                 ]
             t0 = time.perf_counter()
             p = planner.plan(t, pose, goals, cfg.laser_range, self.params,
@@ -567,6 +567,7 @@ class Robot:
                 continue
             if p.status == "blocked":
                 continue  # no goal selected, nothing to announce: it waits (coordination)
+            assert p.goal is not None  # every other status has one
             data = wire.goal_msg(cfg.robot, step, p.goal, p.cost, p.status == "fallback",
                                  next(self.msg_numbers))  # fmt: skip
             with self.lock:
@@ -619,11 +620,15 @@ class Robot:
         started = s.last_plan_step >= 0  # the first plan is motion control's
         if started and st.next_tick is None:
             st.next_tick = s.last_plan_step + period
-        due_step = coordination.timer_due_step(
-            cfg.coordination, s.last_plan_step, st.next_tick, period
+        due_step = (
+            None  # not started (motion control makes the first plan): nothing is due
+            if st.next_tick is None
+            else coordination.timer_due_step(
+                cfg.coordination, s.last_plan_step, st.next_tick, period
+            )
         )
         plan = step >= 0 and started and not s.finished and not s.plan_pending
-        plan = plan and step >= due_step
+        plan = plan and due_step is not None and step >= due_step
         while st.next_tick is not None and st.next_tick <= step:
             st.next_tick += cfg.plan_period
         if plan:
@@ -653,7 +658,7 @@ class Robot:
                 step, work = self.timer_work.popleft()
                 self.timer_busy = True
                 now = self.s.step
-            if work is not None and work.plan:
+            if work is not None and work.plan and work.due_step is not None:
                 self.lateness["plan_timer_steps"].add(now - work.due_step)
                 self.request("timer")
             if work is not None and work.flood:
@@ -791,7 +796,7 @@ class Robot:
         if m["k"] == "goal":
             decision = coordination.on_goal(mode, cfg.robot, mine, my_cost, j, m["goal"],
                                             m["cost"], m["fallback"], cfg.laser_range)  # fmt: skip
-            if decision == "request":
+            if decision == "request" and mine is not None:  # (only with a goal of mine)
                 data = wire.replan_msg(cfg.robot, step, mine, next(self.msg_numbers))
                 self._send(j, "replan", data, step)
         elif m["k"] == "replan":

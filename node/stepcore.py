@@ -101,6 +101,7 @@ def address(a: np.ndarray) -> int:
 
 def classify(logodds: np.ndarray, threshold: float) -> np.ndarray:
     """node.grid.classify, compiled; `logodds` may be a view with strided rows."""
+    assert lib is not None  # callers check NATIVE
     a = logodds
     if a.dtype != np.float32 or a.strides[1] != 4:
         a = np.ascontiguousarray(a, dtype=np.float32)
@@ -112,6 +113,7 @@ def classify(logodds: np.ndarray, threshold: float) -> np.ndarray:
 
 def merge_ternary(view: np.ndarray, t: np.ndarray, threshold: float, merged: float) -> int:
     """OccupancyGrid.merge_ternary's cell update on `view` (float32, unit column stride)."""
+    assert lib is not None  # callers check NATIVE
     t = np.ascontiguousarray(t, dtype=np.uint8)
     h, w = t.shape
     return int(lib.sc_merge_ternary(ptr(view), view.strides[0] // 4, ptr(t), h, w,
@@ -120,10 +122,12 @@ def merge_ternary(view: np.ndarray, t: np.ndarray, threshold: float, merged: flo
 
 def count_and(a: np.ndarray, b: np.ndarray) -> int:
     """Cells set in both of two contiguous boolean arrays of one shape (alive for the run)."""
+    assert lib is not None  # callers check NATIVE
     return int(lib.sc_count_and(address(a), address(b), a.size))
 
 
 def pool(t: np.ndarray, factor: int) -> np.ndarray:
+    assert lib is not None  # callers check NATIVE
     t = np.ascontiguousarray(t, dtype=np.uint8)
     out = np.empty((t.shape[0] // factor, t.shape[1] // factor), dtype=np.uint8)
     lib.sc_pool(ptr(t), t.shape[0], t.shape[1], factor, ptr(out))
@@ -131,6 +135,7 @@ def pool(t: np.ndarray, factor: int) -> np.ndarray:
 
 
 def traversable(p: np.ndarray, inflate: int) -> np.ndarray:
+    assert lib is not None  # callers check NATIVE
     p = np.ascontiguousarray(p, dtype=np.uint8)
     out = np.empty(p.shape, dtype=bool)
     lib.sc_traversable(ptr(p), p.shape[0], p.shape[1], inflate, ptr(out))
@@ -138,6 +143,7 @@ def traversable(p: np.ndarray, inflate: int) -> np.ndarray:
 
 
 def frontier_goals(p: np.ndarray, trav: np.ndarray) -> np.ndarray:
+    assert lib is not None  # callers check NATIVE
     p = np.ascontiguousarray(p, dtype=np.uint8)
     trav = np.ascontiguousarray(trav, dtype=bool)
     out = np.empty(p.shape, dtype=bool)
@@ -231,6 +237,7 @@ def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: in
     one scan from (x, y) into the log-odds map `lp` and the ternary local map `own` (both
     padded, contiguous, one shape, alive for the run). False (nothing done) where the window
     does not fit."""
+    assert lib is not None  # callers check NATIVE
     fx, fy, r0, c0 = _window(laser, x, y, bias)
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > lp.shape[0] or c0 + w > lp.shape[1]:
@@ -250,6 +257,7 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
     """testbed.world's cast from (x, y) on the padded obstacle grid `occ`, samples s0.. only,
     marking what it saw in `seen` (same shape; both alive for the run): (ranges, any ray
     hit), or None where the window does not fit."""
+    assert lib is not None  # callers check NATIVE
     fx, fy, r0, c0 = _window(laser, x, y, bias)
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > occ.shape[0] or c0 + w > occ.shape[1]:

@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
+from typing import Any
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -47,7 +48,7 @@ DEFAULT_ROUTING = "aodv"
 DEFAULT_MEDIUM = "veth"
 # The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
 CPU_PARTS = ("robots", "display", "world", "routing")
-_EMPTY: Mapping = MappingProxyType({})
+_EMPTY: Mapping[str, Any] = MappingProxyType({})
 _NUM = (int, float)
 
 
@@ -69,7 +70,13 @@ def has_result(run_dir: str | Path) -> bool:
 # ---------------------------------------------------------------- checked reading
 
 
-def _get(doc: Mapping, key: str, kinds: tuple[type, ...], default=None, required=False):
+def _get(
+    doc: Mapping[str, Any],
+    key: str,
+    kinds: tuple[type, ...],
+    default: Any = None,
+    required: bool = False,
+) -> Any:
     """doc[key] checked against `kinds` (bool is not a number); default when absent or null."""
     value = doc.get(key)
     if value is None:
@@ -83,7 +90,7 @@ def _get(doc: Mapping, key: str, kinds: tuple[type, ...], default=None, required
     return value
 
 
-def _mapping(doc: Mapping, key: str) -> Mapping:
+def _mapping(doc: Mapping[str, Any], key: str) -> Mapping[str, Any]:
     value = doc.get(key)
     if value is None:
         return _EMPTY
@@ -92,7 +99,7 @@ def _mapping(doc: Mapping, key: str) -> Mapping:
     return MappingProxyType(dict(value))
 
 
-def _list(doc: Mapping, key: str) -> list:
+def _list(doc: Mapping[str, Any], key: str) -> list[Any]:
     value = doc.get(key)
     if value is None:
         return []
@@ -101,7 +108,7 @@ def _list(doc: Mapping, key: str) -> list:
     return value
 
 
-def _plain(value):
+def _plain(value: Any) -> Any:
     """A value as JSON holds it: mappings as dicts, tuples as lists, dataclasses by to_dict."""
     if hasattr(value, "to_dict"):
         return value.to_dict()
@@ -123,7 +130,7 @@ class Plan:
     step: int
     cause: str | None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"step": self.step, "cause": self.cause}
 
 
@@ -154,7 +161,7 @@ class RobotResult:
         """Whether the averages over robots count it: every robot but a stopped one."""
         return self.stopped_step is None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             "finish_step": self.finish_step,
             "crashed": self.crashed,
@@ -166,7 +173,7 @@ class RobotResult:
         }
 
     @classmethod
-    def from_dict(cls, name: str, doc) -> RobotResult:
+    def from_dict(cls, name: str, doc: object) -> RobotResult:
         if not isinstance(doc, Mapping):
             raise ResultError(f"robot {name} is not an object")
         plans = doc.get("plans") or []
@@ -210,20 +217,20 @@ class ResultConfig:
     medium: str = DEFAULT_MEDIUM  # from `extra`
     wifi_standard: str | None = None  # ns3-wifi only (None: the run did not say)
     wifi_rate: str | None = None  # ns3-wifi only; "" is the standard's fastest
-    extra: Mapping = field(default_factory=lambda: _EMPTY)  # the rest of config.json
+    extra: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)  # the rest of config.json
 
     @property
     def map_name(self) -> str:
         """The map's file stem, or "empty" for the empty terrain."""
         return "empty" if not self.map else Path(self.map).stem
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         out = {k: getattr(self, k) for k in CONFIG_KEYS}
         out["extra"] = _plain(self.extra)
         return out
 
     @classmethod
-    def from_config(cls, config: Mapping) -> ResultConfig:
+    def from_config(cls, config: Mapping[str, Any]) -> ResultConfig:
         """From config.json's contents (a run's whole configuration): the contract's keys,
         and everything else under `extra`."""
         doc = {k: config[k] for k in CONFIG_KEYS}
@@ -231,7 +238,7 @@ class ResultConfig:
         return cls.from_dict(doc)
 
     @classmethod
-    def from_dict(cls, c: Mapping) -> ResultConfig:
+    def from_dict(cls, c: Mapping[str, Any]) -> ResultConfig:
         """From result.json's `config` (or a sweep plan's, which keeps everything at the
         top); ResultError when malformed."""
         extra = _mapping(c, "extra")
@@ -265,11 +272,11 @@ class HostStalls:
     stalled_s: float = 0.0
     deadlines_missed: int = 0
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> HostStalls:
+    def from_dict(cls, d: Mapping[str, Any]) -> HostStalls:
         return cls(
             events=_get(d, "events", (int,), 0),
             stalled_s=_get(d, "stalled_s", _NUM, 0.0),
@@ -286,11 +293,11 @@ class Isolated:
     from_step: int
     back_step: int | None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, d) -> Isolated:
+    def from_dict(cls, d: object) -> Isolated:
         if not isinstance(d, Mapping):
             raise ResultError("an 'isolated' entry is not an object")
         return cls(
@@ -327,18 +334,20 @@ class RunResult:
     deadline_miss_fraction_outside_stalls: float = 0.0
     wall_time_s: float | None = None
     step_loop_wall_s: float | None = None
-    wall_parts_s: Mapping = field(default_factory=lambda: _EMPTY)
+    wall_parts_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
     world_priority: str | None = None
     step_core: str | None = None
-    display: Mapping = field(default_factory=lambda: _EMPTY)
-    world_timing_s: Mapping = field(default_factory=lambda: _EMPTY)
-    world_missed_steps_ms_late: tuple = ()
+    display: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    world_timing_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    world_missed_steps_ms_late: tuple[Any, ...] = ()
     robots: tuple[RobotResult, ...] = ()  # in the file's order
-    cpu_s: Mapping = field(default_factory=lambda: _EMPTY)
-    messaging: Mapping | None = None  # the goals' middleware and its counters (None: older)
-    maps: Mapping | None = None  # how maps were shared and the counters (None: older)
-    fidelity: Mapping = field(default_factory=lambda: _EMPTY)  # {} : made before verdicts
-    network_timers: Mapping | None = None
+    cpu_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    messaging: Mapping[str, Any] | None = (
+        None  # the goals' middleware and its counters (None: older)
+    )
+    maps: Mapping[str, Any] | None = None  # how maps were shared and the counters (None: older)
+    fidelity: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)  # {} : made before verdicts
+    network_timers: Mapping[str, Any] | None = None
 
     # -- what code asks of it
 
@@ -349,7 +358,8 @@ class RunResult:
 
     @property
     def fidelity_reason(self) -> str:
-        return self.fidelity.get("reason", "")
+        reason: str = self.fidelity.get("reason", "")
+        return reason
 
     @property
     def network_faithful(self) -> bool | None:
@@ -358,7 +368,8 @@ class RunResult:
 
     @property
     def network_reason(self) -> str:
-        return (self.fidelity.get("network") or {}).get("reason", "")
+        reason: str = (self.fidelity.get("network") or {}).get("reason", "")
+        return reason
 
     @property
     def tcp_in_emulated_time(self) -> bool:
@@ -379,8 +390,8 @@ class RunResult:
         display, world, routing) over the wall seconds of its step loop (wall_parts_s'
         `steps`). What a sweep packs runs by (testbed.sweep.cores). None when the file
         lacks either (older runs, a run that never stepped)."""
-        cpu = [self.cpu_s.get(part) for part in CPU_PARTS]
-        cpu = [s for s in cpu if isinstance(s, int | float) and not isinstance(s, bool)]
+        given = [self.cpu_s.get(part) for part in CPU_PARTS]
+        cpu = [s for s in given if isinstance(s, int | float) and not isinstance(s, bool)]
         wall = self.wall_parts_s.get("steps")
         if not cpu or not isinstance(wall, int | float) or isinstance(wall, bool) or wall <= 0:
             return None
@@ -414,16 +425,17 @@ class RunResult:
         if not counted:
             return None
         values = [r.finish_step if r.finish_step is not None else self.steps for r in counted]
-        if any(v is None for v in values):
+        known = [v for v in values if v is not None]
+        if len(known) < len(values):
             return None
-        return statistics.fmean(values)
+        return statistics.fmean(known)
 
     def robots_by_number(self) -> list[RobotResult]:
         return sorted(self.robots, key=lambda r: r.number)
 
     # -- the file
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         """The file's contents, keys in the file's order."""
         out = {
             f.name: _plain(getattr(self, f.name))
@@ -439,7 +451,7 @@ class RunResult:
         write_json_atomic(str(result_path(run_dir)), self.to_json())
 
     @classmethod
-    def from_json(cls, source: str | Path | Mapping) -> RunResult:
+    def from_json(cls, source: str | Path | Mapping[str, Any]) -> RunResult:
         """From result.json's contents (a mapping), or from a run directory or the file
         itself (a path); ResultError (one line, naming the file) when it is missing, not
         JSON or malformed."""
@@ -469,7 +481,7 @@ class RunResult:
             return None
 
     @classmethod
-    def _parse(cls, doc) -> RunResult:
+    def _parse(cls, doc: object) -> RunResult:
         if not isinstance(doc, Mapping):
             raise ResultError("not a JSON object")
         c = _mapping(doc, "config")

@@ -185,12 +185,12 @@ class Forked:
 
     def wait(self, timeout: float | None = None) -> int:
         deadline = None if timeout is None else time.monotonic() + timeout
-        while self.poll() is None:
+        while (code := self.poll()) is None:
             left = 0.1 if deadline is None else deadline - time.monotonic()
-            if left <= 0:
+            if left <= 0 and timeout is not None:  # (only with a deadline)
                 raise subprocess.TimeoutExpired(f"pid {self.pid}", timeout)
             self.server.collect(min(0.1, left))
-        return self.returncode
+        return code
 
     def send_signal(self, sig: int) -> None:
         if self.returncode is None:

@@ -47,7 +47,7 @@ class LineBuffer:
     def end(self) -> list[bytes | None]:
         """At the end of the stream: its last line if that had no newline (exactly that
         line, once), else nothing."""
-        last = [] if self._skipping or not self._part else [bytes(self._part)]
+        last: list[bytes | None] = [] if self._skipping or not self._part else [bytes(self._part)]
         self._part.clear()
         self._skipping = False
         return last

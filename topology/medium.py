@@ -203,6 +203,7 @@ class Medium:
             netns.write_sysctl("net.ipv6.conf.default.disable_ipv6", 1)
             netns.write_sysctl("net.ipv6.conf.all.disable_ipv6", 1)
 
+        assert self.worker is not None  # open() came first
         self.worker.call(work)
         self._send([(rtnl.link(LO_INDEX, up=True), "medium: lo up")])
 
@@ -217,6 +218,7 @@ class Medium:
         batch = rtnl.Batch()
         for req, what in requests:
             batch.add(req, what)
+        assert self.worker is not None  # open() came first
         batch.send(self.worker.nl)
 
     # -- robots -----------------------------------------------------------------------------
@@ -288,6 +290,7 @@ class Medium:
         this is called; the check is one dump, parsed by topology.rtnl in a few ms, or for a
         few ends (a feed's new links) a request per end."""
         deadline = time.monotonic() + timeout
+        assert self.worker is not None  # open() came first
         while True:
             if len(indices) <= ASK_PORTS_UP_TO:  # a few: ask for them, not the thousands
                 ports = rtnl.port_states(self.worker.nl, indices)
@@ -326,6 +329,7 @@ class Medium:
 
     def set_link_impairment(self, i: int, j: int, imp: Impairment) -> None:
         """Apply `imp` to both directions of link i-j."""
+        assert self.impairer is not None  # open() came first
         self.impairer.apply(names.link_end(i, j), imp)
         self.impairer.apply(names.link_end(j, i), imp)
 
@@ -333,6 +337,7 @@ class Medium:
         """The links as the kernel has them: pairs (i, j), i < j, whose near end forwards.
         Also records which veth pairs exist, for a process that attaches to the testbed."""
         pairs, up = set(), set()
+        assert self.worker is not None  # open() came first
         for name, port_state, _ in rtnl.bridge_ports(self.worker.nl).values():
             parsed = names.parse_link_end(name)
             if parsed and parsed[0] < parsed[1]:

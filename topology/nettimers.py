@@ -152,7 +152,11 @@ class NetworkTimers:
 
     def writes(self) -> list[tuple[str, int]]:
         """(sysctl, value) to write in each robot namespace; none at time scale 1."""
-        return [(s.key, s.value) for s in self.settings if s.status in (DILATED, LIMITED)]
+        return [
+            (s.key, s.value)
+            for s in self.settings
+            if s.status in (DILATED, LIMITED) and s.value is not None
+        ]
 
     @property
     def tcp_dilated(self) -> bool:
@@ -189,7 +193,12 @@ class NetworkTimers:
         ok = [s.name for s in self.settings if s.status == DILATED]
         rto = self.setting("tcp_rto_min")
         head = f"network timers at time scale {self.time_scale:g}: {len(ok)} dilated"
-        if rto is not None and rto.status == DILATED:
+        if (
+            rto is not None
+            and rto.status == DILATED
+            and rto.value is not None
+            and rto.emulated is not None
+        ):
             head += (
                 f" (TCP's RTO floor {rto.value / 1000:g} ms: {rto.emulated / 1000:.0f} emulated)"
             )

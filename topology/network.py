@@ -37,11 +37,11 @@ from dataclasses import asdict
 from common.errors import TestbedError, UsageError
 from common.jsonfile import write_json_atomic
 from topology import capture, names, netns, processes, ranges, routing, state
-from topology.forkserver import ForkServer, ForkServerError, python_env
+from topology.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.impair import MissingKernelFeature
 from topology.los import MapError, Walls
 from topology.medium import WLAN_INDEX
-from topology.ns3medium import medium_for
+from topology.ns3medium import Ns3Medium, medium_for
 from topology.oracle import OracleRouter
 from topology.spec import (
     LOS_MODELS,
@@ -150,6 +150,7 @@ class Network:
         self.medium.open()
         self.medium.setup()
         if not self.spec.impairment.is_none:
+            assert self.medium.impairer is not None  # open() made it
             try:
                 self.medium.impairer.check(self.spec.impairment)
             except MissingKernelFeature as exc:
@@ -168,7 +169,7 @@ class Network:
             made.result()
         self.medium.add_robot_ports(robots)
         self.medium.configure_robots(robots)
-        if self.spec.medium == "ns3-wifi":
+        if isinstance(self.medium, Ns3Medium):  # spec.medium == "ns3-wifi"
             self.adopt_host_process(self.medium.start(self.positions), "ns3-wifi")
         self._apply_positions()
         if self.spec.routing == "oracle":
@@ -192,6 +193,7 @@ class Network:
 
     def _start_captures(self) -> None:
         cdir = self.spec.capture_dir
+        assert cdir is not None  # called only with one
         os.makedirs(cdir, exist_ok=True)
         # What the captures are of (the routing protocol, for `testbed metrics`), next to the
         # daemons' logs that teardown keeps (_keep_logs).
@@ -221,7 +223,8 @@ class Network:
             if argv is None:
                 continue
             logp = routing.log_file(self.spec.routing, k, self.state_dir)
-            if self._routing_forks is not None:  # started in _build iff `forkable`
+            proc: Forked | subprocess.Popen
+            if forkable is not None and self._routing_forks is not None:  # started iff forkable
                 open(logp, "w").close()  # the child appends
                 args = forkable.args(k, self.state_dir, self.spec)
                 try:
@@ -268,6 +271,7 @@ class Network:
             return
         with state.locked(self.name):
             self.state = state.read(self.name) or self.state
+            assert self.state is not None  # up() or attach() made it
             self.state.processes.extend(records)
             state.write(self.name, self.state)
 
@@ -357,6 +361,7 @@ class Network:
         if i == j:
             raise UsageError("a link joins two different robots")
         pair = (min(i, j), max(i, j))
+        assert self.medium.impairer is not None  # the medium is open while we are up
         try:
             self.medium.impairer.check(imp)
         except MissingKernelFeature as exc:
@@ -381,7 +386,7 @@ class Network:
         return self._moved()
 
     def _apply_positions(self, moved: set[int] | None = None) -> tuple[list[Pair], list[Pair]]:
-        if self.spec.medium == "ns3-wifi":
+        if isinstance(self.medium, Ns3Medium):  # spec.medium == "ns3-wifi"
             self.medium.set_positions(self.positions)  # the channel decides who hears whom
         if moved is not None and self.spec.range_model in ("disc", "lossy") and not self.isolated:
             add, remove, change, wanted = self._diff_moved(moved)
@@ -400,7 +405,9 @@ class Network:
             self.oracle.update(self.current)  # routes in place before the move returns
         return add, remove
 
-    def _diff_moved(self, moved: set[int]):
+    def _diff_moved(
+        self, moved: set[int]
+    ) -> tuple[list[Pair], list[Pair], list[Pair], dict[Pair, Impairment]]:
         """What a move of `moved` changes, in O(links of the moved robots), with self.current
         updated in place: only links of a robot that moved can change under the distance
         models. A feed of single moves at 1000 robots would otherwise pay for every link
@@ -484,10 +491,9 @@ class Network:
         if st is None:
             return
         self._state_mtime = mtime
-        self.positions = [tuple(p) for p in st.positions]
+        self.positions = [(x, y) for x, y in st.positions]
         self.link_impairments = {
-            tuple(int(k) for k in key.split("-")): Impairment(**fields)
-            for key, fields in st.link_impairments.items()
+            _pair(key): Impairment(**fields) for key, fields in st.link_impairments.items()
         }
         self._range_cache = None
         self.current = self.wanted()
@@ -505,6 +511,8 @@ class Network:
     def _save(self) -> None:
         with state.locked(self.name):
             st = state.read(self.name) or self.state
+            assert st is not None and self.state is not None  # up() or attach() made it
+            assert self.medium.impairer is not None  # the medium is open while we are up
             st.positions = [list(p) for p in self.positions]
             st.link_impairments = {
                 f"{i}-{j}": asdict(imp) for (i, j), imp in self.link_impairments.items()
@@ -526,12 +534,12 @@ class Network:
         net = cls(state.spec_from_dict(st.spec), persistent=st.persistent)
         net.state = st
         net._state_mtime = _mtime(name)
-        net.positions = [tuple(p) for p in st.positions]
+        net.positions = [(x, y) for x, y in st.positions]
         net.link_impairments = {
-            tuple(int(k) for k in key.split("-")): Impairment(**fields)
-            for key, fields in st.link_impairments.items()
+            _pair(key): Impairment(**fields) for key, fields in st.link_impairments.items()
         }
         net.medium.open()
+        assert net.medium.impairer is not None  # open() made it
         net.medium.impairer.have = {k: Impairment(**v) for k, v in st.applied.items()}
         kernel = net.medium.kernel_links()
         wanted = net.wanted()
@@ -625,6 +633,12 @@ def _mtime(name: str) -> int | None:
         return os.stat(state.state_path(name)).st_mtime_ns
     except FileNotFoundError:
         return None
+
+
+def _pair(key: str) -> Pair:
+    """A link of the state file's `link_impairments` ("i-j") as a pair."""
+    i, j = key.split("-")
+    return int(i), int(j)
 
 
 def _keep_logs(name: str, st: state.TestbedState | None) -> None:

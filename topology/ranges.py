@@ -74,8 +74,8 @@ def wanted_links(
     if model not in ("disc", "lossy", "los", "los-lossy"):
         raise ValueError(f"unknown range model {model!r}")
     if model in LOS_MODELS:
-        links = wanted_links(positions, comm_range, "lossy" if model == "los-lossy" else "disc")
-        return _through_walls(links, positions, walls, wall_loss_pct) if walls else links
+        near = wanted_links(positions, comm_range, "lossy" if model == "los-lossy" else "disc")
+        return _through_walls(near, positions, walls, wall_loss_pct) if walls else near
     links: dict[tuple[int, int], Impairment] = {}
     for i, j in _candidates(positions, comm_range):
         d = math.hypot(positions[i][0] - positions[j][0], positions[i][1] - positions[j][1])
@@ -94,7 +94,8 @@ def _near(xy: np.ndarray, rows: np.ndarray, comm_range: float) -> tuple[np.ndarr
     dx *= dx
     dy *= dy
     dx += dy
-    return np.nonzero(dx <= (comm_range * (1 + 1e-9) + 1e-9) ** 2)
+    row, col = np.nonzero(dx <= (comm_range * (1 + 1e-9) + 1e-9) ** 2)
+    return row, col
 
 
 def _candidates(positions, comm_range: float):

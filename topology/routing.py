@@ -171,7 +171,7 @@ def keep_daemon_files(
         src = log_file(routing, k, run_dir)
         if os.path.exists(src):
             shutil.copy(src, os.path.join(logs_dir, os.path.basename(src)))
-        if stats and os.path.exists(stats(k, run_dir)):
+        if stats and stats_dir and os.path.exists(stats(k, run_dir)):
             shutil.copy(stats(k, run_dir), os.path.join(stats_dir, f"r{k}.json"))
 
 

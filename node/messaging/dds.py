@@ -73,7 +73,7 @@ LEASE_PER_RECONNECT_MAX = 4  # as node.messaging.zenoh: 2 s at time scale 1
 class GoalSample(IdlStruct, typename="tb::GoalSample"):
     dst: int32
     src: int32
-    payload: sequence[uint8]
+    payload: sequence[uint8]  # type: ignore[type-arg]  # an IDL type, subscripted at runtime
 
 
 def partition_of(k: int) -> str:
@@ -284,7 +284,8 @@ class DdsMessenger:
             w = self._writer(j)
             if not has_readers(w):
                 return False
-            w.write(GoalSample(dst=j, src=self.me, payload=data))
+            # the IDL sequence takes bytes at runtime
+            w.write(GoalSample(dst=j, src=self.me, payload=data))  # type: ignore[arg-type]
             return True
         except DDSException as e:
             log.debug("r%d: write to r%d failed: %s", self.me, j, e)

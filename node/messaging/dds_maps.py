@@ -51,7 +51,7 @@ TAKE_BATCH = 16
 class MapSample(IdlStruct, typename="tb::MapSample"):
     src: int32
     key("src")
-    payload: sequence[uint8]
+    payload: sequence[uint8]  # type: ignore[type-arg]  # an IDL type, subscripted at runtime
 
 
 def map_qos(send_timeout_ms: int) -> Qos:
@@ -88,7 +88,8 @@ class DdsMapTopic(MapTopic):
         try:
             if not has_readers(self._writer):
                 return False
-            self._writer.write(MapSample(src=self.me, payload=data))
+            # the IDL sequence takes bytes at runtime
+            self._writer.write(MapSample(src=self.me, payload=data))  # type: ignore[arg-type]
             return True
         except DDSException as e:
             log.debug("r%d: map write failed: %s", self.me, e)

@@ -192,7 +192,8 @@ class ZenohMessenger:
             return False
         try:
             p = self._publisher(j)
-            if not p.matching_status.matching:
+            # zenoh's stub says bool; it is a MatchingStatus
+            if not p.matching_status.matching:  # type: ignore[attr-defined]
                 return False
             p.put(data)
             return True
@@ -230,7 +231,9 @@ class ZenohMessenger:
         self._closed = True
         if self._maps is not None:
             self._maps.undeclare()
-        for e in [self._subscriber, *self._publishers.values()]:
+        entities: list[zenoh.Subscriber[None] | zenoh.Publisher]
+        entities = [self._subscriber, *self._publishers.values()]
+        for e in entities:
             with contextlib.suppress(zenoh.ZError):
                 e.undeclare()
         self._publishers.clear()

@@ -72,7 +72,7 @@ class ZmqSockets:
             self.ctx.term()
             raise OSError(e.errno, f"cannot listen on {bind_addr}:{port}: {e}") from None
         self.listener = _Socket(rx)
-        self._fd = rx.getsockopt(zmq.FD)
+        self._fd: int = rx.getsockopt(zmq.FD)  # type: ignore[assignment]  # FD is an int option
 
     # -- what a subclass says ----------------------------------------------------------------
 

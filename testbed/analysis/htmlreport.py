@@ -73,9 +73,9 @@ def to_html(markdown: str, base: Path) -> str:
             flush()
             level = len(line) - len(line.lstrip("#"))
             out.append(f"<h{level}>{_inline(line[level:].strip())}</h{level}>")
-        elif _IMG.match(line.strip()):
+        elif img := _IMG.match(line.strip()):
             flush()
-            alt, src = _IMG.match(line.strip()).groups()
+            alt, src = img.groups()
             out.append(_image(alt, src, base))
         elif line.startswith("|"):
             flush()

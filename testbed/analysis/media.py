@@ -76,7 +76,7 @@ def phy_of(standard: str | None, rate: str | None) -> tuple[str, float]:
     the standard's fastest. veth runs (no standard) are priced at 802.11a's."""
     family, fastest = STANDARDS.get(standard or DEFAULT_STANDARD, STANDARDS[DEFAULT_STANDARD])
     m = _RATE.search(rate or "")
-    if not m:
+    if not m or rate is None:  # (a match means a rate)
         return family, fastest
     mbps = float(m[1]) + (float(f"0.{m[2]}") if m[2] else 0.0)
     if rate.startswith("Dsss"):

@@ -252,6 +252,7 @@ def middleware_verdict(without: tuple[int, int], failed: tuple[int, int]) -> tup
     if without[1] < MIN_RUNS or failed[1] < MIN_RUNS:
         return TOO_FEW, text + f" (fewer than {MIN_RUNS} runs in a mode)"
     n, f = stats.share_ci(*without), stats.share_ci(*failed)
+    assert n is not None and f is not None  # runs in both modes (MIN_RUNS)
     if n[0] < FINISH_WITHOUT_MIN:
         return UNDECIDED, text + " (the team does not finish reliably even without the failure)"
     if f[0] < STOP_WITH_MAX and stats.separated(n, f):

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from matplotlib.artist import Artist
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
@@ -81,7 +83,7 @@ def _scale_length(width: float) -> float:
     return max(m * base for m in (1, 2, 5) if m * base <= target)
 
 
-def _label(ax, name: str, end: tuple[float, float], size: tuple[float, float], colour) -> None:
+def _label(ax, name: str, end: tuple[float, float], size: Sequence[float], colour) -> None:
     """The robot's name beside its last position, on the side facing the map's middle."""
     right, below = end[0] > size[0] / 2, end[1] > size[1] / 2
     ax.annotate(name, end, textcoords="offset points", xytext=(-6 if right else 6,
@@ -105,6 +107,7 @@ def paths_figure(run: FinishedRun, paths: dict[int, list[tuple[float, float]]]):
     bar = AnchoredSizeBar(ax.transData, length, f"{length:g} m", "lower right", pad=0.4,
                           sep=3, frameon=True, size_vertical=size[1] / 150)  # fmt: skip
     ax.add_artist(bar)
+    handles: list[Artist]
     handles = [Line2D([], [], marker="s", mfc="none", mec="k", ls="none", label="start"),
                Line2D([], [], marker="o", color="k", ls="none", label="end")]  # fmt: skip
     if has_map:

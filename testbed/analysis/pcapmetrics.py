@@ -194,12 +194,13 @@ def parse_fields(text: str) -> list[Frame]:
         f = line.split("\t")
         f += [""] * (len(_FIELDS) + 1 - len(f))
         try:
-            if not f[1]:
+            length = _int(f[1], _U32)
+            if length is None:
                 raise ValueError("no frame length")
             frames.append(
                 Frame(
                     time=_time(f[0]),
-                    length=_int(f[1], _U32),
+                    length=length,
                     eth_src=f[2],
                     eth_dst=f[3],
                     ip_src=f[4],
@@ -263,6 +264,7 @@ def read_pcaps(paths: dict[int, Path], udp_payload: bool = False) -> dict[int, l
             stdout=subprocess.PIPE,
             stderr=merge_err,
         )
+        assert merge.stdout is not None  # stdout=PIPE
         try:
             r = subprocess.run(
                 _tshark_argv("-", udp_payload),
@@ -327,6 +329,7 @@ class _Traffic:
 
     def transmitted(self, f: Frame) -> bool:
         """Note a TCP segment the robot sent as its source; True when it is a new one."""
+        assert f.tcp_len is not None and f.tcp_seq is not None  # the caller checks
         self.tx_payload += f.tcp_len
         key = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport, f.tcp_seq)
         if key in self.sent:
@@ -337,6 +340,7 @@ class _Traffic:
 
     def got(self, f: Frame) -> None:
         """Note a TCP segment the robot received as its destination."""
+        assert f.tcp_len is not None and f.tcp_seq is not None  # the caller checks
         self.rx_payload += f.tcp_len
         flow = (f.ip_src, f.ip_dst, f.tcp_sport, f.tcp_dport)
         seen = self.received[flow].get(f.tcp_seq)
@@ -436,6 +440,7 @@ def _deliveries(
         if lags is not None:
             path = None
             if hit[3] is not None:
+                assert robot_of is not None  # given with lags
                 key = relaylag.packet_key(src, dst, hit[3], 6, hit[4])
                 path = lags.path_lag(key, robot_of[src], robot_of[dst], t_sent, hit[0])
             if path is None:

@@ -167,7 +167,7 @@ def beside_the_rule(points: list[dict[str, dict]]) -> list[str]:
         for by in points:
             a, rivals = by.get("aodv"), [by[p] for p in PROACTIVE if p in by]
             values = [r.get(key) for r in rivals] + [a.get(key) if a else None]
-            if not rivals or any(v is None for v in values):
+            if not rivals or a is None or any(v is None for v in values):
                 continue
             total += 1
             wins += all(sign * (a[key] - r[key]) > 0 for r in rivals)

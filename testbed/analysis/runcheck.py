@@ -94,7 +94,7 @@ def step_clock(out: str) -> list[float]:
 def causality_violations(out: str, slack: int = 2) -> tuple[int, list[dict]]:
     """(messages checked, messages that had no time-respecting path from their sender)."""
     result = RunResult.from_json(out)
-    robots, steps = result.config.robots, int(result.steps)
+    robots, steps = result.config.robots, int(result.steps or 0)  # (None: it never stepped)
     sets = links_by_step(out, steps + slack + 1)
     evs = received(out, robots)
     clock = step_clock(out)

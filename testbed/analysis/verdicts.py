@@ -43,6 +43,7 @@ decided on the means alone say so in their evidence when a point rests on one ru
 from __future__ import annotations
 
 import statistics
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -98,7 +99,7 @@ def _f(x: float) -> str:
     return f"{x:g}"
 
 
-def _overall(results: list[bool | None]) -> str:
+def _overall(results: Sequence[bool | None]) -> str:
     """The claim over its groups' results (None: undecided, too few runs)."""
     if not results:
         return NO_DATA
@@ -161,7 +162,7 @@ def verdict_team_beats_one(fig2: list[dict]) -> Verdict:
         teams = {n: s for n, s in pts.items() if n > 1}
         ok = all(s < pts[1] for s in teams.values())
         results.append(ok)
-        worst = max(teams, key=teams.get)
+        worst = max(teams, key=lambda n: teams[n])
         v.evidence.append(
             f"{_group_name(laser, comm)}: 1 robot {pts[1]:.0f} steps; teams of "
             f"{min(teams)}-{max(teams)}: {min(teams.values()):.0f}-{max(teams.values()):.0f} "
@@ -177,11 +178,12 @@ def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
     """Noise-aware: the rise from the fewest steps to the largest team must exceed the spread
     of the runs (their 95% intervals do not overlap; testbed.analysis.ablation.rise)."""
     v = Verdict("5.1", "Exploration steps fall, then rise again as the team grows", NO_DATA)
-    results = []
+    results: list[bool | None] = []
     for (laser, comm), pts in sorted(_rows(fig2).items()):
         if len(pts) < 3:
             continue
         few = _few(pts.values())
+        ok: bool | None
         ok, why = ablation.rise(pts)
         note = ""
         if few:
@@ -252,7 +254,8 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     by: dict[tuple, dict[float, dict]] = {}
     for r in fig2:
         by.setdefault((r["comm_range"], r["robots"]), {})[r["laser_range"]] = r
-    more, pairs_by_range = [], {}
+    more: list[bool] = []
+    pairs_by_range: dict[float, list[tuple[dict, dict]]] = {}
     for (comm, _robots), pts in sorted(by.items()):
         if short in pts and long_ in pts:
             more.append(pts[short]["mean"] > pts[long_]["mean"])

@@ -35,6 +35,7 @@ import sys
 import textwrap
 import time
 import uuid
+from typing import IO
 
 from aodv.stats import read_fresh
 from testbed.bench.common import median, write
@@ -95,6 +96,12 @@ def _wait_ready(net: Network, n: int) -> None:
         time.sleep(0.05)
 
 
+def _pipe(f: IO[str] | None) -> IO[str]:
+    """A helper's pipe (spawned with it)."""
+    assert f is not None
+    return f
+
+
 def _stats(net: Network, k: int) -> dict:
     return read_fresh(f"{net.state_dir}/r{k}.aodv.json", _daemon(net, k))
 
@@ -118,19 +125,19 @@ def discovery_once() -> dict[int, tuple[float, float]]:
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
             )  # fmt: skip
             for proc in [*rx.values(), tx]:
-                if proc.stdout.readline().strip() != "ready":
+                if _pipe(proc.stdout).readline().strip() != "ready":
                     raise RuntimeError("bench helper did not start")
             time.sleep(1.0)  # let the start-up CPU burst pass
             for h in range(1, MAX_HOPS + 1):
                 dst = h + 1
-                tx.stdin.write(f"10.0.0.{dst}\n")
-                tx.stdin.flush()
-                t_tx = float(tx.stdout.readline())
-                ready, _, _ = select.select([rx[dst].stdout], [], [], 30)
+                _pipe(tx.stdin).write(f"10.0.0.{dst}\n")
+                _pipe(tx.stdin).flush()
+                t_tx = float(_pipe(tx.stdout).readline())
+                ready, _, _ = select.select([_pipe(rx[dst].stdout)], [], [], 30)
                 if not ready:
                     log = open(f"{net.state_dir}/r1.aodv.log").read()[-2000:]
                     raise RuntimeError(f"datagram to robot {dst} not delivered; r1 log:\n{log}")
-                first = float(rx[dst].stdout.readline()) - t_tx
+                first = float(_pipe(rx[dst].stdout).readline()) - t_tx
                 time.sleep(0.2)
                 disc = [d for d in _stats(net, 1)["discoveries"] if d["dest"] == f"10.0.0.{dst}"]
                 if not disc or not disc[-1]["ok"]:

@@ -47,16 +47,16 @@ def scenario(params: Params, seed: int) -> tuple[int, int, dict[str, int]]:
         m.links = {(a, b) for a in addrs for b in addrs
                    if a != b and math.dist(pos[a], pos[b]) <= RANGE_M}  # fmt: skip
         if step % 5 == 0:
-            for s, d in flows:
-                m.send_data(s, d)
+            for src, dst in flows:
+                m.send_data(src, dst)
                 sent += 1
         step += 1
         m.run_until(step * DT)
     m.run_until(DURATION_S + 5)
     delivered = sum(len(m.nodes[a].delivered) for a in addrs)
     kinds: dict[str, int] = {}
-    for s in m.log:
-        kinds[s.kind] = kinds.get(s.kind, 0) + 1
+    for msg in m.log:
+        kinds[msg.kind] = kinds.get(msg.kind, 0) + 1
     return sent, delivered, kinds
 
 

@@ -5,6 +5,7 @@ import os
 import platform
 import statistics
 import time
+from collections.abc import Sequence
 
 from testbed import PROJECT_ROOT
 
@@ -12,7 +13,7 @@ REPO = PROJECT_ROOT
 BENCH_DIR = os.path.join(REPO, "results", "bench")
 
 
-def median(values: list[float]) -> float:
+def median(values: Sequence[float]) -> float:
     return statistics.median(values)
 
 

@@ -61,7 +61,7 @@ def _children(pid: int) -> list[int]:
 
 def _threads(pid: int) -> dict[int, tuple[str, float]]:
     """tid -> (comm, CPU seconds) of every thread of pid."""
-    out = {}
+    out: dict[int, tuple[str, float]] = {}
     try:
         tids = os.listdir(f"/proc/{pid}/task")
     except OSError:
@@ -203,6 +203,7 @@ def testbed_run(robots: int, time_scale: float, seed: int, tree: str) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     inside, outside = _split(sampler.samples, proc.pid, t0, t1)
     steps = r.steps
+    assert steps is not None  # the run stepped (it finished)
     robot_steps = steps * robots
     return {
         "robots": robots, "time_scale": time_scale, "seed": seed, "load_at_start": load,

@@ -9,6 +9,7 @@ step budget at time scale 15 is 6.7 ms; the world's own step takes about 1 ms of
 import os
 import random
 import time
+from typing import Any
 
 from testbed import PROJECT_ROOT
 from testbed.bench.common import median, write
@@ -29,7 +30,7 @@ def _walk(walls: Walls, rng: random.Random) -> list[list[tuple[float, float]]]:
             and not (walls.occupied[r, c])
         )
 
-    pos = []
+    pos: list[tuple[float, float]] = []
     while len(pos) < 10:
         p = (rng.uniform(0.5, 19.5), rng.uniform(0.5, 19.5))
         if free(*p):
@@ -53,7 +54,7 @@ def _time(steps, comm_range: float, model: str, walls: Walls | None) -> float:
 def run() -> None:
     walls = Walls.from_png(OFFICE, 0.05)
     steps = _walk(walls, random.Random(1))
-    result = {"robots": 10, "steps": STEPS}
+    result: dict[str, Any] = {"robots": 10, "steps": STEPS}
     for comm in (5.0, 20.0):
         result[f"range_{comm:g}m"] = {
             "disc_us_median": _time(steps, comm, "disc", None),

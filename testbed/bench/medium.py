@@ -17,6 +17,7 @@ import socket
 import sys
 import time
 import uuid
+from typing import Any
 
 from testbed.bench.common import median, write
 from topology import netns
@@ -102,7 +103,7 @@ def link_update(samples: int = 100) -> dict:
 
 
 def run() -> dict:
-    results = {
+    results: dict[str, Any] = {
         "bring_up": [bring_up(10), bring_up(50)],
         "link_update": link_update(),
         "targets": {"bring_up_ms_per_robot_at_50": 15.0, "link_update_ms_median": 2.0},

@@ -25,6 +25,7 @@ import sys
 import tempfile
 import time
 import uuid
+from typing import Any
 
 import numpy as np
 
@@ -122,6 +123,7 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
         destroy(name)
         shutil.rmtree(out, ignore_errors=True)
     wall = r.step_loop_wall_s or 1e-9
+    steps = r.steps or 0
     cpu = [d["cpu_s"] for d in robots if d.get("cpu_s") is not None]
     rss = [d["max_rss_mb"] for d in robots if d.get("max_rss_mb") is not None]
     answer = [d["latency_ms"]["answer"]["p50"] for d in robots if d.get("latency_ms")]
@@ -137,11 +139,11 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
         "deadline_miss_fraction_outside_stalls": r.deadline_miss_fraction_outside_stalls,
         "host_stalls": r.host_stalls.to_dict(),
         "world_cpu_ms_per_step": round(
-            1000 * r.world_timing_s.get("world_cpu_s", 0) / max(1, r.steps), 2
+            1000 * r.world_timing_s.get("world_cpu_s", 0) / max(1, steps), 2
         ),
         # Robot CPU from the fork (the imports were done once, in the fork server).
         "robot_cpu_core_fraction_mean": round(statistics.mean(cpu) / wall, 3) if cpu else None,
-        "robot_cpu_ms_per_step_mean": round(1000 * statistics.mean(cpu) / max(1, r.steps), 2)
+        "robot_cpu_ms_per_step_mean": round(1000 * statistics.mean(cpu) / max(1, steps), 2)
         if cpu
         else None,
         "robot_max_rss_mb": max(rss) if rss else None,
@@ -188,7 +190,7 @@ def scale_search() -> tuple[float | None, list[dict]]:
 
 def run() -> dict:
     sim = simulate_exploration()
-    searches = []
+    searches: list[dict[str, Any]] = []
     for _ in range(SEARCHES):  # a host that steals CPU for a while decides one search alone
         found, found_runs = scale_search()
         searches.append({"max_time_scale_under_1pct_missed": found, "runs": found_runs})

@@ -25,7 +25,7 @@ from testbed.bench.common import median, write
 from topology import netns, state
 from topology.names import robot_ns
 from topology.network import Network
-from topology.ns3medium import binary
+from topology.ns3medium import Ns3Medium, binary
 from topology.spec import NetworkSpec, layout_positions
 
 SECONDS = float(os.environ.get("BENCH_NS3_SECONDS", "10"))
@@ -56,11 +56,13 @@ def measure(robots: int, time_scale: float) -> dict:
     spec = NetworkSpec(name, tuple(positions), 20.0, medium="ns3-wifi", time_scale=time_scale)
     rng = random.Random(1)
     with Network(spec) as net:
-        pid = next(p.pid for p in state.read(name).processes if p.role == "ns3-wifi")
+        st, medium = state.read(name), net.medium
+        assert st is not None and isinstance(medium, Ns3Medium)  # up, on ns3-wifi
+        pid = next(p.pid for p in st.processes if p.role == "ns3-wifi")
         socks = [netns.run_in(robot_ns(name, k), _socket) for k in spec.robot_ids()]
         try:
             period = PERIOD_S / time_scale
-            before = net.medium.counters()
+            before = medium.counters()
             cpu0, t0 = _cpu_s(pid), time.monotonic()
             rtts = []
             next_at = t0
@@ -77,7 +79,7 @@ def measure(robots: int, time_scale: float) -> dict:
             wall = time.monotonic() - t0
             cpu = _cpu_s(pid) - cpu0
             time.sleep(0.2)  # what is still on the air arrives
-            after = net.medium.counters()
+            after = medium.counters()
         finally:
             for s in socks:
                 s.close()

@@ -15,6 +15,7 @@ import random
 import socket
 import time
 import uuid
+from typing import Any
 
 from testbed.bench.common import median, write
 from topology import names, netns, routequery, rtnl
@@ -73,6 +74,8 @@ def keep_up(seed: int = 1) -> dict:
     budget = STEP_S / TIME_SCALE
     update_s, route_s, changed_steps, over = [], [], 0, 0
     with Network(spec) as net:
+        oracle = net.oracle
+        assert oracle is not None  # routing "oracle"
         next_step = time.perf_counter()
         for _ in range(STEPS):
             for k in range(10):
@@ -88,11 +91,11 @@ def keep_up(seed: int = 1) -> dict:
             if added or removed:
                 changed_steps += 1
                 update_s.append(dt)
-                route_s.append(net.oracle.last_update_s)
+                route_s.append(oracle.last_update_s)
                 over += dt > budget
             next_step += budget
             time.sleep(max(0.0, next_step - time.perf_counter()))
-        updates = net.oracle.updates
+        updates = oracle.updates
 
     def p95(xs: list[float]) -> float:
         return sorted(xs)[int(0.95 * (len(xs) - 1))] if xs else 0.0
@@ -115,7 +118,11 @@ def keep_up(seed: int = 1) -> dict:
 
 
 def run() -> None:
-    result = {"reroute": reroute(), "keep_up": keep_up(), "load_avg": list(_loadavg())}
+    result: dict[str, Any] = {
+        "reroute": reroute(),
+        "keep_up": keep_up(),
+        "load_avg": list(_loadavg()),
+    }
     write("oracle", result)
     r, k = result["reroute"], result["keep_up"]
     print(

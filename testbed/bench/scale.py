@@ -29,6 +29,7 @@ import socket
 import threading
 import time
 import uuid
+from typing import Any
 
 from testbed.bench.common import median, write
 from topology import feed, names, netns
@@ -130,6 +131,7 @@ def aodv(n: int = 500) -> dict:
     net.up()
     up_s = time.perf_counter() - t0
     try:
+        assert net.state is not None  # up() made it
         pids = [p.pid for p in net.state.processes if p.role == "aodv"]
         hz = os.sysconf("SC_CLK_TCK")
         before = sum(_cpu_ticks(p) for p in pids)
@@ -218,7 +220,7 @@ def feed_rate(n: int = 1000) -> dict:
 
 
 def run() -> None:
-    data = {"bring_up": [bring_up(n) for n in (100, 500, 1000)]}
+    data: dict[str, Any] = {"bring_up": [bring_up(n) for n in (100, 500, 1000)]}
     for row in data["bring_up"]:
         print(f"  {row['robots']} robots: {row['up_ms_per_robot']} ms/robot, "
               f"up {row['up_s']} s, down {row['down_s']} s")  # fmt: skip

@@ -48,7 +48,8 @@ def one(view: bool) -> tuple[float, int]:
     cfg = RunConfig(robots=3, comm_range=10.0, laser_range=2.0, seed=3, time_scale=10.0,
                     routing="aodv", max_steps=3000,
                     view=f"127.0.0.1:{port}" if view else None)  # fmt: skip
-    stop, frames = threading.Event(), []
+    stop = threading.Event()
+    frames: list[int] = []
     reader = threading.Thread(target=_reader, args=(port, stop, frames), daemon=True)
     if view:
         reader.start()

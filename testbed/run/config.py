@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import re
+from collections.abc import Set
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -317,6 +318,6 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     return cfg
 
 
-def to_argv(cfg: RunConfig, always: set[str] = frozenset()) -> list[str]:
+def to_argv(cfg: RunConfig, always: Set[str] = frozenset()) -> list[str]:
     """`testbed run` arguments that give back `cfg` (without --out): see runoptions.to_argv."""
     return runoptions.to_argv(cfg, OPTIONS, always)

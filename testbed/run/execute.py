@@ -55,6 +55,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from common.errors import TestbedError
 from common.jsonfile import write_json_atomic
@@ -72,7 +73,13 @@ from testbed.run.progress import ProgressLine, summary_line
 from testbed.run.record import RobotRecord, RunRecord, WallParts
 from testbed.run.stepclock import StepClock, StepTiming, no_clock
 from testbed.world.bodylink import BodyServer
-from topology.forkserver import ForkServer, ForkServerError, python_env
+from topology.forkserver import Forked, ForkServer, ForkServerError, python_env
+
+if TYPE_CHECKING:  # imported where they are needed: the view's web server is not light
+    import numpy as np
+
+    from testbed.view.live import LiveServer
+    from topology.network import Network
 
 log = logging.getLogger(__name__)
 
@@ -141,11 +148,11 @@ def run(
 class Started:
     """What `Run.start()` brought up; the ExitStack it was given takes it down."""
 
-    net: object  # topology.network.Network
+    net: Network
     server: BodyServer
     files: RunFiles
-    display_proc: subprocess.Popen
-    live: object | None  # --view: testbed.view.live.LiveServer
+    display_proc: Forked
+    live: LiveServer | None  # --view
 
     @property
     def network_timers(self) -> dict | None:
@@ -217,7 +224,7 @@ class Run:
         stack.callback(server.close)
         files.links(0, net.links())
 
-        def spawn(k: int, role: str, args: NodeArgs, log_path: str) -> subprocess.Popen:
+        def spawn(k: int, role: str, args: NodeArgs, log_path: str) -> Forked:
             with open(log_path, "w"):
                 pass  # the child appends: the log starts empty
             title = f"r{k} {role}"
@@ -237,7 +244,7 @@ class Run:
         live = self._start_view(stack, net) if self.cfg.view else None
         return Started(net, server, files, display, live)
 
-    def _start_view(self, stack: contextlib.ExitStack, net):
+    def _start_view(self, stack: contextlib.ExitStack, net: Network) -> LiveServer:
         """--view: the live page (testbed.view.live), fed from the step loop's own records."""
         from testbed.view.live import KernelRoutes, LiveFeed, LiveServer, RobotEvents
 
@@ -260,6 +267,7 @@ class Run:
                 {k: prep.path("robots", f"r{k}.events.jsonl") for k in range(1, self.n + 1)}
             )
             feed = LiveFeed(meta, routes, prep.out, stats, events)
+            assert self.cfg.view is not None  # called only with --view
             live = LiveServer(feed, self.cfg.view, self.cfg.map)
         except OSError as e:
             raise TestbedError(
@@ -269,7 +277,7 @@ class Run:
         print(f"live view: http://{live.host}:{live.port}/", file=sys.stderr)
         return live
 
-    def _node_args(self, k: int, server: BodyServer, **role: object) -> NodeArgs:
+    def _node_args(self, k: int, server: BodyServer, **role: Any) -> NodeArgs:
         """What robot k's process is told: the run's parameters plus its role's own."""
         cfg, truth = self.cfg, self.prep.truth
         passed = {name: getattr(cfg, name) for name in run_params()}  # same names both sides
@@ -283,12 +291,12 @@ class Run:
             events=prep.path("display", "events.jsonl"), snapshots=frozenset(prep.snapshots),
         )  # fmt: skip
 
-    def _wait_connected(self, server: BodyServer, display, timeout: float) -> None:
+    def _wait_connected(self, server: BodyServer, display: Forked, timeout: float) -> None:
         """Until every robot and the display said hello; TestbedError when one died first or
         the time ran out."""
         robots, display_k = self.robots, self.prep.display_k
         deadline = time.monotonic() + timeout
-        procs = [r.proc for r in robots.values()] + [display]
+        procs = [r.process for r in robots.values()] + [display]
         while time.monotonic() < deadline:
             server.wait_for(set(robots), {display_k}, timeout=0.2)
             if set(robots) <= set(server.robots) and display_k in server.displays:
@@ -298,10 +306,10 @@ class Run:
         missing = sorted(set(robots) - set(server.robots))
         if not missing and display_k in server.displays:
             return
-        dead = [k for k in robots if robots[k].proc.poll() is not None]
+        dead = [k for k in robots if robots[k].process.poll() is not None]
         raise TestbedError(
             f"robot processes did not connect to the world: {missing or 'display'}"
-            + (f" (r{dead[0]} exited with {robots[dead[0]].proc.returncode})" if dead else "")
+            + (f" (r{dead[0]} exited with {robots[dead[0]].process.returncode})" if dead else "")
         )
 
     # -- finish -------------------------------------------------------------------------------
@@ -314,13 +322,13 @@ class Run:
                 server.send(k, body.END)
         server.send(self.prep.display_k, body.END, True)
         deadline = time.monotonic() + END_GRACE_S
-        live = [r.proc for r in self.robots.values() if not r.gone] + [started.display_proc]
+        live = [r.process for r in self.robots.values() if not r.gone] + [started.display_proc]
         for p in live:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 p.wait(timeout=max(0.1, deadline - time.monotonic()))
         for r in self.robots.values():
             if not r.crashed:
-                r.exit_status = r.proc.poll()
+                r.exit_status = r.process.poll()
         self.parts.mark("processes_ended")
 
     def _keep_routing_files(self, net) -> None:
@@ -375,7 +383,7 @@ class StepLoop:
         self.timing = StepTiming()
         self.progress = ProgressLine(progress, prep.cfg.max_steps, self.n)
         self.positions: list = []  # the robots' positions at the last step
-        self.scans = [self.world.scan(i) for i in range(self.n)]
+        self.scans: list[np.ndarray | None] = [self.world.scan(i) for i in range(self.n)]
         self.cpu0 = time.process_time()
         self.clock = StepClock(prep.cfg.time_scale, self.n, time.monotonic())
 
@@ -482,7 +490,7 @@ class StepLoop:
             if r.gone:  # it died unasked before: a crash, as recorded
                 continue
             with contextlib.suppress(ProcessLookupError):
-                os.kill(r.proc.pid, signal.SIGKILL)
+                os.kill(r.process.pid, signal.SIGKILL)
             r.stop(step)
             self.world.bodies[k - 1].alive = False
             self.files.event(step, "stopped", k)
@@ -490,8 +498,8 @@ class StepLoop:
 
     def _notice_crashes(self, step: int) -> None:
         for k, r in self.robots.items():
-            if not r.gone and r.proc.poll() is not None:
-                r.died(step, r.proc.returncode)
+            if not r.gone and r.process.poll() is not None:
+                r.died(step, r.process.returncode)
                 self.world.bodies[k - 1].alive = False
                 log.warning("r%d exited with status %s at step %d", k, r.exit_status, step)
 
@@ -528,8 +536,9 @@ def over(robots: list[RobotRecord], step: int, max_steps: int) -> tuple[str, str
     step cap."""
     live = [r for r in robots if not r.gone]
     stopped = [r for r in robots if r.stopped_step is not None]
-    if live and all(r.finish_step is not None for r in live):
-        last = max(r.finish_step for r in live)
+    finished = [r.finish_step for r in live if r.finish_step is not None]
+    if live and len(finished) == len(live):
+        last = max(finished)
         if not stopped:
             return "complete", f"all robots finished by step {last}"
         return "complete", f"the robots not stopped finished by step {last}; " + ", ".join(

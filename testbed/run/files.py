@@ -21,9 +21,13 @@ import csv
 import json
 import os
 import shutil
+from typing import TYPE_CHECKING, TextIO
 
 from common.errors import UsageError
 from testbed.resultfile import RESULT_NAME
+
+if TYPE_CHECKING:
+    import _csv
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by
 # the robot processes (robots/).
@@ -73,10 +77,14 @@ class RunFiles:
         self.robots = robots
         self._files: list = []
         self._frames: list[float] = []  # CLOCK_MONOTONIC of each step's frames (clock.csv)
-        self._links = self._coverage = self._positions = self._events = None
+        # Opened by __enter__:
+        self._links: _csv.Writer
+        self._coverage: _csv.Writer
+        self._positions: _csv.Writer
+        self._events: TextIO
 
     def __enter__(self) -> RunFiles:
-        def writer(name: str, header: list[str]):
+        def writer(name: str, header: list[str]) -> _csv.Writer:
             f = open(os.path.join(self.out, name), "w", newline="")  # noqa: SIM115 (closed in __exit__)
             self._files.append(f)
             w = csv.writer(f)

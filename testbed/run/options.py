@@ -24,11 +24,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Set
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from common.argtypes import number
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 GRID = "grid"  # a sweep file may vary the option in [grid]
 RUN = "run"  # a sweep file may fix the option in [run]
@@ -82,6 +85,13 @@ class Option:
     grid: GridDim | None = None  # with sweep={GRID}: how it varies in a sweep
 
     @property
+    def grid_dim(self) -> GridDim:
+        """`grid` of an option a sweep may vary (options() holds that each has one)."""
+        if self.grid is None:
+            raise TypeError(f"option {self.name} is not a grid dimension")
+        return self.grid
+
+    @property
     def flag(self) -> str:
         return self.cli or "--" + self.name.replace("_", "-")
 
@@ -110,14 +120,14 @@ class Option:
         return " and ".join(parts)
 
 
-def option(kind: type, help: str, default: Any = dataclasses.MISSING, **kw) -> Any:
+def option(kind: type, help: str, default: Any = dataclasses.MISSING, **kw: Any) -> Any:
     """A RunConfig field that is a run option (see the module docstring); no default: the
     option is required."""
     meta = {"option": {"kind": kind, "help": help, **kw}}
     return dataclasses.field(default=default, metadata=meta)
 
 
-def options(config_class) -> tuple[Option, ...]:
+def options(config_class: type[DataclassInstance]) -> tuple[Option, ...]:
     """The run options of `config_class` (RunConfig), in field order."""
     out = []
     for f in dataclasses.fields(config_class):
@@ -142,23 +152,22 @@ def _argtype(opt: Option) -> Callable[[str], Any]:
     if opt.kind in (int, float):
         check = number(opt.kind, opt.flag.lstrip("-").replace("-", " "),
                        minimum=opt.minimum, above=opt.above)  # fmt: skip
-        if opt.maximum is None:
+        maximum = opt.maximum
+        if maximum is None:
             return check
 
-        def bounded(text: str):
+        def bounded(text: str) -> int | float:
             value = check(text)
-            if value > opt.maximum:
+            if value > maximum:
                 what = opt.flag.lstrip("-").replace("-", " ")
-                raise argparse.ArgumentTypeError(
-                    f"{what} must be at most {opt.maximum:g}, not {text}"
-                )
+                raise argparse.ArgumentTypeError(f"{what} must be at most {maximum:g}, not {text}")
             return value
 
         return bounded
     return str
 
 
-def add_option(parser: argparse.ArgumentParser, opt: Option, **override) -> None:
+def add_option(parser: argparse.ArgumentParser, opt: Option, **override: Any) -> None:
     """One option as an argument of `parser` (dest: the field's name)."""
     kw: dict[str, Any] = {"dest": opt.name, "help": opt.help_text()}
     if opt.kind is bool:
@@ -208,7 +217,9 @@ def _word(opt: Option, value: Any) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def to_argv(config, opts: tuple[Option, ...], always: set[str] = frozenset()) -> list[str]:
+def to_argv(
+    config: DataclassInstance, opts: tuple[Option, ...], always: Set[str] = frozenset()
+) -> list[str]:
     """The arguments that parse back into `config`: each option whose value is not its
     default, and those named in `always` (unless None or off)."""
     argv: list[str] = []

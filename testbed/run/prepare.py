@@ -88,7 +88,8 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     laser = Laser(cfg.laser_range, cfg.laser_rays, truth.cell)
     world = World(truth, starts, laser, free_space(truth, starts), cfg.speed, cfg.radius)
     w_m, h_m = truth.size_m
-    display_pos = tuple(cfg.display_pos or (w_m / 2, h_m / 2))
+    x, y = cfg.display_pos or (w_m / 2, h_m / 2)
+    display_pos = (x, y)
     spec = _network_spec(cfg, name, tuple(starts) + (display_pos,), out)
     check_machine(spec)
     if cfg.view:

@@ -45,8 +45,9 @@ class ProgressLine:
 
 def summary_line(result: RunResult, out: str) -> str:
     """One line for the end of `testbed run`."""
+    cov = result.coverage_final
     return (
         f"testbed run: {result.status} after {result.steps} steps, coverage "
-        f"{100 * result.coverage_final:.1f}%; results in {out}; replay: "
+        f"{'unknown' if cov is None else f'{100 * cov:.1f}%'}; results in {out}; replay: "
         f"testbed view {shlex.quote(out)}"
     )

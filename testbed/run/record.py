@@ -15,12 +15,15 @@ testbed.run.results writes result.json and the per-robot files from that record 
 from __future__ import annotations
 
 import statistics
-import subprocess
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, ClockSummary
 from testbed.world.world import World
+
+if TYPE_CHECKING:
+    from topology.forkserver import Forked
 
 
 @dataclass
@@ -28,7 +31,7 @@ class RobotRecord:
     """What the world knows of one robot's process during the run."""
 
     k: int
-    proc: subprocess.Popen | None = None
+    proc: Forked | None = None  # from the run's fork server, once spawned
     last_cmd: int = -1  # the latest step whose frame it answered
     finish_step: int | None = None
     crashed: bool = False
@@ -37,6 +40,12 @@ class RobotRecord:
     missed: int = 0
     missed_steps: list = field(default_factory=list)
     stopped_step: int | None = None  # the step the run killed it at (--kill)
+
+    @property
+    def process(self) -> Forked:
+        """Its process (the run spawns every robot's before it steps)."""
+        assert self.proc is not None
+        return self.proc
 
     @property
     def gone(self) -> bool:

@@ -75,7 +75,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
             sent[e["kind"]] = sent.get(e["kind"], 0) + 1
         elif e["e"] == "recv":
             received[e["kind"]] = received.get(e["kind"], 0) + 1
-    summary = next((e for e in reversed(ev) if e["e"] == "summary"), {})
+    summary: dict = next((e for e in reversed(ev) if e["e"] == "summary"), {})
     b = rec.world.bodies[r.k - 1]
     out = RobotResult(
         name=f"r{r.k}", finish_step=r.finish_step, crashed=r.crashed, plans=plans, sent=sent,
@@ -180,7 +180,7 @@ def messaging(middleware: str, summaries: dict[str, dict]) -> dict:
     """The goal messages' middleware and what it did: each robot's messenger counters and
     arrivals (node.messaging.stats, node.messaging.arrivals; None for a robot that left no
     summary), and the team's totals over the robots that did."""
-    robots = {}
+    robots: dict[str, dict | None] = {}
     for k, sm in summaries.items():
         if sm.get("messenger") is None:
             robots[k] = None

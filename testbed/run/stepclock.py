@@ -132,17 +132,17 @@ class StepClock:
     def summary(self) -> ClockSummary:
         """What result.json says of the clock. A loop that did not end normally (interrupted,
         failed) has no wall time and no achieved scale."""
-        stopped = self.stopped_at is not None
+        end = self.stopped_at  # None: it did not end normally
         return ClockSummary(
             steps=self.step,
             robots=self.robots,
-            loop_wall_s=self.stopped_at - self.t0 if stopped else 0.0,
-            time_scale_achieved=self.achieved_scale(self.stopped_at) if stopped else 0.0,
+            loop_wall_s=end - self.t0 if end is not None else 0.0,
+            time_scale_achieved=self.achieved_scale(end) if end is not None else 0.0,
             missed_world=self.missed_world,
             missed_robots=self.missed_robots,
             stalls=self.stalls.summary(),
             world_missed_steps=tuple(self.world_missed_steps),
-            stepping=(self.t0, self.stopped_at) if stopped else None,
+            stepping=(self.t0, end) if end is not None else None,
         )
 
 

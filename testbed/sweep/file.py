@@ -83,6 +83,7 @@ import math
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from common.errors import UsageError
 from node.messaging.maps import PUBSUB_MIDDLEWARES
@@ -100,7 +101,7 @@ _TOP_KEYS = {"description", "grid", "run"}
 # The grid's dimensions in their order (GridDim.order): the nesting of the expansion, the
 # order of a run id's parts and of a point's values.
 _GRID_OPTIONS = tuple(sorted((opt for opt in OPTIONS if GRID in opt.sweep),
-                             key=lambda opt: opt.grid.order))  # fmt: skip
+                             key=lambda opt: opt.grid_dim.order))  # fmt: skip
 GRID_NAMES = tuple(opt.name for opt in _GRID_OPTIONS)
 _RUN_OPTIONS = tuple(opt for opt in OPTIONS if RUN in opt.sweep)
 _GRID_KEYS = {opt.name for opt in _GRID_OPTIONS} | {"runs"}
@@ -352,7 +353,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         raise _fail(path, "grid", "missing table [grid]")
     grid = _check_table(path, "grid", data["grid"], _GRID_KEYS)
     run = _check_table(path, "run", data.get("run", {}), _RUN_KEYS)
-    kw = {"description": _description(path, data)}
+    kw: dict[str, Any] = {"description": _description(path, data)}
     kw.update(_grid(path, grid, run))
     kw.update(_run(path, run, grid, kw["robots"]))
     spec = SweepSpec.of(**kw)
@@ -413,7 +414,7 @@ def run_id(config: RunConfig, index: int, varied=frozenset()) -> str:
     varies them (`varied`); so ids of older sweeps stay valid."""
     parts = []
     for opt in _GRID_OPTIONS:
-        value, dim = getattr(config, opt.name), opt.grid
+        value, dim = getattr(config, opt.name), opt.grid_dim
         if ((dim.shown == NONZERO and not value) or (dim.shown == CHANGED and value == opt.default)
                 or (dim.shown == VARIED and opt.name not in varied)):  # fmt: skip
             continue
@@ -427,7 +428,7 @@ def derive_seed(base: int, config: RunConfig, index: int) -> int:
     map, medium) share their random numbers, so they are compared on the same draws."""
     words = [str(base)]
     for opt in _GRID_OPTIONS:
-        if opt.grid.seeded:
+        if opt.grid_dim.seeded:
             value = getattr(config, opt.name)
             words.append(fmt(value) if isinstance(value, float) else str(value))
     key = ":".join([*words, str(index)])

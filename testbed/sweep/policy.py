@@ -54,6 +54,7 @@ trial is (factor, miss outside stalls, faithful); a pair (factor, miss) is a fai
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import TypeGuard
 
 DEADLINE_MISS_LIMIT = 0.01
 SLOWDOWN = 0.85  # time scale factor applied when a run alone misses over the limit
@@ -107,7 +108,7 @@ class Decision:
     words: str = ""  # appended to the run's line in the progress display
 
 
-def _number(x) -> bool:
+def _number(x: object) -> TypeGuard[float]:
     return isinstance(x, int | float)
 
 
@@ -193,9 +194,9 @@ def decide(o: Outcome, state: State) -> Decision:
     clean = _number(ours) and ours <= CLEAN_MISS and o.faithful is not False
     if clean and s.factor(n) < s.ceiling(n):
         # Rule 7: a clean run of a slowed-down size; enough of them speed it up a notch.
-        clean = s.clean_runs.get(n, 0) + 1
-        if clean < CLEAN_RUNS_TO_SPEED_UP:
-            return replace(d, state=replace(s, clean_runs={**s.clean_runs, n: clean}))
+        runs = s.clean_runs.get(n, 0) + 1
+        if runs < CLEAN_RUNS_TO_SPEED_UP:
+            return replace(d, state=replace(s, clean_runs={**s.clean_runs, n: runs}))
         up = min(s.ceiling(n), s.factor(n) / SLOWDOWN)
         faster = replace(
             s, scale_factors={**s.scale_factors, n: up}, clean_runs={**s.clean_runs, n: 0}

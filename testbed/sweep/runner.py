@@ -55,6 +55,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import BinaryIO
 
 from common.errors import TestbedError
 from common.jsonfile import read_json, write_json_atomic
@@ -66,7 +67,7 @@ from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 from testbed.sweep.progress import Progress
 from testbed.sweep.rundir import is_done, plan_dict, run_argv, run_dir
-from topology.forkserver import ForkServer, ForkServerError, python_env
+from topology.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.state import is_alive, proc_start_time
 
 log = logging.getLogger(__name__)
@@ -103,7 +104,7 @@ class RunForker:
         env["OPENBLAS_NUM_THREADS"] = "1"  # no BLAS thread pool in a process that forks
         self.server = ForkServer(RUN_PRELOAD, env=env, label=label)
 
-    def start(self, argv: list[str], log_path: Path, title: str):
+    def start(self, argv: list[str], log_path: Path, title: str) -> Forked:
         """`argv`: `testbed run`'s arguments. Returns a Popen-like Forked."""
         try:
             return self.server.spawn(
@@ -129,10 +130,10 @@ def _child_setup(parent_pid: int) -> None:  # runs in the child between fork and
 @dataclass
 class _Child:
     run: PlannedRun
-    proc: subprocess.Popen
+    proc: subprocess.Popen | Forked
     started: float
     jobs_at_start: int
-    log_file: object
+    log_file: BinaryIO
     load: float = 0.0
     shared: bool = False  # another run was in flight at some time during this one
     load_seen: float = 0.0  # the most load in flight while this one ran
@@ -248,7 +249,9 @@ class Sweep:
 
     # -- one child
 
-    def _spawn(self, config: RunConfig, rdir: Path, log_path: Path, title: str):
+    def _spawn(
+        self, config: RunConfig, rdir: Path, log_path: Path, title: str
+    ) -> tuple[subprocess.Popen | Forked, BinaryIO]:
         """Start one `testbed run` of `config` into `rdir` (removed first if there): from
         the run server, or the stand-in command with the death signal towards the sweep.
         Returns (process, its open log file, which the caller closes)."""
@@ -256,9 +259,11 @@ class Sweep:
             shutil.rmtree(rdir)
         log_path.parent.mkdir(parents=True, exist_ok=True)
         log_file = open(log_path, "wb")  # noqa: SIM115 (the caller closes it)
+        proc: subprocess.Popen | Forked
         if self.forker is not None:
             proc = self.forker.start(run_argv([], config, rdir), log_path, title)
         else:
+            assert self.command is not None  # run() starts the forker when there is none
             proc = subprocess.Popen(
                 run_argv(self.command, config, rdir),
                 stdin=subprocess.DEVNULL,

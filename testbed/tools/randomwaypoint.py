@@ -55,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.pause < 0:
         print("randomwaypoint: pause must be >= 0", file=sys.stderr)
         return 2
-    sys.stdout.write("\n".join(trace(a.nodes, *a.size, a.duration, tuple(a.speed), a.pause,
+    width, height = a.size
+    sys.stdout.write("\n".join(trace(a.nodes, width, height, a.duration, tuple(a.speed), a.pause,
                                      a.seed)) + "\n")  # fmt: skip
     return 0
 

@@ -38,11 +38,13 @@ class LiveFeed:
         self.run_dir = run_dir
         self.stats_files = list(stats_files)
         self.events = events  # RobotEvents: goals and messages per second, or None
-        self._rate = (0.0, 0, None)  # (when, packets sent, rate)
+        self._rate: tuple[float, int, float | None] = (0.0, 0, None)  # (when, sent, rate)
         self.latest: tuple | None = None
         self.ended = False
 
-    def publish(self, step: int, positions, links, coverage: float, missed: int, scale) -> None:
+    def publish(
+        self, step: int, positions, links, coverage: float | None, missed: int, scale
+    ) -> None:
         self.latest = (step, positions, links, coverage, missed, scale)
 
     def _robot_events(self) -> dict:

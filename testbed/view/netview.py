@@ -46,7 +46,7 @@ class Extent:
         m = self.margin
         lo = [min(p[i] for p in positions) - m for i in (0, 1)]
         hi = [max(p[i] for p in positions) + m for i in (0, 1)]
-        if self.lo is not None:
+        if self.lo is not None and self.hi is not None:  # (set together)
             lo = [min(a, b) for a, b in zip(lo, self.lo, strict=True)]
             hi = [max(a, b) for a, b in zip(hi, self.hi, strict=True)]
         changed = (lo, hi) != (self.lo, self.hi)
@@ -54,11 +54,13 @@ class Extent:
         return changed
 
     def _side(self) -> float:
+        assert self.lo is not None and self.hi is not None  # update() came first
         return max(20.0, self.hi[0] - self.lo[0], self.hi[1] - self.lo[1])
 
     def origin(self) -> list[float]:
         """The square's corner, the robots centred in it along its longer side."""
         side = self._side()
+        assert self.lo is not None and self.hi is not None  # update() came first
         return [
             round(lo - (side - (hi - lo)) / 2, 3) for lo, hi in zip(self.lo, self.hi, strict=True)
         ]

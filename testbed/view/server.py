@@ -71,10 +71,10 @@ def png(path) -> web.Response:
 
 def has_map(map_png: str | None) -> bool:
     """Whether the page should ask for /map.png (the empty terrain has no picture)."""
-    return bool(map_png) and served.is_png(Path(map_png))
+    return bool(map_png and served.is_png(Path(map_png)))
 
 
-def page_routes(run_dir: Path | None, map_png: str | None) -> list:
+def page_routes(run_dir: Path | None, map_png: str | Path | None) -> list:
     """What the replay and the live view serve alike: the page, its static files (by exact
     name), the map picture and the display's snapshots (only steps the run saved)."""
 

@@ -13,6 +13,7 @@ import os
 import selectors
 import socket
 import time
+from typing import cast
 
 from node import body
 
@@ -50,7 +51,7 @@ class BodyServer:
             if key.data is None:
                 self._accept()
                 continue
-            conn, meta = key.fileobj, key.data
+            conn, meta = cast(socket.socket, key.fileobj), key.data  # only sockets registered
             while True:
                 try:
                     data = conn.recv(body.MAX_DATAGRAM)
@@ -113,7 +114,7 @@ class BodyServer:
     def close(self) -> None:
         for key in list(self.sel.get_map().values()):
             with contextlib.suppress(OSError):
-                key.fileobj.close()
+                cast(socket.socket, key.fileobj).close()
         self.sel.close()
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.path)
