@@ -14,6 +14,7 @@ import html
 import re
 from pathlib import Path
 
+from common.jsonfile import write_atomic
 from testbed.resultfile import RESULT_NAME
 
 _IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)$")
@@ -126,7 +127,5 @@ def write_html(sweep_dir: Path, markdown: str) -> Path:
         "<body>", to_html(markdown, sweep_dir), _runs_table(sweep_dir), "</body>", "</html>",
     ])  # fmt: skip
     path = sweep_dir / "report.html"
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page)
-    tmp.replace(path)
+    write_atomic(path, page)  # a fresh temporary name beside it, never through a link
     return path

@@ -21,7 +21,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from testbed.analysis.plots import plt
+from testbed.analysis.plots import plt, save_figure
 from testbed.analysis.runs import FinishedRun
 
 MAX_POINTS = 2000
@@ -128,6 +128,8 @@ def write_paths(run: FinishedRun, stem: Path) -> Path | None:
         return None
     png = stem.with_suffix(".png")
     fig = paths_figure(run, paths)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, png, dpi=110)
+    finally:
+        plt.close(fig)
     return png

@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from common.errors import UsageError
+from common.jsonfile import write_atomic
 from testbed.analysis import (
     ablation,
     figures,
@@ -194,10 +195,12 @@ def write_report(
     vs = verdicts(made["tables"])
     path = sweep_dir / "report.md"
     text = render(sweep_dir, made, vs) + "\n"
-    path.write_text(text)
+    write_atomic(path, text)  # never through a link (common.jsonfile)
     htmlreport.write_html(sweep_dir, text)  # the same report as one page, figures inlined
-    (sweep_dir / "figures" / "verdicts.json").write_text(
-        json.dumps([v.__dict__ for v in vs], indent=1) + "\n"
+    write_atomic(
+        sweep_dir / "figures" / "verdicts.json",
+        json.dumps([v.__dict__ for v in vs], indent=1) + "\n",
+        root=sweep_dir,
     )
     return path, vs
 

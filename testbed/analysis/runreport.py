@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from common.jsonfile import write_atomic
 from testbed.analysis import pcapmetrics
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
@@ -203,5 +204,5 @@ def write(run: FinishedRun) -> tuple[Path, dict | None]:
     and the metrics."""
     metrics = pcapmetrics.run_metrics(run.path, run=run)
     path = run.path / SUMMARY_NAME
-    path.write_text(summary(run, metrics))
+    write_atomic(path, summary(run, metrics))  # never through a link (common.jsonfile)
     return path, metrics

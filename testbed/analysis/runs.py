@@ -210,6 +210,9 @@ def load_runs(sweep_dir: str | Path, unfaithful: bool = False) -> list[FinishedR
     count as usable too."""
     runs = []
     for run_dir in sorted(p.parent for p in Path(sweep_dir).glob(f"runs/*/{RESULT_NAME}")):
+        if run_dir.is_symlink():  # its files (routing.json) would be written elsewhere
+            log.warning("skipping %s: a symbolic link, not a run directory", run_dir)
+            continue
         try:
             runs.append(replace(load_run(run_dir), count_unfaithful=unfaithful))
         except ResultError as e:

@@ -19,11 +19,13 @@ decided on the same tables. Which runs count is the caller's choice of runs plus
 from __future__ import annotations
 
 import csv
+import io
 import json
 import statistics
 from collections.abc import Callable
 from pathlib import Path
 
+from common.jsonfile import write_atomic
 from testbed.analysis import stats
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 
@@ -271,14 +273,13 @@ def impairment_rows(runs: list[FinishedRun], per_run: list[dict]) -> list[dict]:
 
 def write_table(rows: list[dict], stem: Path) -> None:
     """rows as stem.csv (lists joined by ';') and stem.json."""
-    stem.with_suffix(".json").write_text(json.dumps(rows, indent=1) + "\n")
+    write_atomic(stem.with_suffix(".json"), json.dumps(rows, indent=1) + "\n")
     fields: list[str] = []
     for r in rows:
         fields += [k for k in r if k not in fields]
-    with stem.with_suffix(".csv").open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        w.writeheader()
-        for r in rows:
-            w.writerow(
-                {k: ";".join(map(str, v)) if isinstance(v, list) else v for k, v in r.items()}
-            )
+    f = io.StringIO(newline="")
+    w = csv.DictWriter(f, fieldnames=fields)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ";".join(map(str, v)) if isinstance(v, list) else v for k, v in r.items()})
+    write_atomic(stem.with_suffix(".csv"), f.getvalue())

@@ -246,6 +246,7 @@ def metrics(args) -> int:
     import re
     import tempfile
 
+    from common.jsonfile import write_json_atomic
     from testbed.analysis import pcapmetrics
 
     d = os.path.abspath(args.dir)
@@ -267,8 +268,7 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: no captures in {args.dir}")
     m = {k: v for k, v in m.items() if k not in ("pcaps",)}
     out = os.path.join(d, "metrics.json")
-    with open(out, "w") as f:
-        json.dump(m, f, indent=1)
+    write_json_atomic(out, m, strict=True)  # never through a link; no NaN or Infinity
 
     def fmt(v, spec: str) -> str:
         return "n/a" if v is None else format(v, spec)

@@ -15,13 +15,15 @@ from __future__ import annotations
 import argparse
 import fcntl
 import logging
+import os
 import shutil
+import stat
 import sys
 from pathlib import Path
 
 from common.argtypes import number
 from common.errors import UsageError
-from common.jsonfile import read_json
+from common.jsonfile import make_dirs, read_json
 from testbed.run.config import RunConfig
 from testbed.sweep import file as sweepfile
 from testbed.sweep.file import PlannedRun
@@ -31,6 +33,23 @@ from testbed.sweep.runner import Sweep, wait_for_orphans
 from topology.impair import kernel_has_netem
 
 log = logging.getLogger(__name__)
+
+
+def _open_lock(out: Path):
+    """out/.sweep.lock, open for flock (held for the process's lifetime): made if missing,
+    never truncated, and refused (one line) if it is a link or not a regular file."""
+    path = out / ".sweep.lock"
+    flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as e:
+        raise UsageError(
+            f"--out {out}: {path.name}: {e.strerror} (a link, or not a file)"
+        ) from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise UsageError(f"--out {out}: {path.name} is not a regular file")
+    return os.fdopen(fd, "r+")
 
 
 def _jobs(text: str) -> int | str:
@@ -244,8 +263,8 @@ def main(args: argparse.Namespace) -> int:
     jobs = jobs_cap(args.jobs, runs, spec.cpu_limit)
     netem = kernel_has_netem() if any(d > 0 for d in spec.values("delay_ms")) else False
     out.mkdir(parents=True, exist_ok=True)
-    (out / "runs").mkdir(exist_ok=True)
-    lock = open(out / ".sweep.lock", "w")  # noqa: SIM115 (held for the process lifetime)
+    make_dirs(out / "runs", root=out)  # a runs/ that is a link is refused, not followed
+    lock = _open_lock(out)
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

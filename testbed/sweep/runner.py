@@ -255,7 +255,8 @@ class Sweep:
         if rdir.exists():
             shutil.rmtree(rdir)
         log_path.parent.mkdir(parents=True, exist_ok=True)
-        log_file = open(log_path, "wb")  # noqa: SIM115 (the caller closes it)
+        flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC
+        log_file = os.fdopen(os.open(log_path, flags, 0o644), "wb")  # the caller closes it
         if self.forker is not None:
             proc = self.forker.start(run_argv([], config, rdir), log_path, title)
         else:

@@ -1,0 +1,72 @@
+"""Results directories to attack: a small finished sweep and a finished run, made the way
+the testbed writes them (tests.unit.test_sweep_synthetic), and the one way every hostile
+case is judged: `testbed ...` run in this process, which must either succeed or print
+exactly one line and exit 2, never a traceback, and never write outside the directory."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+from testbed import cli
+from testbed.sweep import file as sweepfile
+from tests.unit.test_sweep_synthetic import make_sweep, result_doc, write_run
+
+
+def sweep_dir(out: Path) -> Path:
+    """A finished sweep of teams of 1 and 2 robots, two runs each."""
+    spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,), runs=2)
+    make_sweep(out, spec)
+    return out
+
+
+def run_dir(out: Path) -> Path:
+    """One finished run of 2 robots (in out/runs/ID), no captures."""
+    spec = sweepfile.SweepSpec.of(robots=(2,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
+    run = sweepfile.expand(spec)[0]
+    doc = result_doc(dataclasses.replace(run.config, time_scale=1.0), [817, 823], 823)
+    return write_run(out, run, doc)
+
+
+# A capture with no packets: pcap's global header (little-endian, version 2.4, Ethernet).
+EMPTY_PCAP = bytes.fromhex("d4c3b2a1020004000000000000000000ffff000001000000")
+
+
+def edit_result(run: Path, change) -> None:
+    """Rewrite run/result.json with change(doc) applied (change edits doc in place)."""
+    doc = json.loads((run / "result.json").read_text())
+    change(doc)
+    (run / "result.json").write_text(json.dumps(doc))
+
+
+def testbed(argv: list[str], capsys) -> tuple[int, str, str]:
+    """(exit status, stdout, stderr) of `testbed ARGV` in this process; a traceback
+    (an exception the CLI does not turn into one line) fails the calling test."""
+    status = cli.main([str(a) for a in argv])
+    got = capsys.readouterr()
+    return status, got.out, got.err
+
+
+def refused(argv: list[str], capsys, *words: str) -> str:
+    """Asserts that `testbed ARGV` is one line on stderr and exit 2, the line holding every
+    one of `words`; returns the line."""
+    status, _, err = testbed(argv, capsys)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert status == 2, err
+    assert len(lines) == 1, err
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+def snapshot(d: Path) -> dict[str, bytes]:
+    """Every regular file below d (links not followed) and its content."""
+    out = {}
+    for root, _, files in os.walk(d):
+        for f in files:
+            p = Path(root) / f
+            if p.is_file() and not p.is_symlink():
+                out[str(p.relative_to(d))] = p.read_bytes()
+    return out
