@@ -87,8 +87,8 @@ def write_atomic(path, data: bytes | str, *, root=None, mode: int = 0o644) -> No
     `mode`: the file's permissions, whatever the umask."""
     path = Path(path)
     root = Path(root) if root is not None else path.parent
-    if isinstance(data, str):
-        data = data.encode()
+    if isinstance(data, str):  # a name that is not UTF-8 (a lone surrogate): as its escape
+        data = data.encode(errors="backslashreplace")
     dfd = _open_dirs(root, _parts(path.parent, root), create=False)
     try:
         try:

@@ -69,6 +69,25 @@ def has_result(run_dir: str | Path) -> bool:
 # ---------------------------------------------------------------- checked reading
 
 
+def one_line(text: str, limit: int = 500) -> str:
+    """`text` as one printable line: a control character (newline, ESC, ...) shown as its
+    Python escape, so that neither a report's markdown nor a terminal takes it as markup;
+    at most `limit` characters (an ellipsis marks the cut)."""
+    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return out if len(out) <= limit else out[: limit - 1] + "…"
+
+
+def _one_lines(value):
+    """A record's strings, nested ones included, each made one line (one_line)."""
+    if isinstance(value, str):
+        return one_line(value)
+    if isinstance(value, Mapping):
+        return {one_line(str(k)): _one_lines(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_one_lines(v) for v in value]
+    return value
+
+
 def _get(doc: Mapping, key: str, kinds: tuple[type, ...], default=None, required=False):
     """doc[key] checked against `kinds` (bool is not a number); default when absent or null."""
     value = doc.get(key)
@@ -80,7 +99,7 @@ def _get(doc: Mapping, key: str, kinds: tuple[type, ...], default=None, required
     if not isinstance(value, kinds) or (number and isinstance(value, bool)):
         want = " or ".join(k.__name__ for k in kinds)
         raise ResultError(f"{key!r} is {type(value).__name__}, not {want}")
-    return value
+    return one_line(value) if isinstance(value, str) else value
 
 
 def _mapping(doc: Mapping, key: str) -> Mapping:
@@ -89,7 +108,7 @@ def _mapping(doc: Mapping, key: str) -> Mapping:
         return _EMPTY
     if not isinstance(value, Mapping):
         raise ResultError(f"{key!r} is {type(value).__name__}, not an object")
-    return MappingProxyType(dict(value))
+    return MappingProxyType(_one_lines(dict(value)))
 
 
 def _list(doc: Mapping, key: str) -> list:

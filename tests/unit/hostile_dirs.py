@@ -70,3 +70,9 @@ def snapshot(d: Path) -> dict[str, bytes]:
             if p.is_file() and not p.is_symlink():
                 out[str(p.relative_to(d))] = p.read_bytes()
     return out
+
+
+def png_bytes(marker: bytes = b"") -> bytes:
+    """A PNG's signature and a 1x1 header, then `marker` (enough for the PNG checks)."""
+    ihdr = (13).to_bytes(4, "big") + b"IHDR" + (1).to_bytes(4, "big") * 2
+    return b"\x89PNG\r\n\x1a\n" + ihdr + marker
