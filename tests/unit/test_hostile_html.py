@@ -79,8 +79,8 @@ def test_strings_from_result_json_are_one_line():
 
 
 def hd_result():
-    from tests.unit.test_sweep_synthetic import result_doc
     from testbed.sweep import file as sweepfile
+    from tests.unit.test_sweep_synthetic import result_doc
 
     spec = sweepfile.SweepSpec.of(robots=(1,), comm_range=(5.0,), laser_range=(2.0,), runs=1)
     return result_doc(sweepfile.expand(spec)[0].config, [10], 10)
