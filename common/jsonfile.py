@@ -24,6 +24,7 @@ import secrets
 import stat
 from pathlib import Path
 
+from common import boundedfile
 from common.errors import UsageError
 
 _DIR_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
@@ -137,10 +138,9 @@ def write_json_atomic(
 
 
 def read_json(path):
-    """The JSON in `path`, or None when it is missing, unreadable or not valid JSON (nested
-    deeper than the parser's recursion allows included)."""
+    """The JSON in `path`, or None when it is missing, not a regular file (a FIFO is not
+    waited on), too large, unreadable or not strict JSON (common.boundedfile.load_json)."""
     try:
-        with open(path) as f:
-            return json.load(f)
-    except (OSError, ValueError, RecursionError):
+        return boundedfile.load_json(path)
+    except boundedfile.Refused:
         return None

@@ -28,12 +28,13 @@ nested dicts (tests/unit/test_result_file.py holds this).
 from __future__ import annotations
 
 import dataclasses
-import json
 import statistics
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
+
+from common import boundedfile
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -468,11 +469,11 @@ class RunResult:
         if path.is_dir() or path.name != RESULT_NAME:
             path = result_path(path)
         try:
-            doc = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ResultError(f"{path}: no such file (not a finished run)") from None
-        except (OSError, ValueError, RecursionError) as e:
-            raise ResultError(f"{path}: unreadable ({e})") from None
+            doc = boundedfile.load_json(path)
+        except boundedfile.Refused as r:
+            if r.kind == "missing":
+                raise ResultError(f"{path}: no such file (not a finished run)") from None
+            raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
         try:
             return cls._parse(doc)
         except ResultError as e:

@@ -33,12 +33,13 @@ dilated did not keep it.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from common import boundedfile
 from testbed.resultfile import (
     DEFAULT_VARIANT,
     RESULT_NAME,
@@ -166,12 +167,12 @@ def parse_channel(doc) -> ChannelRecord:
 
 def _load_channel(run_dir: Path) -> ChannelRecord | None:
     path = run_dir / MEDIUM_NAME
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
+    if not os.path.lexists(path):
         return None
-    except (OSError, ValueError) as e:
-        raise ResultError(f"{path}: unreadable ({e})") from None
+    try:
+        doc = boundedfile.load_json(path)
+    except boundedfile.Refused as r:
+        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
     try:
         return parse_channel(doc)
     except ResultError as e:
@@ -183,13 +184,12 @@ def _check_lag_file(run_dir: Path) -> None:
     from testbed.analysis import relaylag
 
     path = run_dir / relaylag.LAG_NAME
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(relaylag.MAGIC))
-    except FileNotFoundError:
+    if not os.path.lexists(path):
         return
-    except OSError as e:
-        raise ResultError(f"{path}: unreadable ({e})") from None
+    try:
+        head = boundedfile.read(path, relaylag.MAX_LAG_BYTES)[: len(relaylag.MAGIC)]
+    except boundedfile.Refused as r:
+        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
     if head != relaylag.MAGIC:
         raise ResultError(f"{path}: not a relay-lag file (no {relaylag.MAGIC.decode()} header)")
 

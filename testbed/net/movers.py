@@ -239,10 +239,33 @@ def _feed_client(path: str) -> int:
     return 0
 
 
+def network_of(path: str) -> tuple[str, float | None]:
+    """(routing, time scale) of a capture directory's daemons/network.json (`net up`
+    wrote it): ("aodv", None) where it is missing; UsageError, one line naming the file
+    and the key, where it is there but not one (a FIFO is refused, not waited on)."""
+    from common import boundedfile
+    from topology.spec import ROUTINGS
+
+    if not os.path.lexists(path):
+        return "aodv", None
+    try:
+        net = boundedfile.load_json(path)
+    except boundedfile.Refused as r:
+        raise UsageError(f"metrics: {path}: {boundedfile.describe(r)}") from None
+    if not isinstance(net, dict):
+        raise UsageError(f"metrics: {path}: not a JSON object")
+    routing, scale = net.get("routing", "aodv"), net.get("time_scale")
+    if routing not in ROUTINGS:
+        raise UsageError(f"metrics: {path}: 'routing' is not one of {', '.join(ROUTINGS)}")
+    ok = isinstance(scale, int | float) and not isinstance(scale, bool) and 0 < scale <= 1000
+    if scale is not None and not ok:
+        raise UsageError(f"metrics: {path}: 'time_scale' is not a number in (0, 1000]")
+    return routing, scale
+
+
 def metrics(args) -> int:
     """`testbed metrics DIR`: testbed.analysis.pcapmetrics.run_metrics on the captures of a
     `net up --capture DIR` network (laid out as a run's pcaps/), written to DIR/metrics.json."""
-    import json
     import re
     import tempfile
 
@@ -254,13 +277,7 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: {args.dir} is not a directory")
     if not any(re.fullmatch(r"r\d+\.pcap", e) for e in os.listdir(d)):
         raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
-    routing, scale = "aodv", None
-    try:
-        with open(os.path.join(d, "daemons", "network.json")) as f:
-            net = json.load(f)
-        routing, scale = net["routing"], net.get("time_scale")
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+    routing, scale = network_of(os.path.join(d, "daemons", "network.json"))
     with tempfile.TemporaryDirectory(prefix="tb-metrics-") as tmp:
         os.symlink(d, os.path.join(tmp, "pcaps"))  # laid out as a run's directory
         m = pcapmetrics.run_metrics(tmp, use_cache=False, network=(routing, scale))

@@ -23,9 +23,10 @@ from pathlib import Path
 
 from common.argtypes import number
 from common.errors import UsageError
-from common.jsonfile import make_dirs, read_json
+from common.jsonfile import make_dirs
 from testbed.run.config import RunConfig
 from testbed.sweep import file as sweepfile
+from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import Plan, config_mismatch, default_jobs, jobs_cap, other_sweep, plan
 from testbed.sweep.rundir import is_done, run_dir
@@ -121,7 +122,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _print_status(out: Path) -> int:
     from testbed.sweep import slurm
 
-    state = read_json(out / "sweep.json")
+    state = sweepstate.read(out)
     if state is None:
         raise UsageError(f"--status {out}: no sweep.json: not a sweep directory")
     planned = state.get("runs", [])
@@ -208,7 +209,7 @@ def _check_same_sweep(out: Path, runs: list[PlannedRun], sweep_file: str) -> Non
     """--resume continues the sweep that made `out`, never another one into it."""
     diff = other_sweep(out, runs)
     if diff:
-        made_by = (read_json(out / "sweep.json") or {}).get("sweep_file") or "another sweep file"
+        made_by = (sweepstate.read(out) or {}).get("sweep_file") or "another sweep file"
         raise UsageError(
             f"--out {out} is the sweep of {made_by}, not of {sweep_file}: {diff}; resume it "
             "with its own sweep file, or give this one a new --out"

@@ -57,11 +57,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from common.errors import TestbedError
-from common.jsonfile import read_json, write_json_atomic
+from common.jsonfile import write_json_atomic
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
 from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
+from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 from testbed.sweep.progress import Progress
@@ -565,7 +566,7 @@ def wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
     """A SIGKILLed sweep's children get SIGINT (PDEATHSIG); wait until they are gone before
     redoing their runs, and SIGKILL any still running after `timeout` (only the very processes
     recorded in sweep.json: pid and start time)."""
-    state = read_json(out / "sweep.json") or {}
+    state = sweepstate.read(out) or {}
     procs = [
         (e["pid"], e.get("pid_start"))
         for e in state.get("runs", [])

@@ -37,6 +37,7 @@ from common.jsonfile import make_dirs, read_json, write_atomic, write_json_atomi
 from testbed import PROJECT_ROOT
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
+from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, run_argv, run_dir
 
@@ -225,7 +226,11 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
         print(f"testbed slurm task: no run {index} in {task_list}", file=sys.stderr)
         return 2
     rid = run_ids[index - 1]
-    plan = {e["id"]: e for e in (read_json(out / "sweep.json") or {}).get("runs", [])}
+    try:
+        plan = {e["id"]: e for e in (sweepstate.read(out) or {}).get("runs", [])}
+    except UsageError as e:
+        print(f"testbed slurm task: {e}", file=sys.stderr)
+        return 2
     if rid not in plan:
         print(f"testbed slurm task: {rid} is not in {out}/sweep.json", file=sys.stderr)
         return 2

@@ -76,3 +76,46 @@ def png_bytes(marker: bytes = b"") -> bytes:
     """A PNG's signature and a 1x1 header, then `marker` (enough for the PNG checks)."""
     ihdr = (13).to_bytes(4, "big") + b"IHDR" + (1).to_bytes(4, "big") * 2
     return b"\x89PNG\r\n\x1a\n" + ihdr + marker
+
+
+class Hung(Exception):
+    """The command under test did not return in time (it waited on a FIFO)."""
+
+
+def within(seconds: int, fn, *args):
+    """fn(*args), or Hung if it takes longer than `seconds` (SIGALRM interrupts a blocked
+    open() or read() of a FIFO, so a hang fails the test instead of stopping the suite)."""
+    import signal
+
+    def ring(signum, frame):
+        raise Hung(f"no answer in {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, ring)
+    signal.alarm(seconds)
+    try:
+        return fn(*args)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def fifo(path: Path) -> Path:
+    """A FIFO at `path` (whatever was there removed first): nobody will ever write to it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.exists() or path.is_symlink():
+        path.unlink()
+    os.mkfifo(path)
+    return path
+
+
+def with_captures(run: Path, robots=(1, 2)) -> Path:
+    """Give run empty captures (headers only), a tcpdump log each and AODV counters."""
+    (run / "pcaps" / "daemons").mkdir(parents=True, exist_ok=True)
+    (run / "aodv").mkdir(exist_ok=True)
+    for k in robots:
+        (run / "pcaps" / f"r{k}.pcap").write_bytes(EMPTY_PCAP)
+        (run / "pcaps" / "daemons" / f"r{k}.tcpdump.log").write_text(
+            "0 packets dropped by kernel\n"
+        )
+        (run / "aodv" / f"r{k}.json").write_text(json.dumps({"messages_sent": {"RREQ": 1}}))
+    return run
