@@ -35,6 +35,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from common import boundedfile
+from testbed import resultcheck
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -193,7 +194,8 @@ class RobotResult:
         if not isinstance(plans, list):
             raise ResultError(f"robot {name}: 'plans' is not a list")
         try:
-            plans = tuple(Plan(int(p["step"]), p.get("cause")) for p in plans)
+            plans = tuple(Plan(_get(p, "step", _NUM, required=True), _get(p, "cause", (str,)))
+                          for p in plans)  # fmt: skip
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ResultError(f"robot {name}: a plan without a step ({e})") from None
         messages = _mapping(doc, "messages")
@@ -264,8 +266,9 @@ class ResultConfig:
             map=_get(c, "map", (str,)),
             loss_pct=_get(c, "loss_pct", _NUM, 0.0),
             delay_ms=_get(c, "delay_ms", _NUM, 0.0),
-            coordination=c.get("coordination", extra.get("coordination", DEFAULT_VARIANT[0])),
-            start=c.get("start", extra.get("start", DEFAULT_VARIANT[1])),
+            coordination=_get(c, "coordination", (str,))
+            or _get(extra, "coordination", (str,), DEFAULT_VARIANT[0]),
+            start=_get(c, "start", (str,)) or _get(extra, "start", (str,), DEFAULT_VARIANT[1]),
             seed=_get(c, "seed", (int,)),
             capture=bool(c.get("capture")),
             max_steps=_get(c, "max_steps", (int,)),
@@ -464,7 +467,7 @@ class RunResult:
         itself (a path); ResultError (one line, naming the file) when it is missing, not
         JSON or malformed."""
         if isinstance(source, Mapping):
-            return cls._parse(source)
+            return cls._checked(source)
         path = Path(source)
         if path.is_dir() or path.name != RESULT_NAME:
             path = result_path(path)
@@ -475,7 +478,7 @@ class RunResult:
                 raise ResultError(f"{path}: no such file (not a finished run)") from None
             raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
         try:
-            return cls._parse(doc)
+            return cls._checked(doc)
         except ResultError as e:
             raise ResultError(f"{path}: {e}") from None
 
@@ -487,6 +490,15 @@ class RunResult:
             return cls.from_json(source)
         except ResultError:
             return None
+
+    @classmethod
+    def _checked(cls, doc) -> RunResult:
+        """_parse, then the values' ranges (testbed.resultcheck)."""
+        result = cls._parse(doc)
+        try:
+            return resultcheck.check(result)
+        except ValueError as e:
+            raise ResultError(str(e)) from None
 
     @classmethod
     def _parse(cls, doc) -> RunResult:

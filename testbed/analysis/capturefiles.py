@@ -169,7 +169,7 @@ def capture_drops(run_dir: Path) -> dict[str, int]:
         except boundedfile.Refused as r:
             log.warning("%s: not read: %s", p, boundedfile.describe(r))
             continue
-        m = re.search(r"(\d{1,15}) packets? dropped by kernel", text)
+        m = re.search(r"(?<![0-9])([0-9]{1,15}) packets? dropped by kernel", text)
         if m:
             out[p.name.split(".")[0][:40]] = int(m[1])
     return out

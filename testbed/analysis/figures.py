@@ -79,7 +79,11 @@ def collect_paths(runs: list[FinishedRun], dest: Path) -> list[Path]:
         src = run.path / "paths.png"
         if not run.usable or point in seen:
             continue
-        png = pathsfig.write_paths(run, dest / run.run_id)
+        try:
+            png = pathsfig.write_paths(run, dest / run.run_id)
+        except pathsfig.PathsError as e:
+            log.warning("no paths picture: %s", e)
+            continue
         if png is None:
             png = _copy_paths_png(src, dest / f"{run.run_id}.png")
         if png is not None:
@@ -198,12 +202,13 @@ def make_all(
     to their time scale are left out unless `unfaithful`."""
     sweep_dir = Path(sweep_dir)
     figdir = make_dirs(sweep_dir / "figures", root=sweep_dir)  # refused if it is a link
-    all_runs = load_runs(sweep_dir, unfaithful=unfaithful)
+    left_out: list[str] = []
+    all_runs = load_runs(sweep_dir, unfaithful=unfaithful, left_out=left_out)
     network = tables.main_network(all_runs)
     messaging = middlewares.main_messaging(all_runs)
     runs = [r for r in all_runs if r.network == network
             and (middlewares.middleware_of(r), middlewares.failure_of(r)) == messaging]  # fmt: skip
-    made: dict = {"files": [], "runs": all_runs, "tables": {}}
+    made: dict = {"files": [], "runs": all_runs, "tables": {}, "left_out": left_out}
     _paper_figures(runs, figdir, made)
     metrics = _all_metrics(all_runs, metrics_of or capture_metrics)
     _protocol_tables(all_runs, metrics, figdir, made)

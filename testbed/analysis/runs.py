@@ -47,6 +47,7 @@ from testbed.resultfile import (
     RunResult,
     _get,
     _mapping,
+    one_line,
 )
 
 log = logging.getLogger(__name__)
@@ -125,7 +126,7 @@ class FinishedRun(RunResult):
     @classmethod
     def of(cls, result: RunResult, run_dir: Path, channel: ChannelRecord | None = None):
         fields = {f.name: getattr(result, f.name) for f in dataclasses.fields(RunResult)}
-        return cls(**fields, run_id=run_dir.name, path=run_dir, channel=channel)
+        return cls(**fields, run_id=one_line(run_dir.name), path=run_dir, channel=channel)
 
 
 _CHANNEL_COUNTS = {
@@ -204,17 +205,22 @@ def load_run(run_dir: str | Path) -> FinishedRun:
     return FinishedRun.of(RunResult.from_json(run_dir), run_dir, channel)
 
 
-def load_runs(sweep_dir: str | Path, unfaithful: bool = False) -> list[FinishedRun]:
+def load_runs(
+    sweep_dir: str | Path, unfaithful: bool = False, left_out: list[str] | None = None
+) -> list[FinishedRun]:
     """Every run of a sweep directory with a readable result.json, sorted by run id; the
-    others are logged and left out. `unfaithful`: runs not faithful to their time scale
-    count as usable too."""
+    others are logged and left out (and why appended to `left_out`, one line each).
+    `unfaithful`: runs not faithful to their time scale count as usable too."""
     runs = []
+    why = [] if left_out is None else left_out
     for run_dir in sorted(p.parent for p in Path(sweep_dir).glob(f"runs/*/{RESULT_NAME}")):
         if run_dir.is_symlink():  # its files (routing.json) would be written elsewhere
-            log.warning("skipping %s: a symbolic link, not a run directory", run_dir)
+            why.append(f"{one_line(str(run_dir))}: a symbolic link, not a run directory")
+            log.warning("skipping %s", why[-1])
             continue
         try:
             runs.append(replace(load_run(run_dir), count_unfaithful=unfaithful))
         except ResultError as e:
-            log.warning("skipping %s", e)
+            why.append(one_line(str(e)))
+            log.warning("skipping %s", why[-1])
     return runs
