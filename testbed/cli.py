@@ -14,6 +14,7 @@ import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
 
+from common import envswitch
 from common.errors import EXIT_USAGE, TestbedError, UsageError
 from testbed.net import commands
 from testbed.resultfile import one_line
@@ -84,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop_on_sigterm)
     try:
         args = build_parser(argv).parse_args(argv)
+        envswitch.check()  # TESTBED_REALTIME=false is refused, not taken as the default
         logging.basicConfig(
             level=logging.INFO if args.verbose else logging.WARNING,
             format="%(asctime)s testbed %(name)s %(levelname)s: %(message)s",

@@ -35,7 +35,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from common import boundedfile
-from testbed import resultcheck
+from testbed.analysis import resultcheck
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -493,7 +493,7 @@ class RunResult:
 
     @classmethod
     def _checked(cls, doc) -> RunResult:
-        """_parse, then the values' ranges (testbed.resultcheck)."""
+        """_parse, then the values' ranges (testbed.analysis.resultcheck)."""
         result = cls._parse(doc)
         try:
             return resultcheck.check(result)
