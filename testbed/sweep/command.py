@@ -231,11 +231,11 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError("testbed sweep needs FILE and --out DIR (or --status DIR)")
     if not args.slurm and (args.partition or args.account or args.sbatch_arg or args.sudo):
         raise UsageError("--partition, --account, --sbatch-arg and --sudo go with --slurm")
-    if args.view:
-        from testbed.view.server import parse_bind
+    if args.view:  # a busy port refused before the sweep's directory and lock are made
+        from testbed.view.server import check_bind
 
         try:
-            parse_bind(args.view)
+            check_bind(args.view)
         except ValueError as e:
             raise UsageError(str(e)) from None
     spec = sweepfile.load(args.file)

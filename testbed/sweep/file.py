@@ -403,6 +403,9 @@ def _read_text(path: Path) -> str:
     except UnicodeDecodeError as e:
         raise UsageError(f"sweep file {path}: not a text file (UTF-8 TOML): byte "
                          f"{e.start} is 0x{data[e.start]:02x}") from None  # fmt: skip
+    if text.startswith("\ufeff"):
+        raise UsageError(f"sweep file {path}: starts with a byte-order mark (BOM), which TOML "
+                         "does not allow: save it as UTF-8 without one")  # fmt: skip
     return text
 
 
