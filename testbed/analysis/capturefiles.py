@@ -120,6 +120,28 @@ def content_stamp(paths: list[Path]) -> dict[str, str]:
     return out
 
 
+_SHARES = ("pdf", "segment_delivery", "overhead_packets", "overhead_bytes")
+_AMOUNTS = ("duration_s", "throughput_bps", "tx_packets", "control_tx_packets")
+_DELAYS = ("delay_ms_mean", "delay_ms_median", "delay_ms_p95")
+
+
+def cache_refusal(doc) -> str | None:
+    """Why a cached routing.json is not taken (then its metrics are computed again from
+    the captures), or None: shares outside 0..1, amounts below 0, delays beyond a day, or
+    anything not a finite number. A cache is keyed on its captures' content, but a
+    directory from elsewhere may ship captures and a cache written to go with them."""
+    if not isinstance(doc, dict):
+        return "not an object"
+    for keys, low, high in ((_SHARES, 0, 1), (_AMOUNTS, 0, 1e18), (_DELAYS, -86.4e6, 86.4e6)):
+        for k in keys:
+            v = doc.get(k)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float) or not low <= v <= high:
+                return f"{k} {str(v)[:40]} is not in {low:g}..{high:g}"
+    return None
+
+
 def _count(value) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_COUNT:
         raise ValueError(f"{str(value)[:40]} is not a count (a whole number 0..{MAX_COUNT:g})")

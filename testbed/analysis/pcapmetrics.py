@@ -740,7 +740,10 @@ def run_metrics(
         try:
             doc = boundedfile.load_json(cache)
             if doc.get("format") == CACHE_FORMAT and doc.get("pcaps") == stamp:
-                return doc
+                why = capturefiles.cache_refusal(doc)
+                if why is None:
+                    return doc
+                log.warning("%s: not taken (%s): computed again", cache, why)
         except (boundedfile.Refused, AttributeError):
             pass
     if run is None and network is None:

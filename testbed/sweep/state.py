@@ -75,7 +75,8 @@ def check(doc) -> dict:
         raise ValueError("runs is not a list")
     out = dict(doc)
     out["runs"] = [_run(i, e) for i, e in enumerate(runs)]
-    spec = doc.get("spec") or {}
+    spec = doc.get("spec")
+    spec = {} if spec is None else spec
     if not isinstance(spec, dict):
         raise ValueError("spec is not an object")
     for key in ("grid", "run"):

@@ -119,3 +119,20 @@ def with_captures(run: Path, robots=(1, 2)) -> Path:
         )
         (run / "aodv" / f"r{k}.json").write_text(json.dumps({"messages_sent": {"RREQ": 1}}))
     return run
+
+
+def udp_pcap(src_k: int, frames: int, port: int = 5000) -> bytes:
+    """A capture of `frames` UDP datagrams from robot src_k (10.0.0.K) to 10.0.0.250, one
+    a millisecond: enough for tshark to read and tell one capture's frames from another's."""
+    import struct
+
+    out = [EMPTY_PCAP]
+    for i in range(frames):
+        payload = b"x" * 16
+        udp = struct.pack("!HHHH", port, port, 8 + len(payload), 0) + payload
+        ip = struct.pack("!BBHHHBBH4s4s", 0x45, 0, 20 + len(udp), i, 0, 64, 17, 0,
+                         bytes([10, 0, 0, src_k]), bytes([10, 0, 0, 250]))  # fmt: skip
+        eth = bytes([2, 0, 0, 0, 0, 250, 2, 0, 0, 0, 0, src_k]) + b"\x08\x00"
+        frame = eth + ip + udp
+        out.append(struct.pack("<IIII", 1000, 1000 * i, len(frame), len(frame)) + frame)
+    return b"".join(out)
