@@ -12,7 +12,7 @@ from aiohttp.test_utils import TestServer
 
 from common import envswitch
 from common.errors import UsageError
-from testbed import cli, console
+from testbed import console
 from testbed.net import movers
 from testbed.view import replay, server
 from tests.unit import hostile_dirs as hd
