@@ -170,7 +170,8 @@ def serve(run_dir: str | Path, bind: str) -> int:
     host, port = parse_bind(bind)
     app = make_app(run_dir, warn=lambda line: print(f"testbed view: {line}", file=sys.stderr))
     check_bind(bind)
-    print(f"replay of {Path(run_dir).name}: http://{host}:{port}/  (Ctrl-C ends it)", flush=True)
+    name = one_line(Path(run_dir).name)  # a directory's name may hold terminal escapes
+    print(f"replay of {name}: http://{host}:{port}/  (Ctrl-C ends it)", flush=True)
     web.run_app(app, host=host, port=port, print=None)
     return 0
 

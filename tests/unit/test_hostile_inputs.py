@@ -176,3 +176,58 @@ def test_status_detail_and_run_names_are_printed_escaped(tmp_path, capsys):
 
 def test_an_error_naming_a_file_is_printed_escaped(tmp_path, capsys):
     hd.refused(["report", tmp_path / "a\x1b[2J\nb"], capsys, "a\\x1b[2J\\nb")
+
+
+# -- sweep files, maps, capture directories ---------------------------------------------------
+
+
+def test_a_nul_in_a_sweep_files_map_is_one_line(tmp_path):
+    from testbed.sweep import command
+    from testbed.sweep import file as sweepfile
+
+    f = tmp_path / "s.toml"
+    f.write_text('[grid]\nrobots = [1]\ncomm_range = [5.0]\nlaser_range = [2.0]\n'
+                 'map = ["a\\u0000b.png"]\n')  # fmt: skip
+    with pytest.raises(UsageError, match="map"):
+        command._check_maps(sweepfile.load(f))
+
+
+def test_a_sweep_file_with_a_bom_says_so(tmp_path):
+    from testbed.sweep import file as sweepfile
+
+    f = tmp_path / "s.toml"
+    f.write_bytes(b"\xef\xbb\xbf[grid]\nrobots = [1]\n")
+    with pytest.raises(UsageError, match="byte-order mark"):
+        sweepfile.load(f)
+
+
+def test_a_transparent_background_is_free_space(tmp_path):
+    import cv2
+    import numpy as np
+
+    from topology import pngmap
+
+    img = np.zeros((20, 20, 4), np.uint8)  # transparent black: free space as a viewer shows it
+    img[5:8, 5:8] = (0, 0, 0, 255)  # an opaque black wall
+    cv2.imwrite(str(tmp_path / "m.png"), img)
+    grey = pngmap.read_gray(str(tmp_path / "m.png"))
+    assert (grey < 128).sum() == 9
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ('{"routing": "aodv", "time_scale": -1}', "time_scale"),
+        ('{"routing": "aodv", "time_scale": 1e308}', "time_scale"),
+        ('{"routing": "x\\u001b[2J"}', "routing"),
+        ("[" * 10_000 + "]" * 10_000, "nested"),
+    ],
+    ids=["negative scale", "1e308 scale", "unknown routing", "deep"],
+)
+def test_metrics_refuses_a_network_json_it_cannot_use(tmp_path, capsys, text, says):
+    d = tmp_path / "cap"
+    (d / "daemons").mkdir(parents=True)
+    (d / "r1.pcap").write_bytes(hd.EMPTY_PCAP)
+    (d / "daemons" / "network.json").write_text(text)
+    line = hd.refused(["metrics", d], capsys, "network.json", says)
+    assert "\x1b" not in line

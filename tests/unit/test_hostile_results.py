@@ -274,3 +274,13 @@ def test_a_capture_linked_out_of_the_run_is_left_out(tmp_path):
     (run / "pcaps" / "r2.pcap").write_bytes(hd.udp_pcap(2, 2))
     found = capturefiles.find(run)
     assert sorted(found.paths) == [2] and "link out" in found.left_out["r1.pcap"]
+
+
+def test_a_nan_in_a_figures_table_is_left_empty_and_said(tmp_path, caplog):
+    from testbed.analysis import tables
+
+    rows = [{"robots": 2, "comm_range": 5.0, "steps_mean": float("nan")}]
+    tables.write_table(rows, tmp_path / "fig2")
+    assert (tmp_path / "fig2.csv").read_text().splitlines()[1] == "2,5.0,"
+    assert json.loads((tmp_path / "fig2.json").read_text())[0]["steps_mean"] is None
+    assert "steps_mean" in caplog.text and "not a number" in caplog.text
