@@ -7,7 +7,9 @@ not waited on; strict JSON, no NaN or 1e400) and checks the shape every reader r
 
 - the document is an object; `runs` a list of objects, each with an `id` that is a run
   directory's name (letters, digits, `.`, `_`, `-`, at most 100) and, where present, a
-  string `status` and `reason`, an object `config`, whole numbers `index` and `pid`;
+  string `status` and `reason`, whole numbers `index` and `pid`, and a `config` whose every
+  key is a run option with a value its table allows (testbed.run.options.check_value; the
+  Slurm tasks build a run's command line from it);
 - `spec` an object whose `grid` and `run` are objects and `time_scale_by_robots` maps team
   sizes (1..1000) to positive numbers; `time_scale_factor` maps team sizes to positive
   numbers; `backoffs` a list; `sweep_file` a string.
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import os
 import re
+from argparse import ArgumentTypeError
 from pathlib import Path
 
 from common import boundedfile
@@ -62,7 +65,30 @@ def _run(i: int, e) -> dict:
         v = e.get(key)
         if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v < 0):
             raise ValueError(f"{where}.{key} is not a whole number")
+    if e.get("config") is not None:
+        _config(where, e["config"])
     return {k: one_line(v) if isinstance(v, str) else v for k, v in e.items()}
+
+
+def _config(where: str, config: dict) -> None:
+    """ValueError unless every key of a run's plan is a run option with a valid value, and
+    the plan makes a RunConfig (the structured options: display_pos, snapshots, kill, ...)."""
+    from testbed.run.config import BY_NAME, RunConfig
+    from testbed.run.options import check_value
+
+    for key, value in config.items():
+        opt = BY_NAME.get(key)
+        if opt is None:
+            raise ValueError(f"{where}.config has {one_line(key, 40)!r}, not a run option")
+        if value is None or opt.parse is not None or opt.repeat:
+            continue
+        why = check_value(opt, value)
+        if why:
+            raise ValueError(f"{where}.config.{key}: {one_line(why, 120)}")
+    try:
+        RunConfig.from_dict(config)
+    except (TypeError, ValueError, ArgumentTypeError) as e:
+        raise ValueError(f"{where}.config: {one_line(str(e), 120)}") from None
 
 
 def check(doc) -> dict:

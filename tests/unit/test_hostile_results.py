@@ -284,3 +284,15 @@ def test_a_nan_in_a_figures_table_is_left_empty_and_said(tmp_path, caplog):
     assert (tmp_path / "fig2.csv").read_text().splitlines()[1] == "2,5.0,"
     assert json.loads((tmp_path / "fig2.json").read_text())[0]["steps_mean"] is None
     assert "steps_mean" in caplog.text and "not a number" in caplog.text
+
+
+@pytest.mark.parametrize(
+    "config",
+    [{"robots": "2"}, {"robots": 2, "laser_rays": 10**8}, {"nonsense": 1},
+     {"robots": 2, "kill": ["r1:99999999999999999"]}, {"robots": 2, "snapshots": "x"}],  # fmt: skip
+    ids=["string robots", "a laser of 10**8 rays", "an unknown key", "a huge kill", "snapshots"],
+)
+def test_a_runs_config_in_sweep_json_is_checked(tmp_path, capsys, config):
+    sweep = hd.sweep_dir(tmp_path / "sweep")
+    (sweep / "sweep.json").write_text(json.dumps({"runs": [{"id": "a", "config": config}]}))
+    hd.refused(["sweep", "--status", sweep], capsys, "sweep.json", "runs[0].config")
