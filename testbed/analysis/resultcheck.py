@@ -84,10 +84,10 @@ def check(r):
     _bounded("mean_finish_step", r.mean_finish_step, 0, top)
     _bounded("mean_finish_step_robots", r.mean_finish_step_robots, 0, r.config.robots + 1)
     _bounded("coverage_final", r.coverage_final, 0, 1 + 1e-9)
-    for name in ("time_scale_requested", "time_scale_achieved"):
-        value = getattr(r, name)
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name!r} is {value}, not a positive number")
+    requested = r.time_scale_requested
+    if requested is not None and not (math.isfinite(requested) and requested > 0):
+        raise ValueError(f"'time_scale_requested' is {requested}, not a positive number")
+    _bounded("time_scale_achieved", r.time_scale_achieved, 0, 1e6)  # 0: it never stepped
     missed = _bounded("deadlines_missed", r.deadlines_missed, 0, MAX_STEPS * 1001, whole=True)
     _bounded("deadlines_missed_world", r.deadlines_missed_world, 0, top, whole=True)
     _bounded("deadline_miss_fraction", r.deadline_miss_fraction, 0, 1)

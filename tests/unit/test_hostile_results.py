@@ -41,6 +41,7 @@ BAD_RESULTS = [
     ("miss fraction 2", _set("deadline_miss_fraction", 2.0), "deadline_miss_fraction"),
     ("coverage 3", _set("coverage_final", 3.0), "coverage_final"),
     ("time scale -1", _set("time_scale_achieved", -1.0), "time_scale_achieved"),
+    ("time scale asked 0", _set("time_scale_requested", 0), "time_scale_requested"),
     ("mean beyond the run", _set("mean_finish_step", 1e9), "mean_finish_step"),
     ("cause a number", _set("robots.r1.plans", [{"step": 1, "cause": 5}]), "cause"),
     ("a count -1", _set("robots.r1.messages", {"sent": {"goal": -1}}), "messages.sent"),
@@ -296,3 +297,19 @@ def test_a_runs_config_in_sweep_json_is_checked(tmp_path, capsys, config):
     sweep = hd.sweep_dir(tmp_path / "sweep")
     (sweep / "sweep.json").write_text(json.dumps({"runs": [{"id": "a", "config": config}]}))
     hd.refused(["sweep", "--status", sweep], capsys, "sweep.json", "runs[0].config")
+
+
+def test_a_run_that_never_stepped_is_still_read(tmp_path, capsys):
+    """A run that failed before its first step writes steps 0 and an achieved scale of 0:
+    a real result, counted as failed, not refused as impossible."""
+    run = hd.run_dir(tmp_path / "s")
+
+    def failed(doc):
+        doc.update(status="failed", steps=0, time_scale_achieved=0.0, coverage_final=0.0)
+        for r in doc["robots"].values():
+            r.update(finish_step=None, plans=[])
+
+    hd.edit_result(run, failed)
+    status, out, err = hd.testbed(["report", run], capsys)
+    assert status == 0, err
+    assert "Status **failed**" in out
