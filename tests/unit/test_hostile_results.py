@@ -289,8 +289,13 @@ def test_a_nan_in_a_figures_table_is_left_empty_and_said(tmp_path, caplog):
 
 @pytest.mark.parametrize(
     "config",
-    [{"robots": "2"}, {"robots": 2, "laser_rays": 10**8}, {"nonsense": 1},
-     {"robots": 2, "kill": ["r1:99999999999999999"]}, {"robots": 2, "snapshots": "x"}],  # fmt: skip
+    [
+        {"robots": "2"},
+        {"robots": 2, "laser_rays": 10**8},
+        {"nonsense": 1},
+        {"robots": 2, "kill": ["r1:99999999999999999"]},
+        {"robots": 2, "snapshots": "x"},
+    ],  # fmt: skip
     ids=["string robots", "a laser of 10**8 rays", "an unknown key", "a huge kill", "snapshots"],
 )
 def test_a_runs_config_in_sweep_json_is_checked(tmp_path, capsys, config):
