@@ -39,6 +39,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from common import boundedfile
 from common.jsonfile import make_dirs, write_atomic
 from testbed.analysis import (
     ablation,
@@ -53,7 +54,6 @@ from testbed.analysis import (
 from testbed.analysis.runs import FinishedRun, load_runs
 from testbed.analysis.tables import MetricsOf, write_table
 from testbed.view import served
-from topology import boundedfile
 
 log = logging.getLogger(__name__)
 

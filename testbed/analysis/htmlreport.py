@@ -21,10 +21,10 @@ import re
 import urllib.parse
 from pathlib import Path
 
+from common import boundedfile
 from common.jsonfile import write_atomic
 from testbed.resultfile import RESULT_NAME
 from testbed.view import served
-from topology import boundedfile
 
 _IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)$")
 # The report's own figures: figures/NAME.png or figures/paths/NAME.png, plain names only.

@@ -84,13 +84,13 @@ import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from common import boundedfile
 from common.errors import UsageError
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 from node.messaging.maps import refusal as maps_refusal
 from testbed.run import failures
 from testbed.run.config import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
 from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
-from topology import boundedfile
 from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
