@@ -230,12 +230,14 @@ def test_a_missing_capture_is_named_in_the_summary(tmp_path, capsys):
         {"messages_sent": {"RREQ": -3}},
         {"messages_sent": {"RREQ": 1}, "bytes_sent": "9" * 5000},
         {"messages_sent": {"RREQ": 1.5}},
+        "deep",
     ],
-    ids=["1e400", "negative", "5000-digit string", "fraction"],
+    ids=["1e400", "negative", "5000-digit string", "fraction", "deep"],
 )
 def test_impossible_daemon_counters_are_left_out(tmp_path, doc):
     run = hd.with_captures(hd.run_dir(tmp_path / "s"))
-    text = json.dumps(doc).replace("1e+400", "1e400").replace("Infinity", "1e400")
+    text = "[" * 100_000 + "]" * 100_000 if doc == "deep" else json.dumps(doc)
+    text = text.replace("Infinity", "1e400")  # json.dumps writes 1e400 as Infinity
     (run / "aodv" / "r1.json").write_text(text)
     counts = capturefiles.daemon_counts(run)
     assert set(counts) == {"r2"}
@@ -318,3 +320,18 @@ def test_a_run_that_never_stepped_is_still_read(tmp_path, capsys):
     status, out, err = hd.testbed(["report", run], capsys)
     assert status == 0, err
     assert "Status **failed**" in out
+
+
+def test_a_plan_at_step_infinity_neither_breaks_the_view_nor_a_resume(tmp_path, capsys):
+    from testbed.sweep.rundir import is_done
+    from testbed.view import replay
+
+    sweep = hd.sweep_dir(tmp_path / "sweep")
+    run = sorted((sweep / "runs").iterdir())[0]
+    text = (run / "result.json").read_text()
+    (run / "result.json").write_text(text.replace('"step": 0', '"step": Infinity', 1))
+    (run / "positions.csv").write_text("step,x1,y1\n0,1,1\n")
+    assert replay.load(run)["status"] == "unknown"  # the result unreadable, the replay drawn
+    assert is_done(sweep, run.name)  # a finished run whose result says nothing: not redone
+    status, _, err = hd.testbed(["report", sweep], capsys)
+    assert status == 0 and "**Left out: 1 run(s)" in (sweep / "report.md").read_text(), err
