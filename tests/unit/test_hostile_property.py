@@ -192,7 +192,7 @@ def _make(path, kind: str, data: bytes, outside) -> None:
         path.write_bytes(data)
 
 
-@settings(SETTINGS, max_examples=50)
+@settings(SETTINGS, max_examples=30)
 @given(
     files=st.lists(
         st.tuples(st.sampled_from(RUN_FILES), st.sampled_from(KINDS), st.binary(max_size=64)),
@@ -227,7 +227,7 @@ state_values = st.one_of(
 )  # fmt: skip
 
 
-@settings(SETTINGS, max_examples=20)
+@settings(SETTINGS, max_examples=12)
 @given(state=state_values, broken=st.lists(changes(), min_size=4, max_size=4))
 def test_a_sweep_report_is_correct_or_one_line(tmp_path_factory, capsys, state, broken):
     base = tmp_path_factory.mktemp("prop")
