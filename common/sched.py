@@ -21,6 +21,8 @@ import contextlib
 import os
 from collections.abc import Iterator
 
+from common import envswitch
+
 # (SCHED_RR priority, nice where real-time priority is refused)
 CLOCK_PRIORITY = (2, -10)  # the world's step loop: the clock everything is measured against
 DEADLINE_PRIORITY = (1, -5)  # every part with a deadline the fidelity verdict checks
@@ -31,7 +33,7 @@ def raise_priority(rt_priority: int, nice: int) -> str:
     `nice` (both need root), else leave it; returns what it got ("SCHED_RR 2", "nice -10" or
     "normal")."""
     try:
-        if os.environ.get("TESTBED_REALTIME", "1") == "0":
+        if envswitch.value("TESTBED_REALTIME") == "0":
             raise OSError("real-time priority turned off")
         policy = os.SCHED_RR | os.SCHED_RESET_ON_FORK
         os.sched_setscheduler(0, policy, os.sched_param(rt_priority))

@@ -17,11 +17,11 @@ a run records it.
 from __future__ import annotations
 
 import ctypes
-import os
 from pathlib import Path
 
 import numpy as np
 
+from common import envswitch
 from node.rays import _BUCKETS, _FRAC
 
 LIBRARY = Path(__file__).resolve().parent.parent / "build" / "libstepcore.so"
@@ -55,7 +55,7 @@ _SIGNATURES = {
 
 
 def _load() -> ctypes.CDLL | None:
-    if os.environ.get("TESTBED_STEPCORE", "").lower() == "numpy":
+    if envswitch.value("TESTBED_STEPCORE") == "numpy":
         return None
     try:
         lib = ctypes.CDLL(str(LIBRARY))

@@ -14,8 +14,10 @@ import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
 
+from common import envswitch
 from common.errors import EXIT_USAGE, TestbedError, UsageError
 from testbed.net import commands
+from testbed.resultfile import one_line
 
 log = logging.getLogger("testbed")
 
@@ -83,19 +85,20 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop_on_sigterm)
     try:
         args = build_parser(argv).parse_args(argv)
+        envswitch.check()  # TESTBED_REALTIME=false is refused, not taken as the default
         logging.basicConfig(
             level=logging.INFO if args.verbose else logging.WARNING,
             format="%(asctime)s testbed %(name)s %(levelname)s: %(message)s",
         )
         return dispatch(args)
-    except TestbedError as exc:
-        print(f"testbed: error: {exc}", file=sys.stderr)
+    except TestbedError as exc:  # one line, whatever a file's name or contents held
+        print(f"testbed: error: {one_line(str(exc), 2000)}", file=sys.stderr)
         return exc.exit_status
     except KeyboardInterrupt:
         print("testbed: interrupted", file=sys.stderr)
         return 130
     except (OSError, NetlinkError) as exc:  # a kernel or file operation that failed
-        print(f"testbed: error: {_os_error_text(exc)}", file=sys.stderr)
+        print(f"testbed: error: {one_line(_os_error_text(exc), 2000)}", file=sys.stderr)
         return 1
 
 

@@ -12,6 +12,14 @@ EXIT_INTERRUPTED = 130
 
 
 def main() -> int:
+    from common import envswitch
+    from common.errors import UsageError
+
+    try:  # before the imports: node.stepcore reads TESTBED_STEPCORE as it is imported
+        envswitch.check()
+    except UsageError as e:
+        sys.stderr.write(f"testbed: error: {e}\n")
+        return e.exit_status
     try:
         from testbed.cli import main as cli_main
 

@@ -28,13 +28,15 @@ nested dicts (tests/unit/test_result_file.py holds this).
 from __future__ import annotations
 
 import dataclasses
-import json
 import statistics
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
+
+from common import boundedfile
+from testbed.analysis import resultcheck
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -70,6 +72,25 @@ def has_result(run_dir: str | Path) -> bool:
 # ---------------------------------------------------------------- checked reading
 
 
+def one_line(text: str, limit: int = 500) -> str:
+    """`text` as one printable line: a control character (newline, ESC, ...) shown as its
+    Python escape, so that neither a report's markdown nor a terminal takes it as markup;
+    at most `limit` characters (an ellipsis marks the cut)."""
+    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return out if len(out) <= limit else out[: limit - 1] + "…"
+
+
+def _one_lines(value: Any) -> Any:
+    """A record's strings, nested ones included, each made one line (one_line)."""
+    if isinstance(value, str):
+        return one_line(value)
+    if isinstance(value, Mapping):
+        return {one_line(str(k)): _one_lines(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_one_lines(v) for v in value]
+    return value
+
+
 def _get(
     doc: Mapping[str, Any],
     key: str,
@@ -87,7 +108,7 @@ def _get(
     if not isinstance(value, kinds) or (number and isinstance(value, bool)):
         want = " or ".join(k.__name__ for k in kinds)
         raise ResultError(f"{key!r} is {type(value).__name__}, not {want}")
-    return value
+    return one_line(value) if isinstance(value, str) else value
 
 
 def _mapping(doc: Mapping[str, Any], key: str) -> Mapping[str, Any]:
@@ -96,7 +117,7 @@ def _mapping(doc: Mapping[str, Any], key: str) -> Mapping[str, Any]:
         return _EMPTY
     if not isinstance(value, Mapping):
         raise ResultError(f"{key!r} is {type(value).__name__}, not an object")
-    return MappingProxyType(dict(value))
+    return MappingProxyType(_one_lines(dict(value)))
 
 
 def _list(doc: Mapping[str, Any], key: str) -> list[Any]:
@@ -180,7 +201,8 @@ class RobotResult:
         if not isinstance(plans, list):
             raise ResultError(f"robot {name}: 'plans' is not a list")
         try:
-            plans = tuple(Plan(int(p["step"]), p.get("cause")) for p in plans)
+            plans = tuple(Plan(_get(p, "step", _NUM, required=True), _get(p, "cause", (str,)))
+                          for p in plans)  # fmt: skip
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ResultError(f"robot {name}: a plan without a step ({e})") from None
         messages = _mapping(doc, "messages")
@@ -251,8 +273,9 @@ class ResultConfig:
             map=_get(c, "map", (str,)),
             loss_pct=_get(c, "loss_pct", _NUM, 0.0),
             delay_ms=_get(c, "delay_ms", _NUM, 0.0),
-            coordination=c.get("coordination", extra.get("coordination", DEFAULT_VARIANT[0])),
-            start=c.get("start", extra.get("start", DEFAULT_VARIANT[1])),
+            coordination=_get(c, "coordination", (str,))
+            or _get(extra, "coordination", (str,), DEFAULT_VARIANT[0]),
+            start=_get(c, "start", (str,)) or _get(extra, "start", (str,), DEFAULT_VARIANT[1]),
             seed=_get(c, "seed", (int,)),
             capture=bool(c.get("capture")),
             max_steps=_get(c, "max_steps", (int,)),
@@ -456,18 +479,18 @@ class RunResult:
         itself (a path); ResultError (one line, naming the file) when it is missing, not
         JSON or malformed."""
         if isinstance(source, Mapping):
-            return cls._parse(source)
+            return cls._checked(source)
         path = Path(source)
         if path.is_dir() or path.name != RESULT_NAME:
             path = result_path(path)
         try:
-            doc = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ResultError(f"{path}: no such file (not a finished run)") from None
-        except (OSError, ValueError, RecursionError) as e:
-            raise ResultError(f"{path}: unreadable ({e})") from None
+            doc = boundedfile.load_json(path)
+        except boundedfile.Refused as r:
+            if r.kind == "missing":
+                raise ResultError(f"{path}: no such file (not a finished run)") from None
+            raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
         try:
-            return cls._parse(doc)
+            return cls._checked(doc)
         except ResultError as e:
             raise ResultError(f"{path}: {e}") from None
 
@@ -479,6 +502,15 @@ class RunResult:
             return cls.from_json(source)
         except ResultError:
             return None
+
+    @classmethod
+    def _checked(cls, doc: object) -> RunResult:
+        """_parse, then the values' ranges (testbed.analysis.resultcheck)."""
+        result = cls._parse(doc)
+        try:
+            return resultcheck.check(result)
+        except ValueError as e:
+            raise ResultError(str(e)) from None
 
     @classmethod
     def _parse(cls, doc: object) -> RunResult:

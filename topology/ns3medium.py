@@ -38,6 +38,7 @@ import struct
 import subprocess
 import time
 
+from common import envswitch
 from common.errors import TestbedError, UsageError
 from topology import names, netns, processes, rtnl, state
 from topology.medium import WLAN_INDEX, Medium, port_index
@@ -122,7 +123,7 @@ def argv(
         out += ["--lag-file", lag_file, "--lag-cap-bytes", str(LAG_CAP_BYTES)]
     if spec.wifi_rate:
         out += ["--rate", spec.wifi_rate]
-    if os.environ.get("TESTBED_REALTIME", "1") != "0":
+    if envswitch.value("TESTBED_REALTIME") == "1":
         out += ["--rt-priority", str(RT_PRIORITY)]
     for k, (x, y) in zip(spec.robot_ids(), positions, strict=True):
         out += ["--robot", f"{names.robot_port(k)},{robot_mac(k)},{x!r},{y!r}"]

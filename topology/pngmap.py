@@ -124,11 +124,22 @@ def read_gray(path: str, max_pixels: int = MAX_MAP_PIXELS) -> np.ndarray:
 
 
 def decode_gray(path: str, width: int, height: int, data: bytes) -> np.ndarray:
-    """Step 4: decode what `check` returned (its width, height and bytes)."""
+    """Step 4: decode what `check` returned (its width, height and bytes). A picture with
+    an alpha channel is laid over white first, as a viewer shows it: transparent free
+    space is free, not the black its colour channels hold."""
     import cv2  # only maps need it; the rest of topology starts without it
 
+    raw = np.frombuffer(data, dtype=np.uint8)
     with _stderr_discarded():
-        img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+        img = cv2.imdecode(raw, cv2.IMREAD_GRAYSCALE)
     if img is None or img.shape != (height, width):
         raise PngError(f"map file {path} is a PNG that OpenCV cannot decode")
+    if data[25:26] in (b"\x04", b"\x06"):  # IHDR colour type: grey or RGB with alpha
+        with _stderr_discarded():
+            full = cv2.imdecode(raw, cv2.IMREAD_UNCHANGED)
+        if full is not None and full.ndim == 3 and full.shape[2] == 4:
+            alpha = full[..., 3].astype(np.float32) / (
+                65535.0 if full.dtype == np.uint16 else 255.0
+            )
+            img = np.rint(img * alpha + 255.0 * (1 - alpha)).astype(np.uint8)
     return img

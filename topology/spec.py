@@ -23,6 +23,14 @@ WIFI_LOSSES = ("range", "logdistance")
 WIFI_STANDARDS = ("80211a", "80211b", "80211g")
 
 
+def _number(value, what: str) -> float:
+    """`value` if it is a number (an int or a float, not a bool), else ValueError saying
+    so: a string "5" is refused in one sentence, not compared into a TypeError."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{what} must be a number, not {str(value)[:40]!r}")
+    return value
+
+
 @dataclass(frozen=True)
 class Impairment:
     """What one direction of one link does to frames: loss, delay, jitter, rate."""
@@ -33,14 +41,14 @@ class Impairment:
     rate_kbit: float = 0.0  # 0: unlimited
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.loss_pct <= 100.0:
+        if not 0.0 <= _number(self.loss_pct, "loss") <= 100.0:
             raise ValueError(f"loss {self.loss_pct}% is not in 0..100")
         for what, value in (
             ("delay", self.delay_ms),
             ("jitter", self.jitter_ms),
             ("rate", self.rate_kbit),
         ):
-            if value < 0 or not math.isfinite(value):
+            if _number(value, what) < 0 or not math.isfinite(value):
                 raise ValueError(f"{what} {value} must be a finite number >= 0")
 
     @property
@@ -125,6 +133,10 @@ class NetworkSpec:
 
     def __post_init__(self) -> None:
         names.check_name(self.name)
+        if not isinstance(self.positions, list | tuple):
+            raise ValueError(f"positions must be a tuple of (x, y), not {str(self.positions)[:40]}")
+        if self.capture_dir is not None and not isinstance(self.capture_dir, str):
+            raise ValueError(f"capture_dir must be a path (str), not {str(self.capture_dir)[:40]}")
         if not self.positions:
             raise ValueError("a testbed needs at least one robot")
         if len(self.positions) > names.MAX_ROBOTS:
@@ -134,7 +146,8 @@ class NetworkSpec:
             "positions",
             tuple(check_position(p, f"position of r{k}") for k, p in enumerate(self.positions, 1)),
         )
-        if not (self.comm_range > 0 and math.isfinite(self.comm_range)):
+        if not (_number(self.comm_range, "communication range") > 0
+                and math.isfinite(self.comm_range)):  # fmt: skip
             raise ValueError(
                 f"communication range must be a positive number, not {self.comm_range}"
             )
@@ -146,11 +159,14 @@ class NetworkSpec:
             raise ValueError(
                 f"unknown range model {self.range_model!r} (choose from {', '.join(RANGE_MODELS)})"
             )
-        if not (self.time_scale > 0 and math.isfinite(self.time_scale)):
+        if not (_number(self.time_scale, "time scale") > 0 and math.isfinite(self.time_scale)):
             raise ValueError(f"time scale must be a positive number, not {self.time_scale}")
-        if not (self.map_cell > 0 and math.isfinite(self.map_cell)):
+        if not (_number(self.map_cell, "map cell size") > 0 and math.isfinite(self.map_cell)):
             raise ValueError(f"map cell size must be a positive number, not {self.map_cell}")
-        if self.wall_loss_pct is not None and not 0 <= self.wall_loss_pct <= 100:
+        if (
+            self.wall_loss_pct is not None
+            and not 0 <= _number(self.wall_loss_pct, "wall loss") <= 100
+        ):
             raise ValueError(f"wall loss {self.wall_loss_pct}% is not in 0..100")
         if self.medium not in MEDIA:
             raise ValueError(f"unknown medium {self.medium!r} (choose from {', '.join(MEDIA)})")
@@ -197,7 +213,7 @@ def layout_positions(
     in a square whose side grows with the team so that density stays that of `spacing`."""
     if robots < 1:
         raise ValueError("a testbed needs at least one robot")
-    if not (spacing > 0 and math.isfinite(spacing)):
+    if not (_number(spacing, "spacing") > 0 and math.isfinite(spacing)):
         raise ValueError(f"spacing must be a positive number, not {spacing}")
     if layout == "chain":
         return [(i * spacing, 0.0) for i in range(robots)]

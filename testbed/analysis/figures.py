@@ -36,10 +36,11 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from common import boundedfile
+from common.jsonfile import make_dirs, write_atomic
 from testbed.analysis import (
     ablation,
     media,
@@ -52,6 +53,7 @@ from testbed.analysis import (
 )
 from testbed.analysis.runs import FinishedRun, load_runs
 from testbed.analysis.tables import MetricsOf, write_table
+from testbed.view import served
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +71,7 @@ def collect_paths(runs: list[FinishedRun], dest: Path) -> list[Path]:
     """The path pictures (Figs. 3 and 5) of each point's first usable run: drawn from its
     positions (testbed.analysis.pathsfig: start markers, a scale bar, names inside the
     frame), or its own paths.png copied where it recorded no positions."""
-    dest.mkdir(parents=True, exist_ok=True)
+    make_dirs(dest, root=dest.parent)  # figures/paths: a directory of its own, not a link
     seen, out = set(), []
     for run in sorted(runs, key=lambda r: r.run_id):
         c = run.config
@@ -77,14 +79,31 @@ def collect_paths(runs: list[FinishedRun], dest: Path) -> list[Path]:
         src = run.path / "paths.png"
         if not run.usable or point in seen:
             continue
-        png = pathsfig.write_paths(run, dest / run.run_id)
-        if png is None and src.is_file():
-            png = dest / f"{run.run_id}.png"
-            shutil.copyfile(src, png)
+        try:
+            png = pathsfig.write_paths(run, dest / run.run_id)
+        except pathsfig.PathsError as e:
+            log.warning("no paths picture: %s", e)
+            continue
+        if png is None:
+            png = _copy_paths_png(src, dest / f"{run.run_id}.png")
         if png is not None:
             seen.add(point)
             out.append(png)
     return out
+
+
+def _copy_paths_png(src: Path, dest: Path) -> Path | None:
+    """A run's own paths.png copied to `dest` when it is a regular PNG file inside its
+    run directory (a link out of it, a FIFO or a non-PNG is left out), else None."""
+    found = served.in_run(src.parent, src.name)
+    if found is None or not served.is_png(found):
+        return None
+    try:
+        data = boundedfile.read(found, served.MAX_FILE_BYTES)
+    except boundedfile.Refused:
+        return None
+    write_atomic(dest, data)
+    return dest
 
 
 def _paper_figures(runs: list[FinishedRun], figdir: Path, made: dict) -> None:
@@ -182,14 +201,14 @@ def make_all(
     {"files": [...], "runs": [FinishedRun, ...], "tables": {name: rows}}. Runs not faithful
     to their time scale are left out unless `unfaithful`."""
     sweep_dir = Path(sweep_dir)
-    figdir = sweep_dir / "figures"
-    figdir.mkdir(parents=True, exist_ok=True)
-    all_runs = load_runs(sweep_dir, unfaithful=unfaithful)
+    figdir = make_dirs(sweep_dir / "figures", root=sweep_dir)  # refused if it is a link
+    left_out: list[str] = []
+    all_runs = load_runs(sweep_dir, unfaithful=unfaithful, left_out=left_out)
     network = tables.main_network(all_runs)
     messaging = middlewares.main_messaging(all_runs)
     runs = [r for r in all_runs if r.network == network
             and (middlewares.middleware_of(r), middlewares.failure_of(r)) == messaging]  # fmt: skip
-    made: dict = {"files": [], "runs": all_runs, "tables": {}}
+    made: dict = {"files": [], "runs": all_runs, "tables": {}, "left_out": left_out}
     _paper_figures(runs, figdir, made)
     metrics = _all_metrics(all_runs, metrics_of or capture_metrics)
     _protocol_tables(all_runs, metrics, figdir, made)

@@ -5,6 +5,12 @@ text into HTML with the figures inlined (data: URIs), so the page can be mailed 
 from a laptop's disk. It knows exactly the markdown the report uses: headings, paragraphs,
 lists, pipe tables, images, **bold** and `code`; anything else passes through as text.
 Each run's directory is linked from a table at the end (its paths picture, its result).
+
+What the page takes from the sweep's files is text, never markup: every string is escaped
+(element text and attribute values alike, run directory names in links percent-encoded
+too), and strings from result.json reach the markdown as one line (testbed.resultfile).
+The only pictures inlined are the report's own figures: an image line whose path is not
+`figures/....png`, a regular PNG inside the sweep directory, is shown as its text.
 """
 
 from __future__ import annotations
@@ -12,11 +18,17 @@ from __future__ import annotations
 import base64
 import html
 import re
+import urllib.parse
 from pathlib import Path
 
+from common import boundedfile
+from common.jsonfile import write_atomic
 from testbed.resultfile import RESULT_NAME
+from testbed.view import served
 
 _IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)$")
+# The report's own figures: figures/NAME.png or figures/paths/NAME.png, plain names only.
+_OWN_FIGURE = re.compile(r"figures/(paths/)?[A-Za-z0-9][A-Za-z0-9._-]*\.png")
 _BOLD = re.compile(r"\*\*(.+?)\*\*")
 _CODE = re.compile(r"`([^`]+)`")
 STYLE = """
@@ -38,11 +50,17 @@ def _inline(text: str) -> str:
 
 
 def _image(alt: str, src: str, base: Path) -> str:
-    path = base / src
-    if path.suffix.lower() == ".png" and path.is_file():
-        data = base64.b64encode(path.read_bytes()).decode()
-        src = f"data:image/png;base64,{data}"
-    return f'<p><img alt="{html.escape(alt)}" src="{src}"></p>'
+    """The report's own figure `src` inlined; anything else as the line's text."""
+    found = served.in_run(base, src) if _OWN_FIGURE.fullmatch(src) else None
+    if found is not None and served.is_png(found):
+        try:
+            data = boundedfile.read(found, served.MAX_FILE_BYTES)
+        except boundedfile.Refused:
+            data = None
+        if data is not None:
+            uri = "data:image/png;base64," + base64.b64encode(data).decode()
+            return f'<p><img alt="{html.escape(alt)}" src="{uri}"></p>'
+    return f"<p>{_inline(f'![{alt}]({src})')}</p>"
 
 
 def _table(rows: list[str]) -> str:
@@ -106,9 +124,10 @@ def _runs_table(sweep_dir: Path) -> str:
         return ""
     rows = []
     for r in runs:
-        links = [f'<a href="runs/{r.name}/{RESULT_NAME}">result</a>']
+        href = html.escape(urllib.parse.quote(f"runs/{r.name}"), quote=True)
+        links = [f'<a href="{href}/{RESULT_NAME}">result</a>']
         if (r / "paths.png").is_file():
-            links.append(f'<a href="runs/{r.name}/paths.png">paths</a>')
+            links.append(f'<a href="{href}/paths.png">paths</a>')
         replay = f"<code>testbed view {html.escape(str(r))}</code>"
         rows.append(
             f"<tr><td>{html.escape(r.name)}</td><td>{' '.join(links)}</td><td>{replay}</td></tr>"
@@ -126,7 +145,5 @@ def write_html(sweep_dir: Path, markdown: str) -> Path:
         "<body>", to_html(markdown, sweep_dir), _runs_table(sweep_dir), "</body>", "</html>",
     ])  # fmt: skip
     path = sweep_dir / "report.html"
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page)
-    tmp.replace(path)
+    write_atomic(path, page)  # a fresh temporary name beside it, never through a link
     return path

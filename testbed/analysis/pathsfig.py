@@ -8,12 +8,22 @@ its colour from a hollow square (its start) to a dot (where it finished), its na
 the dot on the side facing the middle of the map so that it stays inside the frame, and a
 scale bar. Without map.npy the paths are drawn on white over the map's size. Long paths
 are thinned to at most MAX_POINTS points per robot (the last one always kept).
+
+What a run directory holds is checked, not trusted: positions.csv and map.npy are read
+through the one bounded, regular-files-only reader (common.boundedfile); a positions.csv
+whose header is not step,x1,y1,... or whose values are not finite coordinates, a map.npy
+that is not a 2-D array of whole numbers of at most MAX_MAP_CELLS cells (its header is
+checked before anything is allocated), a map_cell or map_size that is not a positive size:
+each leaves the picture out (PathsError, one line naming the file and the field; the report
+logs it and draws no picture for that run).
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -23,49 +33,133 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from testbed.analysis.plots import plt
+from common import boundedfile
+from testbed.analysis.plots import plt, save_figure
 from testbed.analysis.runs import FinishedRun
 
 MAX_POINTS = 2000
+MAX_FILE_BYTES = 256 << 20  # testbed.view.served's limit: a long run's positions.csv
+MAX_MAP_CELLS = 1 << 26  # a 64-megacell map: far more than any run's (hundreds a side)
+MAX_ROBOTS = 1001  # the team and the display robot
+MAX_COORD_M = 10_000_000.0  # docs/security.md's coordinate limit
 _GREYS = np.array([215, 255, 0], dtype=np.uint8)  # unknown, free, occupied
+_COLUMN = re.compile(r"([xy])([1-9][0-9]{0,3})")
+
+
+class PathsError(ValueError):
+    """A run's file the paths picture cannot be drawn from; str() is one line naming it."""
+
+
+def _read(path: Path) -> bytes | None:
+    """The file's bytes, None when it is missing; PathsError when it is not readable."""
+    try:
+        return boundedfile.read(path, MAX_FILE_BYTES)
+    except boundedfile.Refused as r:
+        if r.kind == "missing":
+            return None
+        raise PathsError(f"{path}: {boundedfile.describe(r)}") from None
+
+
+def _columns(path: Path, header: list[str]) -> list[int]:
+    """The robot of each x,y pair of columns of positions.csv's header step,x1,y1,..."""
+    if not header or header[0] != "step" or len(header) % 2 != 1:
+        raise PathsError(f"{path}: the header is not step,x1,y1,...")
+    robots = []
+    for x, y in zip(header[1::2], header[2::2], strict=True):
+        mx, my = _COLUMN.fullmatch(x), _COLUMN.fullmatch(y)
+        if not (mx and my and mx[1] == "x" and my[1] == "y" and mx[2] == my[2]):
+            raise PathsError(f"{path}: columns {x[:20]!r}, {y[:20]!r} are not xK, yK")
+        if int(mx[2]) > MAX_ROBOTS:
+            raise PathsError(f"{path}: robot {mx[2]} is more than {MAX_ROBOTS}")
+        robots.append(int(mx[2]))
+    return robots
+
+
+def _coordinate(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and abs(value) <= MAX_COORD_M):
+        raise ValueError(f"{text[:40]!r} is not a coordinate")
+    return value
 
 
 def read_positions(run_dir: Path) -> dict[int, list[tuple[float, float]]]:
-    """Robot number -> its (x, y) at every step of positions.csv; {} without the file."""
+    """Robot number -> its (x, y) at every step of positions.csv; {} without the file;
+    PathsError (one line: the file, the line, why) when it is not what runs write."""
     path = Path(run_dir) / "positions.csv"
-    if not path.is_file():
+    data = _read(path)
+    if data is None:
         return {}
     paths: dict[int, list[tuple[float, float]]] = {}
-    with path.open() as f:
-        reader = csv.reader(f)
-        header = next(reader, [])
-        robots = [int(h[1:]) for h in header[1::2]]
+    try:
+        reader = csv.reader(io.StringIO(data.decode("utf-8"), newline=""))
+        robots = _columns(path, next(reader, []))
         for row in reader:
+            if len(row) != 1 + 2 * len(robots):
+                raise ValueError(f"{len(row)} columns, not {1 + 2 * len(robots)}")
             for i, k in enumerate(robots):
                 x, y = row[1 + 2 * i : 3 + 2 * i]
                 if x and y:
-                    paths.setdefault(k, []).append((float(x), float(y)))
+                    paths.setdefault(k, []).append((_coordinate(x), _coordinate(y)))
+    except (ValueError, csv.Error) as e:  # UnicodeDecodeError is a ValueError
+        if isinstance(e, PathsError):
+            raise
+        line = getattr(locals().get("reader"), "line_num", 0)
+        raise PathsError(f"{path} line {line}: {str(e)[:200]}") from None
     return {k: p[:: max(1, len(p) // MAX_POINTS)] + p[-1:] for k, p in paths.items()}
+
+
+def read_map(path: Path) -> np.ndarray | None:
+    """The display's map (a 2-D array of whole numbers), None without the file; its header
+    is checked before the array is made (a header may claim 10**12 cells); PathsError
+    when it is not one."""
+    data = _read(path)
+    if data is None:
+        return None
+    f = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(f)
+        header = {(1, 0): np.lib.format.read_array_header_1_0,
+                  (2, 0): np.lib.format.read_array_header_2_0}.get(version)  # fmt: skip
+        if header is None:
+            raise ValueError(f"format version {version}")
+        shape, _, dtype = header(f)
+        if len(shape) != 2 or not all(0 < n <= MAX_MAP_CELLS for n in shape):
+            raise ValueError(f"shape {shape} is not a 2-D map")
+        if shape[0] * shape[1] > MAX_MAP_CELLS or dtype.kind not in "iub":
+            raise ValueError(f"{shape[0] * shape[1]} cells of {dtype}: not a map")
+        if len(data) - f.tell() != shape[0] * shape[1] * dtype.itemsize:
+            raise ValueError("its data is not the size its header says")
+        return np.load(io.BytesIO(data), allow_pickle=False)
+    except (ValueError, TypeError, OSError, SyntaxError) as e:
+        raise PathsError(f"{path}: not a map ({str(e)[:200]})") from None
+
+
+def _positive(run: FinishedRun, key: str, value, high: float) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not (math.isfinite(value) and 0 < value <= high)
+    ):
+        raise PathsError(f"{run.path}: config {key} {str(value)[:40]} is not a size in 0..{high:g}")
+    return value
 
 
 def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, float]:
     """The map's width and height in metres."""
-    cell = run.config.extra.get("map_cell") or 0.05
+    cell = _positive(run, "map_cell", run.config.extra.get("map_cell") or 0.05, 1000)
     if shape is None:
         size = run.config.extra.get("map_size") or [400, 400]
-        shape = (size[1], size[0])
+        if not isinstance(size, list) or len(size) != 2:
+            raise PathsError(f"{run.path}: config map_size is not [rows, cols]")
+        rows = _positive(run, "map_size", size[1], MAX_MAP_CELLS)
+        cols = _positive(run, "map_size", size[0], MAX_MAP_CELLS)
+        return cols * cell, rows * cell
     return shape[1] * cell, shape[0] * cell
 
 
 def _background(ax, run: FinishedRun) -> tuple[float, float, bool]:
     """The display's map in metres; (width, height, whether there was one)."""
-    grid = None
-    path = run.path / "display" / "map.npy"
-    if path.is_file():
-        try:
-            grid = np.load(path)
-        except (OSError, ValueError):
-            grid = None
+    grid = read_map(run.path / "display" / "map.npy")
     w, h = _extent(run, grid.shape if grid is not None else None)
     if grid is not None:
         img = _GREYS[np.clip(grid, 0, 2)]
@@ -131,6 +225,8 @@ def write_paths(run: FinishedRun, stem: Path) -> Path | None:
         return None
     png = stem.with_suffix(".png")
     fig = paths_figure(run, paths)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, png, dpi=110)
+    finally:
+        plt.close(fig)
     return png

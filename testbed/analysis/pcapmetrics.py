@@ -56,12 +56,10 @@ the delays and throughput in emulated time and what each number means
 from __future__ import annotations
 
 import bisect
-import contextlib
 import json
 import logging
 import math
 import os
-import re
 import statistics
 import subprocess
 import sys
@@ -71,8 +69,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from common import boundedfile
 from common.jsonfile import write_json_atomic
-from testbed.analysis import mwframing, relaylag, routingnotes, rtps, runs
+from testbed.analysis import capturefiles, mwframing, relaylag, routingnotes, rtps, runs
+from testbed.analysis.capturefiles import capture_drops, daemon_counts
 from testbed.resultfile import DEFAULT_ROUTING
 
 log = logging.getLogger(__name__)
@@ -84,7 +84,7 @@ BROADCAST = "255.255.255.255"
 CACHE_NAME = "routing.json"
 # 3: "emulated" and "about"; 4: "tcp_flows"; 5: relay-lag correction, or "middleware";
 # 6: both; 7: the middleware's traffic for zenoh and dds, and by kind
-CACHE_FORMAT = 7
+CACHE_FORMAT = 8
 # The robots' goal messages: the port every robot's messenger listens on (node.launch's
 # --goal-port, which a run leaves at its default), and each middleware's framing on it
 # (testbed.analysis.mwframing, testbed.analysis.rtps). A middleware without an entry is not
@@ -674,35 +674,6 @@ def _middleware_totals(middleware: str, framing: str | None, robots: dict[str, d
 # ---------------------------------------------------------------- the AODV daemons' counters
 
 
-def daemon_counts(run_dir: Path) -> dict[str, dict] | None:
-    """Per robot, what its AODV daemon says it transmitted (aodv/rK.json, written by
-    aodv/stats.py): {"packets": n, "bytes": UDP payload bytes, "by_type": {...}}.
-    None if the run has no such files."""
-    d = Path(run_dir) / "aodv"
-    if not d.is_dir():
-        return None
-    out = {}
-    for p in sorted(d.glob("r*.json")):
-        try:
-            doc = json.loads(p.read_text())
-            by_type = Counter({str(k): int(v) for k, v in doc["messages_sent"].items()})
-            # What the kernel took but reported back untransmitted (a unicast whose next
-            # hop's ARP failed) never reaches wlan0, so no capture can hold it.
-            unsent = Counter(
-                {str(k): int(v) for k, v in doc.get("messages_not_transmitted", {}).items()}
-            )
-            by_type.subtract(unsent)
-            out[p.stem] = {
-                "packets": sum(by_type.values()),
-                "bytes": int(doc.get("bytes_sent", 0)) - int(doc.get("bytes_not_transmitted", 0)),
-                "by_type": {k: n for k, n in by_type.items() if n},
-                "not_transmitted": sum(unsent.values()),
-            }
-        except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
-            log.warning("%s: unreadable AODV counters (%s)", p, e)
-    return out or None
-
-
 def _rel(a: float, b: float) -> float | None:
     return abs(a - b) / b if b else (0.0 if a == b else None)
 
@@ -739,19 +710,6 @@ def compare_with_daemons(metrics: dict, daemons: dict[str, dict] | None) -> dict
     }
 
 
-def capture_drops(run_dir: Path) -> dict[str, int]:
-    """Per robot, the packets its capture lost in the kernel (tcpdump's last words, "N packets
-    dropped by kernel", in pcaps/daemons/rK.tcpdump.log): what no count from the pcaps can
-    include. Robots whose log has no such line are left out."""
-    out = {}
-    for p in sorted((Path(run_dir) / "pcaps" / "daemons").glob("r*.tcpdump.log")):
-        with contextlib.suppress(OSError):
-            m = re.search(r"(\d+) packets? dropped by kernel", p.read_text())
-            if m:
-                out[p.name.split(".")[0]] = int(m[1])
-    return out
-
-
 # ---------------------------------------------------------------- a run directory
 
 
@@ -762,15 +720,6 @@ def robot_address(k: int) -> str:
         hi, lo = divmod(k - 1, 254)
         return f"10.0.{hi}.{lo + 1}"
     return robot_addr(k)
-
-
-def _pcaps(run_dir: Path) -> dict[int, Path]:
-    out = {}
-    for p in (Path(run_dir) / "pcaps").glob("r*.pcap*"):
-        m = re.fullmatch(r"r(\d+)\.pcap(ng)?", p.name)
-        if m:
-            out[int(m[1])] = p
-    return out
 
 
 def run_metrics(
@@ -784,19 +733,23 @@ def run_metrics(
     delays into emulated time) is read from the directory when not given; `network`, the
     (routing, time scale) of a `net up --capture` network, stands in for a run that has none."""
     run_dir = Path(run_dir)
-    pcaps = _pcaps(run_dir)
+    found = capturefiles.find(run_dir)
+    pcaps = found.paths
     if not pcaps:
         return None
     cache = run_dir / CACHE_NAME
     lag_path = run_dir / relaylag.LAG_NAME
-    stamped = [*pcaps.values(), *([lag_path] if lag_path.is_file() else [])]
-    stamp = {p.name: [p.stat().st_size, p.stat().st_mtime_ns] for p in stamped}
-    if use_cache and cache.is_file():
+    stamped = [*pcaps.values(), *([lag_path] if boundedfile.regular(lag_path) else [])]
+    stamp = capturefiles.content_stamp(stamped)  # content, not sizes and mtimes
+    if use_cache:
         try:
-            doc = json.loads(cache.read_text())
+            doc = boundedfile.load_json(cache)
             if doc.get("format") == CACHE_FORMAT and doc.get("pcaps") == stamp:
-                return doc
-        except (OSError, ValueError):
+                why = capturefiles.cache_refusal(doc)
+                if why is None:
+                    return doc
+                log.warning("%s: not taken (%s): computed again", cache, why)
+        except (boundedfile.Refused, AttributeError):
             pass
     if run is None and network is None:
         try:
@@ -826,6 +779,7 @@ def run_metrics(
         lags=lags, middleware=middleware,
     )  # fmt: skip
     metrics["pcaps"] = stamp
+    metrics["captures_left_out"] = found.left_out
     metrics["daemon_comparison"] = compare_with_daemons(metrics, daemon_counts(run_dir))
     drops = capture_drops(run_dir)
     metrics["capture_dropped"] = {"packets": sum(drops.values()), "per_robot": drops}

@@ -8,11 +8,13 @@ generation's interval against its step, by cause, with the 20-step timer dashed.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import matplotlib
 from matplotlib.ticker import MaxNLocator
 
+from common.jsonfile import write_atomic
 from testbed.analysis.tables import ROUTING_METRICS
 
 matplotlib.use("Agg")
@@ -21,11 +23,21 @@ import matplotlib.pyplot as plt  # noqa: E402
 PLAN_TIMER_STEPS = 20
 
 
+def save_figure(fig, path: Path, **kw) -> Path:
+    """The figure drawn to memory, then written atomically (common.jsonfile.write_atomic:
+    never through a link); the format from the suffix."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format=path.suffix.lstrip("."), **kw)
+    write_atomic(path, buf.getvalue())
+    return path
+
+
 def save(fig, stem: Path) -> list[Path]:
-    out = [stem.with_suffix(".png"), stem.with_suffix(".pdf")]
-    fig.savefig(out[0], dpi=120)
-    fig.savefig(out[1])
-    plt.close(fig)
+    try:
+        out = [save_figure(fig, stem.with_suffix(".png"), dpi=120)]
+        out.append(save_figure(fig, stem.with_suffix(".pdf")))
+    finally:
+        plt.close(fig)
     return out
 
 

@@ -28,8 +28,11 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
+from common import boundedfile
+
 LAG_NAME = "relay-lag.bin"  # topology.ns3medium.LAG_FILE
 MAGIC = b"TBRLAG01"
+MAX_LAG_BYTES = 1 << 30  # a frame's record is tens of bytes: tens of millions of frames
 # written_ns, in_ns, out_ns, receiver, sender, ethertype, ip_id, ip_src, ip_dst, tcp_seq,
 # ip_proto, tcp_flags, reserved (native/ns3wifi/wifi-medium.cc, LagRecord)
 RECORD = struct.Struct("<QIIHHHH4s4sIBBH")
@@ -103,7 +106,9 @@ def parse_records(data: bytes) -> tuple[list[LagRecord], int]:
 def read_records(path: str | Path) -> tuple[list[LagRecord], int]:
     """parse_records of a file; LagFileError naming it when it is not one."""
     try:
-        return parse_records(Path(path).read_bytes())
+        return parse_records(boundedfile.read(path, MAX_LAG_BYTES))
+    except boundedfile.Refused as r:
+        raise LagFileError(f"{path}: {boundedfile.describe(r)}") from None
     except LagFileError as e:
         raise LagFileError(f"{path}: {e}") from None
 

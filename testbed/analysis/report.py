@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from common.errors import UsageError
+from common.jsonfile import write_atomic
 from testbed.analysis import (
     ablation,
     figures,
@@ -33,7 +34,7 @@ from testbed.analysis import (
 )
 from testbed.analysis.runs import ResultError, load_run
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
-from testbed.resultfile import has_result
+from testbed.resultfile import has_result, one_line
 
 log = logging.getLogger(__name__)
 
@@ -78,8 +79,13 @@ def _img(name: str, figdir: Path) -> str | None:
 def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     figdir = sweep_dir / "figures"
     tables = made["tables"]
-    out = [f"# Sweep report: {sweep_dir.name}", ""]
+    out = [f"# Sweep report: {one_line(sweep_dir.name)}", ""]
     out += sweepinfo.lines(sweep_dir, made["runs"]) + [""]
+    left_out = made.get("left_out") or []
+    if left_out:
+        out += [f"**Left out: {len(left_out)} run(s) whose files are not a run's** "
+                f"(nothing is drawn from them): {'; '.join(left_out[:3])}"
+                f"{'; ...' if len(left_out) > 3 else ''}.", ""]  # fmt: skip
     out += ["## The paper's claims against these runs", ""]
     out += ["| Section | Claim | Verdict |", "|---|---|---|"]
     for v in vs:
@@ -194,10 +200,12 @@ def write_report(
     vs = verdicts(made["tables"])
     path = sweep_dir / "report.md"
     text = render(sweep_dir, made, vs) + "\n"
-    path.write_text(text)
+    write_atomic(path, text)  # never through a link (common.jsonfile)
     htmlreport.write_html(sweep_dir, text)  # the same report as one page, figures inlined
-    (sweep_dir / "figures" / "verdicts.json").write_text(
-        json.dumps([v.__dict__ for v in vs], indent=1) + "\n"
+    write_atomic(
+        sweep_dir / "figures" / "verdicts.json",
+        json.dumps([v.__dict__ for v in vs], indent=1) + "\n",
+        root=sweep_dir,
     )
     return path, vs
 
@@ -224,7 +232,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _sweep_main(sweep_dir: Path, unfaithful: bool = False) -> int:
     path, vs = write_report(sweep_dir, unfaithful=unfaithful)
     held = sum(v.verdict == HOLDS for v in vs)
-    print(f"{path}: {held} of {len(vs)} claims hold", file=sys.stderr)
+    print(f"{one_line(str(path))}: {held} of {len(vs)} claims hold", file=sys.stderr)
     for v in vs:
         print(f"  {v.section} {v.claim}: {v.verdict}", file=sys.stderr)
     return 0
@@ -238,7 +246,7 @@ def _run_main(run_dir: Path) -> int:
     path, metrics = runreport.write(run)
     sys.stdout.write(path.read_text())
     made = [str(path)] + ([str(run_dir / pcapmetrics.CACHE_NAME)] if metrics else [])
-    print(f"wrote {', '.join(made)}", file=sys.stderr)
+    print(f"wrote {one_line(', '.join(made))}", file=sys.stderr)
     return 0
 
 

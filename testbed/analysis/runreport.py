@@ -16,9 +16,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from common.jsonfile import write_atomic
 from testbed.analysis import pcapmetrics
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
+from testbed.resultfile import one_line
 
 SUMMARY_NAME = "summary.md"
 
@@ -135,10 +137,20 @@ def _explanations(m: dict) -> list[str]:
     return out
 
 
+def left_out_text(left_out: dict) -> str:
+    """ "r1.pcap (empty ...), r3.pcap (missing)": the captures a run's metrics left out."""
+    shown = [f"{one_line(str(k), 80)} ({one_line(str(v), 120)})" for k, v in left_out.items()]
+    return ", ".join(shown[:10]) + (f" and {len(shown) - 10} more" if len(shown) > 10 else "")
+
+
 def _routing(m: dict | None) -> list[str]:
     if not m:
         return ["No packet captures in this run (`testbed run --capture`): no routing metrics."]
     out = _routing_table(m)
+    left_out = m.get("captures_left_out") or {}
+    if left_out:
+        out += ["", f"**Captures left out** (no frame of theirs is counted, nor credited to "
+                f"another robot): {left_out_text(left_out)}."]  # fmt: skip
     for line in _explanations(m):
         out += ["", line]
     cmp = m.get("daemon_comparison")
@@ -203,5 +215,5 @@ def write(run: FinishedRun) -> tuple[Path, dict | None]:
     and the metrics."""
     metrics = pcapmetrics.run_metrics(run.path, run=run)
     path = run.path / SUMMARY_NAME
-    path.write_text(summary(run, metrics))
+    write_atomic(path, summary(run, metrics))  # never through a link (common.jsonfile)
     return path, metrics

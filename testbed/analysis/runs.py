@@ -33,12 +33,13 @@ dilated did not keep it.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from common import boundedfile
 from testbed.resultfile import (
     DEFAULT_VARIANT,
     RESULT_NAME,
@@ -46,6 +47,7 @@ from testbed.resultfile import (
     RunResult,
     _get,
     _mapping,
+    one_line,
 )
 
 log = logging.getLogger(__name__)
@@ -124,7 +126,7 @@ class FinishedRun(RunResult):
     @classmethod
     def of(cls, result: RunResult, run_dir: Path, channel: ChannelRecord | None = None):
         fields = {f.name: getattr(result, f.name) for f in dataclasses.fields(RunResult)}
-        return cls(**fields, run_id=run_dir.name, path=run_dir, channel=channel)
+        return cls(**fields, run_id=one_line(run_dir.name), path=run_dir, channel=channel)
 
 
 _CHANNEL_COUNTS = {
@@ -166,12 +168,12 @@ def parse_channel(doc) -> ChannelRecord:
 
 def _load_channel(run_dir: Path) -> ChannelRecord | None:
     path = run_dir / MEDIUM_NAME
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError:
+    if not os.path.lexists(path):
         return None
-    except (OSError, ValueError) as e:
-        raise ResultError(f"{path}: unreadable ({e})") from None
+    try:
+        doc = boundedfile.load_json(path)
+    except boundedfile.Refused as r:
+        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
     try:
         return parse_channel(doc)
     except ResultError as e:
@@ -183,13 +185,12 @@ def _check_lag_file(run_dir: Path) -> None:
     from testbed.analysis import relaylag
 
     path = run_dir / relaylag.LAG_NAME
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(relaylag.MAGIC))
-    except FileNotFoundError:
+    if not os.path.lexists(path):
         return
-    except OSError as e:
-        raise ResultError(f"{path}: unreadable ({e})") from None
+    try:
+        head = boundedfile.read(path, relaylag.MAX_LAG_BYTES)[: len(relaylag.MAGIC)]
+    except boundedfile.Refused as r:
+        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
     if head != relaylag.MAGIC:
         raise ResultError(f"{path}: not a relay-lag file (no {relaylag.MAGIC.decode()} header)")
 
@@ -204,14 +205,22 @@ def load_run(run_dir: str | Path) -> FinishedRun:
     return FinishedRun.of(RunResult.from_json(run_dir), run_dir, channel)
 
 
-def load_runs(sweep_dir: str | Path, unfaithful: bool = False) -> list[FinishedRun]:
+def load_runs(
+    sweep_dir: str | Path, unfaithful: bool = False, left_out: list[str] | None = None
+) -> list[FinishedRun]:
     """Every run of a sweep directory with a readable result.json, sorted by run id; the
-    others are logged and left out. `unfaithful`: runs not faithful to their time scale
-    count as usable too."""
+    others are logged and left out (and why appended to `left_out`, one line each).
+    `unfaithful`: runs not faithful to their time scale count as usable too."""
     runs = []
+    why = [] if left_out is None else left_out
     for run_dir in sorted(p.parent for p in Path(sweep_dir).glob(f"runs/*/{RESULT_NAME}")):
+        if run_dir.is_symlink():  # its files (routing.json) would be written elsewhere
+            why.append(f"{one_line(str(run_dir))}: a symbolic link, not a run directory")
+            log.warning("skipping %s", why[-1])
+            continue
         try:
             runs.append(replace(load_run(run_dir), count_unfaithful=unfaithful))
         except ResultError as e:
-            log.warning("skipping %s", e)
+            why.append(one_line(str(e)))
+            log.warning("skipping %s", why[-1])
     return runs

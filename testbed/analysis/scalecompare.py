@@ -37,6 +37,7 @@ import sys
 from pathlib import Path
 
 from common.errors import UsageError
+from common.jsonfile import write_atomic
 from testbed.analysis import media, pcapmetrics, stats
 from testbed.analysis.runs import FinishedRun, ResultError, load_runs
 
@@ -222,5 +223,5 @@ def main(args: argparse.Namespace) -> int:
     text = "\n".join(lines)
     sys.stdout.write(text)
     if args.out:
-        Path(args.out).write_text(text)
+        write_atomic(Path(args.out), text)  # a link named FILE is replaced, not followed
     return 0

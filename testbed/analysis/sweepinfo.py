@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from common.jsonfile import read_json
 from testbed.analysis.runs import FinishedRun
+from testbed.sweep import state as sweepstate
 
 
 def seconds(x: float) -> str:
@@ -25,7 +25,7 @@ def seconds(x: float) -> str:
 
 def lines(sweep_dir: Path, runs: list[FinishedRun]) -> list[str]:
     """The section's sentences (Markdown paragraphs)."""
-    state = read_json(sweep_dir / "sweep.json") or {}
+    state = sweepstate.read(sweep_dir) or {}
     out = _spec_lines(state.get("spec") or {}, state)
     out += _finished_lines(runs, state.get("runs") or [])
     out += _timing_lines(runs)

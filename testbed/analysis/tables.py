@@ -19,11 +19,15 @@ decided on the same tables. Which runs count is the caller's choice of runs plus
 from __future__ import annotations
 
 import csv
+import io
 import json
+import logging
+import math
 import statistics
 from collections.abc import Callable
 from pathlib import Path
 
+from common.jsonfile import write_atomic
 from testbed.analysis import stats
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 
@@ -36,6 +40,8 @@ ROUTING_METRICS = (
     ("delay_ms_median", "end-to-end delay, median (ms, wall clock)"),
     ("throughput_bps", "throughput (bit/s, wall clock)"),
 )
+
+log = logging.getLogger(__name__)
 
 MetricsOf = Callable[[FinishedRun], "dict | None"]
 
@@ -269,16 +275,30 @@ def impairment_rows(runs: list[FinishedRun], per_run: list[dict]) -> list[dict]:
     return aggregate(rows, ("robots", "comm_range", "delay_ms", "loss_pct"), ["steps", "pdf"])
 
 
+def _finite_rows(rows: list[dict], stem: Path) -> list[dict]:
+    """rows with every number that is not finite (a NaN mean) as None, each said in the log:
+    a table never holds NaN silently, and its JSON stays strict."""
+    out = []
+    for r in rows:
+        bad = [k for k, v in r.items() if isinstance(v, float) and not math.isfinite(v)]
+        for k in bad:
+            point = {k2: v for k2, v in r.items() if k2 in ("robots", "comm_range")}
+            log.warning("%s: %s of %s is %s, not a number: left empty", stem.name, k, point, r[k])
+        out.append({k: None if k in bad else v for k, v in r.items()})
+    return out
+
+
 def write_table(rows: list[dict], stem: Path) -> None:
-    """rows as stem.csv (lists joined by ';') and stem.json."""
-    stem.with_suffix(".json").write_text(json.dumps(rows, indent=1) + "\n")
+    """rows as stem.csv (lists joined by ';') and stem.json; a number that is not finite is
+    written empty, and said (_finite_rows)."""
+    rows = _finite_rows(rows, stem)
+    write_atomic(stem.with_suffix(".json"), json.dumps(rows, indent=1) + "\n")
     fields: list[str] = []
     for r in rows:
         fields += [k for k in r if k not in fields]
-    with stem.with_suffix(".csv").open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        w.writeheader()
-        for r in rows:
-            w.writerow(
-                {k: ";".join(map(str, v)) if isinstance(v, list) else v for k, v in r.items()}
-            )
+    f = io.StringIO(newline="")
+    w = csv.DictWriter(f, fieldnames=fields)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ";".join(map(str, v)) if isinstance(v, list) else v for k, v in r.items()})
+    write_atomic(stem.with_suffix(".csv"), f.getvalue())

@@ -185,6 +185,8 @@ def _net_up(args) -> int:
         raise UsageError("--map is for the los range models: add --range-model los")
     if args.wall_loss_pct is not None and not los:
         raise UsageError("--wall-loss is for the los range models: add --range-model los")
+    if args.capture:
+        movers.check_writable_dir(os.path.abspath(args.capture), f"--capture {args.capture}")
     trace, positions = movers.up_positions(args)
     try:
         if positions is None:  # not from a --mobility trace

@@ -8,6 +8,7 @@ else NAME-links.csv in the directory `net up` runs in. Never in the testbed's ru
 """
 
 import argparse
+import math
 import os
 import socket
 import subprocess
@@ -101,10 +102,28 @@ def links_out(args) -> str | None:
                              "--links-out CSV")  # fmt: skip
     parent = os.path.dirname(out)
     if args.capture and parent == os.path.abspath(args.capture):
-        return out  # net up makes the capture dir
-    if not os.path.isdir(parent) or not os.access(parent, os.W_OK):
-        raise UsageError(f"--links-out {out}: cannot write in {parent}")
+        return out  # net up makes the capture dir (and check_writable_dir checked it)
+    check_writable_dir(parent, f"--links-out {out}")
     return out
+
+
+def check_writable_dir(path: str, what: str) -> None:
+    """UsageError unless a file can be made in directory `path` (or in the directory that
+    would hold it, where it does not exist yet): tried, as os.access is always yes for
+    root, even on /proc."""
+    import tempfile
+
+    probe = path
+    while not os.path.isdir(probe):
+        parent = os.path.dirname(probe)
+        if parent == probe or os.path.lexists(probe):
+            raise UsageError(f"{what}: {path} is not a directory")
+        probe = parent
+    try:
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as e:
+        raise UsageError(f"{what}: cannot write in {probe} ({e.strerror or e})") from None
 
 
 def check_up(args, trace) -> dict:
@@ -239,13 +258,48 @@ def _feed_client(path: str) -> int:
     return 0
 
 
+def network_of(path: str) -> tuple[str, float | None]:
+    """(routing, time scale) of a capture directory's daemons/network.json (`net up`
+    wrote it): ("aodv", None) where it is missing; UsageError, one line naming the file
+    and the key, where it is there but not one (a FIFO is refused, not waited on)."""
+    from common import boundedfile
+    from topology.spec import ROUTINGS
+
+    if not os.path.lexists(path):
+        return "aodv", None
+    try:
+        net = boundedfile.load_json(path)
+    except boundedfile.Refused as r:
+        raise UsageError(f"metrics: {path}: {boundedfile.describe(r)}") from None
+    if not isinstance(net, dict):
+        raise UsageError(f"metrics: {path}: not a JSON object")
+    routing, scale = net.get("routing", "aodv"), net.get("time_scale")
+    if routing not in ROUTINGS:
+        raise UsageError(f"metrics: {path}: 'routing' is not one of {', '.join(ROUTINGS)}")
+    ok = isinstance(scale, int | float) and not isinstance(scale, bool) and 0 < scale <= 1000
+    if scale is not None and not ok:
+        raise UsageError(f"metrics: {path}: 'time_scale' is not a number in (0, 1000]")
+    return routing, scale
+
+
+def _finite(value):
+    """`value` with every number that is not finite as None (metrics.json is strict JSON)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
 def metrics(args) -> int:
     """`testbed metrics DIR`: testbed.analysis.pcapmetrics.run_metrics on the captures of a
     `net up --capture DIR` network (laid out as a run's pcaps/), written to DIR/metrics.json."""
-    import json
     import re
     import tempfile
 
+    from common.jsonfile import write_json_atomic
     from testbed.analysis import pcapmetrics
 
     d = os.path.abspath(args.dir)
@@ -253,13 +307,7 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: {args.dir} is not a directory")
     if not any(re.fullmatch(r"r\d+\.pcap", e) for e in os.listdir(d)):
         raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
-    routing, scale = "aodv", None
-    try:
-        with open(os.path.join(d, "daemons", "network.json")) as f:
-            net = json.load(f)
-        routing, scale = net["routing"], net.get("time_scale")
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+    routing, scale = network_of(os.path.join(d, "daemons", "network.json"))
     with tempfile.TemporaryDirectory(prefix="tb-metrics-") as tmp:
         os.symlink(d, os.path.join(tmp, "pcaps"))  # laid out as a run's directory
         m = pcapmetrics.run_metrics(tmp, use_cache=False, network=(routing, scale))
@@ -267,8 +315,7 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: no captures in {args.dir}")
     m = {k: v for k, v in m.items() if k not in ("pcaps",)}
     out = os.path.join(d, "metrics.json")
-    with open(out, "w") as f:
-        json.dump(m, f, indent=1)
+    write_json_atomic(out, _finite(m), strict=True)  # never through a link; no NaN or Infinity
 
     def fmt(v, spec: str) -> str:
         return "n/a" if v is None else format(v, spec)
@@ -285,5 +332,9 @@ def metrics(args) -> int:
         f"  control overhead: {m['control_tx_packets']} packets, "
         f"{fmt(m['overhead_packets'], '.4f')} of frames, {fmt(m['overhead_bytes'], '.4f')} of bytes"
     )
+    if m.get("captures_left_out"):
+        from testbed.analysis.runreport import left_out_text
+
+        print(f"  captures left out (not counted): {left_out_text(m['captures_left_out'])}")
     print(f"  written to {out}")
     return 0

@@ -29,18 +29,28 @@ from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import (
     AODV_PROFILES,
     LOS_MODELS,
+    MAX_COORD_M,
     MEDIA,
     RANGE_MODELS,
     ROUTINGS,
     WIFI_LOSSES,
     WIFI_STANDARDS,
+    check_position,
 )
+
+# Bounds of the options that have no natural one (docs: README's "Options" and `--help`):
+MAX_STEPS = 10_000_000  # 11 days of emulated time at a step of 0.1 s
+MAX_LASER_RAYS = 10_000  # a ray every 0.036 degrees; the paper's robots have 360
+MAX_SNAPSHOTS = 100
+MIN_TIME_SCALE, MAX_TIME_SCALE = 0.01, 1000.0  # a step of 10 s to one of 100 microseconds
 
 
 def _kill(text: str) -> tuple[int, int]:
-    m = re.fullmatch(r"r?(\d+):(\d+)", text)
-    if not m:
-        raise argparse.ArgumentTypeError(f"--kill {text!r} is not ROBOT:STEP (e.g. r2:150)")
+    m = re.fullmatch(r"r?([0-9]{1,4}):([0-9]{1,8})", text)
+    if not m or int(m[2]) > MAX_STEPS:
+        raise argparse.ArgumentTypeError(
+            f"--kill {text[:40]!r} is not ROBOT:STEP (e.g. r2:150; a step up to {MAX_STEPS:,})"
+        )
     return int(m[1]), int(m[2])
 
 
@@ -49,17 +59,21 @@ _isolate = checked(Outage.parse)
 
 def _point(text: str) -> tuple[float, float]:
     try:
-        x, y = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y in metres") from None
-    return x, y
+        return check_position(text.split(","), f"--display-pos {text[:40]!r}")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"{e} (X,Y in metres)") from None
 
 
 def _steps(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(sorted({int(s) for s in text.split(",") if s.strip()}))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a list of steps") from None
+    words = [s.strip() for s in text.split(",") if s.strip()]
+    if len(words) > MAX_SNAPSHOTS or not all(
+        w.isascii() and w.isdigit() and len(w) <= 8 and int(w) <= MAX_STEPS for w in words
+    ):
+        raise argparse.ArgumentTypeError(
+            f"--snapshots {text[:40]!r} is not a list of steps (at most {MAX_SNAPSHOTS}, each "
+            f"0..{MAX_STEPS:,})"
+        )
+    return tuple(sorted({int(w) for w in words}))
 
 
 EMPTY_MAP = "empty"  # how run ids and sweep files name the paper's empty terrain
@@ -97,16 +111,17 @@ class RunConfig:
                          sweep={GRID},
                          grid=GridDim(0, lambda n: f"n{n:02d}", seeded=True))  # fmt: skip
     comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
+                               maximum=MAX_COORD_M,
                                sweep={GRID}, net=True,
                                grid=GridDim(1, lambda r: f"c{fmt(r)}", seeded=True))  # fmt: skip
     laser_range: float = option(float, f"laser range, at most {MAX_LASER_RANGE_M:g} m and the "
                                 "map's diagonal", **robot("laser_range"), unit="metres",
                                 maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID},
                                 grid=GridDim(2, lambda r: f"l{fmt(r)}", seeded=True))  # fmt: skip
-    seed: int = option(int, SEED_HELP, 1, minimum=0, metavar="S")
+    seed: int = option(int, SEED_HELP, 1, minimum=0, maximum=2**63 - 1, metavar="S")
     time_scale: float = option(
         float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "
-        f"{STEP_S_TEXT} / K", 1.0, unit="factor", above=0,
+        f"{STEP_S_TEXT} / K", 1.0, unit="factor", minimum=MIN_TIME_SCALE, maximum=MAX_TIME_SCALE,
         metavar="K", sweep={RUN}, net=True,
     )  # fmt: skip
     routing: str = option(str, "routing protocol", "aodv", choices=ROUTINGS,
@@ -126,7 +141,8 @@ class RunConfig:
                              grid=GridDim(3, lambda p: f"p{fmt(p)}", NONZERO,
                                           seeded=True))  # fmt: skip
     delay_ms: float = option(float, "delay on every link, with sch_netem", 0.0, unit="ms",
-                             minimum=0, metavar="MS", cli="--delay", sweep={GRID}, net=True,
+                             minimum=0, maximum=60_000, metavar="MS", cli="--delay",
+                             sweep={GRID}, net=True,
                              grid=GridDim(4, lambda d: f"d{fmt(d)}", NONZERO,
                                           seeded=True))  # fmt: skip
     range_model: str = option(
@@ -157,7 +173,8 @@ class RunConfig:
     capture: bool = option(bool, "write pcaps/rK.pcap, one capture per robot", False,
                            sweep={RUN})  # fmt: skip
     max_steps: int = option(int, "stop the run after this many steps", 3000, metavar="N",
-                            unit=f"steps of {STEP_S_TEXT}", minimum=1, sweep={RUN})  # fmt: skip
+                            unit=f"steps of {STEP_S_TEXT}", minimum=1, maximum=MAX_STEPS,
+                            sweep={RUN})  # fmt: skip
     coordination: str = option(
         str, "goal coordination: 'paper' reads the paper's rules literally, 'ours' departs "
         "from them where the text is silent; see README, 'Coordination'",
@@ -186,15 +203,17 @@ class RunConfig:
     )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
     map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
-                             above=0, metavar="M", net=True)  # fmt: skip
-    laser_rays: int = option(int, "rays of a laser scan", **robot("laser_rays"), metavar="N")
+                             minimum=0.001, maximum=100, metavar="M", net=True)  # fmt: skip
+    laser_rays: int = option(int, "rays of a laser scan", **robot("laser_rays"), metavar="N",
+                             maximum=MAX_LASER_RAYS)  # fmt: skip
     # The field is in metres per step, the flag in m/s (per_step).
     speed: float = option(float, "robot speed", **robot("speed"), unit="m/s", metavar="V",
+                          maximum=100,
                           per_step=STEP_S)  # fmt: skip
     radius: float = robot("radius")["default"]
     plan_period: int = robot("plan_period")["default"]
     map_period: int = option(int, "steps between a robot's map floods", **robot("map_period"),
-                             unit="steps", metavar="N")  # fmt: skip
+                             unit="steps", metavar="N", maximum=MAX_STEPS)  # fmt: skip
     flood: str = option(str, "map flooding: pruned (self-pruning) or blind (every robot "
                         "relays every flood)", **robot("flood"))  # fmt: skip
     display_pos: tuple[float, float] | None = option(

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from testbed.resultfile import Isolated
 
-_TEXT = re.compile(r"r?(\d+):(\d+):(\d+)")
+_TEXT = re.compile(r"r?([0-9]{1,4}):([0-9]{1,8}):([0-9]{1,8})")
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,10 @@ class Option:
             shown = self.default / self.per_step if self.per_step else self.default
             tail = f"default {shown:g}" if isinstance(shown, float) else f"default {shown}"
         unit = f"{self.unit}; " if self.unit else ""
-        return f"{self.help} ({unit}{tail})".replace("%", "%%")
+        bounds = (
+            f"; {self.bounds_text()}" if self.kind in (int, float) and self.bounds_text() else ""
+        )
+        return f"{self.help} ({unit}{tail}{bounds})".replace("%", "%%")
 
     def bounds_text(self) -> str:
         parts = []

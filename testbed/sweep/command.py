@@ -15,15 +15,18 @@ from __future__ import annotations
 import argparse
 import fcntl
 import logging
+import os
 import shutil
+import stat
 import sys
 from pathlib import Path
 
 from common.argtypes import number
 from common.errors import UsageError
-from common.jsonfile import read_json
+from common.jsonfile import make_dirs
 from testbed.run.config import RunConfig
 from testbed.sweep import file as sweepfile
+from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import Plan, config_mismatch, default_jobs, jobs_cap, other_sweep, plan
 from testbed.sweep.rundir import is_done, run_dir
@@ -31,6 +34,23 @@ from testbed.sweep.runner import Sweep, wait_for_orphans
 from topology.impair import kernel_has_netem
 
 log = logging.getLogger(__name__)
+
+
+def _open_lock(out: Path):
+    """out/.sweep.lock, open for flock (held for the process's lifetime): made if missing,
+    never truncated, and refused (one line) if it is a link or not a regular file."""
+    path = out / ".sweep.lock"
+    flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as e:
+        raise UsageError(
+            f"--out {out}: {path.name}: {e.strerror} (a link, or not a file)"
+        ) from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise UsageError(f"--out {out}: {path.name} is not a regular file")
+    return os.fdopen(fd, "r+")
 
 
 def _jobs(text: str) -> int | str:
@@ -102,7 +122,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _print_status(out: Path) -> int:
     from testbed.sweep import slurm
 
-    state = read_json(out / "sweep.json")
+    state = sweepstate.read(out)
     if state is None:
         raise UsageError(f"--status {out}: no sweep.json: not a sweep directory")
     planned = state.get("runs", [])
@@ -189,7 +209,7 @@ def _check_same_sweep(out: Path, runs: list[PlannedRun], sweep_file: str) -> Non
     """--resume continues the sweep that made `out`, never another one into it."""
     diff = other_sweep(out, runs)
     if diff:
-        made_by = (read_json(out / "sweep.json") or {}).get("sweep_file") or "another sweep file"
+        made_by = (sweepstate.read(out) or {}).get("sweep_file") or "another sweep file"
         raise UsageError(
             f"--out {out} is the sweep of {made_by}, not of {sweep_file}: {diff}; resume it "
             "with its own sweep file, or give this one a new --out"
@@ -211,11 +231,11 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError("testbed sweep needs FILE and --out DIR (or --status DIR)")
     if not args.slurm and (args.partition or args.account or args.sbatch_arg or args.sudo):
         raise UsageError("--partition, --account, --sbatch-arg and --sudo go with --slurm")
-    if args.view:
-        from testbed.view.server import parse_bind
+    if args.view:  # a busy port refused before the sweep's directory and lock are made
+        from testbed.view.server import check_bind
 
         try:
-            parse_bind(args.view)
+            check_bind(args.view)
         except ValueError as e:
             raise UsageError(str(e)) from None
     spec = sweepfile.load(args.file)
@@ -244,8 +264,8 @@ def main(args: argparse.Namespace) -> int:
     jobs = jobs_cap(args.jobs, runs, spec.cpu_limit)
     netem = kernel_has_netem() if any(d > 0 for d in spec.values("delay_ms")) else False
     out.mkdir(parents=True, exist_ok=True)
-    (out / "runs").mkdir(exist_ok=True)
-    lock = open(out / ".sweep.lock", "w")  # noqa: SIM115 (held for the process lifetime)
+    make_dirs(out / "runs", root=out)  # a runs/ that is a link is refused, not followed
+    lock = _open_lock(out)
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

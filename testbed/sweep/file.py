@@ -85,13 +85,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from common import boundedfile
 from common.errors import UsageError
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 from node.messaging.maps import refusal as maps_refusal
 from testbed.run import failures
 from testbed.run.config import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
 from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
-from topology import boundedfile
 from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
@@ -404,6 +404,9 @@ def _read_text(path: Path) -> str:
     except UnicodeDecodeError as e:
         raise UsageError(f"sweep file {path}: not a text file (UTF-8 TOML): byte "
                          f"{e.start} is 0x{data[e.start]:02x}") from None  # fmt: skip
+    if text.startswith("\ufeff"):
+        raise UsageError(f"sweep file {path}: starts with a byte-order mark (BOM), which TOML "
+                         "does not allow: save it as UTF-8 without one")  # fmt: skip
     return text
 
 

@@ -11,9 +11,9 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from common.jsonfile import read_json
 from testbed.resultfile import RunResult
 from testbed.run.config import RunConfig
+from testbed.sweep import state as sweepstate
 from testbed.sweep.cores import load
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, plan_dict, run_dir
@@ -72,7 +72,7 @@ def other_sweep(out: Path, runs: list[PlannedRun]) -> str | None:
     a sweep may run slower, testbed.sweep.runner). A plan that only adds runs (more `runs`
     per point, a value more in a list) extends the sweep and is the same one."""
     planned = {r.run_id: r.config for r in runs}
-    state = read_json(out / "sweep.json")
+    state = sweepstate.read(out)
     recorded = state.get("runs") if isinstance(state, dict) else None
     for entry in recorded if isinstance(recorded, list) else []:
         rid = entry.get("id") if isinstance(entry, dict) else None

@@ -58,11 +58,12 @@ from pathlib import Path
 from typing import BinaryIO
 
 from common.errors import TestbedError
-from common.jsonfile import read_json, write_json_atomic
+from common.jsonfile import write_json_atomic
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
 from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
+from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 from testbed.sweep.progress import Progress
@@ -258,7 +259,8 @@ class Sweep:
         if rdir.exists():
             shutil.rmtree(rdir)
         log_path.parent.mkdir(parents=True, exist_ok=True)
-        log_file = open(log_path, "wb")  # noqa: SIM115 (the caller closes it)
+        flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC
+        log_file = os.fdopen(os.open(log_path, flags, 0o644), "wb")  # the caller closes it
         proc: subprocess.Popen | Forked
         if self.forker is not None:
             proc = self.forker.start(run_argv([], config, rdir), log_path, title)
@@ -569,7 +571,7 @@ def wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
     """A SIGKILLed sweep's children get SIGINT (PDEATHSIG); wait until they are gone before
     redoing their runs, and SIGKILL any still running after `timeout` (only the very processes
     recorded in sweep.json: pid and start time)."""
-    state = read_json(out / "sweep.json") or {}
+    state = sweepstate.read(out) or {}
     procs = [
         (e["pid"], e.get("pid_start"))
         for e in state.get("runs", [])

@@ -33,10 +33,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from common.errors import TestbedError, UsageError
-from common.jsonfile import read_json, write_json_atomic
+from common.jsonfile import make_dirs, read_json, write_atomic, write_json_atomic
 from testbed import PROJECT_ROOT
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
+from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, run_argv, run_dir
 
@@ -162,7 +163,7 @@ def submit(
     cap = node_cpus(partition)
     measured = measured_cpu_per_robot_step(out)
     slurm_dir = out / "slurm"
-    (slurm_dir / "logs").mkdir(parents=True, exist_ok=True)
+    make_dirs(slurm_dir / "logs", root=out)  # never through a link
     jobs = submitted(out)
     groups: dict[int, list[PlannedRun]] = {}
     for run in todo:
@@ -172,10 +173,9 @@ def submit(
         minutes = max(resources(r.config, cap, measured)[1] for r in runs)
         n = len(jobs) + 1
         task_list = slurm_dir / f"tasks-{n}.txt"
-        task_list.write_text("".join(f"{r.run_id}\n" for r in runs))
+        write_atomic(task_list, "".join(f"{r.run_id}\n" for r in runs))
         script = slurm_dir / f"job-{n}.sh"
-        script.write_text(batch_script(out, task_list, sudo))
-        script.chmod(0o755)
+        write_atomic(script, batch_script(out, task_list, sudo), mode=0o755)
         argv = [
             sbatch, "--parsable", f"--array=1-{len(runs)}", f"--cpus-per-task={cpus}",
             f"--time={minutes}", f"--job-name=tb-{out.name}-n{robots}",
@@ -226,7 +226,11 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
         print(f"testbed slurm task: no run {index} in {task_list}", file=sys.stderr)
         return 2
     rid = run_ids[index - 1]
-    plan = {e["id"]: e for e in (read_json(out / "sweep.json") or {}).get("runs", [])}
+    try:
+        plan = {e["id"]: e for e in (sweepstate.read(out) or {}).get("runs", [])}
+    except UsageError as e:
+        print(f"testbed slurm task: {e}", file=sys.stderr)
+        return 2
     if rid not in plan:
         print(f"testbed slurm task: {rid} is not in {out}/sweep.json", file=sys.stderr)
         return 2

@@ -95,6 +95,8 @@ class LiveFeed:
 
 
 def make_app(feed: LiveFeed, map_png: str | None) -> web.Application:
+    server.quiet_bad_requests()  # a malformed request is one line in the log, not a traceback
+
     async def run(_request):
         return server.json_response({**feed.meta, "live": True, "map": server.has_map(map_png)})
 

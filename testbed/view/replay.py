@@ -134,23 +134,32 @@ def load(run_dir: str | Path) -> dict:
         status = "unknown"
     n = config["robots"]
 
+    seen = [0]  # rows of positions.csv read: its step column counts them
+
     def position_row(row: list[str]) -> list[float]:
         if len(row) != 1 + 2 * n:
             raise ValueError(f"{len(row)} columns, not {1 + 2 * n} (step, x and y of {n})")
+        if _whole(row[0], 0, MAX_STEP) != seen[0]:
+            raise ValueError(f"step {row[0][:20]!r}, not {seen[0]} (one row a step, in order)")
+        seen[0] += 1
         return [round(_finite(v, -MAX_COORD_M, MAX_COORD_M), 3) for v in row[1:]]
+
+    positions = _rows(d, "positions.csv", position_row, required=True)
+    last = len(positions) - 1
 
     def link_row(row: list[str]) -> list:
         if len(row) != 4 or row[1] not in ("add", "remove"):
             raise ValueError("not step,add|remove,i,j")
         i, j = (_whole(v, 1, n + 1) for v in row[2:])  # n + 1: the display robot
-        return [_whole(row[0], 0, MAX_STEP), row[1] == "add", i, j]
+        if i == j:
+            raise ValueError(f"a link of robot {i} to itself")
+        return [_whole(row[0], 0, max(last, 0)), row[1] == "add", i, j]
 
     def coverage_row(row: list[str]) -> float:
         if len(row) != 2:
             raise ValueError("not step,coverage")
         return _finite(row[1], 0.0, 1.0)
 
-    positions = _rows(d, "positions.csv", position_row, required=True)
     return {
         "run": d.name,
         "robots": n,

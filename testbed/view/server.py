@@ -16,6 +16,7 @@ page sends is an HTTP 400 with one line saying why.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 import socket
@@ -24,6 +25,7 @@ from pathlib import Path
 
 from aiohttp import web
 
+from testbed.resultfile import one_line
 from testbed.view import replay, served
 
 STATIC = Path(__file__).parent / "static"
@@ -100,8 +102,31 @@ def page_routes(run_dir: Path | None, map_png: str | Path | None) -> list:
     ]  # fmt: skip
 
 
+class OneLineErrors(logging.Filter):
+    """aiohttp logs every request it cannot parse (a bad header, a NUL in the path) with its
+    whole traceback, so whoever can connect could flood the operator's terminal: this makes
+    each such record one line, "Error handling request from ADDR: BadHttpMessage: why"."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if exc is not None:
+            why = " ".join(part.strip() for part in str(exc).splitlines() if part.strip())
+            record.msg = f"{record.getMessage()}: {type(exc).__name__}: {one_line(why, 200)}"
+            record.args = ()
+            record.exc_info = record.exc_text = None
+        return True
+
+
+def quiet_bad_requests() -> None:
+    """OneLineErrors on aiohttp's server logger (once)."""
+    logger = logging.getLogger("aiohttp.server")
+    if not any(isinstance(f, OneLineErrors) for f in logger.filters):
+        logger.addFilter(OneLineErrors())
+
+
 def make_app(run_dir: str | Path, warn=None) -> web.Application:
     """The replay of `run_dir`; `warn(line)` is told when the run's map is not served."""
+    quiet_bad_requests()
     run_dir = Path(run_dir).resolve()
     data = replay.load(run_dir)  # raises NotARun before anything listens
     map_png, why_not = served.map_picture(run_dir, replay.read_config(run_dir)["map"])
@@ -145,7 +170,8 @@ def serve(run_dir: str | Path, bind: str) -> int:
     host, port = parse_bind(bind)
     app = make_app(run_dir, warn=lambda line: print(f"testbed view: {line}", file=sys.stderr))
     check_bind(bind)
-    print(f"replay of {Path(run_dir).name}: http://{host}:{port}/  (Ctrl-C ends it)", flush=True)
+    name = one_line(Path(run_dir).name)  # a directory's name may hold terminal escapes
+    print(f"replay of {name}: http://{host}:{port}/  (Ctrl-C ends it)", flush=True)
     web.run_app(app, host=host, port=port, print=None)
     return 0
 

@@ -158,8 +158,10 @@ def test_routing_and_impairment_tables(tmp_path):
 
 def test_path_pictures_are_collected(tmp_path):
     runs = make_sweep(tmp_path, small_spec(robots=(1, 2), comm_range=(5.0,), laser_range=(2.0,)))
+    # a PNG's signature and header (what is copied), then the run's id to tell them apart
+    head = b"\x89PNG\r\n\x1a\n" + (13).to_bytes(4, "big") + b"IHDR" + bytes([0, 0, 0, 1] * 2)
     for r in runs:
-        (tmp_path / "runs" / r.run_id / "paths.png").write_bytes(b"\x89PNG " + r.run_id.encode())
+        (tmp_path / "runs" / r.run_id / "paths.png").write_bytes(head + r.run_id.encode())
     made = figures.make_all(tmp_path, metrics_of=lambda run: None)
     got = sorted(p.name for p in (tmp_path / "figures" / "paths").iterdir())
     assert got == ["n01-c5-l2-k1.png", "n02-c5-l2-k1.png"]  # first run of each point

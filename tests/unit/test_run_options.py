@@ -139,7 +139,7 @@ def bad_values(opt):
     if opt.minimum is not None:
         out.append(f"{opt.minimum - 1:g}")
     if opt.maximum is not None:
-        out.append(f"{opt.maximum + 1:g}")
+        out.append(f"{opt.maximum * 2 + 1:g}")  # :g rounds 1e7 + 1 to the maximum itself
     if opt.kind is int:
         out.append("1.5")
     return out

@@ -13,6 +13,7 @@ from testbed.analysis import pcapmetrics, routingnotes, runreport
 from testbed.analysis.runs import load_run
 from testbed.sweep import file as sweepfile
 from tests.unit import test_pcapmetrics as tp
+from tests.unit.hostile_dirs import EMPTY_PCAP
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 REPO = Path(__file__).resolve().parents[2]
@@ -48,12 +49,12 @@ def test_routing_json_says_what_its_numbers_mean_and_gives_emulated_time(tmp_pat
     d = one_run(tmp_path / "s", time_scale=12.0)
     (d / "pcaps").mkdir()
     for k in (1, 2, 3):
-        (d / "pcaps" / f"r{k}.pcap").write_bytes(b"")
+        (d / "pcaps" / f"r{k}.pcap").write_bytes(EMPTY_PCAP)  # a header (an empty file is left out)
     monkeypatch.setattr(pcapmetrics, "read_pcaps", lambda paths: tp.chain_captures())
     monkeypatch.setattr(pcapmetrics, "robot_address", lambda k: tp.ADDRS[k])
     m = pcapmetrics.run_metrics(d)
     doc = json.loads((d / "routing.json").read_text())
-    assert doc["format"] == pcapmetrics.CACHE_FORMAT == 7
+    assert doc["format"] == pcapmetrics.CACHE_FORMAT == 8
     assert set(doc["about"]) == {"pdf", "segment_delivery", "delay", "time"}
     assert "0.957 against 1.0" in doc["about"]["segment_delivery"]
     assert "mean far above the median" in doc["about"]["delay"]

@@ -1,0 +1,197 @@
+"""The files of a run's captures as testbed.analysis.pcapmetrics takes them, none trusted:
+which captures may be read, the AODV daemons' counters (aodv/rK.json), tcpdump's last words
+(pcaps/daemons/rK.tcpdump.log), and the content hash routing.json's cache is keyed on.
+
+Theory of operation. A results directory may come from elsewhere, so:
+
+- a capture is `pcaps/rK.pcap` (or .pcapng) with K a robot (1..MAX_ROBOTS, plain digits), a
+  regular file inside the run directory (no FIFO, no link out of it) of at most
+  MAX_CAPTURE_BYTES that starts with a pcap or pcapng header. Any other is left out and
+  named (`Captures.left_out`), so no robot's frames are credited to another (mergecap skips
+  an empty file, which shifts every later capture's interface id onto the wrong robot);
+- the daemons' counters and tcpdump's logs go through the one bounded reader
+  (common.boundedfile): a FIFO is refused, not waited on; a count that is not a whole
+  number from 0 to MAX_COUNT leaves that robot's counters out, said so;
+- the routing-metrics cache is keyed on a SHA-256 of every capture's (and the relay-lag
+  file's) content, which a tarball cannot carry over from other captures as it does mtimes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from common import boundedfile
+
+log = logging.getLogger(__name__)
+
+MAX_ROBOTS = 1000  # topology.names.MAX_ROBOTS (the analysis reads results without topology)
+MAX_CAPTURE_BYTES = 512 << 20  # a 10-robot run of 5000 steps captures about 20 MB a robot
+MAX_COUNT = 10**15  # more packets or bytes than any run sends
+MAX_LOG_BYTES = 1 << 20
+PCAP_MAGICS = (b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\xc3\xd4", b"\x4d\x3c\xb2\xa1", b"\xa1\xb2\x3c\x4d")
+PCAPNG_MAGIC = b"\x0a\x0d\x0d\x0a"
+_NAME = re.compile(r"r([1-9][0-9]{0,3})\.pcap(ng)?")
+
+
+@dataclass
+class Captures:
+    """A run's readable captures by robot number, and those left out with why."""
+
+    paths: dict[int, Path] = field(default_factory=dict)
+    left_out: dict[str, str] = field(default_factory=dict)  # file name: why
+
+
+def _inside(path: Path, root: Path) -> bool:
+    real, top = os.path.realpath(path), os.path.realpath(root)
+    return real == top or real.startswith(top.rstrip("/") + "/")
+
+
+def _why_not(p: Path, run_dir: Path) -> str | None:
+    """Why capture `p` cannot be read, or None."""
+    if not _inside(p, run_dir / "pcaps"):
+        return "a link out of the captures' directory"
+    try:
+        head = boundedfile.read(p, MAX_CAPTURE_BYTES, _header_only)
+    except boundedfile.Refused as r:
+        return boundedfile.describe(r)
+    except _Header as h:
+        head = h.head
+    if len(head) < 24:
+        return "empty or cut short (no capture header)"
+    if head[:4] not in PCAP_MAGICS + (PCAPNG_MAGIC,):
+        return "not a pcap or pcapng capture"
+    return None
+
+
+class _Header(Exception):
+    def __init__(self, head: bytes):
+        self.head = head
+
+
+def _header_only(fd: int, st) -> None:
+    """boundedfile.read's check: read the first bytes and stop (the file may be large)."""
+    raise _Header(os.pread(fd, 24, 0))
+
+
+def find(run_dir: Path) -> Captures:
+    """The captures of `run_dir` that may be read, and the rest named (see the docstring)."""
+    out = Captures()
+    d = Path(run_dir) / "pcaps"
+    try:
+        entries = sorted(d.iterdir())
+    except OSError:
+        return out
+    for p in entries:
+        if not p.name.startswith("r") or ".pcap" not in p.name:
+            continue
+        m = _NAME.fullmatch(p.name)
+        if m is None or int(m[1]) > MAX_ROBOTS:
+            out.left_out[p.name[:80]] = f"not a robot's capture name (r1 to r{MAX_ROBOTS})"
+            continue
+        why = _why_not(p, Path(run_dir))
+        if why is not None:
+            out.left_out[p.name] = why
+        else:
+            out.paths[int(m[1])] = p
+    if out.paths:  # a robot between 1 and the last with no capture at all
+        for k in range(1, max(out.paths)):
+            if k not in out.paths and not any(n.startswith(f"r{k}.") for n in out.left_out):
+                out.left_out[f"r{k}.pcap"] = "missing"
+    for name, why in out.left_out.items():
+        log.warning("%s: capture %s left out: %s", run_dir, name, why)
+    return out
+
+
+def content_stamp(paths: list[Path]) -> dict[str, str]:
+    """{file name: SHA-256 of its content}: what routing.json's cache is keyed on."""
+    out = {}
+    for p in paths:
+        h = hashlib.sha256()
+        with open(p, "rb") as f:  # find() checked it is a regular file
+            while chunk := f.read(1 << 20):
+                h.update(chunk)
+        out[p.name] = h.hexdigest()
+    return out
+
+
+_SHARES = ("pdf", "segment_delivery", "overhead_packets", "overhead_bytes")
+_AMOUNTS = ("duration_s", "throughput_bps", "tx_packets", "control_tx_packets")
+_DELAYS = ("delay_ms_mean", "delay_ms_median", "delay_ms_p95")
+
+
+def cache_refusal(doc) -> str | None:
+    """Why a cached routing.json is not taken (then its metrics are computed again from
+    the captures), or None: shares outside 0..1, amounts below 0, delays beyond a day, or
+    anything not a finite number. A cache is keyed on its captures' content, but a
+    directory from elsewhere may ship captures and a cache written to go with them."""
+    if not isinstance(doc, dict):
+        return "not an object"
+    for keys, low, high in ((_SHARES, 0, 1), (_AMOUNTS, 0, 1e18), (_DELAYS, -86.4e6, 86.4e6)):
+        for k in keys:
+            v = doc.get(k)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float) or not low <= v <= high:
+                return f"{k} {str(v)[:40]} is not in {low:g}..{high:g}"
+    return None
+
+
+def _count(value) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_COUNT:
+        raise ValueError(f"{str(value)[:40]} is not a count (a whole number 0..{MAX_COUNT:g})")
+    return value
+
+
+def daemon_counts(run_dir: Path) -> dict[str, dict] | None:
+    """Per robot, what its AODV daemon says it transmitted (aodv/rK.json, written by
+    aodv/stats.py): {"packets": n, "bytes": UDP payload bytes, "by_type": {...}}.
+    None if the run has no such files; a file that is not one is left out, said so."""
+    d = Path(run_dir) / "aodv"
+    if not d.is_dir():
+        return None
+    out = {}
+    for p in sorted(d.glob("r*.json")):
+        try:
+            doc = boundedfile.load_json(p)
+            by_type = Counter({str(k): _count(v) for k, v in doc["messages_sent"].items()})
+            # What the kernel took but reported back untransmitted (a unicast whose next
+            # hop's ARP failed) never reaches wlan0, so no capture can hold it.
+            unsent = Counter(
+                {str(k): _count(v) for k, v in doc.get("messages_not_transmitted", {}).items()}
+            )
+            by_type.subtract(unsent)
+            sent = _count(doc.get("bytes_sent", 0)) - _count(doc.get("bytes_not_transmitted", 0))
+            out[p.stem[:40]] = {
+                "packets": sum(by_type.values()),
+                "bytes": sent,
+                "by_type": {k[:40]: n for k, n in by_type.items() if n},
+                "not_transmitted": sum(unsent.values()),
+            }
+        except boundedfile.Refused as r:
+            log.warning("%s: AODV counters not read: %s", p, boundedfile.describe(r))
+        except (ValueError, KeyError, TypeError, AttributeError) as e:
+            log.warning("%s: unreadable AODV counters (%s)", p, str(e)[:200])
+    return out or None
+
+
+def capture_drops(run_dir: Path) -> dict[str, int]:
+    """Per robot, the packets its capture lost in the kernel (tcpdump's last words, "N packets
+    dropped by kernel", in pcaps/daemons/rK.tcpdump.log): what no count from the pcaps can
+    include. Robots whose log has no such line (or is not a regular file) are left out."""
+    out = {}
+    for p in sorted((Path(run_dir) / "pcaps" / "daemons").glob("r*.tcpdump.log")):
+        try:
+            text = boundedfile.read(p, MAX_LOG_BYTES).decode(errors="replace")
+        except boundedfile.Refused as r:
+            log.warning("%s: not read: %s", p, boundedfile.describe(r))
+            continue
+        m = re.search(r"(?<![0-9])([0-9]{1,15}) packets? dropped by kernel", text)
+        if m:
+            out[p.name.split(".")[0][:40]] = int(m[1])
+    return out
