@@ -23,6 +23,7 @@ from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from node.messaging.maps import DEFAULT as DEFAULT_MAPS
 from node.messaging.maps import MAPS
+from topology.spec import CELL_M
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
 
@@ -59,7 +60,7 @@ class NodeArgs:
     role: str = arg("robot", "robot, or the display", choices=("robot", "display"))
     events: str | None = arg(None, "JSON-lines event log to append to")
     map_size: tuple[int, int] = arg((400, 400), "ROWSxCOLS cells", parse=lambda t: shape(t))
-    cell: float = arg(0.05, "metres per map cell", kind=float, above=0)
+    cell: float = arg(CELL_M, "metres per map cell", kind=float, above=0)
     laser_range: float = arg(2.0, "laser range (m)", kind=float, above=0, run=True)
     laser_rays: int = arg(360, "rays of a laser scan", kind=int, minimum=4, run=True)
     speed: float = arg(0.1, "metres per step", kind=float, above=0, run=True)

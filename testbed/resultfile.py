@@ -36,6 +36,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from topology.spec import VETH
+
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
 # The keys of config.json that result.json repeats under "config" (the rest: under "extra").
@@ -45,7 +47,7 @@ CONFIG_KEYS = (
 )  # fmt: skip
 DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
 DEFAULT_ROUTING = "aodv"
-DEFAULT_MEDIUM = "veth"
+DEFAULT_MEDIUM = VETH
 # The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
 CPU_PARTS = ("robots", "display", "world", "routing")
 _EMPTY: Mapping[str, Any] = MappingProxyType({})

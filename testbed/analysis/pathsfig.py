@@ -25,6 +25,7 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from testbed.analysis.plots import plt
 from testbed.analysis.runs import FinishedRun
+from topology.spec import CELL_M
 
 MAX_POINTS = 2000
 _GREYS = np.array([215, 255, 0], dtype=np.uint8)  # unknown, free, occupied
@@ -50,7 +51,7 @@ def read_positions(run_dir: Path) -> dict[int, list[tuple[float, float]]]:
 
 def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, float]:
     """The map's width and height in metres."""
-    cell = run.config.extra.get("map_cell") or 0.05
+    cell = run.config.extra.get("map_cell") or CELL_M
     if shape is None:
         size = run.config.extra.get("map_size") or [400, 400]
         shape = (size[1], size[0])

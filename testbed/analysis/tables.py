@@ -26,6 +26,7 @@ from pathlib import Path
 
 from testbed.analysis import stats
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
+from topology.spec import VETH
 
 FIG4_TEAMS = (1, 2, 5, 10)
 FIG4_LASER = 2.0
@@ -72,7 +73,7 @@ def spread(values: list[float]) -> dict:
     }
 
 
-MAIN_NETWORK = ("aodv", "empty", "veth")
+MAIN_NETWORK = ("aodv", "empty", VETH)
 
 
 def main_network(runs: list[FinishedRun]) -> tuple[str, str, str]:

@@ -28,10 +28,12 @@ from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, op
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import (
     AODV_PROFILES,
+    CELL_M,
     LOS_MODELS,
     MEDIA,
     RANGE_MODELS,
     ROUTINGS,
+    VETH,
     WIFI_LOSSES,
     WIFI_STANDARDS,
 )
@@ -106,7 +108,7 @@ class RunConfig:
     seed: int = option(int, SEED_HELP, 1, minimum=0, metavar="S")
     time_scale: float = option(
         float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "
-        f"{STEP_S_TEXT} / K", 1.0, unit="factor", above=0,
+        f"{STEP_S_TEXT} / K", **robot("time_scale"), unit="factor",
         metavar="K", sweep={RUN}, net=True,
     )  # fmt: skip
     routing: str = option(str, "routing protocol", "aodv", choices=ROUTINGS,
@@ -140,7 +142,7 @@ class RunConfig:
     )  # fmt: skip
     medium: str = option(
         str, "radio medium: veth, perfect links switched by range, or ns3-wifi, ns-3's "
-        "802.11 ad hoc channel (docs/ns3-medium.md)", "veth", choices=MEDIA,
+        "802.11 ad hoc channel (docs/ns3-medium.md)", VETH, choices=MEDIA,
         sweep={GRID, RUN}, newer=True, net=True, grid=GridDim(9, medium_label, VARIED),
     )  # fmt: skip
     wifi_loss: str = option(
@@ -185,7 +187,7 @@ class RunConfig:
         sweep={GRID, RUN}, newer=True, grid=GridDim(11, str, CHANGED),
     )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
-    map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
+    map_cell: float = option(float, "size of a pixel of --map", CELL_M, unit="metres",
                              above=0, metavar="M", net=True)  # fmt: skip
     laser_rays: int = option(int, "rays of a laser scan", **robot("laser_rays"), metavar="N")
     # The field is in metres per step, the flag in m/s (per_step).
@@ -308,7 +310,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     for o in cfg.isolate:
         if not 1 <= o.robot <= cfg.robots:
             raise UsageError(f"--isolate names robot {o.robot}, but the team is r1..r{cfg.robots}")
-    if cfg.isolate and cfg.medium != "veth":
+    if cfg.isolate and cfg.medium != VETH:
         raise UsageError("--isolate needs the veth medium: on ns3-wifi the channel decides "
                          "who hears whom")  # fmt: skip
     why = maps_refusal(cfg.maps, cfg.middleware)
