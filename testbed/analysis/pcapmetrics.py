@@ -75,6 +75,7 @@ from common.jsonfile import write_json_atomic
 from node.messaging import REGISTRY as MIDDLEWARE_REGISTRY
 from testbed.analysis import mwframing, relaylag, routingnotes, rtps, runs
 from testbed.resultfile import DEFAULT_ROUTING
+from topology.names import LAG_FILE
 
 log = logging.getLogger(__name__)
 
@@ -787,7 +788,7 @@ def run_metrics(
     if not pcaps:
         return None
     cache = run_dir / CACHE_NAME
-    lag_path = run_dir / relaylag.LAG_NAME
+    lag_path = run_dir / LAG_FILE
     stamped = [*pcaps.values(), *([lag_path] if lag_path.is_file() else [])]
     stamp = {p.name: [p.stat().st_size, p.stat().st_mtime_ns] for p in stamped}
     if use_cache and cache.is_file():

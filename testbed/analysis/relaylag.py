@@ -28,7 +28,6 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-LAG_NAME = "relay-lag.bin"  # topology.ns3medium.LAG_FILE
 MAGIC = b"TBRLAG01"
 # written_ns, in_ns, out_ns, receiver, sender, ethertype, ip_id, ip_src, ip_dst, tcp_seq,
 # ip_proto, tcp_flags, reserved (native/ns3wifi/wifi-medium.cc, LagRecord)
