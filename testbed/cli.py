@@ -14,7 +14,7 @@ import sys
 
 from pyroute2.netlink.exceptions import NetlinkError
 
-from common.errors import EXIT_USAGE, TestbedError, UsageError
+from common.errors import TestbedError, UsageError
 from testbed.net import commands
 
 log = logging.getLogger("testbed")
@@ -109,6 +109,3 @@ def _os_error_text(exc: Exception) -> str:
 
 if __name__ == "__main__":
     sys.exit(main())
-
-
-__all__ = ["main", "EXIT_USAGE"]

@@ -18,8 +18,7 @@ from topology.los import Walls
 from topology.spec import CELL_M
 
 STEPS = 2000
-REPO = PROJECT_ROOT
-OFFICE = os.path.join(REPO, "testbed", "experiments", "maps", "office.png")
+OFFICE = os.path.join(PROJECT_ROOT, "testbed", "experiments", "maps", "office.png")
 
 
 def _walk(walls: Walls, rng: random.Random) -> list[list[tuple[float, float]]]:
