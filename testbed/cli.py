@@ -18,6 +18,8 @@ from common.errors import TestbedError, UsageError
 from testbed.net import commands
 
 log = logging.getLogger("testbed")
+# What --help says first: the docstring's first paragraph, whole.
+DESCRIPTION = " ".join((__doc__ or "").split("\n\n")[0].split())
 
 
 class Parser(argparse.ArgumentParser):
@@ -46,7 +48,7 @@ def build_parser(argv: list[str] | None = None) -> Parser:
     """The whole command line. Of the delegated commands only the one named in `argv` (all of
     them when argv names none) has its module imported: `testbed run` starts in a quarter of
     a second instead of paying for the report's matplotlib, and `net` or `clean` import none."""
-    parser = Parser(prog="testbed", description=__doc__.splitlines()[0])
+    parser = Parser(prog="testbed", description=DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="log what is done")
     sub = parser.add_subparsers(dest="cmd", required=True, parser_class=Parser)
     commands.add_parsers(sub)
