@@ -13,9 +13,7 @@ from typing import NoReturn
 
 from aodv.params import PROFILES, Params, profile
 from common.argtypes import checked, number
-
-EXIT_USAGE = 2
-EXIT_FAILURE = 1
+from common.errors import EXIT_FAILURE, EXIT_USAGE
 
 
 class RobotFormatter(logging.Formatter):

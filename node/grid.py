@@ -23,6 +23,7 @@ import numpy as np
 
 from node import stepcore
 from node.rays import Laser
+from topology.spec import CELL_M
 
 UNKNOWN = np.uint8(0)
 FREE = np.uint8(1)
@@ -49,7 +50,7 @@ class OccupancyGrid:
     def __init__(
         self,
         shape: tuple[int, int],
-        cell: float = 0.05,
+        cell: float = CELL_M,
         params: LogOdds | None = None,
         pad: int = 0,
     ):

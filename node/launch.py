@@ -23,6 +23,7 @@ from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from node.messaging.maps import DEFAULT as DEFAULT_MAPS
 from node.messaging.maps import MAPS
+from topology.spec import CELL_M
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
 
@@ -35,16 +36,17 @@ def arg(
     parse: Callable[[str], Any] | None = None,
     above: float | None = None,
     minimum: float | None = None,
+    maximum: float | None = None,
     choices: tuple[str, ...] | None = None,
     run: bool = False,
 ) -> Any:
-    """A NodeArgs field and its flag: the default, the help, how the text is read (`parse`,
-    or a number of `kind` within `above`/`minimum`, or one of `choices`), and whether a run
+    """A NodeArgs field and its flag: the default, the help, how the text is read (`parse`, or a
+    number of `kind` within `above`/`minimum`/`maximum`, or one of `choices`), and whether a run
     passes its RunConfig field of the same name through (`run`: testbed.run.execute does, and
     testbed.run.config takes the default and bounds of that option from here). No default:
     the flag is required."""  # fmt: skip
     meta = {"help": help, "kind": kind, "parse": parse, "above": above, "minimum": minimum,
-            "choices": choices, "run": run}  # fmt: skip
+            "maximum": maximum, "choices": choices, "run": run}  # fmt: skip
     return dataclasses.field(default=default, metadata={"arg": meta})
 
 
@@ -59,14 +61,16 @@ class NodeArgs:
     role: str = arg("robot", "robot, or the display", choices=("robot", "display"))
     events: str | None = arg(None, "JSON-lines event log to append to")
     map_size: tuple[int, int] = arg((400, 400), "ROWSxCOLS cells", parse=lambda t: shape(t))
-    cell: float = arg(0.05, "metres per map cell", kind=float, above=0)
+    cell: float = arg(CELL_M, "metres per map cell", kind=float, above=0)
     laser_range: float = arg(2.0, "laser range (m)", kind=float, above=0, run=True)
     laser_rays: int = arg(360, "rays of a laser scan", kind=int, minimum=4, run=True)
     speed: float = arg(0.1, "metres per step", kind=float, above=0, run=True)
     radius: float = arg(0.15, "the robot's radius (m)", kind=float, above=0, run=True)
     plan_period: int = arg(20, "steps between plans on the timer", kind=int, above=0, run=True)
     map_period: int = arg(10, "steps between map floods", kind=int, minimum=1, run=True)
-    time_scale: float = arg(1.0, "emulated time over wall time", kind=float, above=0, run=True)
+    # A step of 10 s to one of 100 microseconds.
+    time_scale: float = arg(1.0, "emulated time over wall time", kind=float, minimum=0.01,
+                            maximum=1000.0, run=True)  # fmt: skip
     timer_phase: int = arg(0, "steps added to the first timer", kind=int)
     iface: str = arg("wlan0", "'' to not bind floods to a device")
     flood_port: int = arg(5100, "UDP port of the map floods", kind=int, above=0)
@@ -151,7 +155,8 @@ def parser() -> argparse.ArgumentParser:
         if meta["parse"] is not None:
             kw["type"] = meta["parse"]
         elif meta["kind"] is not None:
-            kw["type"] = number(meta["kind"], flag, above=meta["above"], minimum=meta["minimum"])
+            kw["type"] = number(meta["kind"], flag, above=meta["above"], minimum=meta["minimum"],
+                                magnitude=meta["maximum"])  # fmt: skip
         if meta["choices"] is not None:
             kw["choices"] = meta["choices"]
         if f.default is dataclasses.MISSING:
@@ -172,5 +177,7 @@ def bounds(name: str) -> dict:
     f = {f.name: f for f in dataclasses.fields(NodeArgs)}[name]
     meta = f.metadata["arg"]
     out = {"default": f.default}
-    out.update({k: meta[k] for k in ("above", "minimum", "choices") if meta[k] is not None})
+    out.update(
+        {k: meta[k] for k in ("above", "minimum", "maximum", "choices") if meta[k] is not None}
+    )
     return out

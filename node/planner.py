@@ -30,6 +30,7 @@ import numpy as np
 
 from node import stepcore
 from node.grid import FREE, OCC, UNKNOWN
+from topology.spec import CELL_M
 
 _CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=np.uint8)
 _SQUARE = np.ones((3, 3), dtype=np.uint8)
@@ -38,7 +39,7 @@ _NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1,
 
 @dataclass(frozen=True)
 class PlannerParams:
-    cell: float = 0.05  # map cell (m)
+    cell: float = CELL_M  # map cell (m)
     factor: int = 2  # planning cell = factor map cells
     robot_radius: float = 0.15  # m
 

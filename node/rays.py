@@ -21,6 +21,8 @@ import math
 
 import numpy as np
 
+from topology.spec import CELL_M
+
 _BIAS = 4096  # makes cell coordinates positive so truncation is floor
 _NO_CELLS = np.zeros(0, dtype=np.intp)
 _NO_CELLS.flags.writeable = False
@@ -51,7 +53,7 @@ def warm(max_range: float, n_rays: int, cell: float) -> None:
 class Laser:
     """Tabulated ray geometry: `max_range` metres, `n_rays` over 360 degrees, `cell` metres."""
 
-    def __init__(self, max_range: float = 2.0, n_rays: int = 360, cell: float = 0.05):
+    def __init__(self, max_range: float = 2.0, n_rays: int = 360, cell: float = CELL_M):
         if max_range <= 0 or n_rays < 1 or cell <= 0:
             raise ValueError("laser range, ray count and cell size must be positive")
         self.max_range = float(max_range)

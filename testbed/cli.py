@@ -15,11 +15,13 @@ import sys
 from pyroute2.netlink.exceptions import NetlinkError
 
 from common import envswitch
-from common.errors import EXIT_USAGE, TestbedError, UsageError
+from common.errors import TestbedError, UsageError
 from testbed.net import commands
 from testbed.resultfile import one_line
 
 log = logging.getLogger("testbed")
+# What --help says first: the docstring's first paragraph, whole.
+DESCRIPTION = " ".join((__doc__ or "").split("\n\n")[0].split())
 
 
 class Parser(argparse.ArgumentParser):
@@ -48,7 +50,7 @@ def build_parser(argv: list[str] | None = None) -> Parser:
     """The whole command line. Of the delegated commands only the one named in `argv` (all of
     them when argv names none) has its module imported: `testbed run` starts in a quarter of
     a second instead of paying for the report's matplotlib, and `net` or `clean` import none."""
-    parser = Parser(prog="testbed", description=__doc__.splitlines()[0])
+    parser = Parser(prog="testbed", description=DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="log what is done")
     sub = parser.add_subparsers(dest="cmd", required=True, parser_class=Parser)
     commands.add_parsers(sub)
@@ -112,6 +114,3 @@ def _os_error_text(exc: Exception) -> str:
 
 if __name__ == "__main__":
     sys.exit(main())
-
-
-__all__ = ["main", "EXIT_USAGE"]

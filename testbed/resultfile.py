@@ -37,6 +37,7 @@ from typing import Any
 
 from common import boundedfile
 from testbed.analysis import resultcheck
+from topology.spec import VETH
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -47,7 +48,7 @@ CONFIG_KEYS = (
 )  # fmt: skip
 DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
 DEFAULT_ROUTING = "aodv"
-DEFAULT_MEDIUM = "veth"
+DEFAULT_MEDIUM = VETH
 # The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
 CPU_PARTS = ("robots", "display", "world", "routing")
 _EMPTY: Mapping[str, Any] = MappingProxyType({})

@@ -46,6 +46,7 @@ from topology.oracle import OracleRouter
 from topology.spec import (
     LOS_MODELS,
     NO_IMPAIRMENT,
+    VETH,
     Impairment,
     NetworkSpec,
     Position,
@@ -380,7 +381,7 @@ class Network:
         robots = frozenset(robots)
         for k in robots:
             self._check_robot(k)
-        if self.spec.medium != "veth":
+        if self.spec.medium != VETH:
             raise UsageError("a robot can be isolated only on the veth medium")
         self.isolated = robots
         return self._moved()

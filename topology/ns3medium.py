@@ -42,6 +42,7 @@ from common import envswitch
 from common.errors import TestbedError, UsageError
 from topology import names, netns, processes, rtnl, state
 from topology.medium import WLAN_INDEX, Medium, port_index
+from topology.names import LAG_FILE
 from topology.spec import Impairment, NetworkSpec, Position
 
 log = logging.getLogger(__name__)
@@ -57,7 +58,6 @@ RT_PRIORITY = 2
 REQUEST_TIMEOUT_S = 10.0
 SIOCETHTOOL = 0x8946
 ETHTOOL_STXCSUM = 0x17
-LAG_FILE = "relay-lag.bin"  # in the testbed's run directory, and in a run's directory
 # The lag file's size cap (40 bytes a frame delivered: about 840 000 frames); the records
 # past it are counted in the counters' lag_file.not_written.
 LAG_CAP_BYTES = 32 << 20

@@ -18,9 +18,13 @@ AODV_PROFILES = ("rfc", "ns3")
 LAYOUTS = ("chain", "grid", "random")
 # The radio medium (topology.medium: veth links; topology.ns3medium: ns-3's 802.11) and, for
 # ns3-wifi, its propagation (a cut-off at the range, or log-distance) and 802.11 standard.
-MEDIA = ("veth", "ns3-wifi")
+VETH, NS3_WIFI = "veth", "ns3-wifi"
+MEDIA = (VETH, NS3_WIFI)  # the first is the default
 WIFI_LOSSES = ("range", "logdistance")
 WIFI_STANDARDS = ("80211a", "80211b", "80211g")
+# Metres per map cell: the robots' and the world's grid, and a pixel of the shipped maps (the
+# default of --map-cell). Declared here, the lowest layer that needs it (the los walls' map).
+CELL_M = 0.05
 
 
 def _number(value, what: str) -> float:
@@ -124,9 +128,9 @@ class NetworkSpec:
     # The walls of the los range models (topology.los): a PNG, metres per pixel, and the
     # loss a wall costs (None: a wall blocks).
     map_png: str | None = None
-    map_cell: float = 0.05
+    map_cell: float = CELL_M
     wall_loss_pct: float | None = None
-    medium: str = "veth"  # MEDIA
+    medium: str = VETH  # MEDIA
     wifi_loss: str = "range"  # the ns3-wifi medium's propagation (WIFI_LOSSES)
     wifi_standard: str = "80211a"
     wifi_rate: str = ""  # ns3-wifi: an ns-3 WifiMode name, "minstrel", or "": the fastest

@@ -2,8 +2,11 @@
 
 Theory of operation. Each middleware is one module of this package with one class that
 keeps the messenger contract (node.messaging.contract; docs/middleware.md says what each
-does here). The registry below names, for each of MIDDLEWARES, that module, its class and
-the Python package it needs. `open_messenger(name, **kwargs)` imports the module only when
+does here). The registry below is the one list of the middlewares: for each, that module,
+its class, the Python package it needs, how its messages are framed on the wire (what the
+capture analysis parses) and, for those that publish maps (`--maps pubsub`), the module of its
+map topic. MIDDLEWARES, node.messaging.maps' tables and testbed.analysis.pcapmetrics' are made
+from it. `open_messenger(name, **kwargs)` imports the module only when
 it is asked for, so a robot loads its own middleware and nothing else, and a package that
 is not installed is a `MiddlewareUnavailable` whose message names the package to install.
 `unavailable(name)` says the same without opening anything: what a run checks before it
@@ -19,9 +22,6 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from node.messaging.contract import Messenger
 
-MIDDLEWARES = ("nanomsg", "zeromq", "zeromq-reqrep", "zenoh", "dds")
-DEFAULT = "nanomsg"
-
 
 @dataclass(frozen=True)
 class Entry:
@@ -31,17 +31,25 @@ class Entry:
     cls: str  # the messenger class
     imports: str  # the top-level module its Python package provides
     package: str  # that package's name on PyPI (pinned in pyproject.toml's middleware extra)
+    # How its messages look on the goal port (testbed.analysis.mwframing, testbed.analysis.rtps):
+    # sp, zmtp, zenoh over TCP; rtps over UDP.
+    framing: str
+    map_topic: str | None = None  # the module of its map topic (node.messaging.maps), if any
 
 
 REGISTRY: dict[str, Entry] = {
-    "nanomsg": Entry("node.messaging.nanomsg", "NanomsgMessenger", "pynng", "pynng"),
-    "zeromq": Entry("node.messaging.zeromq", "ZeroMQMessenger", "zmq", "pyzmq"),
+    "nanomsg": Entry("node.messaging.nanomsg", "NanomsgMessenger", "pynng", "pynng", "sp"),
+    "zeromq": Entry("node.messaging.zeromq", "ZeroMQMessenger", "zmq", "pyzmq", "zmtp"),
     "zeromq-reqrep": Entry(
-        "node.messaging.zeromq_reqrep", "ZeroMQReqRepMessenger", "zmq", "pyzmq"
+        "node.messaging.zeromq_reqrep", "ZeroMQReqRepMessenger", "zmq", "pyzmq", "zmtp"
     ),  # fmt: skip
-    "zenoh": Entry("node.messaging.zenoh", "ZenohMessenger", "zenoh", "eclipse-zenoh"),
-    "dds": Entry("node.messaging.dds", "DdsMessenger", "cyclonedds", "cyclonedds"),
-}
+    "zenoh": Entry("node.messaging.zenoh", "ZenohMessenger", "zenoh", "eclipse-zenoh", "zenoh",
+                   map_topic="node.messaging.zenoh_maps"),
+    "dds": Entry("node.messaging.dds", "DdsMessenger", "cyclonedds", "cyclonedds", "rtps",
+                 map_topic="node.messaging.dds_maps"),
+}  # fmt: skip
+MIDDLEWARES = tuple(REGISTRY)
+DEFAULT = "nanomsg"
 
 
 class MiddlewareUnavailable(Exception):
@@ -59,8 +67,8 @@ def _entry(name: str) -> Entry:
 
 def messenger_class(name: str) -> type:
     """The messenger class of middleware `name`, its module imported now;
-    MiddlewareUnavailable when its package is missing or its module not part of this
-    testbed."""
+    MiddlewareUnavailable when its package is missing (tests/unit/test_messaging.py holds
+    that every entry's module and class exist)."""
     entry = _entry(name)
     try:
         importlib.import_module(entry.imports)
@@ -70,20 +78,7 @@ def messenger_class(name: str) -> type:
             f"--middleware {name} needs the Python package {entry.package}, which {why} "
             f"(`make setup` installs it, or: pip install {entry.package})"
         ) from None
-    try:
-        module = importlib.import_module(entry.module)
-    except ModuleNotFoundError as e:
-        if e.name != entry.module:
-            raise
-        raise MiddlewareUnavailable(
-            f"--middleware {name}: this testbed has no {entry.module} (not written yet)"
-        ) from None
-    try:
-        return getattr(module, entry.cls)
-    except AttributeError:
-        raise MiddlewareUnavailable(
-            f"--middleware {name}: {entry.module} has no class {entry.cls}"
-        ) from None
+    return getattr(importlib.import_module(entry.module), entry.cls)
 
 
 def unavailable(name: str) -> str | None:

@@ -34,15 +34,17 @@ from collections import Counter
 
 from node import wire
 from node.mapstats import MapStats
+from node.messaging import REGISTRY
 from node.messaging.inbox import Inbox
 
 log = logging.getLogger(__name__)
 
 MAPS = ("flood", "pubsub")
 DEFAULT = "flood"
-PUBSUB_MIDDLEWARES = ("zenoh", "dds")
-# The module of each middleware's map topic (what a process may import ahead of using it).
-MODULES = {"zenoh": "node.messaging.zenoh_maps", "dds": "node.messaging.dds_maps"}
+# The module of each middleware's map topic (what a process may import ahead of using it),
+# from the registry: the middlewares that have one are those `--maps pubsub` can go with.
+MODULES = {name: e.map_topic for name, e in REGISTRY.items() if e.map_topic is not None}
+PUBSUB_MIDDLEWARES = tuple(MODULES)
 
 
 def refusal(maps: str, middleware: str) -> str | None:

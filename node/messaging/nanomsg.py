@@ -12,7 +12,7 @@ ceiling it doubles up to). A PUSH socket has no resend timer, and TCP keepalives
 
 The wire is nanomsg's SP over TCP on the robot's goal port (`port`, 5101 in a run): the
 listener on the robot's own address, one outgoing connection per teammate it sends to.
-This messenger was the robots' only one (node.goalnet.GoalNet); its sockets and options are
+This messenger was the robots' only one (first named GoalNet); its sockets and options are
 unchanged, and it counts what it does in `stats` (node.messaging.stats).
 """
 

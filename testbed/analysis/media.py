@@ -39,8 +39,9 @@ import statistics
 
 from testbed.analysis import stats
 from testbed.analysis.runs import FinishedRun
+from topology.spec import NS3_WIFI as WIFI
+from topology.spec import VETH
 
-VETH, WIFI = "veth", "ns3-wifi"
 MEDIA_ORDER = (VETH, WIFI)
 # (key, name in the table and sentences, format)
 COMPARED = (

@@ -71,9 +71,11 @@ from pathlib import Path
 
 from common import boundedfile
 from common.jsonfile import write_json_atomic
+from node.messaging import REGISTRY as MIDDLEWARE_REGISTRY
 from testbed.analysis import capturefiles, mwframing, relaylag, routingnotes, rtps, runs
 from testbed.analysis.capturefiles import capture_drops, daemon_counts
 from testbed.resultfile import DEFAULT_ROUTING
+from topology.names import LAG_FILE
 
 log = logging.getLogger(__name__)
 
@@ -87,12 +89,10 @@ CACHE_NAME = "routing.json"
 CACHE_FORMAT = 8
 # The robots' goal messages: the port every robot's messenger listens on (node.launch's
 # --goal-port, which a run leaves at its default), and each middleware's framing on it
-# (testbed.analysis.mwframing, testbed.analysis.rtps). A middleware without an entry is not
-# counted as a class.
+# (node.messaging's registry; testbed.analysis.mwframing, testbed.analysis.rtps parse them). A
+# middleware without an entry is not counted as a class.
 GOAL_PORT = 5101
-MIDDLEWARE_FRAMING = {
-    "nanomsg": "sp", "zeromq": "zmtp", "zeromq-reqrep": "zmtp", "zenoh": "zenoh", "dds": "rtps",
-}  # fmt: skip
+MIDDLEWARE_FRAMING = {name: e.framing for name, e in MIDDLEWARE_REGISTRY.items()}
 # Cyclone DDS's unicast ports with Ports/Base = the goal port (node/messaging/dds.py): the
 # discovery port and the data port of participant index 0, every robot's in the testbed.
 DDS_PORTS = (GOAL_PORT + 10, GOAL_PORT + 11)
@@ -738,7 +738,7 @@ def run_metrics(
     if not pcaps:
         return None
     cache = run_dir / CACHE_NAME
-    lag_path = run_dir / relaylag.LAG_NAME
+    lag_path = run_dir / LAG_FILE
     stamped = [*pcaps.values(), *([lag_path] if boundedfile.regular(lag_path) else [])]
     stamp = capturefiles.content_stamp(stamped)  # content, not sizes and mtimes
     if use_cache:

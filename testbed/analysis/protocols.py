@@ -22,11 +22,13 @@ from pathlib import Path
 from common.jsonfile import read_json
 from testbed.analysis import stats
 from testbed.analysis.runs import FinishedRun
-from topology.spec import ROUTINGS
+from testbed.resultfile import DEFAULT_MEDIUM
+from topology.spec import ROUTINGS, VETH
 
-PROTOCOL_ORDER = ROUTINGS  # the report lists protocols in the order of the choices
 PROACTIVE = ("babel", "batman")
-DAEMON_AGREEMENT = 0.01  # as the report's Section 2.4 check
+# How far the AODV control packets counted in the captures may be from the daemons' own
+# counters and still agree (here and in the report's check of every run).
+DAEMON_AGREEMENT = 0.01
 METRICS = (
     "steps", "control_pkts_per_robot_s", "control_bytes_per_robot_s", "pdf", "delay_ms",
     "map_delivery", "discovery_ms",
@@ -101,10 +103,11 @@ def point_rows(per_run: list[dict]) -> list[dict]:
     interval."""
     groups: dict[tuple, list[dict]] = {}
     for r in per_run:
-        key = (r["map"], r.get("medium", "veth"), r["comm_range"], r["robots"], r["routing"])
+        medium = r.get("medium", DEFAULT_MEDIUM)
+        key = (r["map"], medium, r["comm_range"], r["robots"], r["routing"])
         groups.setdefault(key, []).append(r)
     out = []
-    order = {p: i for i, p in enumerate(PROTOCOL_ORDER)}
+    order = {p: i for i, p in enumerate(ROUTINGS)}  # protocols in the order of the choices
     for key, items in sorted(groups.items(), key=lambda kv: (*kv[0][:4], order.get(kv[0][4], 9))):
         row = dict(zip(("map", "medium", "comm_range", "robots", "routing"), key, strict=True))
         row["n"] = len(items)
@@ -254,8 +257,8 @@ def section(rows: list[dict]) -> list[str]:
 
 def _where(row: dict) -> str:
     """The map column: the map, and the medium when it is not veth (a media sweep)."""
-    medium = row.get("medium", "veth")
-    return row["map"] if medium == "veth" else f"{row['map']} ({medium})"
+    medium = row.get("medium", DEFAULT_MEDIUM)
+    return row["map"] if medium == VETH else f"{row['map']} ({medium})"
 
 
 def _table_rows(points: dict[tuple, dict[str, dict]]) -> list[str]:

@@ -30,7 +30,6 @@ from pathlib import Path
 
 from common import boundedfile
 
-LAG_NAME = "relay-lag.bin"  # topology.ns3medium.LAG_FILE
 MAGIC = b"TBRLAG01"
 MAX_LAG_BYTES = 1 << 30  # a frame's record is tens of bytes: tens of millions of frames
 # written_ns, in_ns, out_ns, receiver, sender, ethertype, ip_id, ip_src, ip_dst, tcp_seq,

@@ -32,13 +32,12 @@ from testbed.analysis import (
     runreport,
     sweepinfo,
 )
+from testbed.analysis.protocols import DAEMON_AGREEMENT
 from testbed.analysis.runs import ResultError, load_run
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
 from testbed.resultfile import has_result, one_line
 
 log = logging.getLogger(__name__)
-
-DAEMON_AGREEMENT = 0.01
 
 
 def _f(x: float) -> str:

@@ -21,6 +21,7 @@ from testbed.analysis import pcapmetrics
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
 from testbed.resultfile import one_line
+from topology.spec import VETH
 
 SUMMARY_NAME = "summary.md"
 
@@ -36,7 +37,7 @@ def _outcome(run: FinishedRun) -> list[str]:
         f"Status **{run.status}**" + (f": {run.status_detail}" if run.status_detail else "") + ".",
         f"{c.robots} robot(s), range {c.comm_range:g} m, laser {c.laser_range:g} m, routing "
         f"{c.routing}, map {c.map_name}, loss {c.loss_pct:g} %, delay {c.delay_ms:g} ms, "
-        f"seed {c.seed}" + (f", medium {c.medium}." if c.medium != "veth" else "."),
+        f"seed {c.seed}" + (f", medium {c.medium}." if c.medium != VETH else "."),
         f"Steps run (when the last robot finished): {_num(run.steps, 'd')}; exploration "
         f"steps (mean of the robots' finishing steps, as Fig. 2 plots): {_num(mean, '.1f')}; "
         f"coverage at the end: {_num(run.coverage_final, '.1%')}.",

@@ -183,8 +183,9 @@ def _load_channel(run_dir: Path) -> ChannelRecord | None:
 def _check_lag_file(run_dir: Path) -> None:
     """ResultError when the run's relay-lag file is there but not one (its header)."""
     from testbed.analysis import relaylag
+    from topology.names import LAG_FILE
 
-    path = run_dir / relaylag.LAG_NAME
+    path = run_dir / LAG_FILE
     if not os.path.lexists(path):
         return
     try:

@@ -30,6 +30,7 @@ from pathlib import Path
 from common.jsonfile import write_atomic
 from testbed.analysis import stats
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
+from topology.spec import VETH
 
 FIG4_TEAMS = (1, 2, 5, 10)
 FIG4_LASER = 2.0
@@ -78,7 +79,7 @@ def spread(values: list[float]) -> dict:
     }
 
 
-MAIN_NETWORK = ("aodv", "empty", "veth")
+MAIN_NETWORK = ("aodv", "empty", VETH)
 
 
 def main_network(runs: list[FinishedRun]) -> tuple[str, str, str]:

@@ -9,8 +9,7 @@ from collections.abc import Sequence
 
 from testbed import PROJECT_ROOT
 
-REPO = PROJECT_ROOT
-BENCH_DIR = os.path.join(REPO, "results", "bench")
+BENCH_DIR = os.path.join(PROJECT_ROOT, "results", "bench")
 
 
 def median(values: Sequence[float]) -> float:

@@ -36,7 +36,8 @@ import uuid
 
 import numpy as np
 
-from testbed.bench.common import REPO, write
+from testbed import PROJECT_ROOT
+from testbed.bench.common import write
 from testbed.resultfile import RunResult
 
 RUNS = 3
@@ -256,7 +257,7 @@ def _median_of(runs: list[dict], key: str) -> float | None:
     return round(float(np.median(v)), 3) if v else None
 
 
-def measure(tree: str = REPO, runs: int = RUNS) -> dict:
+def measure(tree: str = PROJECT_ROOT, runs: int = RUNS) -> dict:
     floor = [in_process(seed) for seed in (2, 2, 2)]
     floor_ms = float(np.median([f["wall_ms_per_step"] for f in floor]))
     floor_cpu = float(np.median([f["cpu_ms_per_step"] for f in floor]))
@@ -292,7 +293,7 @@ def measure(tree: str = REPO, runs: int = RUNS) -> dict:
 
 
 def run() -> None:
-    tree = os.environ.get("TESTBED_COST_TREE", REPO)
+    tree = os.environ.get("TESTBED_COST_TREE", PROJECT_ROOT)
     runs = int(os.environ.get("TESTBED_COST_RUNS", RUNS))
     data = measure(tree, runs)
     name = os.environ.get("TESTBED_COST_NAME", "cost")

@@ -15,10 +15,10 @@ from testbed import PROJECT_ROOT
 from testbed.bench.common import median, write
 from topology import ranges
 from topology.los import Walls
+from topology.spec import CELL_M
 
 STEPS = 2000
-REPO = PROJECT_ROOT
-OFFICE = os.path.join(REPO, "testbed", "experiments", "maps", "office.png")
+OFFICE = os.path.join(PROJECT_ROOT, "testbed", "experiments", "maps", "office.png")
 
 
 def _walk(walls: Walls, rng: random.Random) -> list[list[tuple[float, float]]]:
@@ -52,7 +52,7 @@ def _time(steps, comm_range: float, model: str, walls: Walls | None) -> float:
 
 
 def run() -> None:
-    walls = Walls.from_png(OFFICE, 0.05)
+    walls = Walls.from_png(OFFICE, CELL_M)
     steps = _walk(walls, random.Random(1))
     result: dict[str, Any] = {"robots": 10, "steps": STEPS}
     for comm in (5.0, 20.0):

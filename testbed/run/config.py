@@ -28,11 +28,13 @@ from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, op
 from testbed.world.worldmap import START_PLACEMENTS
 from topology.spec import (
     AODV_PROFILES,
+    CELL_M,
     LOS_MODELS,
     MAX_COORD_M,
     MEDIA,
     RANGE_MODELS,
     ROUTINGS,
+    VETH,
     WIFI_LOSSES,
     WIFI_STANDARDS,
     check_position,
@@ -42,7 +44,6 @@ from topology.spec import (
 MAX_STEPS = 10_000_000  # 11 days of emulated time at a step of 0.1 s
 MAX_LASER_RAYS = 10_000  # a ray every 0.036 degrees; the paper's robots have 360
 MAX_SNAPSHOTS = 100
-MIN_TIME_SCALE, MAX_TIME_SCALE = 0.01, 1000.0  # a step of 10 s to one of 100 microseconds
 
 
 def _kill(text: str) -> tuple[int, int]:
@@ -121,7 +122,7 @@ class RunConfig:
     seed: int = option(int, SEED_HELP, 1, minimum=0, maximum=2**63 - 1, metavar="S")
     time_scale: float = option(
         float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "
-        f"{STEP_S_TEXT} / K", 1.0, unit="factor", minimum=MIN_TIME_SCALE, maximum=MAX_TIME_SCALE,
+        f"{STEP_S_TEXT} / K", **robot("time_scale"), unit="factor",
         metavar="K", sweep={RUN}, net=True,
     )  # fmt: skip
     routing: str = option(str, "routing protocol", "aodv", choices=ROUTINGS,
@@ -156,7 +157,7 @@ class RunConfig:
     )  # fmt: skip
     medium: str = option(
         str, "radio medium: veth, perfect links switched by range, or ns3-wifi, ns-3's "
-        "802.11 ad hoc channel (docs/ns3-medium.md)", "veth", choices=MEDIA,
+        "802.11 ad hoc channel (docs/ns3-medium.md)", VETH, choices=MEDIA,
         sweep={GRID, RUN}, newer=True, net=True, grid=GridDim(9, medium_label, VARIED),
     )  # fmt: skip
     wifi_loss: str = option(
@@ -202,7 +203,7 @@ class RunConfig:
         sweep={GRID, RUN}, newer=True, grid=GridDim(11, str, CHANGED),
     )  # fmt: skip
     # Beyond the contract's config keys (recorded too, so a run is reproducible):
-    map_cell: float = option(float, "size of a pixel of --map", 0.05, unit="metres",
+    map_cell: float = option(float, "size of a pixel of --map", CELL_M, unit="metres",
                              minimum=0.001, maximum=100, metavar="M", net=True)  # fmt: skip
     laser_rays: int = option(int, "rays of a laser scan", **robot("laser_rays"), metavar="N",
                              maximum=MAX_LASER_RAYS)  # fmt: skip
@@ -327,7 +328,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     for o in cfg.isolate:
         if not 1 <= o.robot <= cfg.robots:
             raise UsageError(f"--isolate names robot {o.robot}, but the team is r1..r{cfg.robots}")
-    if cfg.isolate and cfg.medium != "veth":
+    if cfg.isolate and cfg.medium != VETH:
         raise UsageError("--isolate needs the veth medium: on ns3-wifi the channel decides "
                          "who hears whom")  # fmt: skip
     why = maps_refusal(cfg.maps, cfg.middleware)

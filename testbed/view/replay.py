@@ -21,7 +21,7 @@ from pathlib import Path
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.view.served import in_run, snapshot, snapshot_steps
 from topology.names import MAX_ROBOTS
-from topology.spec import MAX_COORD_M
+from topology.spec import CELL_M, MAX_COORD_M
 
 __all__ = ["NotARun", "load", "read_config", "snapshot_path", "snapshot_steps"]
 
@@ -70,7 +70,7 @@ def read_config(d: Path) -> dict:
     if robots != int(robots):
         raise NotARun(f"{where}: robots {robots:g} is not a whole number")
     comm_range = float(_number(config, "comm_range", where, 0, MAX_COORD_M))
-    cell = float(_number(config, "map_cell", where, 1e-6, 1e3, default=0.05))
+    cell = float(_number(config, "map_cell", where, 1e-6, 1e3, default=CELL_M))
     size = config.get("map_size")
     if size is None:
         map_m = [20.0, 20.0]
@@ -78,7 +78,7 @@ def read_config(d: Path) -> dict:
         if not (isinstance(size, list) and len(size) == 2):
             raise NotARun(f"{where}: map_size is not [rows, cols]")
         rows, cols = (_number({"map_size": v}, "map_size", where, 1, MAX_MAP_CELLS) for v in size)
-        map_m = [int(cols) * 0.05, int(rows) * 0.05]
+        map_m = [int(cols) * CELL_M, int(rows) * CELL_M]
     display = config.get("display_pos") or []
     if display:
         if not (isinstance(display, list) and len(display) == 2):

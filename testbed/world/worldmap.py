@@ -16,8 +16,7 @@ import numpy as np
 
 from common.errors import UsageError
 from topology import pngmap
-
-CELL = 0.05  # metres
+from topology.spec import CELL_M as CELL  # metres
 
 
 @dataclass(frozen=True)

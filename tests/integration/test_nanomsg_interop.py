@@ -1,7 +1,7 @@
 """A robot's nanomsg endpoint talks with Debian's libnanomsg tools (nanocat), both ways.
 
-The robot's goal socket (node.goalnet, pynng/nng) is used exactly as a robot uses it, in one
-robot namespace; nanocat (libnanomsg) runs in another, one hop away over the emulated radio.
+The robot's goal socket (node.messaging.nanomsg, pynng/nng) is used exactly as a robot uses it,
+in one robot namespace; nanocat (libnanomsg) runs in another, one hop away over the emulated radio.
 Messages are the robots' own goal messages, parsed by the robot's parser: so the wire protocol
 is nanomsg's SP over TCP.
 """
@@ -64,9 +64,9 @@ def test_nanocat_push_to_robot(net):
             net,
             f"""
             import json, select
-            from node.goalnet import GoalNet
+            from node.messaging.nanomsg import NanomsgMessenger
             from node import wire
-            g = GoalNet(1, "10.0.0.1", {PORT}, lambda k: f"10.0.0.{{k}}")
+            g = NanomsgMessenger(1, "10.0.0.1", {PORT}, lambda k: f"10.0.0.{{k}}")
             select.select([g.fileno()], [], [], 15)
             data = g.receive()[0]
             print(json.dumps(wire.parse_msg(data, 5)))
@@ -93,9 +93,9 @@ def test_robot_push_to_nanocat(net):
     env = dict(os.environ, PYTHONPATH=PROJECT_ROOT)
     robot = net.spawn(1, [sys.executable, "-c", textwrap.dedent(f"""
         import time
-        from node.goalnet import GoalNet
+        from node.messaging.nanomsg import NanomsgMessenger
         from node import wire
-        g = GoalNet(1, "10.0.0.1", {PORT}, lambda k: f"10.0.0.{{k}}", send_timeout_ms=200)
+        g = NanomsgMessenger(1, "10.0.0.1", {PORT}, lambda k: f"10.0.0.{{k}}", send_timeout_ms=200)
         for _ in range(50):
             if g.send(2, wire.goal_msg(1, 42, (1.5, 2.5), 3.0)):
                 break

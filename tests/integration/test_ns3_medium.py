@@ -293,8 +293,8 @@ def test_each_frames_relay_lag_is_recorded_and_taken_out_of_the_delays(rlg_name,
         client = ["iperf3", "-c", "10.0.0.3", "-p", "5301", "-t", "2", "-b", "2M", "-l", "1000"]
         assert net.exec(1, client, capture_output=True, timeout=60).returncode == 0
         c = net.medium.counters()
-        net.medium.keep_lag_file(str(tmp_path / relaylag.LAG_NAME))
-    records, partial = relaylag.read_records(tmp_path / relaylag.LAG_NAME)
+        net.medium.keep_lag_file(str(tmp_path / names.LAG_FILE))
+    records, partial = relaylag.read_records(tmp_path / names.LAG_FILE)
     assert partial == 0
     # One record per frame delivered to a robot (the counters are one snapshot; the copy,
     # a moment later, may hold a few more), each with its sender; none past the cap.

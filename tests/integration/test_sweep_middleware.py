@@ -3,7 +3,6 @@ failure and with r2 killed at mid-run), swept in real namespaces and reported: t
 goes through the run's kill list at the step fixed before the run, and the report's
 middlewares section has a row per failure and middleware and decides nothing on one run."""
 
-import importlib.util
 import json
 import os
 from pathlib import Path
@@ -29,8 +28,6 @@ def test_middleware_short_sweep_and_report(tmp_path):
     missing = [m for m in MIDDLEWARES if unavailable(m)]
     if missing:
         pytest.skip(f"middleware packages missing: {missing} (make setup installs them)")
-    if importlib.util.find_spec("aodv.__main__") is None:
-        pytest.skip("the AODV daemon (python -m aodv) is not built yet")
     out = tmp_path / "mw"
     r = run_testbed("sweep", SHORT, "--out", out, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]

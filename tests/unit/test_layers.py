@@ -220,10 +220,11 @@ def test_packet_and_file_formats_are_not_netlink(tmp_path):
 
 
 def test_the_harness_is_in_named_parts():
-    """testbed/ holds the command line and the result.json contract at its top; everything
-    else is in a subpackage that says what it holds (run/, sweep/, net/, analysis/, ...)."""
+    """testbed/ holds the command line (`testbed`, `python -m testbed`) and the result.json
+    contract at its top; everything else is in a subpackage that says what it holds (run/,
+    sweep/, net/, analysis/, ...)."""
     top = sorted(f for f in os.listdir(os.path.join(REPO, "testbed")) if f.endswith(".py"))
-    assert top == ["__init__.py", "cli.py", "console.py", "resultfile.py"]
+    assert top == ["__init__.py", "__main__.py", "cli.py", "console.py", "resultfile.py"]
     for part in ("run", "sweep", "net"):
         names = os.listdir(os.path.join(REPO, "testbed", part))
         prefixed = [n for n in names if n.startswith(part) and n.endswith(".py")]

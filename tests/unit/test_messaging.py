@@ -2,6 +2,8 @@
 one line, the counters, and each messenger's sends on loopback (bounded, or for
 zeromq-reqrep, measured while they wait)."""
 
+import ast
+import importlib.util
 import socket
 import subprocess
 import sys
@@ -11,7 +13,7 @@ import time
 import pytest
 
 from node import messaging, wire
-from node.messaging import MIDDLEWARES, REGISTRY, Entry, MiddlewareUnavailable, open_messenger
+from node.messaging import MIDDLEWARES, REGISTRY, MiddlewareUnavailable, open_messenger
 from node.messaging.arrivals import LATE_STEPS, Arrivals
 from node.messaging.stats import COUNTERS, MessengerStats
 
@@ -69,13 +71,29 @@ def test_a_missing_package_is_named_in_one_line(name, monkeypatch):
     assert messaging.unavailable(name) == text
 
 
-def test_a_middleware_whose_module_is_not_written_says_so(monkeypatch):
-    monkeypatch.setitem(REGISTRY, "later", Entry("node.messaging.later", "Later", "json", "x"))
-    assert messaging.unavailable("later") == (
-        "--middleware later: this testbed has no node.messaging.later (not written yet)"
-    )
+@pytest.mark.parametrize("name", MIDDLEWARES)
+def test_every_entry_names_modules_and_a_class_that_exist(name):
+    """Read from the source, so a middleware whose package is missing here is checked too."""
+    entry = REGISTRY[name]
+    for module, cls in ((entry.module, entry.cls), (entry.map_topic, None)):
+        if module is None:
+            continue
+        spec = importlib.util.find_spec(module)
+        assert spec is not None and spec.origin, module
+        if cls:
+            tree = ast.parse(open(spec.origin).read())
+            assert cls in {n.name for n in tree.body if isinstance(n, ast.ClassDef)}
     with pytest.raises(MiddlewareUnavailable, match="unknown"):
         messaging.messenger_class("mqtt")
+
+
+def test_every_framing_of_the_registry_is_parsed_by_the_capture_analysis():
+    from node.messaging import maps
+    from testbed.analysis import mwframing, pcapmetrics
+
+    parsed = set(mwframing.FRAMINGS) | pcapmetrics.DATAGRAM_FRAMINGS
+    assert {e.framing for e in REGISTRY.values()} <= parsed
+    assert maps.PUBSUB_MIDDLEWARES == ("zenoh", "dds")
 
 
 def test_stats_count_sends_and_a_send_still_inside():

@@ -9,7 +9,7 @@ from testbed.analysis import pcapmetrics as pm
 from testbed.analysis import relaylag as rl
 from testbed.analysis import routingnotes, runs
 from testbed.analysis.pcapmetrics import Frame
-from topology import ns3medium
+from topology import names
 
 M1, M2, M3 = "02:00:0a:00:00:01", "02:00:0a:00:00:02", "02:00:0a:00:00:03"
 A1, A2, A3 = "10.0.0.1", "10.0.0.2", "10.0.0.3"
@@ -50,10 +50,6 @@ def test_the_file_is_read_back_as_written_and_a_cut_record_is_left_out():
     assert back.ip_src == "" and back.ethertype == 0x0806  # not IPv4: no identity
     with pytest.raises(rl.LagFileError):
         rl.parse_records(b"TBRLAG02" + packed(recs[0]))
-
-
-def test_the_file_name_is_the_one_the_medium_writes():
-    assert ns3medium.LAG_FILE == rl.LAG_NAME
 
 
 KEY = rl.packet_key(A1, A3, 7, 6, 1000)
@@ -159,7 +155,7 @@ def test_ip_id_is_read_from_tsharks_hex():
 
 def test_a_run_with_a_lag_file_that_is_not_one_is_one_line(tmp_path):
     (tmp_path / "result.json").write_text(json.dumps({"status": "complete"}))
-    (tmp_path / rl.LAG_NAME).write_bytes(b"garbage!")
+    (tmp_path / names.LAG_FILE).write_bytes(b"garbage!")
     with pytest.raises(runs.ResultError) as e:
         runs.load_run(tmp_path)
-    assert rl.LAG_NAME in str(e.value) and "\n" not in str(e.value)
+    assert names.LAG_FILE in str(e.value) and "\n" not in str(e.value)

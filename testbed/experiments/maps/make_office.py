@@ -13,7 +13,8 @@ import os
 import cv2
 import numpy as np
 
-CELL = 0.05
+from topology.spec import CELL_M as CELL
+
 SIZE_M = 20.0
 WALL_M = 0.2
 
