@@ -63,7 +63,7 @@ from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
 from testbed.resultfile import RunResult
-from testbed.run import isolation
+from testbed.run import isolation, robotchoice
 from testbed.run import results as runresults
 from testbed.run.config import RunConfig, add_arguments, config_from_args
 from testbed.run.files import RunFiles
@@ -78,7 +78,7 @@ log = logging.getLogger(__name__)
 
 # What the fork server imports once for every robot and the display (topology.forkserver);
 # the run's middleware module (node.messaging) is added to it.
-NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "topology.names"]
+NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "node.native", "topology.names"]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
 END_GRACE_S = 15.0  # for the processes to write their logs after END
 __all__ = [
@@ -164,6 +164,10 @@ class Run:
         self.progress = progress
         self.robots = {k: RobotRecord(k) for k in range(1, self.n + 1)}
         self.parts = WallParts(time.monotonic())  # wall seconds of each stage
+        # Which robot program runs and why (testbed.run.robotchoice); the display is Python.
+        self.robot_impl, self.robot_reason = robotchoice.choose(
+            self.cfg.robot, self.cfg.middleware, self.cfg.maps
+        )
 
     # -- the whole run ------------------------------------------------------------------------
 
@@ -221,8 +225,10 @@ class Run:
             with open(log_path, "w"):
                 pass  # the child appends: the log starts empty
             title = f"r{k} {role}"
-            proc = forks.spawn(net.robot_ns(k), "node.__main__", args.to_argv(), log_path,
-                               title=title)  # fmt: skip
+            # node.native replaces the forked child with build/tb-robot, the same argv.
+            module = "node.native" if role == "robot" and self.robot_impl == "cpp" else None
+            proc = forks.spawn(net.robot_ns(k), module or "node.__main__", args.to_argv(),
+                               log_path, title=title)  # fmt: skip
             net.adopt(k, proc, role)  # recorded with the testbed: teardown stops it
             return proc
 
@@ -354,6 +360,7 @@ class Run:
             world_timing=loop.timing.seconds() if loop else {},
             parts=dict(self.parts.parts), priority=priority, t_start=self.parts.t_start,
             network_timers=network_timers, outages=self.cfg.isolate,
+            robot=self.robot_impl, robot_reason=self.robot_reason,
         )  # fmt: skip
 
 
