@@ -330,7 +330,7 @@ class RunResult:
     wall_parts_s: Mapping = field(default_factory=lambda: _EMPTY)
     world_priority: str | None = None
     step_core: str | None = None
-    robot: str | None = None  # the robot program: "cpp" or "python" (None: older file)
+    robot: str | None = None  # "cpp", "python", "mixed" (a test's team); None: older file
     robot_reason: str = ""  # why that one (testbed.run.robotchoice)
     display: Mapping = field(default_factory=lambda: _EMPTY)
     world_timing_s: Mapping = field(default_factory=lambda: _EMPTY)

@@ -128,13 +128,19 @@ def network_note(result: RunResult) -> str | None:
 
 
 def run(
-    cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False
+    cfg: RunConfig,
+    out: str,
+    name: str,
+    progress: bool = True,
+    replace: bool = False,
+    cpp_robots: frozenset[int] | None = None,
 ) -> RunResult:
     """Do one run into directory `out`; returns its RunResult (also in out/result.json).
     UsageError, before anything is made, for a run that cannot be done or a directory that
-    holds a run (unless `replace`)."""
+    holds a run (unless `replace`). `cpp_robots` (tests of the robots' contract): a mixed
+    team, those robots the C++ robot and the others the Python robot, whatever cfg.robot."""
     prepared = prepare(cfg, out, name, replace)
-    return runresults.write(Run(prepared, progress).execute())
+    return runresults.write(Run(prepared, progress, cpp_robots).execute())
 
 
 @dataclass(frozen=True)
@@ -157,7 +163,9 @@ class Started:
 class Run:
     """One prepared run: `execute()` starts it, steps it and returns its record."""
 
-    def __init__(self, prepared: PreparedRun, progress: bool = True) -> None:
+    def __init__(
+        self, prepared: PreparedRun, progress: bool = True, cpp_robots: frozenset[int] | None = None
+    ) -> None:
         self.prep = prepared
         self.cfg = prepared.cfg
         self.n = prepared.robots
@@ -168,6 +176,12 @@ class Run:
         self.robot_impl, self.robot_reason = robotchoice.choose(
             self.cfg.robot, self.cfg.middleware, self.cfg.maps
         )
+        self.cpp = {k for k in self.robots if self.robot_impl == "cpp"}
+        if cpp_robots is not None:
+            self.cpp = set(cpp_robots) & set(self.robots)
+            names = ", ".join(f"r{k}" for k in sorted(self.cpp)) or "none"
+            self.robot_impl = "mixed"
+            self.robot_reason = f"mixed: C++ robots {names}, the others Python"
 
     # -- the whole run ------------------------------------------------------------------------
 
@@ -226,7 +240,7 @@ class Run:
                 pass  # the child appends: the log starts empty
             title = f"r{k} {role}"
             # node.native replaces the forked child with build/tb-robot, the same argv.
-            module = "node.native" if role == "robot" and self.robot_impl == "cpp" else None
+            module = "node.native" if role == "robot" and k in self.cpp else None
             proc = forks.spawn(net.robot_ns(k), module or "node.__main__", args.to_argv(),
                                log_path, title=title)  # fmt: skip
             net.adopt(k, proc, role)  # recorded with the testbed: teardown stops it
