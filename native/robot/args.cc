@@ -5,7 +5,6 @@
 #include <cstdlib>
 #include <functional>
 #include <map>
-#include <regex>
 #include <set>
 
 namespace tb {
@@ -16,17 +15,42 @@ using Setter = std::function<bool(const std::string&, Args&, std::string&)>;
 
 std::string quoted(const std::string& t) { return "'" + t + "'"; }
 
+bool all_digits(const std::string& t, size_t lo, size_t hi) {
+    if (t.size() < lo || t.size() > hi) return false;
+    for (char c : t)
+        if (c < '0' || c > '9') return false;
+    return true;
+}
+
+// Python's int(): optional blanks and sign, digits with single underscores between them.
+bool int_text(const std::string& t, std::string& digits) {
+    size_t a = t.find_first_not_of(" \t"), b = t.find_last_not_of(" \t");
+    if (a == std::string::npos) return false;
+    std::string s = t.substr(a, b - a + 1);
+    size_t i = (s[0] == '-' || s[0] == '+') ? 1 : 0;
+    digits = s.substr(0, i);
+    bool prev_digit = false;
+    for (; i < s.size(); ++i) {
+        if (s[i] >= '0' && s[i] <= '9') {
+            digits += s[i];
+            prev_digit = true;
+        } else if (s[i] == '_' && prev_digit && i + 1 < s.size()) {
+            prev_digit = false;
+        } else {
+            return false;
+        }
+    }
+    return prev_digit;
+}
+
 // common.argtypes.number: a finite int or float, within the bounds.
 Setter number_int(int Args::*field, const char* flag, const char* bound, long lo) {
     return [=](const std::string& t, Args& a, std::string& err) {
-        static const std::regex re(R"(\s*[-+]?\d+(_\d+)*\s*)");
-        if (!std::regex_match(t, re)) {
+        std::string digits;
+        if (!int_text(t, digits)) {
             err = std::string(flag) + " must be a whole number, not " + quoted(t);
             return false;
         }
-        std::string digits;
-        for (char c : t)
-            if (c != '_' && c != ' ') digits += c;
         errno = 0;
         long v = strtol(digits.c_str(), nullptr, 10);
         if (errno || v > 1000000000L || v < -1000000000L) {
@@ -88,13 +112,12 @@ const std::map<std::string, Setter>& table() {
     static const std::map<std::string, Setter> t = {
         {"--robot",
          [](const std::string& v, Args& a, std::string& err) {
-             std::smatch m;
-             static const std::regex re(R"(r?(\d{1,3}))");
-             if (!std::regex_match(v, m, re) || std::stoi(m[1]) < 1) {
+             std::string d = !v.empty() && v[0] == 'r' ? v.substr(1) : v;
+             if (!all_digits(d, 1, 3) || std::stoi(d) < 1) {
                  err = "argument --robot: " + quoted(v) + " is not a robot name like r3";
                  return false;
              }
-             a.robot = std::stoi(m[1]);
+             a.robot = std::stoi(d);
              return true;
          }},
         {"--robots", number_int(&Args::robots, "--robots", ">", 0)},
@@ -103,14 +126,15 @@ const std::map<std::string, Setter>& table() {
         {"--events", text(&Args::events)},
         {"--map-size",
          [](const std::string& v, Args& a, std::string& err) {
-             std::smatch m;
-             static const std::regex re(R"((\d{1,5})x(\d{1,5}))");
-             if (!std::regex_match(v, m, re) || std::stoi(m[1]) < 1 || std::stoi(m[2]) < 1) {
+             size_t x = v.find('x');
+             std::string r = v.substr(0, x), c = x == std::string::npos ? "" : v.substr(x + 1);
+             if (!all_digits(r, 1, 5) || !all_digits(c, 1, 5) || std::stoi(r) < 1 ||
+                 std::stoi(c) < 1) {
                  err = "argument --map-size: " + quoted(v) + " is not ROWSxCOLS";
                  return false;
              }
-             a.rows = std::stoi(m[1]);
-             a.cols = std::stoi(m[2]);
+             a.rows = std::stoi(r);
+             a.cols = std::stoi(c);
              return true;
          }},
         {"--cell", number_real(&Args::cell, "--cell")},

@@ -8,6 +8,7 @@
 //
 // `tb-robot --decode KIND` and `--encode KIND` are the contract's self-test (selftest.cc).
 #include <csignal>
+#include <sys/prctl.h>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -55,6 +56,10 @@ int main(int argc, char** argv) {
                         "robot runs this",
                     2);
     tb::log_init(a.robot);
+    // The process's name as the Python robot's fork server titles it ("r3 robot"): ps, top
+    // and the cost benchmark's process kinds read it (exec named it "tb-robot").
+    std::string title = "r" + std::to_string(a.robot) + " robot";
+    prctl(PR_SET_NAME, title.c_str(), 0, 0, 0);
     tb::RobotTimings timing;
     timing.time_scale = a.time_scale;
     timing.map_period = a.map_period;
