@@ -81,8 +81,8 @@ int main(int argc, char** argv) {
     sa.sa_handler = on_term;
     sigaction(SIGTERM, &sa, nullptr);
     signal(SIGPIPE, SIG_IGN);
-    LOG_INFO("node", "robot up (C++): team of %d, laser %.1f m, maps by %s", a.robots,
-             a.laser_range, a.maps.c_str());
+    LOG_INFO("node", "robot up (C++, %s): team of %d, laser %.1f m, maps by %s", argv[0],
+             a.robots, a.laser_range, a.maps.c_str());
     robot.run();
     g_robot = nullptr;
     messenger.close();

@@ -52,7 +52,7 @@ def test_a_team_of_sanitized_cpp_robots_runs_clean(tmp_path, monkeypatch, build)
         log = (Path(out) / "robots" / f"r{k}.log").read_text()
         found = [line for line in log.splitlines() if any(r in line for r in REPORTS)]
         assert not found, f"r{k} under {build}:\n" + "\n".join(found[:20])
-        assert "robot up (C++)" in log
+        assert f"robot up (C++, {REPO / target})" in log  # the sanitized build ran
         r = result["robots"][f"r{k}"]
         assert r["exit_status"] == 0, (k, r.get("exit_status"), log[-2000:])
     assert result["steps"] > 100
