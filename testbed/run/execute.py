@@ -56,7 +56,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from common.errors import TestbedError
+from common.errors import TestbedError, UsageError
 from common.jsonfile import write_json_atomic
 from common.sched import CLOCK_PRIORITY, deadline_priority
 from node import body, messaging
@@ -173,9 +173,12 @@ class Run:
         self.robots = {k: RobotRecord(k) for k in range(1, self.n + 1)}
         self.parts = WallParts(time.monotonic())  # wall seconds of each stage
         # Which robot program runs and why (testbed.run.robotchoice); the display is Python.
-        self.robot_impl, self.robot_reason = robotchoice.choose(
-            self.cfg.robot, self.cfg.middleware, self.cfg.maps
-        )
+        try:
+            self.robot_impl, self.robot_reason = robotchoice.choose(
+                self.cfg.robot, self.cfg.middleware, self.cfg.maps
+            )
+        except ValueError as e:
+            raise UsageError(str(e)) from None
         self.cpp = {k for k in self.robots if self.robot_impl == "cpp"}
         if cpp_robots is not None:
             self.cpp = set(cpp_robots) & set(self.robots)
