@@ -58,10 +58,11 @@ $(STEPCORE): native/stepcore/stepcore.cc
 	g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<
 
 $(TB_ROBOT): $(TB_ROBOT_DEPS)
-	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev; the Python robot runs"; exit 0; }
-	@mkdir -p $(@D)
-	g++ -O3 $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) || { rm -f $@; \
-		echo "C++ robot not built: g++ failed on native/robot (above); the Python robot runs"; }
+	@if ! $(TB_ROBOT_CAN); then \
+		echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev; the Python robot runs"; \
+	else mkdir -p $(@D) && echo "g++ -O3 ... -o $@ (native/robot)" && \
+		g++ -O3 $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) || { rm -f $@; \
+		echo "C++ robot not built: g++ failed on native/robot (above); the Python robot runs"; }; fi
 
 build/asan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
