@@ -11,6 +11,9 @@
 #include <sys/prctl.h>
 #include <cstdio>
 #include <cstring>
+#include <exception>
+#include <memory>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -18,6 +21,7 @@
 #include "body.h"
 #include "events.h"
 #include "flood.h"
+#include "laser.h"
 #include "log.h"
 #include "messenger.h"
 #include "robot.h"
@@ -45,11 +49,19 @@ int main(int argc, char** argv) {
     std::vector<std::string> args(argv + 1, argv + argc);
     if (!args.empty() && (args[0] == "--decode" || args[0] == "--encode" ||
                           args[0] == "--laser-tables"))
-        return tb::selftest_main(args);
+        try {
+            return tb::selftest_main(args);
+        } catch (const std::exception& e) {  // an input asking for more than the machine has
+            return fail(args[0] + ": " + e.what(), 2);
+        }
     tb::Args a;
     std::string err;
     if (!tb::parse_args(args, a, err)) return fail(err, 2);
     if (a.role != "robot") return fail("the C++ robot is not the display: run python -m node", 2);
+    if (a.laser_range > tb::MAX_RANGE_M || a.laser_range / a.cell > 10000)
+        return fail("--laser-range " + std::to_string(a.laser_range) +
+                        ": longer than a run's lasers (at most 30 m, node.rays.MAX_RANGE_M)",
+                    2);
     if (a.middleware != "nanomsg" || a.maps != "flood")
         return fail("--middleware " + a.middleware + " --maps " + a.maps +
                         ": the C++ robot carries nanomsg with flooded maps only; the Python "
@@ -75,7 +87,18 @@ int main(int argc, char** argv) {
     std::string bind = a.bind.empty() ? tb::robot_addr(a.robot) : a.bind;
     if (!link.open(a.body, a.robot, err) || !messenger.open(bind, err) || !flooder.open(err))
         return fail("r" + std::to_string(a.robot) + ": cannot start: " + err, 1);
-    tb::Robot robot(a, timing, link, flooder, messenger, events);
+    // The maps and the laser's tables are allocated here: a map or laser too large for the
+    // machine is one line and exit 1, as the Python robot's MemoryError would be a crash.
+    std::unique_ptr<tb::Robot> made;
+    try {
+        made = std::make_unique<tb::Robot>(a, timing, link, flooder, messenger, events);
+    } catch (const std::bad_alloc&) {
+        return fail("r" + std::to_string(a.robot) + ": cannot start: not enough memory for a " +
+                        std::to_string(a.rows) + "x" + std::to_string(a.cols) + " map and a " +
+                        std::to_string(a.laser_range) + " m laser",
+                    1);
+    }
+    tb::Robot& robot = *made;
     g_robot = &robot;
     struct sigaction sa {};
     sa.sa_handler = on_term;

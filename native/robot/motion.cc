@@ -49,6 +49,13 @@ void Robot::motion() {
         }
         if (msg.kind != "frame") continue;
         const Frame& f = msg.frame;
+        if (!std::isfinite(f.x) || !std::isfinite(f.y) || std::fabs(f.x) > 1e6 ||
+            std::fabs(f.y) > 1e6) {
+            // No pose to scan from (the Python robot's part would fail on it): dropped.
+            ++malformed_;
+            LOG_WARN("node.robot", "dropped a frame without a finite position (step %u)", f.step);
+            continue;
+        }
         ++frames_;
         keep_step_order(f);
         double t_frame = thread_cpu_s();

@@ -89,9 +89,11 @@ int decode(const std::string& kind, int robots, int rows, int cols) {
     return 0;
 }
 
+// A field as a number; a value no field could hold (not finite, beyond 2^53) is 0.
 double num(const Json& o, const char* k, double dflt = 0) {
     const Json* v = o.get(k);
-    return v && v->is_number() ? v->number() : dflt;
+    double d = v && v->is_number() ? v->number() : dflt;
+    return std::isfinite(d) && std::fabs(d) < 9e15 ? d : 0;
 }
 
 int encode(const std::string& kind) {
@@ -128,6 +130,10 @@ int encode(const std::string& kind) {
         Ternary t;
         t.h = (int)num(o, "h");
         t.w = (int)num(o, "w");
+        if (t.h < 0 || t.w < 0 || t.h > 65535 || t.w > 65535 || (int64_t)t.h * t.w > 4000000) {
+            fprintf(stderr, "node: --encode map: h and w in 0..65535, at most 4,000,000 cells\n");
+            return 2;
+        }
         const Json* c = o.get("cells");
         for (char ch : c ? c->s : "") t.cells.push_back((uint8_t)(ch - '0'));
         t.cells.resize((size_t)t.h * t.w, 0);
@@ -190,7 +196,15 @@ int selftest_main(const std::vector<std::string>& argv) {
             fprintf(stderr, "node: --laser-tables RANGE RAYS CELL\n");
             return 2;
         }
-        return laser_tables(atof(argv[1].c_str()), atoi(argv[2].c_str()), atof(argv[3].c_str()));
+        char *e1 = nullptr, *e2 = nullptr, *e3 = nullptr;
+        double range = strtod(argv[1].c_str(), &e1), cell = strtod(argv[3].c_str(), &e3);
+        long rays = strtol(argv[2].c_str(), &e2, 10);
+        if (*e1 || *e2 || *e3 || !(range > 0 && range <= MAX_RANGE_M) || !(cell > 0.001) ||
+            rays < 1 || rays > 100000 || range / cell > 10000) {
+            fprintf(stderr, "node: --laser-tables: RANGE in (0, 30] m, RAYS >= 1, CELL > 1 mm\n");
+            return 2;
+        }
+        return laser_tables(range, (int)rays, cell);
     }
     if (argv.size() < 2) {
         fprintf(stderr, "node: %s KIND\n", argv[0].c_str());

@@ -294,3 +294,19 @@ def test_a_map_window_with_a_bad_cell_is_refused_by_both():
     with pytest.raises(ValueError):
         decode_ternary(3, 3, raw[16:])
     assert cpp_decode("map", raw) is None
+
+
+@pytest.mark.parametrize(
+    "argv,stdin",
+    [
+        (["--decode", "nothing"], b""),
+        (["--encode", "msg"], b"not json"),
+        (["--encode", "map"], b'{"h": 100000, "w": 100000, "cells": ""}'),
+        (["--laser-tables", "0", "360", "0.05"], b""),
+        (["--laser-tables", "1e9", "360", "0.05"], b""),
+        (["--laser-tables", "2", "x", "0.05"], b""),
+    ],
+)
+def test_bad_self_test_input_is_one_line_and_status_2(argv, stdin):
+    p = subprocess.run([str(TB_ROBOT), *argv], input=stdin, capture_output=True, timeout=20)
+    assert p.returncode == 2 and p.stderr.count(b"\n") == 1 and p.stderr.startswith(b"node: ")
