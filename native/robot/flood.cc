@@ -133,7 +133,7 @@ bool Flooder::must_relay(int sender, int origin, const std::vector<uint16_t>& co
 
 std::vector<std::string> Flooder::receive_raw() {
     std::vector<std::string> out;
-    std::vector<uint8_t> buf(65535);
+    std::vector<uint8_t>& buf = recv_buf_;
     double now = monotonic_s();
     while (true) {
         ssize_t n = recv(fd_, buf.data(), buf.size(), 0);

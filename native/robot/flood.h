@@ -57,6 +57,7 @@ private:
     std::map<int, double> heard_;
     std::mutex counts_lock_;  // guards counts_
     Counter counts_;
+    std::vector<uint8_t> recv_buf_ = std::vector<uint8_t>(65535);  // the inbox thread's
 };
 
 }  // namespace tb

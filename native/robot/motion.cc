@@ -134,8 +134,16 @@ void Robot::put_scan(const Frame& f) {
     float fy = (float)(f.y / L.cell + BIAS);
     int r0 = (int)fy - BIAS, c0 = (int)fx - BIAS, w = L.window;
     int height = a_.rows + 2 * L.pad;
-    std::vector<float> ranges = f.ranges;
-    ranges.resize(L.n_rays, INFINITY);
+    // A scan of another ray count (the world's laser is the robot's, so never in a run) is
+    // cut or padded with "nothing hit" rather than read past its end.
+    static thread_local std::vector<float> padded;
+    const std::vector<float>* rp = &f.ranges;
+    if ((int)f.ranges.size() != L.n_rays) {
+        padded = f.ranges;
+        padded.resize(L.n_rays, INFINITY);
+        rp = &padded;
+    }
+    const std::vector<float>& ranges = *rp;
     if (r0 >= 0 && c0 >= 0 && r0 + w <= height && c0 + w <= stride_) {
         static thread_local std::vector<uint8_t> free_tmp;
         static thread_local std::vector<int64_t> occ_tmp;
