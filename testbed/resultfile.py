@@ -361,6 +361,8 @@ class RunResult:
     wall_parts_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
     world_priority: str | None = None
     step_core: str | None = None
+    robot: str | None = None  # "cpp", "python", "mixed" (a test's team); None: older file
+    robot_reason: str = ""  # why that one (testbed.run.robotchoice)
     display: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
     world_timing_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
     world_missed_steps_ms_late: tuple[Any, ...] = ()
@@ -553,6 +555,8 @@ class RunResult:
             wall_parts_s=_mapping(doc, "wall_parts_s"),
             world_priority=_get(doc, "world_priority", (str,)),
             step_core=_get(doc, "step_core", (str,)),
+            robot=_get(doc, "robot", (str,)),
+            robot_reason=_get(doc, "robot_reason", (str,), ""),
             display=_mapping(doc, "display"),
             world_timing_s=_mapping(doc, "world_timing_s"),
             world_missed_steps_ms_late=tuple(

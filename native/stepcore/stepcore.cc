@@ -17,6 +17,8 @@
 #include <memory>
 #include <vector>
 
+#include "stepcore.h"
+
 namespace {
 
 constexpr uint8_t UNKNOWN = 0, FREE = 1, OCC = 2;

@@ -19,11 +19,15 @@ kind, sampling /proc (every thread of every process under the run) while it runs
 
 `python -m testbed.bench cost` writes results/bench/cost.json; TESTBED_COST_TREE=DIR runs
 the testbed of another checkout (its own code, this machine's venv) for a before/after
-figure. Medians over RUNS runs; the sampler itself costs about 1% of a core.
+figure. Each case runs with each robot program of TESTBED_COST_ROBOTS (default
+"python,cpp": `testbed run --robot`, the Python robot against the C++ robot in one sitting;
+a tree without the option takes "default"). Medians over RUNS runs; the sampler itself costs
+about 1% of a core.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shutil
@@ -174,13 +178,18 @@ def _plans_and_frames(robots: list[tuple[dict, str]]) -> tuple[list[float], list
     return plan_ms, frames
 
 
-def testbed_run(robots: int, time_scale: float, seed: int, tree: str) -> dict:
-    """One `testbed run` of `tree`'s code, its CPU split by process kind."""
+def testbed_run(
+    robots: int, time_scale: float, seed: int, tree: str, robot: str = "default"
+) -> dict:
+    """One `testbed run` of `tree`'s code, its CPU split by process kind; `robot`: the
+    robot program (`--robot`), "default" to leave it to the run."""
     out = tempfile.mkdtemp(prefix="bench-cost-")
     name = "tc" + uuid.uuid4().hex[:6]
     cmd = [sys.executable, "-m", "testbed.cli", "run", "--robots", str(robots),
            "--comm-range", "20", "--seed", str(seed), "--time-scale", str(time_scale),
            "--out", out, "--name", name, "--quiet", "--replace"]  # fmt: skip
+    if robot != "default":
+        cmd += ["--robot", robot]
     load = os.getloadavg()[0]
     t_start = time.monotonic()
     proc = subprocess.Popen(cmd, cwd=tree, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -212,6 +221,7 @@ def testbed_run(robots: int, time_scale: float, seed: int, tree: str) -> dict:
         "step_loop_wall_s": r.step_loop_wall_s,
         "faithful": r.faithful, "fidelity_reason": r.fidelity_reason or None,
         "step_core": r.step_core or "numpy",
+        "robot": r.robot or "python", "robot_reason": r.robot_reason,
         "cpu_ms_per_robot_step": round(sum(inside.values()) * 1000 / robot_steps, 3),
         "stepping_cpu_ms_per_robot_step": {
             k: round(v * 1000 / robot_steps, 3) for k, v in sorted(inside.items())
@@ -257,13 +267,16 @@ def _median_of(runs: list[dict], key: str) -> float | None:
     return round(float(np.median(v)), 3) if v else None
 
 
-def measure(tree: str = PROJECT_ROOT, runs: int = RUNS) -> dict:
+def measure(
+    tree: str = PROJECT_ROOT, runs: int = RUNS, programs: tuple[str, ...] = ("default",)
+) -> dict:
     floor = [in_process(seed) for seed in (2, 2, 2)]
     floor_ms = float(np.median([f["wall_ms_per_step"] for f in floor]))
     floor_cpu = float(np.median([f["cpu_ms_per_step"] for f in floor]))
     cases = {}
-    for label, robots, k, seed in CASES:
-        rs = [testbed_run(robots, k, seed, tree) for _ in range(runs)]
+    for (case, robots, k, seed), program in itertools.product(CASES, programs):
+        label = case if program == "default" else f"{case}-{program}"
+        rs = [testbed_run(robots, k, seed, tree, program) for _ in range(runs)]
         for r in rs:
             if robots == 1 and r["step_loop_wall_s"] and r["steps"]:
                 # The floor is one robot's: a lone run's wall time per step against it (the
@@ -295,7 +308,8 @@ def measure(tree: str = PROJECT_ROOT, runs: int = RUNS) -> dict:
 def run() -> None:
     tree = os.environ.get("TESTBED_COST_TREE", PROJECT_ROOT)
     runs = int(os.environ.get("TESTBED_COST_RUNS", RUNS))
-    data = measure(tree, runs)
+    programs = tuple(os.environ.get("TESTBED_COST_ROBOTS", "python,cpp").split(","))
+    data = measure(tree, runs, programs)
     name = os.environ.get("TESTBED_COST_NAME", "cost")
     print(f"bench cost: {write(name, data)}")
     for label, c in data["cases"].items():

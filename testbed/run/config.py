@@ -21,7 +21,7 @@ from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
-from testbed.run import failures
+from testbed.run import failures, robotchoice
 from testbed.run import options as runoptions
 from testbed.run.isolation import Outage
 from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
@@ -241,6 +241,13 @@ class RunConfig:
         str, "serve a live view of the run at [HOST:]PORT (127.0.0.1 unless a host is given)",
         None, metavar="[HOST:]PORT", default_text="none",
     )  # fmt: skip
+    # Last: its name would shadow `robot` (node.launch.bounds) for the fields after it.
+    robot: str = option(
+        str, "the robot program: auto (the C++ robot where it was built and carries the "
+        "run's middleware, else the Python robot), cpp, or python (the reference); "
+        "testbed.run.robotchoice", "auto", choices=robotchoice.CHOICES, sweep={GRID, RUN},
+        newer=True, grid=GridDim(13, str, VARIED),
+    )  # fmt: skip
 
     @property
     def kills(self) -> tuple[tuple[int, int], ...]:
@@ -334,6 +341,10 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     why = maps_refusal(cfg.maps, cfg.middleware)
     if why:
         raise UsageError(why)
+    try:
+        robotchoice.choose(cfg.robot, cfg.middleware, cfg.maps)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
     _view(cfg.view)
     return cfg
 

@@ -57,14 +57,14 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from common.errors import TestbedError
+from common.errors import TestbedError, UsageError
 from common.jsonfile import write_json_atomic
 from common.sched import CLOCK_PRIORITY, deadline_priority
 from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
 from testbed.resultfile import RunResult
-from testbed.run import isolation
+from testbed.run import isolation, robotchoice
 from testbed.run import results as runresults
 from testbed.run.config import RunConfig, add_arguments, config_from_args
 from testbed.run.files import RunFiles
@@ -85,7 +85,7 @@ log = logging.getLogger(__name__)
 
 # What the fork server imports once for every robot and the display (topology.forkserver);
 # the run's middleware module (node.messaging) is added to it.
-NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "topology.names"]
+NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "node.native", "topology.names"]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
 END_GRACE_S = 15.0  # for the processes to write their logs after END
 __all__ = [
@@ -135,13 +135,19 @@ def network_note(result: RunResult) -> str | None:
 
 
 def run(
-    cfg: RunConfig, out: str, name: str, progress: bool = True, replace: bool = False
+    cfg: RunConfig,
+    out: str,
+    name: str,
+    progress: bool = True,
+    replace: bool = False,
+    cpp_robots: frozenset[int] | None = None,
 ) -> RunResult:
     """Do one run into directory `out`; returns its RunResult (also in out/result.json).
     UsageError, before anything is made, for a run that cannot be done or a directory that
-    holds a run (unless `replace`)."""
+    holds a run (unless `replace`). `cpp_robots` (tests of the robots' contract): a mixed
+    team, those robots the C++ robot and the others the Python robot, whatever cfg.robot."""
     prepared = prepare(cfg, out, name, replace)
-    return runresults.write(Run(prepared, progress).execute())
+    return runresults.write(Run(prepared, progress, cpp_robots).execute())
 
 
 @dataclass(frozen=True)
@@ -164,13 +170,28 @@ class Started:
 class Run:
     """One prepared run: `execute()` starts it, steps it and returns its record."""
 
-    def __init__(self, prepared: PreparedRun, progress: bool = True) -> None:
+    def __init__(
+        self, prepared: PreparedRun, progress: bool = True, cpp_robots: frozenset[int] | None = None
+    ) -> None:
         self.prep = prepared
         self.cfg = prepared.cfg
         self.n = prepared.robots
         self.progress = progress
         self.robots = {k: RobotRecord(k) for k in range(1, self.n + 1)}
         self.parts = WallParts(time.monotonic())  # wall seconds of each stage
+        # Which robot program runs and why (testbed.run.robotchoice); the display is Python.
+        try:
+            self.robot_impl, self.robot_reason = robotchoice.choose(
+                self.cfg.robot, self.cfg.middleware, self.cfg.maps
+            )
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+        self.cpp = {k for k in self.robots if self.robot_impl == "cpp"}
+        if cpp_robots is not None:
+            self.cpp = set(cpp_robots) & set(self.robots)
+            names = ", ".join(f"r{k}" for k in sorted(self.cpp)) or "none"
+            self.robot_impl = "mixed"
+            self.robot_reason = f"mixed: C++ robots {names}, the others Python"
 
     # -- the whole run ------------------------------------------------------------------------
 
@@ -228,8 +249,10 @@ class Run:
             with open(log_path, "w"):
                 pass  # the child appends: the log starts empty
             title = f"r{k} {role}"
-            proc = forks.spawn(net.robot_ns(k), "node.__main__", args.to_argv(), log_path,
-                               title=title)  # fmt: skip
+            # node.native replaces the forked child with build/tb-robot, the same argv.
+            module = "node.native" if role == "robot" and k in self.cpp else None
+            proc = forks.spawn(net.robot_ns(k), module or "node.__main__", args.to_argv(),
+                               log_path, title=title)  # fmt: skip
             net.adopt(k, proc, role)  # recorded with the testbed: teardown stops it
             return proc
 
@@ -362,6 +385,7 @@ class Run:
             world_timing=loop.timing.seconds() if loop else {},
             parts=dict(self.parts.parts), priority=priority, t_start=self.parts.t_start,
             network_timers=network_timers, outages=self.cfg.isolate,
+            robot=self.robot_impl, robot_reason=self.robot_reason,
         )  # fmt: skip
 
 

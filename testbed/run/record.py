@@ -137,6 +137,8 @@ class RunRecord:
     t_start: float  # CLOCK_MONOTONIC when the run began
     network_timers: dict | None = None  # topology.nettimers' record; None: no network came up
     outages: tuple = ()  # testbed.run.isolation.Outage: the radio outages asked for (--isolate)
+    robot: str | None = None  # the robot program: "cpp", "python" or (a test's) "mixed"
+    robot_reason: str = ""  # why that one
 
     @property
     def steps(self) -> int:

@@ -153,6 +153,8 @@ def contents(rec: RunRecord) -> RunResult:
         wall_parts_s=dict(rec.parts),
         world_priority=rec.priority,
         step_core=stepcore.kind(),
+        robot=rec.robot,
+        robot_reason=rec.robot_reason,
         display={
             "robot": len(rec.robots) + 1,
             "coverage_final": display_coverage(rec.out, rec.world),

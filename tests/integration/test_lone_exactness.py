@@ -4,13 +4,18 @@ took before the per-step work was compiled and the timer woken only for work (se
 
 A run's answer is only exact when it was faithful to its time scale (the fidelity verdict): a
 run judged unfaithful is redone once, and at least one of the two must be faithful; every
-faithful run must be exact."""
+faithful run must be exact.
+
+Both robot programs are held to it (`--robot python`, the reference, and `--robot cpp`, the
+C++ robot of native/robot, which calls the same step core): one answer, two implementations.
+The C++ case is skipped where build/tb-robot was not built (no g++ or libnng-dev)."""
 
 import os
 import uuid
 
 import pytest
 
+from node.native import TB_ROBOT
 from testbed.run.execute import RunConfig, run
 from topology.network import destroy
 
@@ -19,19 +24,24 @@ STEPS = {1: 1901, 2: 1989, 3: 1964}
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("robot", ["python", "cpp"])
 @pytest.mark.parametrize("seed", sorted(STEPS))
-def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed):
+def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
+    if robot == "cpp" and not TB_ROBOT.is_file():
+        pytest.skip("build/tb-robot not built (make setup builds it with g++ and libnng-dev)")
     with open(os.path.join(DATA, f"seed{seed}.positions.csv")) as f:
         expected = f.read()
     faithful = 0
     for attempt in range(2):
         name = "tx" + uuid.uuid4().hex[:6]
         out = str(tmp_path / f"run{attempt}")
-        cfg = RunConfig(robots=1, comm_range=20.0, laser_range=2.0, seed=seed, time_scale=5.0)
+        cfg = RunConfig(robots=1, comm_range=20.0, laser_range=2.0, seed=seed, time_scale=5.0,
+                        robot=robot)  # fmt: skip
         try:
             result = run(cfg, out, name, progress=False).to_json()
         finally:
             destroy(name)
+        assert result["robot"] == robot, result["robot_reason"]
         if not result["fidelity"]["ok"]:
             continue
         faithful += 1

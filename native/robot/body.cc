@@ -1,0 +1,156 @@
+#include "body.h"
+
+#include <cerrno>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include "wirebytes.h"
+
+namespace tb {
+
+namespace {
+constexpr size_t HELLO = 4, FRAME = 27, CMD = 14, DONE = 5;
+}
+
+bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
+    if (n == 0) {
+        err = "empty body message";
+        return false;
+    }
+    out = BodyMsg();
+    switch (d[0]) {
+        case 'H':
+            if (n != HELLO) break;
+            out.kind = "hello";
+            out.robot = rd16(d + 1);
+            out.role = d[3];
+            return true;
+        case 'F': {
+            if (n < FRAME) break;
+            out.kind = "frame";
+            Frame& f = out.frame;
+            f.step = rd32(d + 1);
+            f.x = rdf32(d + 5);
+            f.y = rdf32(d + 9);
+            f.theta = rdf32(d + 13);
+            f.sent = rdf64(d + 17);
+            size_t rays = rd16(d + 25);
+            if (n - FRAME != 4 * rays) {
+                err = "frame length does not match its ray count";
+                return false;
+            }
+            f.ranges.resize(rays);
+            for (size_t k = 0; k < rays; ++k) f.ranges[k] = rdf32(d + FRAME + 4 * k);
+            return true;
+        }
+        case 'E':
+            out.kind = "end";  // as node.body: the first byte decides
+            return true;
+        case 'C':
+            if (n != CMD) break;
+            out.kind = "cmd";
+            out.step = rd32(d + 1);
+            out.go = d[5] != 0;
+            out.tx = rdf32(d + 6);
+            out.ty = rdf32(d + 10);
+            return true;
+        case 'D':
+            if (n != DONE) break;
+            out.kind = "done";
+            out.step = rd32(d + 1);
+            return true;
+        default:
+            err = "unknown body message type";
+            return false;
+    }
+    err = "malformed body message: wrong length";
+    return false;
+}
+
+std::string body_hello(int robot, int role) {
+    std::string o = "H";
+    put16(o, (uint16_t)robot);
+    put8(o, (uint8_t)role);
+    return o;
+}
+
+std::string body_cmd(uint32_t step, bool go, double x, double y) {
+    std::string o = "C";
+    put32(o, step);
+    put8(o, go ? 1 : 0);
+    putf32(o, go ? (float)x : 0.0f);
+    putf32(o, go ? (float)y : 0.0f);
+    return o;
+}
+
+std::string body_done(uint32_t step) {
+    std::string o = "D";
+    put32(o, step);
+    return o;
+}
+
+std::string body_frame(const Frame& f) {
+    std::string o = "F";
+    put32(o, f.step);
+    putf32(o, (float)f.x);
+    putf32(o, (float)f.y);
+    putf32(o, (float)f.theta);
+    putf64(o, f.sent);
+    put16(o, (uint16_t)f.ranges.size());
+    for (float r : f.ranges) putf32(o, r);
+    return o;
+}
+
+BodyClient::~BodyClient() {
+    if (fd_ >= 0) close(fd_);
+}
+
+bool BodyClient::open(const std::string& path, int robot, std::string& err) {
+    robot_ = robot;
+    fd_ = socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+    if (fd_ < 0) {
+        err = std::string("body link: ") + strerror(errno);
+        return false;
+    }
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    if (path.size() >= sizeof a.sun_path) {
+        err = "body link: socket path too long";
+        return false;
+    }
+    memcpy(a.sun_path, path.c_str(), path.size() + 1);
+    if (connect(fd_, (sockaddr*)&a, sizeof a) != 0) {
+        err = "body link " + path + ": " + strerror(errno);
+        return false;
+    }
+    return true;
+}
+
+void BodyClient::ready() { send(body_hello(robot_, 0)); }
+
+int BodyClient::recv(double timeout_s, BodyMsg& out, std::string& err) {
+    pollfd p{fd_, POLLIN, 0};
+    int r = poll(&p, 1, (int)(timeout_s * 1000));
+    if (r == 0 || (r < 0 && errno == EINTR)) return 0;
+    ssize_t n = ::recv(fd_, buf_.data(), buf_.size(), 0);
+    if (n <= 0) {
+        out = BodyMsg();
+        out.kind = "end";
+        return 1;
+    }
+    return body_parse(buf_.data(), (size_t)n, out, err) ? 1 : -1;
+}
+
+bool BodyClient::pending() {
+    pollfd p{fd_, POLLIN, 0};
+    return poll(&p, 1, 0) > 0;
+}
+
+void BodyClient::send(const std::string& data) {
+    // The world gone: the reader sees the hang-up.
+    (void)::send(fd_, data.data(), data.size(), MSG_NOSIGNAL);
+}
+
+}  // namespace tb

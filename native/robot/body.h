@@ -1,0 +1,56 @@
+// The robot's link to its body (node/body.py; docs/robot-contract.md): a Unix SOCK_SEQPACKET
+// socket to the world, one datagram per message, network byte order.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tb {
+
+struct Frame {
+    uint32_t step = 0;
+    double x = 0, y = 0, theta = 0;  // float32 on the wire, widened as Python does
+    double sent = 0;                 // the world's time.monotonic() when it sent the frame
+    std::vector<float> ranges;
+};
+
+// One decoded body message; `kind` is "hello", "frame", "end", "cmd" or "done".
+struct BodyMsg {
+    std::string kind;
+    Frame frame;                 // frame
+    uint32_t step = 0;           // cmd, done
+    int robot = 0, role = 0;     // hello
+    bool go = false;             // cmd
+    double tx = 0, ty = 0;       // cmd target
+};
+
+// Decodes one datagram as node.body.parse does; false (and why) when it is malformed.
+bool body_parse(const uint8_t* data, size_t n, BodyMsg& out, std::string& err);
+std::string body_hello(int robot, int role);
+std::string body_cmd(uint32_t step, bool go, double x, double y);
+std::string body_done(uint32_t step);
+std::string body_frame(const Frame& f);
+
+// The robot side: one reader thread (motion control), any writer.
+class BodyClient {
+public:
+    BodyClient() = default;
+    ~BodyClient();
+    BodyClient(const BodyClient&) = delete;
+    BodyClient& operator=(const BodyClient&) = delete;
+    bool open(const std::string& path, int robot, std::string& err);
+    void ready();  // HELLO: every part is running
+    // 1: a message in `out`; 0: timeout; -1: malformed (why in err). The world hanging up
+    // comes as kind "end".
+    int recv(double timeout_s, BodyMsg& out, std::string& err);
+    bool pending();
+    void send(const std::string& data);
+
+private:
+    int fd_ = -1;
+    int robot_ = 0;
+    std::vector<uint8_t> buf_ = std::vector<uint8_t>(65536);
+};
+
+}  // namespace tb

@@ -1,0 +1,170 @@
+#include "flood.h"
+
+#include <arpa/inet.h>
+#include <cerrno>
+#include <cstring>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "json.h"
+
+namespace tb {
+
+namespace {
+constexpr int64_t WINDOW = 256;
+}
+
+bool DuplicateCache::seen(int origin, uint32_t seq_u) {
+    int64_t seq = seq_u;
+    auto hi = high_.find(origin);
+    if (hi == high_.end()) {
+        high_[origin] = seq;
+        recent_[origin] = {seq};
+        return false;
+    }
+    auto& rec = recent_[origin];
+    if (seq <= hi->second - WINDOW || rec.count(seq)) return true;
+    rec.insert(seq);
+    if (seq > hi->second) {
+        hi->second = seq;
+        if ((int64_t)rec.size() > 2 * WINDOW) rec.erase(rec.begin(), rec.upper_bound(seq - WINDOW));
+    }
+    return false;
+}
+
+Flooder::Flooder(int me, int port, std::string iface, std::string mode, double hold_s)
+    : stats(), me_(me), port_(port), iface_(std::move(iface)), mode_(std::move(mode)),
+      hold_(hold_s) {}
+
+Flooder::~Flooder() {
+    if (fd_ >= 0) close(fd_);
+}
+
+bool Flooder::open(std::string& err) {
+    fd_ = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    int one = 1, buf = 4 << 20;
+    if (fd_ < 0 || setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) ||
+        setsockopt(fd_, SOL_SOCKET, SO_BROADCAST, &one, sizeof one) ||
+        setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &buf, sizeof buf) ||
+        setsockopt(fd_, SOL_SOCKET, SO_SNDBUF, &buf, sizeof buf) ||
+        (!iface_.empty() &&
+         setsockopt(fd_, SOL_SOCKET, SO_BINDTODEVICE, iface_.c_str(), iface_.size()))) {
+        err = std::string("flood socket: ") + strerror(errno);
+        return false;
+    }
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons((uint16_t)port_);
+    a.sin_addr.s_addr = htonl(INADDR_ANY);
+    if (bind(fd_, (sockaddr*)&a, sizeof a) != 0) {
+        err = std::string("flood socket bind: ") + strerror(errno);
+        return false;
+    }
+    return true;
+}
+
+std::vector<uint16_t> Flooder::neighbours(double now) {
+    std::vector<uint16_t> out;
+    for (const auto& kv : heard_)
+        if (now - kv.second <= hold_) out.push_back((uint16_t)kv.first);
+    return out;
+}
+
+void Flooder::note(const std::string& key) {
+    std::lock_guard<std::mutex> g(counts_lock_);
+    counts_.add(key);
+}
+
+double Flooder::count(const std::string& key) {
+    std::lock_guard<std::mutex> g(counts_lock_);
+    return counts_.get(key);
+}
+
+std::string Flooder::counts_json() {
+    std::lock_guard<std::mutex> g(counts_lock_);
+    return counts_.json_int();
+}
+
+bool Flooder::send(const std::string& data) {
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons((uint16_t)port_);
+    a.sin_addr.s_addr = htonl(INADDR_BROADCAST);
+    if (sendto(fd_, data.data(), data.size(), 0, (sockaddr*)&a, sizeof a) < 0) {
+        note("send_failed");
+        return false;
+    }
+    return true;
+}
+
+uint32_t Flooder::originate(uint8_t kind, uint32_t step, const std::string& payload) {
+    ++seq_;
+    FloodHeader h;
+    {
+        std::lock_guard<std::mutex> g(cache_lock_);
+        cache_.seen(me_, seq_);
+        h.neighbours = neighbours(monotonic_s());
+    }
+    h.kind = kind;
+    h.ttl = ttl_;
+    h.origin = (uint16_t)me_;
+    h.seq = seq_;
+    h.step = step;
+    h.sender = (uint16_t)me_;
+    std::string data = pack_flood(h, payload);
+    double t0 = monotonic_s();
+    bool ok = send(data);
+    if (kind == KIND_MAP) stats.note_publish(data.size(), ok, monotonic_s() - t0);
+    return seq_;
+}
+
+bool Flooder::must_relay(int sender, int origin, const std::vector<uint16_t>& covered,
+                         double now) {
+    if (mode_ == "blind") return true;
+    for (uint16_t k : neighbours(now)) {
+        if (k == sender || k == origin) continue;
+        bool skip = false;
+        for (uint16_t c : covered) skip = skip || c == k;
+        if (!skip) return true;
+    }
+    return false;
+}
+
+std::vector<std::string> Flooder::receive_raw() {
+    std::vector<std::string> out;
+    std::vector<uint8_t>& buf = recv_buf_;
+    double now = monotonic_s();
+    while (true) {
+        ssize_t n = recv(fd_, buf.data(), buf.size(), 0);
+        if (n < 0) return out;  // EAGAIN: drained
+        FloodHeader h;
+        std::string err;
+        if (!unpack_flood(buf.data(), (size_t)n, h, err)) {
+            note("malformed");
+            continue;
+        }
+        bool relay;
+        std::vector<uint16_t> nb;
+        {
+            std::lock_guard<std::mutex> g(cache_lock_);
+            if (h.sender != me_) heard_[h.sender] = now;
+            if (h.origin == me_ || cache_.seen(h.origin, h.seq)) {
+                note("duplicate");
+                continue;
+            }
+            relay = h.ttl > 1 && must_relay(h.sender, h.origin, h.neighbours, now);
+            if (relay) nb = neighbours(now);
+        }
+        if (relay) {
+            send(relayed(buf.data(), (size_t)n, h, (uint8_t)(h.ttl - 1), (uint16_t)me_, nb));
+            note("relayed");
+        } else if (h.ttl > 1) {
+            note("pruned");
+        }
+        if (h.kind == KIND_MAP) stats.note_receive(h.origin, (size_t)n);
+        out.emplace_back((const char*)buf.data(), (size_t)n);
+    }
+}
+
+}  // namespace tb

@@ -1,0 +1,114 @@
+// tb-robot: the paper's robot in C++, started by `testbed run` inside the robot's network
+// namespace with the Python robot's command line (node/launch.py's NodeArgs). It carries the
+// default middleware (nanomsg) with flooded maps; for anything else, and for the display,
+// it refuses in one line (exit 2) and the runner starts the Python robot instead.
+//
+// Exit statuses as the Python robot's: 0 the run ended, 1 cannot start (a socket), 2 bad
+// arguments or a middleware it does not carry, 3 a part failed.
+//
+// `tb-robot --decode KIND` and `--encode KIND` are the contract's self-test (selftest.cc).
+#include <csignal>
+#include <sys/prctl.h>
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <memory>
+#include <new>
+#include <string>
+#include <vector>
+
+#include "args.h"
+#include "body.h"
+#include "events.h"
+#include "flood.h"
+#include "laser.h"
+#include "log.h"
+#include "messenger.h"
+#include "robot.h"
+
+namespace tb {
+int selftest_main(const std::vector<std::string>& argv);
+}
+
+namespace {
+
+tb::Robot* g_robot = nullptr;
+
+void on_term(int) {
+    if (g_robot) g_robot->stopping = true;  // std::atomic<bool>: lock-free, signal-safe
+}
+
+int fail(const std::string& line, int status) {
+    fprintf(stderr, "node: %s\n", line.c_str());
+    return status;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::vector<std::string> args(argv + 1, argv + argc);
+    if (!args.empty() && (args[0] == "--decode" || args[0] == "--encode" ||
+                          args[0] == "--laser-tables"))
+        try {
+            return tb::selftest_main(args);
+        } catch (const std::exception& e) {  // an input asking for more than the machine has
+            return fail(args[0] + ": " + e.what(), 2);
+        }
+    tb::Args a;
+    std::string err;
+    if (!tb::parse_args(args, a, err)) return fail(err, 2);
+    if (a.role != "robot") return fail("the C++ robot is not the display: run python -m node", 2);
+    if (a.laser_range > tb::MAX_RANGE_M || a.laser_range / a.cell > 10000)
+        return fail("--laser-range " + std::to_string(a.laser_range) +
+                        ": longer than a run's lasers (at most 30 m, node.rays.MAX_RANGE_M)",
+                    2);
+    if (a.middleware != "nanomsg" || a.maps != "flood")
+        return fail("--middleware " + a.middleware + " --maps " + a.maps +
+                        ": the C++ robot carries nanomsg with flooded maps only; the Python "
+                        "robot runs this",
+                    2);
+    tb::log_init(a.robot);
+    // The process's name as the Python robot's fork server titles it ("r3 robot"): ps, top
+    // and the cost benchmark's process kinds read it (exec named it "tb-robot").
+    std::string title = "r" + std::to_string(a.robot) + " robot";
+    prctl(PR_SET_NAME, title.c_str(), 0, 0, 0);
+    tb::RobotTimings timing;
+    timing.time_scale = a.time_scale;
+    timing.map_period = a.map_period;
+    tb::EventLog events;
+    if (!events.open(a.events))
+        return fail("r" + std::to_string(a.robot) + ": cannot start: " + a.events + ": " +
+                        strerror(errno),
+                    1);
+    tb::BodyClient link;
+    tb::Flooder flooder(a.robot, a.flood_port, a.iface, a.flood, timing.neighbour_hold_s());
+    tb::Messenger messenger(a.robot, a.goal_port, timing.goal_send_timeout_ms(),
+                            timing.goal_reconnect_min_ms(), timing.goal_reconnect_max_ms());
+    std::string bind = a.bind.empty() ? tb::robot_addr(a.robot) : a.bind;
+    if (!link.open(a.body, a.robot, err) || !messenger.open(bind, err) || !flooder.open(err))
+        return fail("r" + std::to_string(a.robot) + ": cannot start: " + err, 1);
+    // The maps and the laser's tables are allocated here: a map or laser too large for the
+    // machine is one line and exit 1, as the Python robot's MemoryError would be a crash.
+    std::unique_ptr<tb::Robot> made;
+    try {
+        made = std::make_unique<tb::Robot>(a, timing, link, flooder, messenger, events);
+    } catch (const std::bad_alloc&) {
+        return fail("r" + std::to_string(a.robot) + ": cannot start: not enough memory for a " +
+                        std::to_string(a.rows) + "x" + std::to_string(a.cols) + " map and a " +
+                        std::to_string(a.laser_range) + " m laser",
+                    1);
+    }
+    tb::Robot& robot = *made;
+    g_robot = &robot;
+    struct sigaction sa {};
+    sa.sa_handler = on_term;
+    sigaction(SIGTERM, &sa, nullptr);
+    signal(SIGPIPE, SIG_IGN);
+    LOG_INFO("node", "robot up (C++, %s): team of %d, laser %.1f m, maps by %s", argv[0],
+             a.robots, a.laser_range, a.maps.c_str());
+    robot.run();
+    g_robot = nullptr;
+    messenger.close();
+    events.close();
+    return 0;
+}

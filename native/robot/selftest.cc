@@ -1,0 +1,221 @@
+// The contract's self-test modes (docs/robot-contract.md), for tests that hold the two
+// robots to one wire format:
+//
+//   tb-robot --decode KIND [--robots N] [--map-size RxC]   bytes on stdin -> one JSON line
+//   tb-robot --encode KIND                                 one JSON object on stdin -> bytes
+//   tb-robot --laser-tables RANGE RAYS CELL                the laser's tables, raw, on stdout
+//
+// KIND: body, flood, map (a flood's map payload), msg (a goal or re-plan message). A decoder
+// prints the decoded form, or "refused: <why>" and exits 1; never a crash.
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include "body.h"
+#include "json.h"
+#include "laser.h"
+#include "wire.h"
+
+namespace tb {
+
+namespace {
+
+std::string read_stdin() {
+    std::string s((std::istreambuf_iterator<char>(std::cin)), std::istreambuf_iterator<char>());
+    return s;
+}
+
+std::string real_list(const std::vector<double>& v) {
+    std::string o = "[";
+    for (size_t i = 0; i < v.size(); ++i) o += (i ? "," : "") + py_float(v[i]);
+    return o + "]";
+}
+
+int refused(const std::string& why) {
+    printf("refused: %s\n", why.c_str());
+    return 1;
+}
+
+int decode(const std::string& kind, int robots, int rows, int cols) {
+    std::string in = read_stdin();
+    const uint8_t* d = (const uint8_t*)in.data();
+    std::string err;
+    JsonObj o;
+    if (kind == "body") {
+        BodyMsg m;
+        if (!body_parse(d, in.size(), m, err)) return refused(err);
+        o.str("kind", m.kind);
+        if (m.kind == "hello") o.num("robot", m.robot).num("role", m.role);
+        if (m.kind == "frame") {
+            const Frame& f = m.frame;
+            std::vector<double> r(f.ranges.begin(), f.ranges.end());
+            o.num("step", f.step).real("x", f.x).real("y", f.y).real("theta", f.theta);
+            o.real("sent", f.sent).raw("ranges", real_list(r));
+        }
+        if (m.kind == "cmd")
+            o.num("step", m.step).raw("target", m.go ? real_list({m.tx, m.ty}) : "null");
+        if (m.kind == "done") o.num("step", m.step);
+    } else if (kind == "flood") {
+        FloodHeader h;
+        if (!unpack_flood(d, in.size(), h, err)) return refused(err);
+        std::string nb = "[";
+        for (size_t i = 0; i < h.neighbours.size(); ++i)
+            nb += (i ? "," : "") + std::to_string(h.neighbours[i]);
+        o.num("kind", h.kind).num("ttl", h.ttl).num("origin", h.origin).num("seq", h.seq);
+        o.num("step", h.step).num("sender", h.sender).raw("neighbours", nb + "]");
+        o.num("payload", (int64_t)(in.size() - h.payload_at));
+    } else if (kind == "map") {
+        MapMsg m;
+        if (!unpack_map(d, in.size(), rows, cols, m, err)) return refused(err);
+        std::string cells;
+        for (uint8_t c : m.cells.cells) cells += (char)('0' + c);
+        o.real("x", m.x).real("y", m.y).num("r0", m.r0).num("c0", m.c0);
+        o.num("h", m.cells.h).num("w", m.cells.w).str("cells", cells);
+    } else if (kind == "msg") {
+        GoalMsg m;
+        if (!parse_msg(in, robots, m, err)) return refused(err);
+        o.str("k", m.k).num("from", m.from).num("step", m.step).raw("goal", real_list({m.gx, m.gy}));
+        if (m.k == "goal") o.real("cost", m.cost).boolean("fallback", m.fallback);
+        o.raw("n", m.n ? std::to_string(m.n) : "null");
+    } else {
+        fprintf(stderr, "node: --decode %s: one of body, flood, map, msg\n", kind.c_str());
+        return 2;
+    }
+    printf("%s\n", o.text().c_str());
+    return 0;
+}
+
+// A field as a number; a value no field could hold (not finite, beyond 2^53) is 0.
+double num(const Json& o, const char* k, double dflt = 0) {
+    const Json* v = o.get(k);
+    double d = v && v->is_number() ? v->number() : dflt;
+    return std::isfinite(d) && std::fabs(d) < 9e15 ? d : 0;
+}
+
+int encode(const std::string& kind) {
+    Json o;
+    std::string err, out;
+    if (!json_parse(read_stdin(), o, err) || o.kind != Json::OBJ) {
+        fprintf(stderr, "node: --encode %s: not a JSON object: %s\n", kind.c_str(), err.c_str());
+        return 2;
+    }
+    const Json* k = o.get("kind");
+    std::string what = k && k->kind == Json::STR ? k->s : "";
+    if (kind == "body") {
+        if (what == "hello") out = body_hello((int)num(o, "robot"), (int)num(o, "role"));
+        else if (what == "cmd") {
+            const Json* t = o.get("target");
+            bool go = t && t->kind == Json::ARR && t->arr.size() == 2;
+            out = body_cmd((uint32_t)num(o, "step"), go, go ? t->arr[0].number() : 0,
+                           go ? t->arr[1].number() : 0);
+        } else if (what == "done") out = body_done((uint32_t)num(o, "step"));
+        else if (what == "end") out = "E";
+        else if (what == "frame") {
+            Frame f;
+            f.step = (uint32_t)num(o, "step");
+            f.x = num(o, "x");
+            f.y = num(o, "y");
+            f.theta = num(o, "theta");
+            f.sent = num(o, "sent");
+            if (const Json* r = o.get("ranges"))
+                for (const Json& v : r->arr)
+                    f.ranges.push_back(v.is_number() ? (float)v.number() : INFINITY);
+            out = body_frame(f);
+        }
+    } else if (kind == "map") {
+        Ternary t;
+        t.h = (int)num(o, "h");
+        t.w = (int)num(o, "w");
+        if (t.h < 0 || t.w < 0 || t.h > 65535 || t.w > 65535 || (int64_t)t.h * t.w > 4000000) {
+            fprintf(stderr, "node: --encode map: h and w in 0..65535, at most 4,000,000 cells\n");
+            return 2;
+        }
+        const Json* c = o.get("cells");
+        for (char ch : c ? c->s : "") t.cells.push_back((uint8_t)(ch - '0'));
+        t.cells.resize((size_t)t.h * t.w, 0);
+        out = pack_map(num(o, "x"), num(o, "y"), t, (int)num(o, "r0"), (int)num(o, "c0"));
+    } else if (kind == "flood") {
+        FloodHeader h;
+        h.kind = (uint8_t)num(o, "kind_code", KIND_MAP);
+        h.ttl = (uint8_t)num(o, "ttl");
+        h.origin = (uint16_t)num(o, "origin");
+        h.seq = (uint32_t)num(o, "seq");
+        h.step = (uint32_t)num(o, "step");
+        h.sender = (uint16_t)num(o, "sender");
+        if (const Json* nb = o.get("neighbours"))
+            for (const Json& v : nb->arr) h.neighbours.push_back((uint16_t)v.number());
+        const Json* p = o.get("payload");
+        out = pack_flood(h, p && p->kind == Json::STR ? p->s : "");
+    } else if (kind == "msg") {
+        const Json* g = o.get("goal");
+        double gx = g && g->arr.size() == 2 ? g->arr[0].number() : 0;
+        double gy = g && g->arr.size() == 2 ? g->arr[1].number() : 0;
+        const Json* f = o.get("fallback");
+        if (what == "goal")
+            out = goal_msg((int)num(o, "from"), (int64_t)num(o, "step"), gx, gy, num(o, "cost"),
+                           f && f->kind == Json::BOOL && f->b, (int64_t)num(o, "n"));
+        else
+            out = replan_msg((int)num(o, "from"), (int64_t)num(o, "step"), gx, gy,
+                             (int64_t)num(o, "n"));
+    }
+    if (out.empty()) {
+        fprintf(stderr, "node: --encode %s: nothing to encode for kind %s\n", kind.c_str(),
+                what.c_str());
+        return 2;
+    }
+    fwrite(out.data(), 1, out.size(), stdout);
+    return 0;
+}
+
+int laser_tables(double range, int rays, double cell) {
+    Laser L(range, rays, cell);
+    L.prepare_tables();
+    auto put = [](const void* p, size_t n) { fwrite(p, 1, n, stdout); };
+    put(L.dx.data(), 4 * L.dx.size());
+    put(L.dy.data(), 4 * L.dy.size());
+    put(L.mark.data(), L.mark.size());
+    for (const MarkTable& t : L.tables) {
+        int32_t n = (int32_t)t.odx.size();
+        put(t.sure.data(), t.sure.size());
+        put(&n, 4);
+        put(t.odx.data(), 4 * t.odx.size());
+        put(t.ody.data(), 4 * t.ody.size());
+    }
+    return 0;
+}
+
+}  // namespace
+
+int selftest_main(const std::vector<std::string>& argv) {
+    if (argv[0] == "--laser-tables") {
+        if (argv.size() != 4) {
+            fprintf(stderr, "node: --laser-tables RANGE RAYS CELL\n");
+            return 2;
+        }
+        char *e1 = nullptr, *e2 = nullptr, *e3 = nullptr;
+        double range = strtod(argv[1].c_str(), &e1), cell = strtod(argv[3].c_str(), &e3);
+        long rays = strtol(argv[2].c_str(), &e2, 10);
+        if (*e1 || *e2 || *e3 || !(range > 0 && range <= MAX_RANGE_M) || !(cell > 0.001) ||
+            rays < 1 || rays > 100000 || range / cell > 10000) {
+            fprintf(stderr, "node: --laser-tables: RANGE in (0, 30] m, RAYS >= 1, CELL > 1 mm\n");
+            return 2;
+        }
+        return laser_tables(range, (int)rays, cell);
+    }
+    if (argv.size() < 2) {
+        fprintf(stderr, "node: %s KIND\n", argv[0].c_str());
+        return 2;
+    }
+    int robots = 10, rows = 400, cols = 400;
+    for (size_t i = 2; i + 1 < argv.size(); i += 2) {
+        if (argv[i] == "--robots") robots = atoi(argv[i + 1].c_str());
+        if (argv[i] == "--map-size") sscanf(argv[i + 1].c_str(), "%dx%d", &rows, &cols);
+    }
+    return argv[0] == "--decode" ? decode(argv[1], robots, rows, cols) : encode(argv[1]);
+}
+
+}  // namespace tb

@@ -1,0 +1,31 @@
+// The step core's C ABI (stepcore.cc): the per-step work both robots run. The Python robot
+// loads build/libstepcore.so with ctypes (node/stepcore.py declares the same signatures); the
+// C++ robot (native/robot) links stepcore.cc in. One laser, one map update, one planner.
+// Arrays are C-contiguous; booleans are one byte, 0 or 1.
+#pragma once
+
+#include <cstdint>
+
+extern "C" {
+
+int sc_version(void);
+int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
+                    int n_samples, int w, float fx, float fy, int roff, int coff,
+                    const int32_t* idx, uint8_t* free_out, int64_t* occ_out);
+void sc_mark_table(const uint8_t* sure, int w, const float* odx, const float* ody, int n_open,
+                   float fx, float fy, int roff, int coff, uint8_t* dst, int64_t stride,
+                   int or_into);
+void sc_scan_into(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
+                  int n_samples, float step, int w, float fx, float fy, int roff, int coff,
+                  const float* ranges, float* lp, uint8_t* own, int64_t stride, int64_t r0,
+                  int64_t c0, float l_free, float l_occ, float l_max, uint8_t* free_tmp,
+                  int64_t* occ_tmp, const uint8_t* sure, const float* odx, const float* ody,
+                  int n_open);
+void sc_classify(const float* l, int h, int w, int64_t stride, float threshold, uint8_t* out);
+int64_t sc_merge_ternary(float* l, int64_t stride, const uint8_t* t, int h, int w,
+                         float threshold, float merged);
+int sc_plan(const uint8_t* t, int th, int tw, int factor, int inflate, double px, double py,
+            double plan_cell, const double* goals, int n_goals, double radius, int fallback_ok,
+            int* status_out, int* path_out, int max_n);
+
+}  // extern "C"

@@ -1,0 +1,32 @@
+"""The C++ robot's entry in a robot namespace: `main(argv)` replaces the process with
+build/tb-robot and the same argv (node.launch.NodeArgs' command line, which tb-robot parses
+the same way; native/robot). The fork server calls it as it would call node.__main__.main,
+so the child keeps its namespace, log, title and parent-death signal, and the runner records
+and stops it like any robot. `TESTBED_TB_ROBOT` in the environment names another build of the
+same program (the sanitizer tests run build/asan/tb-robot and build/tsan/tb-robot so)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+TB_ROBOT = Path(__file__).resolve().parent.parent / "build" / "tb-robot"
+BINARY_ENV = "TESTBED_TB_ROBOT"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    sys.stdout.flush()
+    sys.stderr.flush()
+    binary = os.environ.get(BINARY_ENV) or str(TB_ROBOT)
+    try:
+        os.execv(binary, [binary, *argv])
+    except OSError as e:
+        sys.stderr.write(f"node: cannot start the C++ robot {binary}: {e.strerror}\n")
+        return 2
+    return 0  # not reached
+
+
+if __name__ == "__main__":
+    sys.exit(main())
