@@ -60,9 +60,10 @@ setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT)
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
 # float rounds as in numpy and the two agree cell for cell.
 $(STEPCORE): native/stepcore/stepcore.cc
-	@command -v g++ >/dev/null || { echo "g++ not found: the per-step work runs in numpy (slower); install g++ and run make setup"; exit 0; }
-	@mkdir -p $(@D)
-	g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<
+	@if ! command -v g++ >/dev/null; then echo "g++ not found: the per-step work runs in numpy" \
+		"(slower); install g++ and run make setup"; else mkdir -p $(@D) && \
+		echo "g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<" && \
+		g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<; fi
 
 $(TB_ROBOT): $(TB_ROBOT_DEPS)
 	@if ! $(TB_ROBOT_CAN); then \

@@ -2,9 +2,11 @@
 took before the per-step work was compiled and the timer woken only for work (seeds 1, 2, 3:
 1901, 1989 and 1964 steps; tests/data/lone-k5 holds the positions.csv each run wrote then).
 
-A run's answer is only exact when it was faithful to its time scale (the fidelity verdict): a
-run judged unfaithful is redone once, and at least one of the two must be faithful; every
-faithful run must be exact.
+A run's answer is only exact when no plan came late and no plan timer fired late (a lone run
+is deterministic, and one late plan may move its path: testbed.run.fidelity, "Decided"); the
+fidelity verdict tolerates one plan in a hundred, so a faithful run is not enough. A run with
+a late plan or timer is redone, up to three runs; at least one must be clean, and every clean
+run must be exact.
 
 Both robot programs are held to it (`--robot python`, the reference, and `--robot cpp`, the
 C++ robot of native/robot, which calls the same step core): one answer, two implementations.
@@ -31,8 +33,8 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
         pytest.skip("build/tb-robot not built (make setup builds it with g++ and libnng-dev)")
     with open(os.path.join(DATA, f"seed{seed}.positions.csv")) as f:
         expected = f.read()
-    faithful = 0
-    for attempt in range(2):
+    clean = 0
+    for attempt in range(3):
         name = "tx" + uuid.uuid4().hex[:6]
         out = str(tmp_path / f"run{attempt}")
         cfg = RunConfig(robots=1, comm_range=20.0, laser_range=2.0, seed=seed, time_scale=5.0,
@@ -42,11 +44,12 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
         finally:
             destroy(name)
         assert result["robot"] == robot, result["robot_reason"]
-        if not result["fidelity"]["ok"]:
+        m = result["fidelity"]["measures"]
+        if not result["fidelity"]["ok"] or m["late_plans"] or m["late_timers"]:
             continue
-        faithful += 1
-        assert result["steps"] == STEPS[seed]
+        clean += 1
+        assert result["steps"] == STEPS[seed], m
         with open(os.path.join(out, "positions.csv")) as f:
             assert f.read() == expected, "the path differs"
         break
-    assert faithful, "neither run was faithful at time scale 5"
+    assert clean, "no run of three was without late plans at time scale 5"
