@@ -13,6 +13,20 @@ from pathlib import Path
 
 TB_ROBOT = Path(__file__).resolve().parent.parent / "build" / "tb-robot"
 BINARY_ENV = "TESTBED_TB_ROBOT"
+UNBUILT = TB_ROBOT.with_name("tb-robot.unbuilt")  # make setup's line where it could not build it
+
+
+def unbuilt_reason() -> str | None:
+    """Why build/tb-robot is not here: make setup's one line where it could not build it, or
+    None. None also where neither the program nor that line is there (setup has not run):
+    then what needs the program fails rather than skipping in silence."""
+    if TB_ROBOT.is_file():
+        return None
+    try:
+        with open(UNBUILT) as f:
+            return f.readline(500).strip() or None
+    except OSError:
+        return None
 
 
 def main(argv: list[str] | None = None) -> int:

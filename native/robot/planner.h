@@ -2,6 +2,7 @@
 // the waypoints (cell centres) and the path's length as numpy sums it. Pure: no threads.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>

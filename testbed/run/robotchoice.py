@@ -9,7 +9,7 @@ before it starts); `--robot python` asks for the reference. The display is alway
 
 from __future__ import annotations
 
-from node.native import TB_ROBOT
+from node.native import TB_ROBOT, unbuilt_reason
 
 CHOICES = ("auto", "cpp", "python")
 CPP_MIDDLEWARES = ("nanomsg",)
@@ -21,7 +21,9 @@ def cpp_refusal(middleware: str, maps: str, built: bool | None = None) -> str:
     if built is None:
         built = TB_ROBOT.is_file()
     if not built:
-        return f"{TB_ROBOT.name} not built (make setup builds it where g++ and libnng-dev are)"
+        return unbuilt_reason() or (
+            f"{TB_ROBOT.name} not built (make setup builds it where g++ and libnng-dev are)"
+        )
     if middleware not in CPP_MIDDLEWARES:
         return f"it carries nanomsg, not --middleware {middleware}"
     if maps not in CPP_MAPS:

@@ -10,11 +10,11 @@ import uuid
 
 import pytest
 
-from node.native import TB_ROBOT
+from node.native import unbuilt_reason
 from testbed.run.execute import RunConfig, run
 from topology.network import destroy
 
-pytestmark = pytest.mark.skipif(not TB_ROBOT.is_file(), reason="build/tb-robot not built")
+pytestmark = pytest.mark.skipif(unbuilt_reason() is not None, reason=str(unbuilt_reason()))
 
 
 def robot_summary(out: str, k: int) -> dict:

@@ -17,7 +17,7 @@ import uuid
 
 import pytest
 
-from node.native import TB_ROBOT
+from node.native import unbuilt_reason
 from testbed.run.execute import RunConfig, run
 from topology.network import destroy
 
@@ -29,8 +29,8 @@ STEPS = {1: 1901, 2: 1989, 3: 1964}
 @pytest.mark.parametrize("robot", ["python", "cpp"])
 @pytest.mark.parametrize("seed", sorted(STEPS))
 def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
-    if robot == "cpp" and not TB_ROBOT.is_file():
-        pytest.skip("build/tb-robot not built (make setup builds it with g++ and libnng-dev)")
+    if robot == "cpp" and unbuilt_reason() is not None:
+        pytest.skip(str(unbuilt_reason()))
     with open(os.path.join(DATA, f"seed{seed}.positions.csv")) as f:
         expected = f.read()
     clean = 0

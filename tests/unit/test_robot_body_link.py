@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from node import body
-from node.native import TB_ROBOT
+from node.native import TB_ROBOT, unbuilt_reason
 
 STEPS = 80
 RAYS = 360
@@ -93,7 +93,7 @@ def drive(tmp_path, program: str) -> tuple[list, list, int, dict]:
     return answers, goals, status, summary
 
 
-@pytest.mark.skipif(not TB_ROBOT.is_file(), reason="build/tb-robot not built")
+@pytest.mark.skipif(unbuilt_reason() is not None, reason=str(unbuilt_reason()))
 def test_both_robots_answer_every_frame_alike(tmp_path):
     py = drive(tmp_path, "python")
     cc = drive(tmp_path, "cpp")

@@ -9,7 +9,7 @@ import pytest
 
 from common.errors import UsageError
 from node.launch import NodeArgs
-from node.native import TB_ROBOT
+from node.native import TB_ROBOT, unbuilt_reason
 from testbed import cli
 from testbed.run import robotchoice
 from testbed.run.config import config_from_args
@@ -44,7 +44,7 @@ def test_a_run_asking_for_cpp_with_another_middleware_is_refused_before_it_start
         config_from_args(cli.build_parser(["run"]).parse_args(argv))
 
 
-needs_binary = pytest.mark.skipif(not TB_ROBOT.is_file(), reason="build/tb-robot not built")
+needs_binary = pytest.mark.skipif(unbuilt_reason() is not None, reason=str(unbuilt_reason()))
 
 
 def tb_robot(argv: list[str]) -> subprocess.CompletedProcess:

@@ -25,10 +25,10 @@ from hypothesis import strategies as st
 
 from node import body, wire
 from node.grid import decode_ternary
-from node.native import TB_ROBOT
+from node.native import TB_ROBOT, unbuilt_reason
 from node.rays import Laser
 
-pytestmark = pytest.mark.skipif(not TB_ROBOT.is_file(), reason="build/tb-robot not built")
+pytestmark = pytest.mark.skipif(unbuilt_reason() is not None, reason=str(unbuilt_reason()))
 
 FUZZ = settings(max_examples=120, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
