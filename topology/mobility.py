@@ -32,7 +32,7 @@ and every record must lie within its time and x, y bounds. A line that is not a 
 (a record with two extra fields, say) therefore cannot pass as one and vanish: it is refused
 with its line number, or every record after it contradicts it.
 
-Limits (`LIMITS_TEXT`, stated in `net up --help` and the README). What a trace may ask for is
+Limits (`LIMITS_TEXT`, stated in `net up --help` and docs/guide.md). What a trace may ask for is
 bounded by what a testbed and this machine can carry, and checked while parsing, before
 anything is allocated for it:
 

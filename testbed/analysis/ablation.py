@@ -166,7 +166,7 @@ def section(fig2_all: list[dict], thirds: list[dict]) -> list[str]:
     out = ["## Ablation: what makes big teams slow", ""]
     out += [
         "Each variant is a coordination mode (`paper`: the paper's rules read literally; "
-        "`ours`: see the README) and a start placement. Steps are the mean over runs with "
+        "`ours`: see docs/guide.md) and a start placement. Steps are the mean over runs with "
         f"the 95% interval ({stats.METHOD}). A rise holds in a group when the fewest steps "
         "fall at a team size strictly between the smallest and the largest and the intervals "
         "of that point and the largest team do not overlap.",

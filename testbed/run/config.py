@@ -40,7 +40,7 @@ from topology.spec import (
     check_position,
 )
 
-# Bounds of the options that have no natural one (docs: README's "Options" and `--help`):
+# Bounds of the options that have no natural one (docs/guide.md's option list and `--help`):
 MAX_STEPS = 10_000_000  # 11 days of emulated time at a step of 0.1 s
 MAX_LASER_RAYS = 10_000  # a ray every 0.036 degrees; the paper's robots have 360
 MAX_SNAPSHOTS = 100
@@ -178,7 +178,7 @@ class RunConfig:
                             sweep={RUN})  # fmt: skip
     coordination: str = option(
         str, "goal coordination: 'paper' reads the paper's rules literally, 'ours' departs "
-        "from them where the text is silent; see README, 'Coordination'",
+        "from them where the text is silent; see docs/guide.md, 'Coordination'",
         **robot("coordination"), sweep={GRID}, grid=GridDim(5, str, CHANGED),
     )  # fmt: skip
     start: str = option(str, "start placement: clustered near a corner (as in the paper), "
