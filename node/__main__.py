@@ -14,7 +14,18 @@ import signal
 import sys
 from typing import TYPE_CHECKING
 
-from node import body
+from common import envswitch
+from common.errors import UsageError
+
+# The environment switches are read while node's modules load (node.stepcore): a robot
+# started by hand with a value they do not know gets one line, not a traceback.
+try:
+    envswitch.check()
+except UsageError as e:
+    sys.stderr.write(f"node: {e}\n")
+    sys.exit(2)
+
+from node import body  # noqa: E402
 from node.events import EventLog
 from node.flood import Flooder
 from node.launch import NodeArgs

@@ -5,7 +5,10 @@ terminal escapes in what report and view print."""
 import asyncio
 import json
 import logging
+import os
 import socket
+import subprocess
+import sys
 
 import pytest
 from aiohttp.test_utils import TestServer
@@ -62,6 +65,17 @@ def test_an_environment_switch_with_an_unknown_value_is_refused(monkeypatch, cap
     assert f"{name}='{value}' is not one of" in line
     with pytest.raises(UsageError):
         envswitch.value(name)
+
+
+def test_a_robot_started_by_hand_refuses_an_unknown_switch_in_one_line():
+    """`python -m node` reads the switches while its modules load: one line, exit 2."""
+    env = {**os.environ, "TESTBED_STEPCORE": "nmupy"}
+    r = subprocess.run([sys.executable, "-m", "node", "--robot", "r1", "--robots", "1",
+                        "--body", "/nonexistent"], capture_output=True, text=True, env=env,
+                       timeout=60)  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    assert line == "node: TESTBED_STEPCORE='nmupy' is not one of compiled, numpy"
 
 
 @pytest.mark.parametrize(("name", "value", "got"), [("TESTBED_REALTIME", "0", "0"),
