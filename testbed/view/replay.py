@@ -18,6 +18,7 @@ import json
 import math
 from pathlib import Path
 
+from common import boundedfile
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.view.served import in_run, snapshot, snapshot_steps
 from topology.names import MAX_ROBOTS
@@ -39,10 +40,9 @@ def _json_object(d: Path, name: str, required: bool) -> dict:
         if required:
             raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
         return {}
-    try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except (OSError, ValueError, RecursionError):
+    try:  # a regular file only, bounded; its values are checked field by field below
+        doc = json.loads(boundedfile.read(path, boundedfile.MAX_JSON_BYTES))
+    except (boundedfile.Refused, ValueError, RecursionError):
         doc = None
     if not isinstance(doc, dict):
         if required:
@@ -98,9 +98,9 @@ def _rows(d: Path, name: str, parse, required: bool = False) -> list:
             raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
         return []
     try:
-        f = open(path, newline="", encoding="utf-8")
-    except OSError as e:
-        raise NotARun(f"{d}/{name}: {e.strerror}") from None
+        f = boundedfile.open_text(path)  # checked on the descriptor: no FIFO swapped in
+    except boundedfile.Refused as r:
+        raise NotARun(f"{d}/{name}: {boundedfile.describe(r)}") from None
     with f:
         reader = csv.reader(f)
         try:

@@ -85,3 +85,22 @@ def test_sweep_resume_refuses_a_fifo_sweep_json(tmp_path):
         hd.within(20, plan.other_sweep, sweep, [])
     with pytest.raises(UsageError, match="not a regular file"):
         hd.within(20, runner.wait_for_orphans, sweep)
+
+
+def test_a_file_read_line_by_line_is_checked_on_the_descriptor_it_was_opened_on(tmp_path):
+    """open_text checks the opened descriptor, so a FIFO put in a file's place is refused at
+    once (never waited on), and a regular file reads as text."""
+    import os
+
+    from common import boundedfile
+
+    fifo, text = tmp_path / "positions.csv", tmp_path / "links.csv"
+    os.mkfifo(fifo)
+    text.write_text("step,a,b\n0,1,2\n")
+    with pytest.raises(boundedfile.Refused) as refused:
+        boundedfile.open_text(fifo)
+    assert refused.value.kind == "special"
+    with pytest.raises(boundedfile.Refused):
+        boundedfile.open_text(tmp_path)
+    with boundedfile.open_text(text) as f:
+        assert f.read().splitlines() == ["step,a,b", "0,1,2"]
