@@ -2,7 +2,7 @@
 
 - `KernelRoutes`: /32 routes of our own routing protocol number. Neighbours are
   `dev wlan0 scope link`, others `via NEXT dev wlan0 onlink`. Requests are rtnetlink
-  messages (packed by topology/netlinkmsg.py) written to a raw NETLINK_ROUTE socket. At
+  messages (packed by topology/kernel/netlinkmsg.py) written to a raw NETLINK_ROUTE socket. At
   run time installs and deletes ask for no acknowledgement: the kernel applies a route
   request within the send() call, so a packet sent right after sees the route, and it
   answers a request without NLM_F_ACK only when the request failed; the daemon's loop
@@ -34,7 +34,7 @@ import socket
 import struct
 import subprocess
 
-from topology import netlinkmsg as nl
+from topology.kernel import netlinkmsg as nl
 
 log = logging.getLogger(__name__)
 

@@ -4,7 +4,7 @@ rather than waited on or read without end. The one reader of every file the test
 from a results directory (result.json, medium.json, sweep.json, the daemons' statistics,
 network.json, captures' logs, relay-lag files), of movement traces, sweep files and map
 pictures; each caller words the refusal for its own kind of file (`describe` gives the
-reason as words). topology.boundedfile is this module under its older name.
+reason as words).
 
 `load_json` is the strict JSON of such a file: no NaN or Infinity, no number that is not
 finite as a float (1e400) or longer than MAX_DIGITS digits, nesting no deeper than

@@ -46,7 +46,7 @@ _SHARED_TABLES: dict[tuple[float, int, float], dict] = {}  # geometry -> pose-fr
 
 def warm(max_range: float, n_rays: int, cell: float) -> None:
     """Build every pose-fraction table of this geometry in this process, for the processes
-    forked from it later (topology.forkserver)."""
+    forked from it later (topology.kernel.forkserver)."""
     Laser(max_range, n_rays, cell).prepare_tables()
 
 

@@ -13,7 +13,8 @@ import fcntl
 import logging
 import os
 
-from topology import names, netns, state
+from topology import names, state
+from topology.kernel import netns
 from topology.network import destroy
 
 log = logging.getLogger(__name__)

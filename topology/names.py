@@ -21,7 +21,7 @@ NETWORK = "10.0.0.0/16"
 # Inside a robot namespace.
 ROBOT_IFACE = "wlan0"
 
-# The ns3-wifi medium's per-frame relay lag (topology.ns3medium writes it, in the testbed's run
+# The ns3-wifi medium's per-frame relay lag (topology.radio.ns3wifi writes it, in the testbed's run
 # directory and a run's; testbed.analysis.relaylag reads it).
 LAG_FILE = "relay-lag.bin"
 

@@ -6,8 +6,8 @@ Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kerne
    crash at any later point leaves a record that `testbed clean` can act on;
 2. create the medium namespace and one namespace per robot (names from topology.names);
 3. per robot, a bridge in the medium and a veth whose far end is the robot's wlan0
-   (topology.medium), addressed 10.0.0.K/32 with the sysctls docs/architecture.md lists, and
-   the network timers of its namespace divided by the time scale (topology.nettimers;
+   (topology.radio.veth), addressed 10.0.0.K/32 with the sysctls docs/architecture.md lists, and
+   the network timers of its namespace divided by the time scale (topology.kernel.nettimers;
    `Network.timers` is the record of what was dilated, to what, and what could not be);
 4. the links the range model wants for the initial positions, with their impairments;
 5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing); a
@@ -36,13 +36,15 @@ from dataclasses import asdict
 
 from common.errors import TestbedError, UsageError
 from common.jsonfile import write_json_atomic
-from topology import capture, names, netns, processes, ranges, routing, state
-from topology.forkserver import Forked, ForkServer, ForkServerError, python_env
-from topology.impair import MissingKernelFeature
-from topology.los import MapError, Walls
-from topology.medium import WLAN_INDEX
-from topology.ns3medium import Ns3Medium, medium_for
+from topology import names, routing, state
+from topology.kernel import capture, netns, processes
+from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
+from topology.kernel.impair import MissingKernelFeature
 from topology.oracle import OracleRouter
+from topology.radio import ranges
+from topology.radio.los import MapError, Walls
+from topology.radio.ns3wifi import Ns3Medium, medium_for
+from topology.radio.veth import WLAN_INDEX
 from topology.spec import (
     LOS_MODELS,
     NO_IMPAIRMENT,
@@ -98,7 +100,7 @@ class Network:
 
     @property
     def timers(self):
-        """The robot namespaces' network timers (topology.nettimers.NetworkTimers), None
+        """The robot namespaces' network timers (topology.kernel.nettimers.NetworkTimers), None
         before they are made and for a testbed taken up by `attach`."""
         return self.medium.timers
 

@@ -27,7 +27,8 @@ import time
 from collections import deque
 from collections.abc import Iterable
 
-from topology import names, netlinkmsg, netns, rtnl
+from topology import names
+from topology.kernel import netlinkmsg, netns, rtnl
 
 RTPROT_ORACLE = 102
 Pair = tuple[int, int]

@@ -28,7 +28,7 @@ adding one function here.
          makes a restarted daemon obey the RFC 6.13 reboot rule.
 
 A protocol written in Python (aodv) is also *forkable*: the Network starts its daemons from a
-fork server (topology.forkserver) that has imported the daemon and warmed it up once, instead
+fork server (topology.kernel.forkserver) that has imported the daemon and warmed it up once, instead
 of one interpreter per robot. Starting 11 daemons as interpreters took 1.1-1.2 s of wall time
 on two cores (about 0.2 s of CPU each for start-up and imports); from the fork server,
 started at the beginning of the network's bring-up, 0.34-0.49 s.

@@ -12,11 +12,11 @@ from topology import names
 
 ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")  # the first is the default
 RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
-LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.los)
+LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.radio.los)
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")
 LAYOUTS = ("chain", "grid", "random")
-# The radio medium (topology.medium: veth links; topology.ns3medium: ns-3's 802.11) and, for
+# The radio medium (topology.radio.veth: veth links; topology.radio.ns3wifi: ns-3's 802.11) and, for
 # ns3-wifi, its propagation (a cut-off at the range, or log-distance) and 802.11 standard.
 VETH, NS3_WIFI = "veth", "ns3-wifi"
 MEDIA = (VETH, NS3_WIFI)  # the first is the default
@@ -125,7 +125,7 @@ class NetworkSpec:
     capture_dir: str | None = None
     time_scale: float = 1.0
     aodv_profile: str = "rfc"  # aodv.params.PROFILES; used only with routing "aodv"
-    # The walls of the los range models (topology.los): a PNG, metres per pixel, and the
+    # The walls of the los range models (topology.radio.los): a PNG, metres per pixel, and the
     # loss a wall costs (None: a wall blocks).
     map_png: str | None = None
     map_cell: float = CELL_M

@@ -473,7 +473,7 @@ class RelayTag : public Tag
 };
 
 // The file of per-frame records, one per frame delivered to a robot: "TBRLAG01", then
-// 40-byte little-endian records (topology/ns3medium.py and testbed/analysis/relaylag.py read
+// 40-byte little-endian records (topology/radio/ns3wifi.py and testbed/analysis/relaylag.py read
 // them; docs/ns3-medium.md, "Each frame's relay lag"). A cap on its size: records past it
 // are counted, not written.
 #pragma pack(push, 1)

@@ -22,7 +22,7 @@ table and one sentence per measure: at which points the two sweeps agree within 
 at which they do not. Unfaithful runs are left out unless asked for, as in the report.
 
 PDF and delay are the kernel's TCP. Its timers keep emulated time only where the robots'
-namespaces had them divided by the time scale (topology.nettimers; result.json's
+namespaces had them divided by the time scale (topology.kernel.nettimers; result.json's
 `fidelity.network`): at a point whose two sides ran at different scales and where a dilated
 run's TCP did not keep emulated time (a kernel before 6.11, a scale past its jiffy, or a run
 made before the timers were dilated), TCP's measures (PDF, delays, retransmissions) are not

@@ -13,8 +13,8 @@ from typing import Any
 
 from testbed import PROJECT_ROOT
 from testbed.bench.common import median, write
-from topology import ranges
-from topology.los import Walls
+from topology.radio import ranges
+from topology.radio.los import Walls
 from topology.spec import CELL_M
 
 STEPS = 2000

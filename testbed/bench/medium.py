@@ -20,7 +20,7 @@ import uuid
 from typing import Any
 
 from testbed.bench.common import median, write
-from topology import netns
+from topology.kernel import netns
 from topology.network import Network
 from topology.spec import NetworkSpec, layout_positions
 

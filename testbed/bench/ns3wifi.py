@@ -1,11 +1,11 @@
-"""Benchmark of the ns3-wifi medium (topology.ns3medium): what the ns-3 process costs and how
+"""Benchmark of the ns3-wifi medium (topology.radio.ns3wifi): what the ns-3 process costs and how
 late it runs.
 
 - size: 10, 20 and 50 robots at time scale 1 on a square room (grid, 4 m apart, range 20 m),
   each broadcasting a 1000-byte datagram every 100 ms of emulated time (a flooded map
   fragment's size and the exploration's map period), every robot moved a little each step
   (100 ms) through Network.set_positions, for SECONDS. Reported: the process's CPU (share
-  of one core), the relay lag and the timer lateness (topology.ns3medium counters), what
+  of one core), the relay lag and the timer lateness (topology.radio.ns3wifi counters), what
   arrived, and the round trip of a position update.
 - scale: 10 robots, the same traffic, at time scales 1, 2, 5, 10 and 20 (emulated periods
   divided by K). The highest faithful time scale is the highest K whose relay lag stays
@@ -22,10 +22,11 @@ import time
 import uuid
 
 from testbed.bench.common import median, write
-from topology import netns, state
+from topology import state
+from topology.kernel import netns
 from topology.names import robot_ns
 from topology.network import Network
-from topology.ns3medium import Ns3Medium, binary
+from topology.radio.ns3wifi import Ns3Medium, binary
 from topology.spec import NetworkSpec, layout_positions
 
 SECONDS = float(os.environ.get("BENCH_NS3_SECONDS", "10"))

@@ -18,7 +18,8 @@ import uuid
 from typing import Any
 
 from testbed.bench.common import median, write
-from topology import names, netns, routequery, rtnl
+from topology import names
+from topology.kernel import netns, routequery, rtnl
 from topology.network import Network
 from topology.spec import NetworkSpec
 

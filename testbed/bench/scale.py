@@ -17,7 +17,7 @@ robots (pairs reached, memory, idle CPU), and the position feed's rate.
   step of up to STEP_M metres each way) written to its socket as fast as one client can:
   updates applied (links updated) per second; and the latency of one move_many of one robot
   (the cost of an unbatched update). A link met for the first time costs a veth pair (a few
-  ms of kernel work, topology.medium), so teleports anywhere would be slower.
+  ms of kernel work, topology.radio.veth), so teleports anywhere would be slower.
 Goals: bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardown of 1000
 <= 10 s, every pair reached, >= 1000 feed updates per second.
 """
@@ -32,7 +32,9 @@ import uuid
 from typing import Any
 
 from testbed.bench.common import median, write
-from topology import feed, names, netns
+from topology import names
+from topology.inputs import feed
+from topology.kernel import netns
 from topology.network import Network
 from topology.spec import NetworkSpec, layout_positions
 

@@ -245,7 +245,8 @@ def _require_root() -> None:
 
 
 def _net_exec(args) -> int:
-    from topology import names, netns, state
+    from topology import names, state
+    from topology.kernel import netns
 
     _require_root()
     cmd = args.command[1:] if args.command[:1] == ["--"] else args.command
@@ -314,7 +315,8 @@ def _net_links(args) -> int:
 
 
 def _net_down(args) -> int:
-    from topology import names, netns, state
+    from topology import names, state
+    from topology.kernel import netns
     from topology.network import destroy
 
     _require_root()

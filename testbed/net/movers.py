@@ -17,7 +17,7 @@ import time
 
 from common.argtypes import number
 from common.errors import TestbedError, UsageError
-from topology.mobility import LIMITS_TEXT, MIN_TICK_S
+from topology.inputs.mobility import LIMITS_TEXT, MIN_TICK_S
 
 READY_TIMEOUT_S = 10.0
 
@@ -42,7 +42,7 @@ def add_up_arguments(up) -> None:
 
 def add_parsers(nsub, sub, name_type) -> None:
     """`net feed` (and its siblings to come) under `net`; top-level commands under `sub`."""
-    from topology import feed
+    from topology.inputs import feed
     from topology.spec import MAX_COORD_M
 
     fd = nsub.add_parser(
@@ -71,7 +71,7 @@ def up_positions(args):
         if args.robots is None:
             raise UsageError("net up: --robots is required (unless --mobility gives it)")
         return None, None
-    from topology import mobility
+    from topology.inputs import mobility
 
     if args.positions is not None or args.layout is not None:
         raise UsageError("--mobility gives the positions: drop --layout/--positions")
@@ -138,8 +138,9 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
     if trace is not None:
         out = extras["links_out"]
         ready = os.path.join(net.state_dir, "mobility.ready")
-        argv = [sys.executable, "-m", "topology.player", net.name, os.path.abspath(args.mobility),
-                "--tick", repr(args.tick), "--links-out", out, "--ready", ready]  # fmt: skip
+        argv = [sys.executable, "-m", "topology.inputs.player", net.name,
+                os.path.abspath(args.mobility), "--tick", repr(args.tick),
+                "--links-out", out, "--ready", ready]  # fmt: skip
         proc = _start(net, argv, "mobility")
         _wait_ready(proc, ready, os.path.join(net.state_dir, "mobility.log"), "the trace player")
         robots = net.spec.robots
@@ -149,7 +150,7 @@ def after_up(net, args, trace, extras: dict) -> list[str]:
                      "(kept after net down)")  # fmt: skip
         lines.append(f"trace {trace.mapping_text(robots)}")
     if args.feed:
-        from topology import feed
+        from topology.inputs import feed
 
         argv = [sys.executable, "-m", "testbed.cli", "net", "feed", net.name, "--no-stdin"]
         proc = _start(net, argv, "feed")
@@ -215,7 +216,8 @@ def _start(net, argv: list[str], role: str):
 
 def net_feed(args) -> int:
     """Client of a running feed server if there is one, else the server itself."""
-    from topology import feed, state
+    from topology import state
+    from topology.inputs import feed
 
     if os.geteuid() != 0:
         raise UsageError("network namespaces need root: run this under sudo")

@@ -73,7 +73,7 @@ from testbed.run.progress import ProgressLine, summary_line
 from testbed.run.record import RobotRecord, RunRecord, WallParts
 from testbed.run.stepclock import StepClock, StepTiming, no_clock
 from testbed.world.bodylink import BodyServer
-from topology.forkserver import Forked, ForkServer, ForkServerError, python_env
+from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 
 if TYPE_CHECKING:  # imported where they are needed: the view's web server is not light
     import numpy as np
@@ -83,7 +83,7 @@ if TYPE_CHECKING:  # imported where they are needed: the view's web server is no
 
 log = logging.getLogger(__name__)
 
-# What the fork server imports once for every robot and the display (topology.forkserver);
+# What the fork server imports once for every robot and the display (topology.kernel.forkserver);
 # the run's middleware module (node.messaging) is added to it.
 NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "node.native", "topology.names"]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
@@ -162,7 +162,8 @@ class Started:
 
     @property
     def network_timers(self) -> dict | None:
-        """The robot namespaces' network timers (topology.nettimers), as result.json has them."""
+        """The robot namespaces' network timers (topology.kernel.nettimers), as result.json has
+        them."""
         timers = self.net.timers
         return None if timers is None else timers.to_dict()
 
@@ -368,7 +369,7 @@ class Run:
         counters = getattr(net.medium, "counters", None)  # the ns3-wifi channel's, if any
         if counters is not None:
             write_json_atomic(self.prep.path("medium.json"), counters())
-            from topology.ns3medium import LAG_FILE
+            from topology.radio.ns3wifi import LAG_FILE
 
             # Each frame's relay lag, which the analysis takes out of the delays.
             net.medium.keep_lag_file(self.prep.path(LAG_FILE))

@@ -68,7 +68,7 @@ The verdict: a run is faithful when, over all its robots and daemons,
 
 The network has its own verdict (`network_verdict`, result.json's `fidelity.network`): the
 kernel's TCP timers are divided by the time scale where the kernel lets them be
-(topology.nettimers), and a dilated run whose kernel could not dilate TCP's retransmission
+(topology.kernel.nettimers), and a dilated run whose kernel could not dilate TCP's retransmission
 timeout (no `tcp_rto_min_us` before Linux 6.11, or a time scale past its jiffy) says so. Its
 PDF and delay then mean something else than at another time scale, and the report does not
 set them beside another scale's; its exploration does not depend on it (steps, plans and
@@ -83,7 +83,7 @@ from dataclasses import asdict, dataclass
 
 from aodv.params import Params as AodvParams
 from node.timing import STEP_S
-from topology.nettimers import NetworkTimers
+from topology.kernel.nettimers import NetworkTimers
 
 DEADLINE_MISS_LIMIT = 0.01
 LATE_PLAN_LIMIT = 0.01
@@ -260,7 +260,7 @@ def verdict(m: Measures, th: Thresholds = Thresholds()) -> dict:
 
 
 def network_verdict(timers: dict | None, time_scale: float) -> dict:
-    """result.json's `fidelity.network` from its `network_timers` (topology.nettimers'
+    """result.json's `fidelity.network` from its `network_timers` (topology.kernel.nettimers'
     record): {ok, reason (when not ok)}. At time scale 1 the network is in emulated time by
     definition; dilated, when TCP's retransmission timeout was dilated."""
     if time_scale == 1:

@@ -161,7 +161,7 @@ def check_machine(spec: NetworkSpec) -> None:
     """Root, the tools, a free testbed name and the kernel features the impairments need;
     UsageError if not."""
     from topology import state
-    from topology.impair import kernel_has_netem, missing_feature
+    from topology.kernel.impair import kernel_has_netem, missing_feature
     from topology.network import preflight
 
     preflight(spec)

@@ -23,7 +23,7 @@ from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, ClockSummary
 from testbed.world.world import World
 
 if TYPE_CHECKING:
-    from topology.forkserver import Forked
+    from topology.kernel.forkserver import Forked
 
 
 @dataclass
@@ -135,7 +135,9 @@ class RunRecord:
     parts: dict
     priority: str | None  # what the step loop's thread got
     t_start: float  # CLOCK_MONOTONIC when the run began
-    network_timers: dict | None = None  # topology.nettimers' record; None: no network came up
+    network_timers: dict | None = (
+        None  # topology.kernel.nettimers' record; None: no network came up
+    )
     outages: tuple = ()  # testbed.run.isolation.Outage: the radio outages asked for (--isolate)
     robot: str | None = None  # the robot program: "cpp", "python" or (a test's) "mixed"
     robot_reason: str = ""  # why that one

@@ -126,7 +126,7 @@ def contents(rec: RunRecord) -> RunResult:
             clock.stepping,
         )
     )
-    # Whether TCP kept emulated time, from the robots' network timers (topology.nettimers).
+    # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).
     verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
     return RunResult(
         config=ResultConfig.from_config(rec.config),

@@ -31,7 +31,7 @@ from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import Plan, config_mismatch, default_jobs, jobs_cap, other_sweep, plan
 from testbed.sweep.rundir import is_done, run_dir
 from testbed.sweep.runner import Sweep, wait_for_orphans
-from topology.impair import kernel_has_netem
+from topology.kernel.impair import kernel_has_netem
 
 log = logging.getLogger(__name__)
 

@@ -9,7 +9,7 @@ before the run is redone) and skipped (points this machine cannot run, e.g. dela
 sch_netem, with the reason recorded); `Sweep.run` takes the runs to do.
 
 Each run is a child process, `testbed run ... --out DIR/runs/R`, with its output in
-`DIR/logs/R.log`. The children are forked from a fork server (topology.forkserver) that has
+`DIR/logs/R.log`. The children are forked from a fork server (topology.kernel.forkserver) that has
 imported `testbed run` once: a fresh interpreter spent about 1 s of each run on its imports
 (pyroute2, OpenCV, numpy), 4 minutes over the paper's 240 runs. Children run in their own
 session (a Ctrl-C in the terminal reaches only the sweep, which forwards it) and with
@@ -68,7 +68,7 @@ from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 from testbed.sweep.progress import Progress
 from testbed.sweep.rundir import is_done, plan_dict, run_argv, run_dir
-from topology.forkserver import Forked, ForkServer, ForkServerError, python_env
+from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.state import is_alive, proc_start_time
 
 log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ RUN_PRELOAD = [
     "testbed.cli",
     "testbed.run.execute",
     "pyroute2",
-    "topology.rtnl",
+    "topology.kernel.rtnl",
     "topology.network",
 ]
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.

@@ -172,7 +172,7 @@ class LiveServer:
 
 class KernelRoutes:
     """Where each robot's kernel would send a packet for robot `dest` now: an RTM_GETROUTE
-    lookup (topology.routequery) through a netlink socket opened once in each robot's
+    lookup (topology.kernel.routequery) through a netlink socket opened once in each robot's
     namespace (read only; no packet is sent). Used by the view when a robot is clicked."""
 
     def __init__(self, testbed: str, robots: int) -> None:
@@ -182,13 +182,15 @@ class KernelRoutes:
 
     def _sock(self, k: int):
         if k not in self._socks:
-            from topology import names, netns, rtnl
+            from topology import names
+            from topology.kernel import netns, rtnl
 
             self._socks[k] = netns.run_in(names.robot_ns(self.testbed, k), rtnl.open_socket)
         return self._socks[k]
 
     def __call__(self, dest: int) -> dict[int, int | None]:
-        from topology import names, routequery
+        from topology import names
+        from topology.kernel import routequery
 
         out: dict[int, int | None] = {}
         with self._lock:

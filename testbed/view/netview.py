@@ -18,8 +18,8 @@ import time
 
 from testbed.view.live import KernelRoutes, LiveFeed, LiveServer
 from topology import state
-from topology.los import Walls
-from topology.ns3medium import medium_for
+from topology.radio.los import Walls
+from topology.radio.ns3wifi import medium_for
 from topology.spec import LOS_MODELS
 
 POLL_S = 0.2

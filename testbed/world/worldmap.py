@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from common.errors import UsageError
-from topology import pngmap
+from topology.inputs import pngmap
 from topology.spec import CELL_M as CELL  # metres
 
 
@@ -77,7 +77,7 @@ MAX_CELLS = 4000  # a side of the world's grid, in cells (200 m at 5 cm)
 
 def png_cells(path: str, cell_m: float) -> tuple[int, int]:
     """(columns, rows) of the world's grid for a PNG map of `cell_m` metres a pixel, from the
-    file's header and structure alone (topology.pngmap.check; nothing is decoded): what a
+    file's header and structure alone (topology.inputs.pngmap.check; nothing is decoded): what a
     sweep checks of every map before its first run. UsageError for a map it cannot use."""
     _check_cell(cell_m)
     try:
@@ -109,7 +109,7 @@ def load_png(path: str, cell_m: float, walls: bool = True) -> GroundTruth:
 
     The picture is resampled to the world's 5 cm cells; a one-cell wall is added around it
     when `walls` (robots must not leave the map). Its size is checked from its header before
-    it is decoded (topology.pngmap): at most MAX_CELLS a side once resampled.
+    it is decoded (topology.inputs.pngmap): at most MAX_CELLS a side once resampled.
     """
     _check_cell(cell_m)
     try:

@@ -12,7 +12,8 @@ import uuid
 
 import pytest
 
-from topology import names, netns
+from topology import names
+from topology.kernel import netns
 
 SESSION_TAG = uuid.uuid4().hex[:3]
 _made: list[str] = []

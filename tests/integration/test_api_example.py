@@ -3,7 +3,7 @@
 import os
 import re
 
-from topology import netns
+from topology.kernel import netns
 
 DOC = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "api.md")
 

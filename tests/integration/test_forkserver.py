@@ -1,4 +1,4 @@
-"""The fork server (topology.forkserver) with real namespaces: its children run in the
+"""The fork server (topology.kernel.forkserver) with real namespaces: its children run in the
 namespace asked for, with their own session and log, and their exit statuses come back."""
 
 import os
@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from topology import netns
-from topology.forkserver import ForkServer, ForkServerError
+from topology.kernel import netns
+from topology.kernel.forkserver import ForkServer, ForkServerError
 from topology.network import Network
 from topology.spec import NetworkSpec
 
@@ -57,7 +57,7 @@ def test_children_run_in_their_namespace_and_report_exit(tmp_path, tb_name):
 
 def test_server_dies_with_its_parent(tmp_path):
     code = (
-        "import os, sys, time; from topology.forkserver import ForkServer; "
+        "import os, sys, time; from topology.kernel.forkserver import ForkServer; "
         "f = ForkServer([]); print(f.proc.pid, flush=True); time.sleep(60)"
     )
     parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
@@ -80,7 +80,7 @@ def test_hanging_up_before_the_server_is_ready_is_quiet():
     # whose bring-up failed) hangs up while the server still imports: it must exit 0 without
     # a traceback when its "ready" finds nobody listening.
     code = (
-        "from topology.forkserver import ForkServer; "
+        "from topology.kernel.forkserver import ForkServer; "
         "f = ForkServer(['numpy', 'json']); f.close(); print(f.ready, f.proc.returncode)"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

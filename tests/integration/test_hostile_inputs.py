@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from topology import netns
+from topology.kernel import netns
 
 REPO = Path(__file__).resolve().parents[2]
 TESTBED = str(REPO / ".venv" / "bin" / "testbed")

@@ -11,8 +11,9 @@ import time
 
 import pytest
 
-from topology import names, netns
-from topology.impair import kernel_has_netem
+from topology import names
+from topology.kernel import netns
+from topology.kernel.impair import kernel_has_netem
 from topology.network import Network
 from topology.spec import Impairment, NetworkSpec
 

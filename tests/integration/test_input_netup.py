@@ -11,7 +11,8 @@ import time
 import urllib.error
 import urllib.request
 
-from topology import netns, state
+from topology import state
+from topology.kernel import netns
 
 TESTBED = [sys.executable, "-m", "testbed.cli"]
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -10,7 +10,9 @@ import sys
 
 import pytest
 
-from topology import feed, netns, state
+from topology import state
+from topology.inputs import feed
+from topology.kernel import netns
 
 TESTBED = [sys.executable, "-m", "testbed.cli"]
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -13,8 +13,9 @@ import pytest
 from testbed.analysis import figures, media
 from testbed.analysis.runs import load_run
 from testbed.run.execute import RunConfig, run
-from topology import netns, state
-from topology.ns3medium import unbuilt_reason
+from topology import state
+from topology.kernel import netns
+from topology.radio.ns3wifi import unbuilt_reason
 
 # Skipped only where `make setup` said it could not build the medium (no ns-3, or g++ failed
 # against this release's ns-3), with its line; where it was to be built, a missing build fails.

@@ -10,7 +10,7 @@ import pytest
 
 from topology import names
 from topology.network import Network
-from topology.ranges import wanted_links
+from topology.radio.ranges import wanted_links
 from topology.spec import NetworkSpec, layout_positions
 
 PORT = 47000
@@ -190,9 +190,9 @@ def test_robot_namespace_settings(tb_name):
 
 
 def test_route_query_reads_each_kernels_next_hop(tb_name):
-    """topology.routequery (the view's click, the oracle bench): one RTM_GETROUTE per ask,
+    """topology.kernel.routequery (the view's click, the oracle bench): one RTM_GETROUTE per ask,
     answered from the kernel's routes that the oracle wrote."""
-    from topology import netns, routequery, rtnl
+    from topology.kernel import netns, routequery, rtnl
 
     spec = NetworkSpec(name=tb_name, positions=((0, 0), (8, 0), (16, 0)), comm_range=10.0,
                        routing="oracle")  # fmt: skip

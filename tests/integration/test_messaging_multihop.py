@@ -19,7 +19,8 @@ import pytest
 
 from node.timing import RobotTimings
 from testbed import PROJECT_ROOT
-from topology import names, netns
+from topology import names
+from topology.kernel import netns
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 

@@ -7,7 +7,8 @@ import subprocess
 import sys
 import time
 
-from topology import feed, state
+from topology import state
+from topology.inputs import feed
 
 TESTBED = [sys.executable, "-m", "testbed.cli"]
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -15,9 +15,10 @@ import pytest
 
 from common.errors import TestbedError
 from testbed.analysis import pcapmetrics, relaylag
-from topology import names, netns, state
+from topology import names, state
+from topology.kernel import netns
 from topology.network import Network, destroy
-from topology.ns3medium import unbuilt_reason
+from topology.radio.ns3wifi import unbuilt_reason
 from topology.spec import NetworkSpec
 
 from .test_medium import _neighbour_routes, _received, _start_listeners

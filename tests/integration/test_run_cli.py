@@ -98,7 +98,7 @@ def test_a_view_port_in_use_is_one_line_and_makes_nothing(tmp_path, tb_name):
 
 
 def test_delay_without_netem_is_one_line_and_makes_nothing(tmp_path, tb_name):
-    from topology.impair import kernel_has_netem
+    from topology.kernel.impair import kernel_has_netem
 
     if kernel_has_netem():
         pytest.skip("this kernel has sch_netem: --delay works here")

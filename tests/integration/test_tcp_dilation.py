@@ -1,5 +1,5 @@
 """TCP keeps emulated time: one transfer over a lossy link takes the same emulated time, with
-as many retransmissions, at time scale 1 and at 10 (topology.nettimers, applied by the
+as many retransmissions, at time scale 1 and at 10 (topology.kernel.nettimers, applied by the
 namespace-making code of topology.network).
 
 The transfer is what the robots' goal messages are: small messages, each answered, over one
@@ -26,7 +26,8 @@ import time
 import pytest
 
 from common.sched import deadline_priority
-from topology import names, netns
+from topology import names
+from topology.kernel import netns
 from topology.network import Network
 from topology.spec import Impairment, NetworkSpec
 

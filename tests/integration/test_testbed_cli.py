@@ -11,7 +11,8 @@ import time
 
 import pytest
 
-from topology import names, netns, processes, state
+from topology import names, state
+from topology.kernel import netns, processes
 
 TESTBED = [sys.executable, "-m", "testbed.cli"]
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

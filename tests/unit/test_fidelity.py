@@ -7,7 +7,7 @@ from node.lateness import MS_BOUNDS, Lateness
 from testbed.resultfile import ResultError, RunResult
 from testbed.run import fidelity
 from testbed.run.fidelity import Measures, Thresholds, measures, verdict
-from topology import nettimers
+from topology.kernel import nettimers
 
 
 def robot(plans: int, late: int, timers: int = 0, late_timers: int = 0, age_max: int = 1):
@@ -206,7 +206,7 @@ def test_a_run_without_the_channel_or_with_a_malformed_counter_is_not_judged_on_
         assert verdict(m)["ok"] is True
 
 
-# -- the network's verdict: TCP's timers in emulated time (topology.nettimers) --------------
+# -- the network's verdict: TCP's timers in emulated time (topology.kernel.nettimers) --------------
 
 JIFFY = 4000
 KERNEL_618 = {"net.ipv4.tcp_rto_min_us": 200_000, "net.ipv4.tcp_rto_max_ms": 120_000}

@@ -8,8 +8,8 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from topology import feed
-from topology.linebuffer import TOO_LONG, LineBuffer
+from topology.inputs import feed
+from topology.inputs.linebuffer import TOO_LONG, LineBuffer
 from topology.names import MAX_ROBOTS
 from topology.spec import MAX_COORD_M
 

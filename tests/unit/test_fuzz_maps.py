@@ -1,5 +1,5 @@
-"""Map PNGs from anywhere (topology.pngmap) and line of sight across them (topology.los),
-fuzzed with Hypothesis.
+"""Map PNGs from anywhere (topology.inputs.pngmap) and line of sight across them
+(topology.radio.los), fuzzed with Hypothesis.
 
 A map file either decodes to a grey picture of exactly the size its header states, within
 MAX_MAP_PIXELS, or is refused with a `PngError` of one printable line; and whichever it is,
@@ -21,8 +21,8 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from topology import pngmap
-from topology.los import Walls, crossings
+from topology.inputs import pngmap
+from topology.radio.los import Walls, crossings
 
 BASE = settings(deadline=2000, database=None,
                 suppress_health_check=[HealthCheck.too_slow,

@@ -1,4 +1,4 @@
-"""Movement traces from anywhere (topology.mobility), fuzzed with Hypothesis: every input
+"""Movement traces from anywhere (topology.inputs.mobility), fuzzed with Hypothesis: every input
 ends in exactly one of two ways. Either the trace is accepted and sane (at most 1000 nodes,
 its end and every sampled position finite and within the limits, its ticks generated
 lazily), or it is refused with a `TraceError` of one printable line. Nothing else: no other
@@ -15,7 +15,7 @@ import math
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from topology import mobility
+from topology.inputs import mobility
 
 BASE = settings(deadline=2000, suppress_health_check=[HealthCheck.too_slow], database=None)
 

@@ -219,7 +219,7 @@ def test_a_transparent_background_is_free_space(tmp_path):
     import cv2
     import numpy as np
 
-    from topology import pngmap
+    from topology.inputs import pngmap
 
     img = np.zeros((20, 20, 4), np.uint8)  # transparent black: free space as a viewer shows it
     img[5:8, 5:8] = (0, 0, 0, 255)  # an opaque black wall

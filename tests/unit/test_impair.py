@@ -1,9 +1,9 @@
-"""topology.impair's pure builders: the qdisc tree and nft commands an impairment wants, and
+"""topology.kernel.impair's pure builders: the qdisc tree and nft commands an impairment wants, and
 the requests that take a link end from what it has to that."""
 
 import pytest
 
-from topology.impair import (
+from topology.kernel.impair import (
     CLEAR,
     Plan,
     TcRequest,

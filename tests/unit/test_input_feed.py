@@ -5,8 +5,8 @@ import time
 
 import pytest
 
-from topology import feed
-from topology.linebuffer import TOO_LONG, LineBuffer
+from topology.inputs import feed
+from topology.inputs.linebuffer import TOO_LONG, LineBuffer
 
 
 def lines_of(chunks: list[bytes], limit: int = 64) -> list[bytes | None]:

@@ -143,7 +143,7 @@ NETLINK_LAYOUTS = {
     "HH": "rtattr",
 }
 STRUCT_CALLS = {"Struct", "pack", "pack_into", "unpack", "unpack_from", "calcsize", "iter_unpack"}
-NETLINK_MODULE = os.path.join("topology", "netlinkmsg.py")
+NETLINK_MODULE = os.path.join("topology", "kernel", "netlinkmsg.py")
 
 
 def netlink_layout(fmt: str) -> str | None:
@@ -179,7 +179,7 @@ def netlink_structs(path: str) -> set[tuple[int, str]]:
 
 
 def test_netlink_structures_are_packed_in_one_module():
-    """nlmsghdr, rtmsg, ifinfomsg, nfgenmsg and rtattr are laid out in topology/netlinkmsg.py
+    """nlmsghdr, rtmsg, ifinfomsg, nfgenmsg and rtattr are laid out in topology/kernel/netlinkmsg.py
     only: the AODV daemon, the oracle, route queries and the medium use its functions."""
     where = {
         os.path.relpath(p, REPO): netlink_structs(p)
@@ -239,6 +239,10 @@ def test_the_project_root_is_the_checkout():
     assert os.path.samefile(PROJECT_ROOT, REPO)
     assert os.path.isfile(os.path.join(PROJECT_ROOT, "pyproject.toml"))
     assert f"cd {PROJECT_ROOT} ||" in batch_script(Path("/out"), Path("/out/tasks"))
-    # (topology/, below the harness, finds the checkout from its own depth: one level.)
-    roots = [p for p in modules("testbed") if "dirname(os.path.dirname(" in open(p).read()]
-    assert not roots, f"take the checkout from testbed.PROJECT_ROOT: {roots}"
+    roots = [
+        p
+        for package in ("common", "node", "topology", "aodv", "testbed")
+        for p in modules(package)
+        if "dirname(os.path.dirname(" in open(p).read() or ".parents[" in open(p).read()
+    ]
+    assert roots == [os.path.join(REPO, "common", "paths.py")], f"take common.paths: {roots}"

@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from topology.los import MapError, Walls, crossings
-from topology.ranges import wanted_links
+from topology.radio.los import MapError, Walls, crossings
+from topology.radio.ranges import wanted_links
 
 OFFICE = Path(__file__).resolve().parents[2] / "testbed" / "experiments" / "maps" / "office.png"
 

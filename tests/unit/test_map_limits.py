@@ -1,5 +1,5 @@
 """Map files and laser ranges a run can be asked for: a map is sized from its PNG header
-before it is decoded (topology.pngmap), damaged files are one line of ours and nothing of
+before it is decoded (topology.inputs.pngmap), damaged files are one line of ours and nothing of
 libpng's, and a laser's cost in `prepare` is bounded and interruptible. No root."""
 
 import json
@@ -21,7 +21,7 @@ import pytest
 from common.errors import UsageError
 from testbed.run.config import RunConfig, config_from_args
 from testbed.world.worldmap import empty_terrain, load_png
-from topology.los import MapError, Walls
+from topology.radio.los import MapError, Walls
 
 REPO = Path(__file__).resolve().parents[2]
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -57,7 +57,7 @@ def test_a_huge_png_is_refused_from_its_header_without_decoding(tmp_path):
         import json
         from common.errors import UsageError
         from testbed.world.worldmap import load_png
-        from topology.los import MapError, Walls
+        from topology.radio.los import MapError, Walls
         said = []
         loads = (lambda: load_png({str(big)!r}, 0.01), lambda: Walls.from_png({str(big)!r}, 0.05))
         for load in loads:
@@ -258,7 +258,7 @@ def test_a_config_records_the_laser_bound_for_sweeps():
 def test_line_of_sight_between_far_robots_costs_what_the_map_costs():
     """Robots 1e9 m apart (a feed, a trace, --positions) across a 10 m map: the segment is
     cut to the map first, so its walls are counted in microseconds, not 2e10 samples."""
-    from topology.los import crossings
+    from topology.radio.los import crossings
 
     occ = np.zeros((100, 100), dtype=bool)
     occ[:, 30:32] = occ[:, 60:62] = True  # two walls, at 3 m and 6 m

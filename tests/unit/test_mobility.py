@@ -1,11 +1,12 @@
-"""Mobility traces (topology.mobility), feed lines (topology.feed) and the range model's fast
-paths for large teams (topology.ranges): pure functions, no root."""
+"""Mobility traces (topology.inputs.mobility), feed lines (topology.inputs.feed) and the range
+model's fast paths for large teams (topology.radio.ranges): pure functions, no root."""
 
 import random
 
 import pytest
 
-from topology import feed, mobility, ranges
+from topology.inputs import feed, mobility
+from topology.radio import ranges
 
 NS2 = """\
 # BonnMotion-style header comment

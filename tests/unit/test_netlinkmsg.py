@@ -1,4 +1,4 @@
-"""topology.netlinkmsg against bytes checked by hand, field by field, against
+"""topology.kernel.netlinkmsg against bytes checked by hand, field by field, against
 linux/netlink.h and linux/rtnetlink.h (on a little-endian host, as netlink is in host order):
 what `ip route replace`, `ip route del` and `ip route get` would send, and the reading of
 answers the kernel sends."""
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from topology import netlinkmsg as nl
+from topology.kernel import netlinkmsg as nl
 
 pytestmark = pytest.mark.skipif(sys.byteorder != "little", reason="golden bytes are little-endian")
 

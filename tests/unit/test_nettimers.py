@@ -1,12 +1,12 @@
-"""The network timers' arithmetic (topology.nettimers): division by the time scale, rounding to
-the kernel's granularity, its floors and ceilings, and the record of what could not be."""
+"""The network timers' arithmetic (topology.kernel.nettimers): division by the time scale, rounding
+to the kernel's granularity, its floors and ceilings, and the record of what could not be."""
 
 import math
 
 import pytest
 
-from topology import nettimers
-from topology.nettimers import BY_NAME, plan
+from topology.kernel import nettimers
+from topology.kernel.nettimers import BY_NAME, plan
 
 HZ250 = 4000  # a jiffy at HZ = 250 (this project's development kernel), in us
 HZ1000 = 1000  # Ubuntu's generic kernels

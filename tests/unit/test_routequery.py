@@ -1,10 +1,10 @@
-"""topology.routequery's pure halves: the RTM_GETROUTE request and the reading of the answer
+"""topology.kernel.routequery's pure halves: the RTM_GETROUTE request and the reading of the answer
 (the round trip against a real kernel: tests/integration/test_medium.py)."""
 
 import socket
 import struct
 
-from topology.routequery import RTM_GETROUTE, RTM_NEWROUTE, Route, parse, request
+from topology.kernel.routequery import RTM_GETROUTE, RTM_NEWROUTE, Route, parse, request
 
 HDR = struct.Struct("=LHHLL")
 

@@ -1,11 +1,11 @@
-"""topology.rtnl without the kernel: the AF_BRIDGE dump's parser on hand-built messages."""
+"""topology.kernel.rtnl without the kernel: the AF_BRIDGE dump's parser on hand-built messages."""
 
 import socket
 import struct
 
 import pytest
 
-from topology import rtnl
+from topology.kernel import rtnl
 
 NEWLINK, DONE, ERROR = 16, 3, 2
 

@@ -6,8 +6,9 @@ import sys
 
 import pytest
 
-from topology import names, ranges, state
-from topology.impair import nft_loss_rules, nft_unloss_rules
+from topology import names, state
+from topology.kernel.impair import nft_loss_rules, nft_unloss_rules
+from topology.radio import ranges
 from topology.spec import Impairment, NetworkSpec, layout_positions
 
 
@@ -132,7 +133,7 @@ def test_process_identity_includes_start_time():
 
 
 def test_rtnl_templates_encode_exactly_what_pyroute2_would():
-    from topology import rtnl
+    from topology.kernel import rtnl
 
     enslave = rtnl.Template(rtnl.link, ints=("index", "master"))
     assert enslave(index=10_001_002, master=1_000_001) == rtnl.link(10_001_002, master=1_000_001)
@@ -152,7 +153,7 @@ def test_rtnl_templates_encode_exactly_what_pyroute2_would():
 def test_port_state_request_marks_protinfo_nested():
     import struct
 
-    from topology import rtnl
+    from topology.kernel import rtnl
 
     msg = rtnl.port_state(5, rtnl.BR_STATE_FORWARDING)
     length, mtype = struct.unpack_from("=LH", msg)

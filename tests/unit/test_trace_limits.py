@@ -1,6 +1,6 @@
-"""What a movement trace may ask for (topology.mobility's limits) and the player that plays it
-(topology.player): hostile traces are refused while parsing, in one line, before anything is
-allocated for them. No root.
+"""What a movement trace may ask for (topology.inputs.mobility's limits) and the player that plays
+it (topology.inputs.player): hostile traces are refused while parsing, in one line, before anything
+is allocated for them. No root.
 
 The traces that used to eat the machine are parsed in a child process with its address space
 capped at 1 GB and a time limit, so that code without the limits fails the test (MemoryError,
@@ -19,7 +19,7 @@ import pytest
 
 from common.errors import UsageError
 from testbed.cli import build_parser
-from topology import mobility, player
+from topology.inputs import mobility, player
 
 REPO = Path(__file__).resolve().parents[2]
 ADDRESS_SPACE = 1 << 30
@@ -33,7 +33,7 @@ def load_capped(path: str, timeout: float = 20.0) -> str:
     """`mobility.load(path)` in a child capped at 1 GB: its TraceError message, or what else
     happened to it (a traceback's last line, or 'timeout')."""
     code = textwrap.dedent(f"""
-        from topology import mobility
+        from topology.inputs import mobility
         try:
             tr = mobility.load({path!r})
             print("accepted", tr.nodes, tr.end)
@@ -144,7 +144,7 @@ def test_one_long_line_is_refused_by_its_length(tmp_path):
 
 def test_ticks_are_generated_one_at_a_time():
     code = textwrap.dedent("""
-        from topology import mobility
+        from topology.inputs import mobility
         it = mobility.ticks(1e6, 1e-3)  # 1e9 ticks: 8 GB as a list
         print(next(iter(it)), next(iter(it)))
     """)

@@ -5,7 +5,7 @@ must every timer that belongs to it (docs/architecture.md, "Time dilation and fi
 kernel's network timers run on the wall clock: left alone, TCP's minimum retransmission
 timeout of 200 ms lasts K x 200 ms of emulated time. A stock kernel has a knob for some of
 them in every network namespace (sysctls); this module is the arithmetic, pure (no kernel is
-read or written here; topology.medium probes the namespace and writes what `plan` says):
+read or written here; topology.radio.veth probes the namespace and writes what `plan` says):
 
 - `KNOBS` lists the per-namespace sysctls that hold a network timer: TCP's retransmission
   timeout floor and ceiling (`tcp_rto_min_us`, Linux 6.11; `tcp_rto_max_ms`, 6.15), its SACK
@@ -315,7 +315,7 @@ def plan(
 ) -> NetworkTimers:
     """What to write in a robot namespace at this time scale. `defaults` maps each sysctl the
     namespace has to its value there (a key it lacks is missing); `jiffy_us` is the kernel's
-    jiffy (topology.medium probes it)."""
+    jiffy (topology.radio.veth probes it)."""
     if not (time_scale > 0 and math.isfinite(time_scale)):
         raise ValueError(f"time scale must be a positive number, not {time_scale}")
     if jiffy_us <= 0:

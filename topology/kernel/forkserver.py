@@ -42,7 +42,8 @@ import subprocess
 import sys
 import time
 
-from topology import netns
+from common.paths import PROJECT_ROOT
+from topology.kernel import netns
 
 _PR_SET_PDEATHSIG = 1
 _PR_SET_NAME = 15
@@ -55,9 +56,10 @@ class ForkServerError(RuntimeError):
 
 def python_env() -> dict[str, str]:
     """The environment for a fork server: this one, with this project importable."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ)
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["PYTHONPATH"] = PROJECT_ROOT + (
+        os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else ""
+    )
     return env
 
 
@@ -216,7 +218,7 @@ class ForkServer:
     ):
         ours, theirs = socket.socketpair()
         code = (
-            "import sys, json; from topology.forkserver import serve; "
+            "import sys, json; from topology.kernel.forkserver import serve; "
             f"sys.exit(serve({theirs.fileno()}, {preload!r}, json.loads({json.dumps(warm)!r})))"
         )
         self.proc = subprocess.Popen(

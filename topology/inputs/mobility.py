@@ -3,7 +3,7 @@ parsed into per-node motions and sampled at any time.
 
 Theory of operation. A trace is parsed once into a `Trace`: each node's initial position and
 its timed way-points. Sampling is a pure function of time (`Trace.positions(t)`), so the
-player (topology.player) only has to pick the times: the tick's.
+player (topology.inputs.player) only has to pick the times: the tick's.
 
 ns-2 (what BonnMotion's NSFile and CORE write, and ns-3's Ns2MobilityHelper reads):
 
@@ -63,7 +63,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
-from topology import boundedfile
+from common import boundedfile
 from topology.names import MAX_ROBOTS
 
 Position = tuple[float, float]

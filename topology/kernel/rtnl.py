@@ -21,8 +21,8 @@ from pyroute2.netlink.rtnl import RTM_NEWADDR
 from pyroute2.netlink.rtnl.ifaddrmsg import ifaddrmsg
 from pyroute2.netlink.rtnl.ifinfmsg import ifinfmsg
 
-from topology import netlinkmsg as nl
-from topology.netlinkmsg import (
+from topology.kernel import netlinkmsg as nl
+from topology.kernel.netlinkmsg import (
     NLA_F_NESTED,
     NLM_F_ACK,
     NLM_F_CREATE,

@@ -9,8 +9,8 @@ objects asked for, and ends a dump with NLMSG_DONE.
 Here they are packed and read with `struct`, by pure functions that take and return
 bytes: no sockets, no pyroute2. The senders are the AODV daemon (aodv/kernel.py: its
 routes, the nftables set it polls), the oracle (topology/oracle.py: routes in every
-robot's namespace), route queries (topology/routequery.py) and the medium's link
-requests (topology/rtnl.py, whose link messages pyroute2 encodes once as templates).
+robot's namespace), route queries (topology/kernel/routequery.py) and the medium's link
+requests (topology/kernel/rtnl.py, whose link messages pyroute2 encodes once as templates).
 pyroute2's own rtmsg class encodes the same route request in ~65 us against ~1 us here,
 and its import costs ~20 MB and ~0.15 s in each daemon: the daemon's route updates and
 the oracle's batches would pay for both.

@@ -32,7 +32,7 @@ import socket
 import time
 
 from topology import state
-from topology.linebuffer import TOO_LONG, LineBuffer
+from topology.inputs.linebuffer import TOO_LONG, LineBuffer
 from topology.names import parse_robot_ref
 from topology.spec import check_position
 

@@ -10,7 +10,7 @@ Pure functions of positions (no kernel). `wanted_links` returns a dict from an o
   stand-in for fading near the edge of radio range). Loss is rounded to whole percent so that
   small moves do not churn the kernel.
 - los: as disc, and the straight line between the robots must cross no wall of the map
-  (topology.los); with `wall_loss_pct` a wall costs that much loss instead of blocking
+  (topology.radio.los); with `wall_loss_pct` a wall costs that much loss instead of blocking
   (losses combine as independent drops: 1 - (1-a)(1-b); 100% or more is no link).
 - los-lossy: los, with the lossy model's edge loss on top.
 """
@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from topology.los import Walls, crossings
+from topology.radio.los import Walls, crossings
 from topology.spec import LOS_MODELS, NO_IMPAIRMENT, Impairment, Position
 
 MAX_EDGE_LOSS_PCT = 50.0

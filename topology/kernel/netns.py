@@ -177,7 +177,7 @@ _STOP = object()
 class NsWorker:
     """A thread parked in one namespace, with an IPRoute of its own, running submitted calls.
 
-    `nl` is a raw rtnetlink socket of that namespace (topology.rtnl), usable from any thread:
+    `nl` is a raw rtnetlink socket of that namespace (topology.kernel.rtnl), usable from any thread:
     a socket belongs to the namespace it was made in."""
 
     def __init__(self, name: str):
@@ -195,10 +195,10 @@ class NsWorker:
 
     def _loop(self, ready: queue.Queue) -> None:
         # pyroute2 is imported here, not at the top: it takes 0.2 s, and the fork servers
-        # (topology.forkserver), which only enter namespaces, start without it.
+        # (topology.kernel.forkserver), which only enter namespaces, start without it.
         from pyroute2 import IPRoute
 
-        from topology import rtnl
+        from topology.kernel import rtnl
 
         try:
             _enter(self.name)

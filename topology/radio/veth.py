@@ -9,19 +9,19 @@ of `bri`, arrives at the far bridges and leaves only through their robot ports: 
 from i reaches exactly the robots linked to i, once each, and never hops link to link.
 
 Frames leaving through `lixj` travel from i to j, so a qdisc on `lixj` shapes exactly that
-direction of that link (see topology.impair). Removing a link disables the bridge port of
+direction of that link (see topology.kernel.impair). Removing a link disables the bridge port of
 its near end (see `set_links`): the robots' own `wlan0` stay up and notice nothing but
 silence, as on a real radio.
 
-Requests go out in batches through topology.rtnl (a raw rtnetlink socket of the medium
+Requests go out in batches through topology.kernel.rtnl (a raw rtnetlink socket of the medium
 namespace, held by an NsWorker); robot-side configuration (sysctls, address) runs in one
 thread that visits each robot's namespace in turn. pyroute2's IPRoute serves the rest (tc,
 dumps), where speed does not matter.
 
-The robots' network timers follow the time scale (topology.nettimers): the first robot's
+The robots' network timers follow the time scale (topology.kernel.nettimers): the first robot's
 namespace is probed for the timer sysctls it has and for the kernel's jiffy, the plan's values
 are written there (a value the kernel refuses is recorded, not fatal) and then in every other
-robot's namespace. `Medium.timers` is the record, whichever routing daemon installs the routes.
+robot's namespace. `VethMedium.timers` is the record, whichever routing daemon installs the routes.
 """
 
 import errno
@@ -29,8 +29,9 @@ import logging
 import os
 import time
 
-from topology import names, netns, nettimers, rtnl
-from topology.impair import Impairer
+from topology import names
+from topology.kernel import netns, nettimers, rtnl
+from topology.kernel.impair import Impairer
 from topology.spec import Impairment
 
 log = logging.getLogger(__name__)
@@ -176,7 +177,7 @@ def _configure_robot(k: int, timer_writes: list[tuple[str, int]] | None = None) 
         batch.send(sock)
 
 
-class Medium:
+class VethMedium:
     """The bridges and links of one testbed, inside its medium namespace."""
 
     def __init__(self, testbed: str, time_scale: float = 1.0):
@@ -287,7 +288,7 @@ class Medium:
         """The kernel brings a new veth's carrier up asynchronously (linkwatch), and only then
         does the bridge forward through it: wait for that (the port forwarding, its operstate
         up), so a link is usable on return. Usually nothing is left to wait for by the time
-        this is called; the check is one dump, parsed by topology.rtnl in a few ms, or for a
+        this is called; the check is one dump, parsed by topology.kernel.rtnl in a few ms, or for a
         few ends (a feed's new links) a request per end."""
         deadline = time.monotonic() + timeout
         assert self.worker is not None  # open() came first

@@ -17,8 +17,8 @@ import socket
 from dataclasses import dataclass
 
 from topology import names
-from topology import netlinkmsg as nl
-from topology.medium import WLAN_INDEX
+from topology.kernel import netlinkmsg as nl
+from topology.radio.veth import WLAN_INDEX
 
 RTM_NEWROUTE, RTM_GETROUTE = nl.RTM_NEWROUTE, nl.RTM_GETROUTE
 

@@ -1,7 +1,7 @@
 """Map PNGs read with care: sized from their header before anything is decoded.
 
 A map is a PNG whose dark pixels are walls (testbed.world.worldmap for the robots' world,
-topology.los for the radio). It may come from anywhere, so `read_gray(path)` checks it in
+topology.radio.los for the radio). It may come from anywhere, so `read_gray(path)` checks it in
 the order that costs least, and refuses with one line (`PngError`) at the first problem:
 
 1. a regular file (a directory, a FIFO or a device is named as such, never opened for a
@@ -30,7 +30,7 @@ import zlib
 
 import numpy as np
 
-from topology import boundedfile
+from common import boundedfile
 
 MAX_MAP_PIXELS = 16_000_000
 # The largest such picture stored uncompressed at 16 bits per channel (RGBA), and a margin.

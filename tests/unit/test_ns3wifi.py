@@ -2,7 +2,7 @@
 
 import pytest
 
-from topology import ns3medium
+from topology.radio import ns3wifi
 from topology.spec import Impairment, NetworkSpec
 
 
@@ -12,21 +12,21 @@ def spec(**kw) -> NetworkSpec:
 
 
 def test_robot_macs_are_unicast_locally_administered_and_distinct():
-    macs = [ns3medium.robot_mac(k) for k in range(1, 1001)]
+    macs = [ns3wifi.robot_mac(k) for k in range(1, 1001)]
     assert len(set(macs)) == 1000
-    assert ns3medium.robot_mac(1) == "02:00:0a:00:00:01"
-    assert ns3medium.robot_mac(300) == "02:00:0a:00:01:2c"
+    assert ns3wifi.robot_mac(1) == "02:00:0a:00:00:01"
+    assert ns3wifi.robot_mac(300) == "02:00:0a:00:01:2c"
     for mac in macs:
         first = int(mac[:2], 16)
         assert first & 0x02 and not first & 0x01  # locally administered, unicast
     with pytest.raises(ValueError):
-        ns3medium.robot_mac(0)
+        ns3wifi.robot_mac(0)
 
 
 def test_argv_names_every_robot_port_mac_and_position(monkeypatch):
-    monkeypatch.setenv(ns3medium.BINARY_ENV, "/x/tb-ns3-wifi")
+    monkeypatch.setenv(ns3wifi.BINARY_ENV, "/x/tb-ns3-wifi")
     s = spec(medium="ns3-wifi", time_scale=4.0, wifi_rate="minstrel")
-    argv = ns3medium.argv(s, list(s.positions), "/run/s.sock")
+    argv = ns3wifi.argv(s, list(s.positions), "/run/s.sock")
     assert argv[0] == "/x/tb-ns3-wifi"
     opts = dict(zip(argv[1::2], argv[2::2], strict=True))
     assert opts["--socket"] == "/run/s.sock"
@@ -42,21 +42,21 @@ def test_argv_names_every_robot_port_mac_and_position(monkeypatch):
 
 
 def test_no_rate_option_means_the_standards_fastest():
-    argv = ns3medium.argv(spec(medium="ns3-wifi"), [(0, 0)] * 3, "/s")
+    argv = ns3wifi.argv(spec(medium="ns3-wifi"), [(0, 0)] * 3, "/s")
     assert "--rate" not in argv
 
 
 def test_positions_request_round_trips_floats_exactly():
-    line = ns3medium.positions_request([(0.1, 2.0), (-3.25, 1e-7)])
+    line = ns3wifi.positions_request([(0.1, 2.0), (-3.25, 1e-7)])
     assert line == "pos 0.1 2.0 -3.25 1e-07"
     assert [float(w) for w in line.split()[1:]] == [0.1, 2.0, -3.25, 1e-7]
 
 
 def test_parse_links():
-    assert ns3medium.parse_links("links") == set()
-    assert ns3medium.parse_links("links 1-2 3-2") == {(1, 2), (2, 3)}
+    assert ns3wifi.parse_links("links") == set()
+    assert ns3wifi.parse_links("links 1-2 3-2") == {(1, 2), (2, 3)}
     with pytest.raises(ValueError):
-        ns3medium.parse_links("error unknown request")
+        ns3wifi.parse_links("error unknown request")
 
 
 def test_spec_defaults_to_veth_and_checks_the_medium():
@@ -104,18 +104,18 @@ def test_net_up_medium_arguments_are_one_line_exit_2(extra, words, capsys):
 
 
 def test_medium_for_picks_the_specs_medium():
-    from topology.medium import Medium
+    from topology.radio.veth import VethMedium
 
-    veth = ns3medium.medium_for(spec())
-    wifi = ns3medium.medium_for(spec(medium="ns3-wifi"))
-    assert type(veth) is Medium
-    assert isinstance(wifi, ns3medium.Ns3Medium) and wifi.spec.medium == "ns3-wifi"
+    veth = ns3wifi.medium_for(spec())
+    wifi = ns3wifi.medium_for(spec(medium="ns3-wifi"))
+    assert type(veth) is VethMedium
+    assert isinstance(wifi, ns3wifi.Ns3Medium) and wifi.spec.medium == "ns3-wifi"
 
 
 def test_a_medium_without_its_process_is_one_clear_error(tmp_path, monkeypatch):
     from common.errors import TestbedError
 
     monkeypatch.setenv("TESTBED_STATE_DIR", str(tmp_path))
-    wifi = ns3medium.Ns3Medium(spec(medium="ns3-wifi"))
+    wifi = ns3wifi.Ns3Medium(spec(medium="ns3-wifi"))
     with pytest.raises(TestbedError, match="does not answer"):
         wifi.set_positions([(0, 0)] * 3)

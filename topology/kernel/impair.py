@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from pyroute2.netlink.exceptions import NetlinkError
 
 from common.errors import TestbedError
-from topology import netns
+from topology.kernel import netns
 from topology.spec import Impairment
 
 log = logging.getLogger(__name__)

@@ -1,5 +1,6 @@
 """The trace player of `testbed net up --mobility FILE`: a process of its own that moves the
-robots of a running testbed along a trace (topology.mobility) and writes the links it applied.
+robots of a running testbed along a trace (topology.inputs.mobility) and writes the links it
+applied.
 
 Theory of operation. The player attaches to the testbed (topology.network.Network.attach) and
 walks the ticks 0, T, 2T, ... of emulated time; tick t is due at wall time t / time_scale
@@ -21,10 +22,10 @@ import time
 
 from common.argtypes import number
 from common.errors import TestbedError
-from topology import mobility
+from topology.inputs import mobility
 from topology.network import Network
 
-log = logging.getLogger("topology.player")
+log = logging.getLogger("topology.inputs.player")
 
 
 def play(net: Network, trace: mobility.Trace, tick: float, links_out: str,
@@ -70,7 +71,7 @@ def play(net: Network, trace: mobility.Trace, tick: float, links_out: str,
 def main(argv: list[str] | None = None) -> int:
     """The player's process. Whatever stops it early is one line in its log (`error: ...`)
     and a non-zero exit status, which `net up` reports while it waits for `--ready`."""
-    p = argparse.ArgumentParser(prog="python -m topology.player")
+    p = argparse.ArgumentParser(prog="python -m topology.inputs.player")
     p.add_argument("name")
     p.add_argument("trace")
     p.add_argument("--tick", type=number(float, "tick", minimum=mobility.MIN_TICK_S),

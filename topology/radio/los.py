@@ -1,4 +1,4 @@
-"""Line of sight through walls, for the `los` range models (topology.ranges).
+"""Line of sight through walls, for the `los` range models (topology.radio.ranges).
 
 A radio link indoors is blocked (or weakened) by walls. `Walls` is an obstacle grid in
 metres: a PNG where pixels darker than mid-grey are walls, one pixel `cell` metres, row =
@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from topology import pngmap
+from topology.inputs import pngmap
 
 Position = tuple[float, float]
 
@@ -38,7 +38,7 @@ class Walls:
     @classmethod
     def from_png(cls, path: str, cell: float) -> Walls:
         """The walls of a PNG map at its own resolution, one pixel `cell` metres; its size
-        is checked from its header before it is decoded (topology.pngmap)."""
+        is checked from its header before it is decoded (topology.inputs.pngmap)."""
         try:
             img = pngmap.read_gray(path)
         except pngmap.PngError as exc:

@@ -1,6 +1,6 @@
 """The ns3-wifi radio medium: an 802.11 channel simulated by ns-3, carrying the robots' frames.
 
-Theory of operation (docs/ns3-medium.md). Where the veth medium (topology.medium) joins the
+Theory of operation (docs/ns3-medium.md). Where the veth medium (topology.radio.veth) joins the
 robots by links switched on and off, this medium has one shared channel: the program
 build/tb-ns3-wifi (native/ns3wifi/wifi-medium.cc), one process per testbed, running ns-3's
 real-time simulator in the medium namespace. Robot K's `wlan0` is, as with veth, one end of a
@@ -40,9 +40,11 @@ import time
 
 from common import envswitch
 from common.errors import TestbedError, UsageError
-from topology import names, netns, processes, rtnl, state
-from topology.medium import WLAN_INDEX, Medium, port_index
+from common.paths import PROJECT_ROOT
+from topology import names, state
+from topology.kernel import netns, processes, rtnl
 from topology.names import LAG_FILE
+from topology.radio.veth import WLAN_INDEX, VethMedium, port_index
 from topology.spec import Impairment, NetworkSpec, Position
 
 log = logging.getLogger(__name__)
@@ -65,13 +67,9 @@ LAG_CAP_BYTES = 32 << 20
 Pair = tuple[int, int]
 
 
-def repo_root() -> str:
-    return os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
 def binary() -> str:
     """The tb-ns3-wifi program (built by `make setup`)."""
-    return os.environ.get(BINARY_ENV) or os.path.join(repo_root(), "build", "tb-ns3-wifi")
+    return os.environ.get(BINARY_ENV) or os.path.join(PROJECT_ROOT, "build", "tb-ns3-wifi")
 
 
 def unbuilt_reason() -> str | None:
@@ -83,7 +81,7 @@ def unbuilt_reason() -> str | None:
     if os.access(binary(), os.X_OK):
         return None
     try:
-        with open(os.path.join(repo_root(), "build", "tb-ns3-wifi.unbuilt")) as f:
+        with open(os.path.join(PROJECT_ROOT, "build", "tb-ns3-wifi.unbuilt")) as f:
             line = f.readline(500).strip()
     except OSError:
         line = ""
@@ -179,9 +177,9 @@ def _prepare_wlan(k: int) -> None:
     _tx_checksum_off(names.ROBOT_IFACE)
 
 
-class Ns3Medium(Medium):
+class Ns3Medium(VethMedium):
     """The ns3-wifi medium of one testbed: the veth ends in the medium namespace and the
-    ns-3 process that carries frames between them. Offers what Network uses of Medium; the
+    ns-3 process that carries frames between them. Offers what Network uses of VethMedium; the
     bridge and link methods have nothing to do here."""
 
     def __init__(self, spec: NetworkSpec):
@@ -332,8 +330,8 @@ class Ns3Medium(Medium):
         super().close()
 
 
-def medium_for(spec: NetworkSpec) -> Medium:
+def medium_for(spec: NetworkSpec) -> VethMedium:
     """The medium `spec` asks for (not yet opened)."""
     if spec.medium == "ns3-wifi":
         return Ns3Medium(spec)
-    return Medium(spec.name, spec.time_scale)
+    return VethMedium(spec.name, spec.time_scale)

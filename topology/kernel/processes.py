@@ -6,7 +6,7 @@ import signal
 import subprocess
 import time
 
-from topology import netns
+from topology.kernel import netns
 from topology.state import ProcessRecord, is_alive, proc_start_time
 
 
