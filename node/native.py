@@ -11,7 +11,9 @@ import os
 import sys
 from pathlib import Path
 
-TB_ROBOT = Path(__file__).resolve().parent.parent / "build" / "tb-robot"
+from common.paths import PROJECT_ROOT
+
+TB_ROBOT = Path(PROJECT_ROOT) / "build" / "tb-robot"
 BINARY_ENV = "TESTBED_TB_ROBOT"
 UNBUILT = TB_ROBOT.with_name("tb-robot.unbuilt")  # make setup's line where it could not build it
 

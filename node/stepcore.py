@@ -22,9 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from common import envswitch
+from common.paths import PROJECT_ROOT
 from node.rays import _BUCKETS, _FRAC
 
-LIBRARY = Path(__file__).resolve().parent.parent / "build" / "libstepcore.so"
+LIBRARY = Path(PROJECT_ROOT) / "build" / "libstepcore.so"
 VERSION = 1  # sc_version() of the source this wrapper was written for
 
 _P = ctypes.c_void_p

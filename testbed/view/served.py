@@ -21,7 +21,9 @@ import stat
 import struct
 from pathlib import Path
 
-PACKAGED_MAPS = Path(__file__).resolve().parent.parent / "experiments" / "maps"
+from testbed import PACKAGE_DIR
+
+PACKAGED_MAPS = PACKAGE_DIR / "experiments" / "maps"
 # The largest file the view reads or serves: a 50-robot run of 100000 steps writes a
 # positions.csv of about 70 MB; the parsed numbers take about five times as much memory.
 MAX_FILE_BYTES = 256 << 20

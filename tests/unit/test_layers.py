@@ -243,6 +243,6 @@ def test_the_project_root_is_the_checkout():
         p
         for package in ("common", "node", "topology", "aodv", "testbed")
         for p in modules(package)
-        if "dirname(os.path.dirname(" in open(p).read() or ".parents[" in open(p).read()
+        if re.search(r"dirname\(os\.path\.dirname\(|\.parents\[|\.parent\.parent\b", open(p).read())
     ]
     assert roots == [os.path.join(REPO, "common", "paths.py")], f"take common.paths: {roots}"
