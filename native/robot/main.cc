@@ -1,7 +1,8 @@
 // tb-robot: the paper's robot in C++, started by `testbed run` inside the robot's network
-// namespace with the Python robot's command line (node/launch.py's NodeArgs). It carries the
-// default middleware (nanomsg) with flooded maps; for anything else, and for the display,
-// it refuses in one line (exit 2) and the runner starts the Python robot instead.
+// namespace with the Python robot's command line (node/launch.py's NodeArgs). It carries
+// nanomsg (the default middleware) and, where built with libzmq, ZeroMQ, with flooded maps;
+// for anything else, and for the display, it refuses in one line (exit 2) and the runner
+// starts the Python robot instead. `tb-robot --middlewares` prints what this build carries.
 //
 // Exit statuses as the Python robot's: 0 the run ended, 1 cannot start (a socket), 2 bad
 // arguments or a middleware it does not carry, 3 a part failed.
@@ -54,6 +55,10 @@ int main(int argc, char** argv) {
         } catch (const std::exception& e) {  // an input asking for more than the machine has
             return fail(args[0] + ": " + e.what(), 2);
         }
+    if (args.size() == 1 && args[0] == "--middlewares") {
+        printf("%s\n", tb::carried_middlewares().c_str());
+        return 0;
+    }
     tb::Args a;
     std::string err;
     if (!tb::parse_args(args, a, err)) return fail(err, 2);
@@ -62,19 +67,23 @@ int main(int argc, char** argv) {
         return fail("--laser-range " + std::to_string(a.laser_range) +
                         ": longer than a run's lasers (at most 30 m, node.rays.MAX_RANGE_M)",
                     2);
-    if (a.middleware != "nanomsg" || a.maps != "flood")
+    tb::RobotTimings timing;
+    timing.time_scale = a.time_scale;
+    timing.map_period = a.map_period;
+    std::unique_ptr<tb::Messenger> messenger = tb::make_messenger(
+        a.middleware, a.robot,
+        {a.goal_port, timing.goal_send_timeout_ms(), timing.goal_reconnect_min_ms(),
+         timing.goal_reconnect_max_ms()});
+    if (!messenger || a.maps != "flood")
         return fail("--middleware " + a.middleware + " --maps " + a.maps +
-                        ": the C++ robot carries nanomsg with flooded maps only; the Python "
-                        "robot runs this",
+                        ": this C++ robot carries " + tb::carried_middlewares() +
+                        " with flooded maps only; the Python robot runs this",
                     2);
     tb::log_init(a.robot);
     // The process's name as the Python robot's fork server titles it ("r3 robot"): ps, top
     // and the cost benchmark's process kinds read it (exec named it "tb-robot").
     std::string title = "r" + std::to_string(a.robot) + " robot";
     prctl(PR_SET_NAME, title.c_str(), 0, 0, 0);
-    tb::RobotTimings timing;
-    timing.time_scale = a.time_scale;
-    timing.map_period = a.map_period;
     tb::EventLog events;
     if (!events.open(a.events))
         return fail("r" + std::to_string(a.robot) + ": cannot start: " + a.events + ": " +
@@ -82,16 +91,14 @@ int main(int argc, char** argv) {
                     1);
     tb::BodyClient link;
     tb::Flooder flooder(a.robot, a.flood_port, a.iface, a.flood, timing.neighbour_hold_s());
-    tb::Messenger messenger(a.robot, a.goal_port, timing.goal_send_timeout_ms(),
-                            timing.goal_reconnect_min_ms(), timing.goal_reconnect_max_ms());
     std::string bind = a.bind.empty() ? tb::robot_addr(a.robot) : a.bind;
-    if (!link.open(a.body, a.robot, err) || !messenger.open(bind, err) || !flooder.open(err))
+    if (!link.open(a.body, a.robot, err) || !messenger->open(bind, err) || !flooder.open(err))
         return fail("r" + std::to_string(a.robot) + ": cannot start: " + err, 1);
     // The maps and the laser's tables are allocated here: a map or laser too large for the
     // machine is one line and exit 1, as the Python robot's MemoryError would be a crash.
     std::unique_ptr<tb::Robot> made;
     try {
-        made = std::make_unique<tb::Robot>(a, timing, link, flooder, messenger, events);
+        made = std::make_unique<tb::Robot>(a, timing, link, flooder, *messenger, events);
     } catch (const std::bad_alloc&) {
         return fail("r" + std::to_string(a.robot) + ": cannot start: not enough memory for a " +
                         std::to_string(a.rows) + "x" + std::to_string(a.cols) + " map and a " +
@@ -108,7 +115,7 @@ int main(int argc, char** argv) {
              a.robots, a.laser_range, a.maps.c_str());
     robot.run();
     g_robot = nullptr;
-    messenger.close();
+    messenger->close();
     events.close();
     return 0;
 }

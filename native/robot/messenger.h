@@ -1,17 +1,14 @@
-// nanomsg, the default middleware (node/messaging/nanomsg.py), with nng's C API: a PULL
-// socket listening on the robot's address to hear, one PUSH per teammate dialled in the
-// background. A send waits at most the send timeout for a connected peer, then gives up;
-// redials back off from reconnect min to max. The same options as the Python robot's.
+// The goal messages' middleware (node/messaging/): one listening socket to hear, one socket per
+// teammate to send on, the same contract as the Python robot's messengers (docs/
+// robot-contract.md). A send waits at most the send timeout for a connected peer, then gives
+// up; reconnects back off from reconnect min to max; the counters are MessengerStats.
+// Two implementations: nanomsg's PUSH/PULL with nng (nng_messenger.cc, always) and ZeroMQ's
+// PUSH/PULL with libzmq (zmq_messenger.cc, where make setup found libzmq3-dev).
 #pragma once
 
-#include <map>
-#include <mutex>
+#include <memory>
 #include <string>
 #include <vector>
-
-#include <nng/nng.h>
-#include <nng/protocol/pipeline0/pull.h>
-#include <nng/protocol/pipeline0/push.h>
 
 #include "stats.h"
 
@@ -19,28 +16,29 @@ namespace tb {
 
 class Messenger {
 public:
-    Messenger(int me, int port, int send_timeout_ms, int reconnect_min_ms, int reconnect_max_ms);
-    ~Messenger();
-    Messenger(const Messenger&) = delete;
-    Messenger& operator=(const Messenger&) = delete;
-    bool open(const std::string& bind_addr, std::string& err);
-    int fileno() const { return recv_fd_; }
-    void connect(int j);
-    bool send(int j, const std::string& data);
-    std::vector<std::string> receive();
-    void close();
+    virtual ~Messenger() = default;
+    // The run's --middleware value this messenger carries ("nanomsg", "zeromq").
+    virtual const char* name() const = 0;
+    virtual bool open(const std::string& bind_addr, std::string& err) = 0;
+    // A descriptor that is readable when receive() may have something (poll it).
+    virtual int fileno() const = 0;
+    virtual void connect(int j) = 0;
+    virtual bool send(int j, const std::string& data) = 0;
+    virtual std::vector<std::string> receive() = 0;
+    virtual void close() = 0;
     MessengerStats stats;
-
-private:
-    nng_socket* push_socket(int j);  // lock held
-
-    int me_, port_, send_timeout_ms_, reconnect_min_, reconnect_max_;
-    nng_socket pull_ = NNG_SOCKET_INITIALIZER;
-    bool pull_open_ = false;
-    int recv_fd_ = -1;
-    std::mutex lock_;  // guards push_ (the planner and message processing both send)
-    std::map<int, nng_socket> push_;
 };
+
+struct MessengerTimings {
+    int port, send_timeout_ms, reconnect_min_ms, reconnect_max_ms;
+};
+
+// The messenger for --middleware `middleware`, or nullptr where this build does not carry it.
+std::unique_ptr<Messenger> make_messenger(const std::string& middleware, int me,
+                                          const MessengerTimings& t);
+
+// The middlewares this build carries, space-separated ("nanomsg zeromq").
+std::string carried_middlewares();
 
 // Robot k's address (topology.names.robot_addr): 10.0.hi.lo+1.
 std::string robot_addr(int k);

@@ -154,7 +154,7 @@ void Robot::stop() {
     o.raw("max_rss_mb", rss < 0 ? "null" : py_float(rss));
     o.raw("busy_s", busy_.json_real(3)).raw("thread_cpu_s", tcpu.text());
     o.raw("priority", prio.text()).raw("lateness", late.text()).raw("latency_ms", lat.text());
-    o.boolean("finished", finished).str("middleware", "nanomsg");
+    o.boolean("finished", finished).str("middleware", goals_.name());
     o.raw("messenger", goals_.stats.json()).raw("arrivals", arrivals_.json());
     o.str("robot_impl", "cpp");
     events_.write("summary", step, o);

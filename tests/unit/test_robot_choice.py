@@ -3,6 +3,7 @@ robot's command line against the Python robot's (node.launch.NodeArgs): the same
 accepted by both, bad arguments refused by both in one line with exit status 2."""
 
 import dataclasses
+import os
 import subprocess
 
 import pytest
@@ -14,32 +15,38 @@ from testbed import cli
 from testbed.run import robotchoice
 from testbed.run.config import config_from_args
 
+NNG = ("nanomsg",)
+BOTH = ("nanomsg", "zeromq")
+
 
 def test_auto_takes_the_cpp_robot_where_built_and_it_carries_the_run():
-    assert robotchoice.choose("auto", "nanomsg", "flood", built=True) == (
+    assert robotchoice.choose("auto", "nanomsg", "flood", built=True, carries=NNG) == (
         "cpp", "auto: built and carries nanomsg")  # fmt: skip
+    assert robotchoice.choose("auto", "zeromq", "flood", built=True, carries=BOTH) == (
+        "cpp", "auto: built and carries zeromq")  # fmt: skip
 
 
 @pytest.mark.parametrize(
     "middleware,maps,built,why",
     [("nanomsg", "flood", False, "not built"), ("zenoh", "flood", True, "--middleware zenoh"),
-     ("zenoh", "pubsub", True, "--middleware zenoh"), ("nanomsg", "pubsub", True, "--maps")],
+     ("zenoh", "pubsub", True, "--middleware zenoh"), ("nanomsg", "pubsub", True, "--maps"),
+     ("zeromq", "flood", True, "carries nanomsg, not --middleware zeromq")],
 )  # fmt: skip
 def test_auto_falls_back_to_python_and_says_why(middleware, maps, built, why):
-    impl, reason = robotchoice.choose("auto", middleware, maps, built=built)
+    impl, reason = robotchoice.choose("auto", middleware, maps, built=built, carries=NNG)
     assert impl == "python" and reason.startswith("auto: ") and why in reason
 
 
 def test_python_on_request_and_cpp_refused_where_it_cannot_run():
-    assert robotchoice.choose("python", "nanomsg", "flood", built=True)[0] == "python"
-    assert robotchoice.choose("cpp", "nanomsg", "flood", built=True)[0] == "cpp"
-    with pytest.raises(ValueError, match="carries nanomsg"):
-        robotchoice.choose("cpp", "dds", "flood", built=True)
+    assert robotchoice.choose("python", "nanomsg", "flood", built=True, carries=BOTH)[0] == "python"
+    assert robotchoice.choose("cpp", "nanomsg", "flood", built=True, carries=BOTH)[0] == "cpp"
+    with pytest.raises(ValueError, match="carries nanomsg and zeromq, not --middleware dds"):
+        robotchoice.choose("cpp", "dds", "flood", built=True, carries=BOTH)
 
 
 def test_a_run_asking_for_cpp_with_another_middleware_is_refused_before_it_starts():
     argv = ["run", "--robots", "2", "--comm-range", "5", "--laser-range", "2", "--middleware",
-            "zeromq", "--robot", "cpp", "--out", "/x"]  # fmt: skip
+            "zenoh", "--robot", "cpp", "--out", "/x"]  # fmt: skip
     with pytest.raises(UsageError, match="--robot cpp"):
         config_from_args(cli.build_parser(["run"]).parse_args(argv))
 
@@ -91,6 +98,17 @@ def test_bad_arguments_are_refused_by_both_in_one_line(argv):
 def test_the_cpp_robot_refuses_what_only_python_runs(extra):
     p = tb_robot(["--robot", "r1", "--robots", "2", "--body", "x", *extra])
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "python" in p.stderr.lower()
+
+
+@needs_binary
+def test_the_built_robot_says_what_it_carries():
+    """nanomsg always; ZeroMQ exactly where libzmq3-dev was there when make setup built it."""
+    p = tb_robot(["--middlewares"])
+    assert p.returncode == 0 and p.stderr == ""
+    carries = p.stdout.split()
+    zmq_there = os.path.exists("/usr/include/zmq.h")
+    assert carries == (["nanomsg", "zeromq"] if zmq_there else ["nanomsg"])
+    assert robotchoice.carried_middlewares() == tuple(carries)
 
 
 def test_robot_choice_is_recorded_in_the_result_type():
