@@ -1,6 +1,7 @@
 """A testbed's network: robot namespaces on the radio medium, captures and routing daemons.
 
-Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kernel objects:
+Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kernel objects
+(`up`):
 
 1. claim the name: the state file is created exclusively *before* anything else, so a
    crash at any later point leaves a record that `testbed clean` can act on;
@@ -10,55 +11,50 @@ Theory of operation. `Network(spec)` turns a NetworkSpec (plain data) into kerne
    the network timers of its namespace divided by the time scale (topology.kernel.nettimers;
    `Network.timers` is the record of what was dilated, to what, and what could not be);
 4. the links the range model wants for the initial positions, with their impairments;
-5. tcpdump per robot if asked, then the routing daemon per robot (topology.routing); a
-   daemon written in Python is forked from a fork server started at step 1, whose imports
-   run while the kernel objects are made.
+5. tcpdump per robot if asked, then the routing daemon per robot (topology.bringup,
+   topology.routing); a daemon written in Python is forked from a fork server started at
+   step 1, whose imports run while the kernel objects are made.
 
-Teardown (`destroy`) is the same function for a clean exit, an exception during bring-up,
-`testbed net down` and `testbed clean`: stop the recorded processes (SIGTERM, then SIGKILL),
-then any other process still inside our namespaces, then remove the namespaces (which takes
-every interface with them) and the state. It works from names and the state file alone, so
-it needs nothing from the process that built the testbed.
+Teardown (`down`; topology.teardown.destroy) is the same function for a clean exit, an
+exception during bring-up, `testbed net down` and `testbed clean`, and works from names and
+the state file alone.
 
-Moving robots recomputes the wanted links and applies only the difference. A robot whose
-radio is taken out of range on purpose (`set_isolated`, a run's `--isolate`) has no link in
-the wanted set, whatever the positions say, until it is let back.
+While up, moving robots recomputes the wanted links and applies only the difference
+(topology.linkchanges says what changes; this module applies it to the medium and the
+oracle's routes, and keeps the state file's positions and impairments). A robot whose radio
+is taken out of range on purpose (`set_isolated`, a run's `--isolate`) has no link in the
+wanted set, whatever the positions say, until it is let back.
 """
 
 import contextlib
 import logging
 import os
-import shutil
 import subprocess
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 
-from common.errors import TestbedError, UsageError
-from common.jsonfile import write_json_atomic
-from topology import names, routing, state
-from topology.kernel import capture, netns, processes
-from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
+from common.errors import UsageError
+from topology import bringup, names, state
+from topology.bringup import preflight as preflight
+from topology.kernel import netns, processes
+from topology.kernel.forkserver import ForkServer
 from topology.kernel.impair import MissingKernelFeature
+from topology.linkchanges import Links, Pair
 from topology.oracle import OracleRouter
-from topology.radio import ranges
-from topology.radio.los import MapError, Walls
+from topology.radio.los import Walls
 from topology.radio.ns3wifi import Ns3Medium, medium_for
 from topology.radio.veth import WLAN_INDEX
 from topology.spec import (
-    LOS_MODELS,
-    NO_IMPAIRMENT,
     VETH,
     Impairment,
     NetworkSpec,
     Position,
     check_position,
 )
+from topology.teardown import destroy
 
 log = logging.getLogger(__name__)
-
-Pair = tuple[int, int]
-CAPTURE_DRAIN_S = 0.2  # lets tcpdump read what is still queued for it before it stops
 
 
 class Network:
@@ -69,24 +65,14 @@ class Network:
         self.persistent = persistent
         self.positions: list[Position] = list(spec.positions)
         self.medium = medium_for(spec)  # veth links, or ns-3's 802.11 channel
-        self.current: dict[Pair, Impairment] = {}
-        self.link_impairments: dict[Pair, Impairment] = {}  # set by hand, per link
         self.state: state.TestbedState | None = None
         self.children: dict[int, subprocess.Popen] = {}
         self._owner = False
         self._routing_forks: ForkServer | None = None
         self.oracle: OracleRouter | None = None  # routing "oracle": routes from here
-        self.walls: Walls | None = None  # the los range models' walls, from spec.map_png
-        self._range_cache: dict[Pair, Impairment] | None = None  # the last range-model links
         self._deferred: list[state.ProcessRecord] | None = None  # see _recording
         self._state_mtime: int | None = None  # of the state file we last read or wrote
-        self._adj: dict[int, set[Pair]] | None = None  # robot -> its links in current
-        self.isolated: frozenset[int] = frozenset()  # robots out of everyone's range
-        if spec.map_png and spec.range_model in LOS_MODELS:
-            try:
-                self.walls = Walls.from_png(spec.map_png, spec.map_cell)
-            except MapError as exc:
-                raise UsageError(str(exc)) from None
+        self.linkset = Links(spec, Links.walls_of(spec))  # the links up now, what changes them
 
     # -- names ------------------------------------------------------------------------------
 
@@ -112,6 +98,39 @@ class Network:
         if not 1 <= k <= self.spec.robots:
             raise UsageError(f"testbed {self.name} has robots r1..r{self.spec.robots}, not r{k}")
 
+    # -- the link set (topology.linkchanges) --------------------------------------------------
+
+    @property
+    def current(self) -> dict[Pair, Impairment]:
+        """The links up now, with their impairments."""
+        return self.linkset.current
+
+    @current.setter
+    def current(self, links: dict[Pair, Impairment]) -> None:
+        self.linkset.current = links
+
+    @property
+    def link_impairments(self) -> dict[Pair, Impairment]:
+        """The impairments set by hand, per link."""
+        return self.linkset.by_hand
+
+    @link_impairments.setter
+    def link_impairments(self, by_hand: dict[Pair, Impairment]) -> None:
+        self.linkset.by_hand = by_hand
+
+    @property
+    def isolated(self) -> frozenset[int]:
+        """The robots out of everyone's radio range (set_isolated)."""
+        return self.linkset.isolated
+
+    @isolated.setter
+    def isolated(self, robots: frozenset[int]) -> None:
+        self.linkset.isolated = robots
+
+    @property
+    def walls(self) -> Walls | None:
+        return self.linkset.walls
+
     # -- bring-up ---------------------------------------------------------------------------
 
     def __enter__(self) -> "Network":
@@ -122,7 +141,7 @@ class Network:
         self.down()
 
     def up(self) -> None:
-        preflight(self.spec)
+        bringup.preflight(self.spec)
         self.state = state.TestbedState.new(self.spec)
         try:
             state.create(self.name, self.state)
@@ -142,14 +161,8 @@ class Network:
         t0 = time.perf_counter()
         state.make_run_dir(self.name)
         robots = list(self.spec.robot_ids())
-        forkable = routing.FORKABLE.get(self.spec.routing)
-        if forkable is not None:
-            self._routing_forks = ForkServer(
-                list(forkable.preload), env=python_env(),
-                warm=[[m, f, list(a)] for m, f, a in forkable.warm],
-                label=f"{self.name} {self.spec.routing}",
-            )  # fmt: skip
-        self._create_namespace(names.medium_ns(self.name))
+        self._routing_forks = bringup.routing_fork_server(self.spec)
+        bringup.create_namespace(names.medium_ns(self.name))
         self.medium.open()
         self.medium.setup()
         if not self.spec.impairment.is_none:
@@ -158,15 +171,18 @@ class Network:
                 self.medium.impairer.check(self.spec.impairment)
             except MissingKernelFeature as exc:
                 raise UsageError(str(exc)) from None
+
         # The kernel brings new veths' carriers up in the background (linkwatch): links first,
         # then the robots' interfaces meanwhile; _apply_positions waits for the links before
         # switching them on. The robots' namespaces are made in a thread meanwhile: both are
         # kernel work (the thread runs while the other waits in a netlink send), and on two
         # cores this saves ~a third of the namespaces' cost (~1 ms a robot).
+        def robot_namespaces() -> None:
+            for k in robots:
+                bringup.create_namespace(names.robot_ns(self.name, k))
+
         with ThreadPoolExecutor(1) as pool:
-            made = pool.submit(
-                lambda: [self._create_namespace(names.robot_ns(self.name, k)) for k in robots]
-            )
+            made = pool.submit(robot_namespaces)
             self.medium.add_bridges(robots)
             self.medium.create_pairs(sorted(self.wanted()))
             made.result()
@@ -180,80 +196,12 @@ class Network:
             self.oracle.update(self.current)
         with self._recording():
             if self.spec.capture_dir:
-                self._start_captures()
-            self._start_routing()
+                bringup.start_captures(self)
+            bringup.start_routing(self, self._routing_forks)
         log.info(
             "%s: %d robots, %d links up in %.0f ms",
             self.name, self.spec.robots, len(self.current), 1000 * (time.perf_counter() - t0),
         )  # fmt: skip
-
-    @staticmethod
-    def _create_namespace(ns: str) -> None:
-        try:
-            netns.create(ns)
-        except FileExistsError:
-            raise UsageError(f"namespace {ns} already exists (try `testbed clean`)") from None
-
-    def _start_captures(self) -> None:
-        cdir = self.spec.capture_dir
-        assert cdir is not None  # called only with one
-        os.makedirs(cdir, exist_ok=True)
-        # What the captures are of (the routing protocol, for `testbed metrics`), next to the
-        # daemons' logs that teardown keeps (_keep_logs).
-        os.makedirs(os.path.join(cdir, "daemons"), exist_ok=True)
-        about = state.spec_to_dict(self.spec)
-        if self.timers is not None:
-            about["network_timers"] = self.timers.to_dict()
-        write_json_atomic(os.path.join(cdir, "daemons", "network.json"), about)
-        started = []
-        for k in self.spec.robot_ids():
-            logp = os.path.join(self.state_dir, f"r{k}.tcpdump.log")
-            with open(logp, "w") as logf:
-                proc = self.spawn(k, capture.tcpdump_argv(cdir, k), role="tcpdump",
-                                  stdout=subprocess.DEVNULL, stderr=logf)  # fmt: skip
-            started.append((logp, proc))
-        for logp, proc in started:
-            try:
-                capture.wait_ready(logp, proc)
-            except RuntimeError as exc:
-                raise TestbedError(f"packet capture: {exc}") from None
-
-    def _start_routing(self) -> None:
-        started = []
-        forkable = routing.FORKABLE.get(self.spec.routing)
-        for k in self.spec.robot_ids():
-            argv = routing.argv_for(self.spec, k, self.state_dir)
-            if argv is None:
-                continue
-            logp = routing.log_file(self.spec.routing, k, self.state_dir)
-            proc: Forked | subprocess.Popen
-            if forkable is not None and self._routing_forks is not None:  # started iff forkable
-                open(logp, "w").close()  # the child appends
-                args = forkable.args(k, self.state_dir, self.spec)
-                try:
-                    proc = self._routing_forks.spawn(
-                        self.robot_ns(k), forkable.module, args, logp,
-                        title=f"r{k} {self.spec.routing}",
-                    )  # fmt: skip
-                except ForkServerError as exc:
-                    raise TestbedError(f"{self.spec.routing} daemon of r{k}: {exc}") from None
-                self.adopt(k, proc, self.spec.routing)
-            else:
-                with open(logp, "w") as logf:
-                    proc = self.spawn(k, argv, role=self.spec.routing, stdout=logf,
-                                      stderr=subprocess.STDOUT)  # fmt: skip
-            started.append((k, proc, logp))
-        # Return only once every daemon can route, so the first packet is not lost to a race.
-        deadline = time.monotonic() + routing.READY_TIMEOUT_S
-        for k, proc, logp in started:
-            ready = routing.ready_file(self.spec.routing, k, self.state_dir)
-            while ready and not os.path.exists(ready):
-                if proc.poll() is not None or time.monotonic() > deadline:
-                    with open(logp) as f:
-                        last = (f.read().strip().splitlines() or ["(no output)"])[-1]
-                    what = "exited" if proc.poll() is not None else "did not start in time"
-                    raise TestbedError(f"{self.spec.routing} daemon of r{k} {what}: {last}")
-                time.sleep(0.01)
 
     # -- processes --------------------------------------------------------------------------
 
@@ -325,36 +273,10 @@ class Network:
 
     # -- positions and links ----------------------------------------------------------------
 
-    def _range_links(self, moved: set[int] | None = None) -> dict[Pair, Impairment]:
-        """The range model's links for the current positions. With the distance models and
-        `moved` given, only the links of the robots that moved are computed again (the rest
-        come from the last call): what keeps a feed of many moves cheap at 1000 robots."""
-        cached = self._range_cache
-        if moved is not None and cached is not None and self.spec.range_model in ("disc", "lossy"):
-            links = {p: v for p, v in cached.items() if p[0] not in moved and p[1] not in moved}
-            links.update(ranges.links_of(self.positions, moved, self.spec.comm_range,
-                                         self.spec.range_model))  # fmt: skip
-        else:
-            links = ranges.wanted_links(
-                self.positions, self.spec.comm_range, self.spec.range_model,
-                self.walls, self.spec.wall_loss_pct,
-            )  # fmt: skip
-        self._range_cache = links
-        return links
-
     def wanted(self, moved: set[int] | None = None) -> dict[Pair, Impairment]:
         """The links (with their impairments) the positions call for; `moved`: the robots
         that moved since the last call, if known."""
-        links = self._range_links(moved)
-        if self.isolated:
-            links = {p: v for p, v in links.items() if not self.isolated.intersection(p)}
-        base = self.spec.impairment
-        if base.is_none and not self.link_impairments:
-            return links  # the common case, once per world step: nothing to combine
-        return {
-            p: base.combined(imp).combined(self.link_impairments.get(p, NO_IMPAIRMENT))
-            for p, imp in links.items()
-        }
+        return self.linkset.wanted(self.positions, moved)
 
     def impair(self, i: int, j: int, imp: Impairment) -> None:
         """Impair link i-j (both directions) on top of the testbed-wide impairment and the
@@ -391,57 +313,18 @@ class Network:
     def _apply_positions(self, moved: set[int] | None = None) -> tuple[list[Pair], list[Pair]]:
         if isinstance(self.medium, Ns3Medium):  # spec.medium == "ns3-wifi"
             self.medium.set_positions(self.positions)  # the channel decides who hears whom
-        if moved is not None and self.spec.range_model in ("disc", "lossy") and not self.isolated:
-            add, remove, change, wanted = self._diff_moved(moved)
-        else:
-            wanted = self.wanted()
-            add, remove, change = ranges.diff(self.current, wanted)
-            self._adj = None
+        incremental = self.linkset.incremental(moved)
+        add, remove, change, wanted = self.linkset.changes(self.positions, moved)
         # Impairments before enabling, so no frame crosses a link without its loss and delay.
         self.medium.create_pairs(add)
         for p in add + change:
             self.medium.set_link_impairment(*p, wanted[p])
         self.medium.set_links(add, remove)
-        if moved is None or self.spec.range_model not in ("disc", "lossy") or self.isolated:
+        if not incremental:
             self.current = wanted
         if self.oracle is not None and (add or remove):
             self.oracle.update(self.current)  # routes in place before the move returns
         return add, remove
-
-    def _diff_moved(
-        self, moved: set[int]
-    ) -> tuple[list[Pair], list[Pair], list[Pair], dict[Pair, Impairment]]:
-        """What a move of `moved` changes, in O(links of the moved robots), with self.current
-        updated in place: only links of a robot that moved can change under the distance
-        models. A feed of single moves at 1000 robots would otherwise pay for every link
-        (diffing 2000 links: ~4 ms) per update. Returns (add, remove, change, new links)."""
-        if self._adj is None:
-            self._adj = {}
-            for p in self.current:
-                self._adj.setdefault(p[0], set()).add(p)
-                self._adj.setdefault(p[1], set()).add(p)
-        self._range_cache = None  # wanted() recomputes in full from now on
-        new = ranges.links_of(self.positions, moved, self.spec.comm_range, self.spec.range_model)
-        base = self.spec.impairment
-        if not base.is_none or self.link_impairments:
-            new = {
-                p: base.combined(imp).combined(self.link_impairments.get(p, NO_IMPAIRMENT))
-                for p, imp in new.items()
-            }
-        old = set().union(*(self._adj.get(k, ()) for k in moved))
-        add = sorted(set(new) - old)
-        remove = sorted(old - set(new))
-        change = sorted(p for p in old & set(new) if new[p] != self.current[p])
-        for p in remove:
-            del self.current[p]
-            self._adj[p[0]].discard(p)
-            self._adj[p[1]].discard(p)
-        for p in add:
-            self._adj.setdefault(p[0], set()).add(p)
-            self._adj.setdefault(p[1], set()).add(p)
-        for p in add + change:
-            self.current[p] = new[p]
-        return add, remove, change, new
 
     def move(self, k: int, xy: Position) -> tuple[list[Pair], list[Pair]]:
         """Move robot k; links follow before this returns. Returns (added, removed)."""
@@ -495,12 +378,8 @@ class Network:
             return
         self._state_mtime = mtime
         self.positions = [(x, y) for x, y in st.positions]
-        self.link_impairments = {
-            _pair(key): Impairment(**fields) for key, fields in st.link_impairments.items()
-        }
-        self._range_cache = None
-        self.current = self.wanted()
-        self._adj = None
+        by_hand = {_pair(key): Impairment(**fields) for key, fields in st.link_impairments.items()}
+        self.linkset.retake(self.positions, by_hand)
 
     def links(self) -> set[Pair]:
         """The links up now: pairs (i, j), i < j."""
@@ -577,60 +456,6 @@ class Network:
         self._owner = False
 
 
-# The Debian/Ubuntu package of each tool preflight asks for.
-TOOL_PACKAGES = {"ip": "iproute2", "unshare": "util-linux"}
-
-
-def preflight(spec: NetworkSpec) -> None:
-    """What can be checked before touching the kernel: privileges and tools."""
-    if os.geteuid() != 0:
-        raise UsageError("network namespaces need root: run this under sudo")
-    missing = [t for t in ("ip",) if shutil.which(t) is None]
-    if spec.capture_dir and shutil.which("tcpdump") is None:
-        missing.append("tcpdump")
-    missing += routing.missing_tools(spec.routing)
-    if missing:
-        pkgs = ", ".join(dict.fromkeys(TOOL_PACKAGES.get(t, t) for t in missing))
-        raise UsageError(
-            f"missing tool(s): {', '.join(missing)} (package(s) {pkgs}: `sudo make setup` "
-            "installs those the distribution has)"
-        )
-
-
-def our_namespaces(name: str) -> list[str]:
-    return [ns for ns in netns.list_names() if (names.parse_ns(ns) or ("",))[0] == name]
-
-
-def destroy(name: str, children: dict[int, subprocess.Popen] | None = None) -> None:
-    """Remove everything testbed `name` made: processes, namespaces, run dir, state. A state
-    file another user could have written is ignored (one warning): none of the processes it
-    names is signalled, only those the kernel shows inside the testbed's namespaces."""
-    try:
-        st = state.read(name)
-    except state.UntrustedState as exc:
-        log.warning("%s; signalling only the processes inside tb-%s-* namespaces", exc, name)
-        st = None
-    namespaces = our_namespaces(name)
-    if st is not None:
-        # Captures last: what the daemons send as they stop belongs in the pcaps.
-        last = [p for p in st.processes if p.role == "tcpdump"]
-        processes.stop([p for p in st.processes if p.role != "tcpdump"], children)
-        if last:
-            time.sleep(CAPTURE_DRAIN_S)
-            processes.stop(last, children)
-    stray = [pid for pid in processes.pids_in_namespaces(namespaces) if pid != os.getpid()]
-    if stray:
-        processes.stop(
-            [state.ProcessRecord(pid, state.proc_start_time(pid), 0, "stray") for pid in stray],
-            children,
-        )
-    for ns in namespaces:
-        netns.remove(ns)
-    _keep_logs(name, st)
-    shutil.rmtree(state.run_dir(name), ignore_errors=True)
-    state.remove(name)
-
-
 def _mtime(name: str) -> int | None:
     try:
         return os.stat(state.state_path(name)).st_mtime_ns
@@ -642,17 +467,3 @@ def _pair(key: str) -> Pair:
     """A link of the state file's `link_impairments` ("i-j") as a pair."""
     i, j = key.split("-")
     return int(i), int(j)
-
-
-def _keep_logs(name: str, st: state.TestbedState | None) -> None:
-    """Nothing is lost: when the testbed captured packets, the daemons' logs and statistics
-    (written to its run dir as they stop) go next to the pcaps, in CAPTURE_DIR/daemons/."""
-    capture_dir = st.spec.get("capture_dir") if st else None
-    src = state.run_dir(name)
-    if not capture_dir or not os.path.isdir(src):
-        return
-    dst = os.path.join(capture_dir, "daemons")
-    os.makedirs(dst, exist_ok=True)
-    for entry in os.listdir(src):
-        if entry.endswith((".log", ".json")):
-            shutil.copy2(os.path.join(src, entry), os.path.join(dst, entry))

@@ -12,7 +12,7 @@ state dir is 0755, each state file 0644, each lock file 0600 and each run dir 07
 the control sockets: the feed, the body link, the ns-3 medium; others cannot even reach
 them). A state file someone else could have written (not ours, or writable by group or
 others, or a symlink) is not trusted: `read` raises UntrustedState, and teardown then
-signals none of the processes it names (topology.network.destroy).
+signals none of the processes it names (topology.teardown.destroy).
 
 Ownership: a testbed built inside a `with Network(...)` block is owned by that process; when
 the owner dies without tearing down, the testbed is abandoned and `testbed clean` removes it.

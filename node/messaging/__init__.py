@@ -5,7 +5,7 @@ keeps the messenger contract (node.messaging.contract; docs/middleware.md says w
 does here). The registry below is the one list of the middlewares: for each, that module,
 its class, the Python package it needs, how its messages are framed on the wire (what the
 capture analysis parses) and, for those that publish maps (`--maps pubsub`), the module of its
-map topic. MIDDLEWARES, node.messaging.maps' tables and testbed.analysis.pcapmetrics' are made
+map topic. MIDDLEWARES, node.messaging.maps' tables and testbed.analysis.mwtraffic's are made
 from it. `open_messenger(name, **kwargs)` imports the module only when
 it is asked for, so a robot loads its own middleware and nothing else, and a package that
 is not installed is a `MiddlewareUnavailable` whose message names the package to install.

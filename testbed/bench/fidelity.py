@@ -2,7 +2,7 @@
 cost a robot per step, against the shortest step the shipped sweep files use.
 
 Per robot-step the guard adds, on motion control's thread: one check that the timer and the
-planner finished the previous step's work (node.robot `_keep_step_order`: a lock and two
+planner finished the previous step's work (node.motion `_keep_step_order`: a lock and two
 comparisons, when nothing is owed, which is almost always) and one or two `Lateness.add`
 (the frame's answer lag; a plan's age when one is applied); the timer thread adds one more
 (the map or plan timer) and a notify. Timed here on a real Robot object, REPEATS rounds of
@@ -47,7 +47,7 @@ def run() -> None:
     lateness = Lateness(MS_BOUNDS)
     add_us = _per_call_us(lambda: lateness.add(3.2))
 
-    def timer_mark():  # what the timer thread does after each step (node.robot._timer)
+    def timer_mark():  # what the timer thread does after each step (node.timerpart's _timer)
         with robot.lock:
             robot.timer_seen = 10
             robot.caught_up.notify_all()

@@ -23,7 +23,7 @@ quiet machine); one late plan already moves it (seed 2: 1 of 99 late and 2 timer
 steps for 1989), because exploration is chaotic: a path that differs once differs after.
 All the numbers are in docs/architecture.md ("Time dilation and fidelity").
 
-Since then the robot keeps that order itself (node.robot `_keep_step_order`): motion control
+Since then the robot keeps that order itself (node.motion `_keep_step_order`): motion control
 holds a frame until the previous step's plan and timer are done, for at most three quarters
 of a step, so a plan comes late only when the host cannot compute it within that: a lone
 robot now takes exactly the same steps at K = 5 and K = 30 (seeds 1-3), and at K = 60 one

@@ -34,7 +34,8 @@ every limit set, and a run always starts when none is in flight. The queue is se
 first-fit: the first waiting run that fits starts. What happens when a run misses step
 deadlines (the concurrency backs off, a team size's time scale goes down and up again, a run
 is redone) is decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only
-applies them.
+applies them. The limits, the time scales and which run fits next are the sweep's schedule
+(testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -68,6 +69,7 @@ from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 from testbed.sweep.progress import Progress
 from testbed.sweep.rundir import is_done, plan_dict, run_argv, run_dir
+from testbed.sweep.schedule import Schedule
 from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.state import is_alive, proc_start_time
 
@@ -161,60 +163,75 @@ class Sweep:
         self.spec = spec
         self.runs = runs
         self.out = out
-        self.jobs = jobs
-        self.jobs_requested = jobs
-        self.load_limit = getattr(spec, "load_limit", None)
-        self.load_limit_requested = self.load_limit
-        self.cpu_limit = getattr(spec, "cpu_limit", None)
-        self.cpu_limit_requested = self.cpu_limit
-        # What the sweep's finished runs measured, for estimating the cores of the next ones,
-        # and the cores per unit of load that makes per team size (the queue is scanned every
-        # tenth of a second, each median only once per measurement).
-        self.measured: list[sweepcores.Measured] = []
-        self._rates: dict[int, float] = {}
-        # Per team size, applied to its runs' time scales (see _finish): a large team that
-        # runs short of CPU says nothing about a lone robot, which is bound by latency.
-        self.scale_factors: dict[int, float] = {}
-        self.clean_runs: dict[int, int] = {}
-        # --calibrate: per team size, the factor its trials found (also its ceiling), and
-        # the trials themselves [(factor, miss outside stalls), ...] for sweep.json.
-        self.calibrate = calibrate
+        # The concurrency, limits and time scales, and which run fits next.
+        self.schedule = Schedule(
+            jobs, getattr(spec, "load_limit", None), getattr(spec, "cpu_limit", None)
+        )
+        self.calibrate = calibrate  # --calibrate: find each team size's time scale first
         # --view: the run in progress serves the live page (one run at a time holds it).
         self.view = view
         self.view_owner: str | None = None
-        self.ceilings: dict[int, float] = {}
-        self.calibration: dict[int, list[tuple[float, float, bool]]] = {}
         self.netem = netem
         self.sweep_file = sweep_file
         self.command = command or run_command()
         self.forker: RunForker | None = None  # started by run() when there is no command
         self.status: dict[str, dict] = {r.run_id: {"status": "pending"} for r in runs}
-        self.backoffs: list[dict] = []
         self.stop_signal: int | None = None
         self.progress = Progress(len(runs), progress_stream)
+
+    # -- the schedule's (testbed.sweep.schedule)
+
+    @property
+    def jobs(self) -> int:
+        return self.schedule.jobs
+
+    @property
+    def measured(self) -> list[sweepcores.Measured]:
+        return self.schedule.measured
+
+    @measured.setter
+    def measured(self, measured: list[sweepcores.Measured]) -> None:
+        self.schedule.measured = measured
+
+    @property
+    def scale_factors(self) -> dict[int, float]:
+        return self.schedule.scale_factors
+
+    @scale_factors.setter
+    def scale_factors(self, factors: dict[int, float]) -> None:
+        self.schedule.scale_factors = factors
+
+    def _estimate(self, run: PlannedRun) -> float:
+        """The cores `run` is expected to keep busy (Schedule.estimate)."""
+        return self.schedule.estimate(run)
+
+    def _next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
+        """The first waiting run that fits, taken off `queue` (Schedule.next_fitting)."""
+        return self.schedule.next_fitting(queue, children)
 
     # -- bookkeeping
 
     def _write_state(self) -> None:
+        sch = self.schedule
         data = {
             "format": 1,
             "sweep_file": self.sweep_file,
             "spec": self.spec.to_dict(),
-            "jobs_requested": self.jobs_requested,
-            "jobs": self.jobs,
-            "load_limit_requested": self.load_limit_requested,
-            "load_limit": self.load_limit,
-            "cpu_limit_requested": self.cpu_limit_requested,
-            "cpu_limit": self.cpu_limit,
+            "jobs_requested": sch.jobs_requested,
+            "jobs": sch.jobs,
+            "load_limit_requested": sch.load_limit_requested,
+            "load_limit": sch.load_limit,
+            "cpu_limit_requested": sch.cpu_limit_requested,
+            "cpu_limit": sch.cpu_limit,
             "time_scale_factor": {
-                str(n): round(f, 3) for n, f in sorted(self.scale_factors.items())
+                str(n): round(f, 3) for n, f in sorted(sch.scale_factors.items())
             },
             "netem": self.netem,
             "calibration": {
-                str(n): {"factor": self.ceilings.get(n), "trials": trials}
-                for n, trials in sorted(self.calibration.items())
+                str(n): {"factor": sch.ceilings.get(n), "trials": trials}
+                for n, trials in sorted(sch.calibration.items())
             },
-            "backoffs": self.backoffs,
+            "backoffs": sch.backoffs,
             "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "runs": [
                 {
@@ -234,8 +251,7 @@ class Sweep:
 
     def _show(self, queue, event=None) -> None:
         done, running, failed = self._counts()
-        limited = self.load_limit is not None or self.cpu_limit is not None
-        jobs = self.progress.parallelism() if limited else self.jobs
+        jobs = self.progress.parallelism() if self.schedule.limited else self.jobs
         eta = self.progress.eta(list(queue), running, jobs)
         self.progress.update(done, running, failed, eta, event)
 
@@ -275,38 +291,18 @@ class Sweep:
             )
         return proc, log_file
 
-    def _scaled(self, run: PlannedRun) -> RunConfig:
-        """`run`'s config at the time scale it gets now: the file's times its team size's
-        factor (testbed.sweep.policy)."""
-        config = run.config
-        factor = self._factor(config.robots)
-        if factor != 1.0:
-            config = replace(config, time_scale=round(config.time_scale * factor, 3))
-        return config
-
-    def _estimate(self, run: PlannedRun) -> float:
-        """The cores `run` is expected to keep busy, at the time scale it gets now
-        (testbed.sweep.cores.estimate)."""
-        config = self._scaled(run)
-        n = config.robots
-        if n not in self._rates:
-            self._rates[n] = sweepcores.cores_per_load(n, self.measured)
-        return self._rates[n] * sweepcores.load(n, config.time_scale)
-
     def _measure(self, result: RunResult | None, st: dict) -> None:
         """Learn from a finished run's result (None: unreadable) what its cores were, and
         record them in its status entry `st`."""
         cores = result.cores_while_stepping if result else None
         if cores is not None:
             st["cores_measured"] = round(cores, 3)
-        measured = sweepcores.measure(result) if result else None
-        if measured is not None:
-            self.measured.append(measured)
-            self._rates.clear()
+        if result:
+            self.schedule.learn(result)
 
     def _start(self, run: PlannedRun) -> _Child:
-        config = self._scaled(run)
-        estimate = self._estimate(run)
+        config = self.schedule.scaled(run)
+        estimate = self.schedule.estimate(run)
         if self.view and self.view_owner is None:
             config = replace(config, view=self.view)
             self.view_owner = run.run_id
@@ -368,32 +364,16 @@ class Sweep:
             faithful=faithful,
             fidelity_reason=result.fidelity_reason if result else "",
         )
-        decision = sweeppolicy.decide(outcome, self._policy_state())
+        decision = sweeppolicy.decide(outcome, self.schedule.policy_state())
         self._apply(decision, run, st, queue)
         return f"{run.run_id}: {st['result_status']} in {wall:.0f} s" + decision.words
 
-    def _policy_state(self) -> sweeppolicy.State:
-        return sweeppolicy.State(
-            jobs=self.jobs,
-            load_limit=self.load_limit,
-            cpu_limit=self.cpu_limit,
-            scale_factors=dict(self.scale_factors),
-            clean_runs=dict(self.clean_runs),
-            ceilings=dict(self.ceilings),
-        )
-
     def _apply(self, d: sweeppolicy.Decision, run: PlannedRun, st: dict, queue: deque) -> None:
         """Carry out what the policy decided about `run` (status entry `st`)."""
-        self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
-        self.cpu_limit = d.state.cpu_limit
-        self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
-        self.backoffs += [{"run": run.run_id, **record} for record in d.backoffs]
+        self.schedule.apply(d, run.run_id)
         if d.redo:
             st["status"] = "pending"
             queue.appendleft(run)
-
-    def _factor(self, robots: int) -> float:
-        return self.scale_factors.get(robots, 1.0)
 
     def _calibrate(self, todo: list[PlannedRun]) -> None:
         """Find each team size's time scale on this machine before its first run: short
@@ -410,9 +390,7 @@ class Sweep:
                 miss, faithful = self._trial(run, factor, len(trials) + 1)
                 trials.append((round(factor, 3), miss, faithful))
                 factor = sweeppolicy.calibration_next(trials)
-            found = sweeppolicy.calibrated(trials)
-            self.calibration[robots], self.ceilings[robots] = trials, found
-            self.scale_factors[robots] = found
+            found = self.schedule.calibrated(robots, trials)
             scale = run.config.time_scale * found
             self.progress.update(0, 0, 0, None, f"calibrated teams of {robots}: time scale "
                                  f"{scale:.3g} ({found:.0%} of the file's), {len(trials)} "
@@ -460,30 +438,6 @@ class Sweep:
             if st["status"] == "failed" and not is_done(self.out, rid):
                 st["status"] = "interrupted"
 
-    def _fits(self, run: PlannedRun, children: dict) -> bool:
-        """Whether `run` fits beside the runs in flight: their loads and its own within the
-        load limit, their estimated cores and its own within the cpu limit (each when set)."""
-        if self.load_limit is not None:
-            in_flight = sum(c.load for c in children.values())
-            if in_flight + run_load(run) > self.load_limit + 1e-9:
-                return False
-        if self.cpu_limit is not None:
-            in_flight = sum(c.cores for c in children.values())
-            if in_flight + self._estimate(run) > self.cpu_limit + 1e-9:
-                return False
-        return True
-
-    def _next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
-        """Take the first waiting run that fits (any run, when nothing is in flight); None
-        when none fits."""
-        if not children:
-            return queue.popleft()
-        for i, run in enumerate(queue):
-            if self._fits(run, children):
-                del queue[i]
-                return run
-        return None
-
     # -- the loop
 
     def run(self, todo: list[PlannedRun], done: list[PlannedRun], skipped: dict[str, str]) -> int:
@@ -507,7 +461,7 @@ class Sweep:
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
                 while queue and len(children) < self.jobs and self.stop_signal is None:
-                    run = self._next_fitting(queue, children)
+                    run = self.schedule.next_fitting(queue, children)
                     if run is None:
                         break
                     child = self._start(run)

@@ -19,7 +19,7 @@ view and the oracle; the positions go to the ns-3 process every step (`set_posit
 line over its Unix socket, answered once the simulator has applied it). `kernel_links` asks
 the channel which pairs hear each other, so a process that attaches to a `net up` testbed
 sees the truth. The process is recorded in the testbed's state (role "ns3-wifi") and stopped
-by its pid with the others (topology.network.destroy).
+by its pid with the others (topology.teardown.destroy).
 
 Each frame the channel delivers to a robot leaves one record of its relay lag (what the
 relay added to its trip beyond the channel's emulated time) in the testbed's run directory,

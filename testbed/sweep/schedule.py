@@ -1,0 +1,131 @@
+"""A sweep's schedule while it runs: how many runs at once, each team size's time scale, and
+which waiting run starts next (testbed.sweep.runner.Sweep starts and watches the runs).
+
+Theory of operation. `Schedule` holds what the sweep's rules read and change: the concurrency
+(--jobs), the load and cpu limits (each as the sweep file asked and as it is now), the factor
+each team size's time scale is multiplied by, the clean runs towards speeding a team size up
+again, and what --calibrate found. A waiting run gets its team size's factor (`scaled`), is
+expected to keep `estimate` cores busy (testbed.sweep.cores, learnt from what the sweep's
+finished runs measured: `learn`), and starts when it fits beside the runs in flight
+(`next_fitting`: first fit). After a run, testbed.sweep.policy decides from `policy_state`,
+and `apply` takes up its decision. Nothing here starts a process.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import replace
+
+from testbed.resultfile import RunResult
+from testbed.run.config import RunConfig
+from testbed.sweep import cores as sweepcores
+from testbed.sweep import policy as sweeppolicy
+from testbed.sweep.file import PlannedRun
+from testbed.sweep.plan import run_load
+
+
+class Schedule:
+    """The sweep's concurrency and time scales, and which run fits next (module docstring)."""
+
+    def __init__(self, jobs: int, load_limit: float | None, cpu_limit: float | None):
+        self.jobs = jobs
+        self.jobs_requested = jobs
+        self.load_limit = load_limit
+        self.load_limit_requested = self.load_limit
+        self.cpu_limit = cpu_limit
+        self.cpu_limit_requested = self.cpu_limit
+        # What the sweep's finished runs measured, for estimating the cores of the next ones,
+        # and the cores per unit of load that makes per team size (the queue is scanned every
+        # tenth of a second, each median only once per measurement).
+        self.measured: list[sweepcores.Measured] = []
+        self._rates: dict[int, float] = {}
+        # Per team size, applied to its runs' time scales (see Sweep._finish): a large team
+        # that runs short of CPU says nothing about a lone robot, which is bound by latency.
+        self.scale_factors: dict[int, float] = {}
+        self.clean_runs: dict[int, int] = {}
+        # --calibrate: per team size, the factor its trials found (also its ceiling), and
+        # the trials themselves [(factor, miss outside stalls), ...] for sweep.json.
+        self.ceilings: dict[int, float] = {}
+        self.calibration: dict[int, list[tuple[float, float, bool]]] = {}
+        self.backoffs: list[dict] = []
+
+    @property
+    def limited(self) -> bool:
+        """Whether runs are packed by a load or cpu limit (not only by --jobs)."""
+        return self.load_limit is not None or self.cpu_limit is not None
+
+    def factor(self, robots: int) -> float:
+        return self.scale_factors.get(robots, 1.0)
+
+    def scaled(self, run: PlannedRun) -> RunConfig:
+        """`run`'s config at the time scale it gets now: the file's times its team size's
+        factor (testbed.sweep.policy)."""
+        config = run.config
+        factor = self.factor(config.robots)
+        if factor != 1.0:
+            config = replace(config, time_scale=round(config.time_scale * factor, 3))
+        return config
+
+    def estimate(self, run: PlannedRun) -> float:
+        """The cores `run` is expected to keep busy, at the time scale it gets now
+        (testbed.sweep.cores.estimate)."""
+        config = self.scaled(run)
+        n = config.robots
+        if n not in self._rates:
+            self._rates[n] = sweepcores.cores_per_load(n, self.measured)
+        return self._rates[n] * sweepcores.load(n, config.time_scale)
+
+    def learn(self, result: RunResult) -> None:
+        """Learn from a finished run's result what its cores were."""
+        measured = sweepcores.measure(result)
+        if measured is not None:
+            self.measured.append(measured)
+            self._rates.clear()
+
+    def fits(self, run: PlannedRun, children: dict) -> bool:
+        """Whether `run` fits beside the runs in flight: their loads and its own within the
+        load limit, their estimated cores and its own within the cpu limit (each when set)."""
+        if self.load_limit is not None:
+            in_flight = sum(c.load for c in children.values())
+            if in_flight + run_load(run) > self.load_limit + 1e-9:
+                return False
+        if self.cpu_limit is not None:
+            in_flight = sum(c.cores for c in children.values())
+            if in_flight + self.estimate(run) > self.cpu_limit + 1e-9:
+                return False
+        return True
+
+    def next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
+        """Take the first waiting run that fits (any run, when nothing is in flight); None
+        when none fits."""
+        if not children:
+            return queue.popleft()
+        for i, run in enumerate(queue):
+            if self.fits(run, children):
+                del queue[i]
+                return run
+        return None
+
+    def policy_state(self) -> sweeppolicy.State:
+        return sweeppolicy.State(
+            jobs=self.jobs,
+            load_limit=self.load_limit,
+            cpu_limit=self.cpu_limit,
+            scale_factors=dict(self.scale_factors),
+            clean_runs=dict(self.clean_runs),
+            ceilings=dict(self.ceilings),
+        )
+
+    def apply(self, d: sweeppolicy.Decision, run_id: str) -> None:
+        """Take up what the policy decided after run `run_id`: its state and back-offs."""
+        self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
+        self.cpu_limit = d.state.cpu_limit
+        self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
+        self.backoffs += [{"run": run_id, **record} for record in d.backoffs]
+
+    def calibrated(self, robots: int, trials: list[tuple[float, float, bool]]) -> float:
+        """Take up a team size's calibration trials; returns the factor they found."""
+        found = sweeppolicy.calibrated(trials)
+        self.calibration[robots], self.ceilings[robots] = trials, found
+        self.scale_factors[robots] = found
+        return found
