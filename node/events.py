@@ -1,13 +1,37 @@
-"""A robot's event log: one JSON object per line, for the run to summarise and check.
+"""A robot's event log as one type: `EventLog` writes it, `Event` is one of its lines, and
+`read` / `parse_lines` are the one way back in, for the run to summarise and check.
 
-Every record has "e" (the event) and "step" (the robot's step when it happened). The file is
-line-buffered so a robot killed mid-run leaves every complete line behind.
+Every record has "e" (the event) and "step" (the robot's step when it happened), then the
+event's own fields ("kind", "goal", "frm", ...). The file is line-buffered so a robot killed
+mid-run leaves every complete line behind. The C++ robot (native/robot/events.h) writes the
+same lines, compact JSON with "e" first, so `event_name` can tell a line's event from its
+first bytes without parsing it: a reader that wants only some events (the live view counts
+sends many times a second) parses only those lines.
+
+Reading: a line cut short by a crash, one that is not a JSON object, or one without a string
+"e" and a whole-number "step" is skipped (a log is evidence, not input to trust); lines
+longer than MAX_LINE are cut there (and so skipped); a missing log is empty; anything but a
+regular file of at most MAX_LOG_BYTES is refused (common.boundedfile.Refused). Values keep
+the type JSON gave them. Nobody else opens an event log to parse its lines
+(tests/unit/test_file_types.py holds this).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import threading
+from collections.abc import Collection, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from common import boundedfile
+
+EVENTS_SUFFIX = ".events.jsonl"  # robots/rK.events.jsonl; the display's: display/events.jsonl
+MAX_LINE = 1 << 20  # a map diff or a summary is a few kB
+MAX_LOG_BYTES = 1 << 32  # a day-long run of one robot logs well under a GB
+_PREFIX = b'{"e":"'  # how every line starts (json.dumps with compact separators, and C++)
 
 
 class EventLog:
@@ -18,8 +42,7 @@ class EventLog:
     def write(self, event: str, step: int, **fields) -> None:
         if self.f is None:
             return
-        rec = {"e": event, "step": step, **fields}
-        line = json.dumps(rec, separators=(",", ":"))
+        line = Event(event, step, fields).to_line()
         with self.lock:
             self.f.write(line + "\n")
 
@@ -28,3 +51,93 @@ class EventLog:
             with self.lock:
                 self.f.close()
                 self.f = None
+
+
+@dataclass(frozen=True)
+class Event:
+    """One line of an event log: the event `e`, the robot's `step`, and the event's other
+    fields in the order they were written."""
+
+    e: str
+    step: int
+    fields: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+    def get(self, name: str, default: Any = None) -> Any:
+        """Field `name` ("e" and "step" too), `default` where the line has none."""
+        if name == "e":
+            return self.e
+        if name == "step":
+            return self.step
+        return self.fields.get(name, default)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The line's object, keys in the file's order."""
+        return {"e": self.e, "step": self.step, **self.fields}
+
+    def to_line(self) -> str:
+        """The line the writers write (without its newline)."""
+        return json.dumps(self.to_dict(), separators=(",", ":"))
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Event | None:
+        """The event an object holds; None unless it has a string "e" and a whole "step"."""
+        if not isinstance(d, dict):
+            return None
+        e, step = d.get("e"), d.get("step")
+        if not isinstance(e, str) or not isinstance(step, int) or isinstance(step, bool):
+            return None
+        return cls(
+            e, step, MappingProxyType({k: v for k, v in d.items() if k not in ("e", "step")})
+        )
+
+
+def event_name(line: bytes | str) -> str | None:
+    """The event a line holds, read from its first bytes where it starts as the writers
+    start it; otherwise (or when the name has an escape) from the whole line parsed. None for
+    a line that is no event."""
+    raw = line.encode("utf-8", "replace") if isinstance(line, str) else line
+    if raw.startswith(_PREFIX):
+        end = raw.find(b'"', len(_PREFIX))
+        name = raw[len(_PREFIX) : end]
+        if end > 0 and b"\\" not in name:
+            return name.decode("utf-8", "replace")
+    ev = parse(line)
+    return ev.e if ev else None
+
+
+def parse(line: bytes | str) -> Event | None:
+    """The event on one line; None for a line that holds none (see the module's docstring)."""
+    try:
+        return Event.from_dict(json.loads(line))
+    except (ValueError, RecursionError):  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        return None
+
+
+def parse_lines(
+    lines: Iterable[bytes | str], only: Collection[str] | None = None
+) -> Iterator[Event]:
+    """The events of `lines`, in order; with `only`, just the events named there (the other
+    lines are not parsed)."""
+    for line in lines:
+        if only is not None and event_name(line) not in only:
+            continue
+        ev = parse(line)
+        if ev is not None:
+            yield ev
+
+
+def read(path: str | os.PathLike[str], only: Collection[str] | None = None) -> list[Event]:
+    """The events of the log at `path` ([] when there is none); with `only`, just those
+    events. boundedfile.Refused when it is not a regular file of at most MAX_LOG_BYTES."""
+    try:
+        f = boundedfile.open_text(path)
+    except boundedfile.Refused as r:
+        if r.kind == "missing":
+            return []
+        raise
+    with f:
+        size = os.fstat(f.fileno()).st_size
+        if size > MAX_LOG_BYTES:
+            raise boundedfile.Refused("too_big", size)
+        raw = f.buffer  # bytes: a bad byte spoils its line, not the log
+        return list(parse_lines(iter(lambda: raw.readline(MAX_LINE), b""), only))

@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import bisect
 import csv
-import json
 import os
 from collections import defaultdict
 
+from node import events
 from testbed.resultfile import RunResult
 
 
@@ -67,18 +67,8 @@ def received(out: str, robots: int) -> list[dict]:
     """Every 'recv' event of every robot, with "to" added."""
     evs = []
     for k in range(1, robots + 1):
-        path = os.path.join(out, "robots", f"r{k}.events.jsonl")
-        if not os.path.exists(path):
-            continue
-        with open(path) as f:
-            for line in f:
-                try:
-                    e = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                if e.get("e") == "recv":
-                    e["to"] = k
-                    evs.append(e)
+        path = os.path.join(out, "robots", f"r{k}{events.EVENTS_SUFFIX}")
+        evs += [{**e.to_dict(), "to": k} for e in events.read(path, only=("recv",))]
     return evs
 
 

@@ -40,6 +40,9 @@ import uuid
 
 import numpy as np
 
+from common import boundedfile
+from node import events as nodeevents
+from node.events import EVENTS_SUFFIX
 from testbed import PROJECT_ROOT
 from testbed.bench.common import write
 from testbed.resultfile import RunResult
@@ -148,7 +151,7 @@ def _robots(out: str, n: int) -> list[tuple[dict, str]]:
     for k in range(1, n + 1):
         try:
             with open(os.path.join(out, "robots", f"r{k}.json")) as f:
-                found.append((json.load(f), os.path.join(out, "robots", f"r{k}.events.jsonl")))
+                found.append((json.load(f), os.path.join(out, "robots", f"r{k}{EVENTS_SUFFIX}")))
         except (OSError, ValueError):
             continue
     return found
@@ -167,13 +170,9 @@ def _plans_and_frames(robots: list[tuple[dict, str]]) -> tuple[list[float], list
     for d, events in robots:
         frames.append(d.get("latency_ms") or {})
         try:
-            with open(events) as f:
-                for line in f:
-                    if '"plan"' in line:
-                        e = json.loads(line)
-                        if e.get("e") == "plan" and "ms" in e:
-                            plan_ms.append(float(e["ms"]))
-        except (OSError, ValueError):
+            plans = nodeevents.read(events, only=("plan",))
+            plan_ms += [float(e.fields["ms"]) for e in plans if "ms" in e.fields]
+        except (boundedfile.Refused, TypeError, ValueError):
             continue
     return plan_ms, frames
 

@@ -13,13 +13,13 @@ the robots' processes and sends nothing on the emulated radio.
 from __future__ import annotations
 
 import asyncio
-import json
 import threading
 import time
 
 from aiohttp import web
 
 from common.jsonfile import read_json
+from node import events
 from testbed.view import server
 from testbed.view.served import snapshot_steps
 
@@ -232,10 +232,12 @@ class RobotEvents:
             end = chunk.rfind(b"\n") + 1  # whole lines only; the rest next time
             self.offsets[k] += end
             for line in chunk[:end].splitlines():
-                if line.startswith(b'{"e":"send"'):
+                name = events.event_name(line)
+                if name == "send":
                     sent += 1
-                elif line.startswith(b'{"e":"plan"'):
-                    goal = json.loads(line).get("goal")
+                elif name == "plan":
+                    ev = events.parse(line)
+                    goal = ev.get("goal") if ev else None
                     if goal:
                         self.goals[k] = goal
         if self._last:
