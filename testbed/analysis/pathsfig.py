@@ -36,7 +36,6 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from common import boundedfile
 from testbed.analysis.plots import plt, save_figure
 from testbed.analysis.runs import FinishedRun
-from topology.spec import CELL_M
 
 MAX_POINTS = 2000
 MAX_FILE_BYTES = 256 << 20  # testbed.view.served's limit: a long run's positions.csv
@@ -147,9 +146,9 @@ def _positive(run: FinishedRun, key: str, value, high: float) -> float:
 
 def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, float]:
     """The map's width and height in metres."""
-    cell = _positive(run, "map_cell", run.config.extra.get("map_cell") or CELL_M, 1000)
+    cell = _positive(run, "map_cell", run.config.map_cell, 1000)
     if shape is None:
-        size = run.config.extra.get("map_size") or [400, 400]
+        size = run.config.map_size
         if not isinstance(size, list) or len(size) != 2:
             raise PathsError(f"{run.path}: config map_size is not [rows, cols]")
         rows = _positive(run, "map_size", size[1], MAX_MAP_CELLS)

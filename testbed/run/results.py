@@ -114,8 +114,9 @@ def contents(rec: RunRecord) -> RunResult:
     )
     # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).
     verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
+    config = ResultConfig.from_config(rec.config)
     return RunResult(
-        config=ResultConfig.from_config(rec.config),
+        config=config,
         status=rec.status,
         status_detail=rec.detail,
         steps=clock.steps,
@@ -150,12 +151,10 @@ def contents(rec: RunRecord) -> RunResult:
         world_missed_steps_ms_late=tuple(tuple(m) for m in clock.world_missed_steps),
         robots=tuple(r for r, _ in robots),
         cpu_s=cpu_seconds(rec, summaries, display, daemons),
-        messaging=messaging(
-            rec.config.get("middleware", "nanomsg"), {r.name: sm for r, sm in robots}
-        ),
+        messaging=messaging(config.middleware, {r.name: sm for r, sm in robots}),
         maps=map_sharing(
-            rec.config.get("maps", "flood"),
-            rec.config.get("middleware", "nanomsg"),
+            config.maps,
+            config.middleware,
             {r.name: sm for r, sm in robots},
             display.get("maps"),
         ),  # fmt: skip

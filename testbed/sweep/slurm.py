@@ -234,7 +234,7 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
         return 2
     planned = state.run(rid) if state else None
     if planned is None:
-        print(f"testbed slurm task: {rid} is not in {out}/sweep.json", file=sys.stderr)
+        print(f"testbed slurm task: {rid} is not in {sweepstate.state_path(out)}", file=sys.stderr)
         return 2
     if is_done(out, rid):
         print(f"{rid}: already done", file=sys.stderr)
