@@ -18,9 +18,8 @@ nested dicts (tests/unit/test_result_file.py holds this).
   `routing` aodv, `map` none (the empty terrain), `loss_pct` and `delay_ms` 0,
   `coordination` ours and `start` corner (before those existed, they were all there was),
   no robot stopped (before `--kill` stopped robots, `mean_finish_step_robots` and
-  `survivors_finished` are None), no radio outage, no fidelity verdict; and of the config's
-  `extra`: middleware nanomsg, maps flood, battery failure none, the map's cell CELL_M and
-  size 400 x 400 (`ResultConfig.middleware` and the like).
+  `survivors_finished` are None), no radio outage, no fidelity verdict; in config's `extra`,
+  middleware nanomsg, maps flood, no battery failure, a 400 x 400 map of CELL_M cells.
 - Values keep the type JSON gave them (an int stays an int), so the numbers written from
   them are those the file holds. The diagnostic records that only people and the report's
   text read whole (wall_parts_s, world_timing_s, display, cpu_s, fidelity, network_timers)
@@ -38,7 +37,7 @@ from types import MappingProxyType
 from typing import Any
 
 from common import boundedfile
-from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
+from node import messaging
 from testbed.analysis import resultcheck
 from testbed.run.failures import NONE as NO_FAILURE
 from topology.spec import CELL_M, VETH
@@ -53,7 +52,6 @@ CONFIG_KEYS = (
 DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
 DEFAULT_ROUTING = "aodv"
 DEFAULT_MEDIUM = VETH
-DEFAULT_MAP_SIZE = (400, 400)  # the empty terrain's cells, of runs that did not say
 # The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
 CPU_PARTS = ("robots", "display", "world", "routing")
 _EMPTY: Mapping[str, Any] = MappingProxyType({})
@@ -252,36 +250,29 @@ class ResultConfig:
         """The map's file stem, or "empty" for the empty terrain."""
         return "empty" if not self.map else Path(self.map).stem
 
+    def _named(self, key: str, default: str) -> str:  # `default`: runs before the option
+        name = self.extra.get(key)
+        return name if isinstance(name, str) else default
+
     @property
     def middleware(self) -> str:
-        """The robots' middleware (`extra`; nanomsg, the only one before there was a choice)."""
-        name = self.extra.get("middleware")
-        return name if isinstance(name, str) else DEFAULT_MIDDLEWARE
+        return self._named("middleware", messaging.DEFAULT)
 
     @property
     def maps(self) -> str:
-        """How maps were shared (`extra`; flood, the only way before there was a choice)."""
-        from node.messaging.maps import DEFAULT as DEFAULT_MAPS  # (it imports numpy)
-
-        name = self.extra.get("maps")
-        return name if isinstance(name, str) else DEFAULT_MAPS
+        return self._named("maps", messaging.DEFAULT_MAPS)
 
     @property
     def battery_failure(self) -> str:
-        """The run's battery failure (`extra`; none for runs made before the option)."""
-        name = self.extra.get("battery_failure")
-        return name if isinstance(name, str) else NO_FAILURE
+        return self._named("battery_failure", NO_FAILURE)
 
     @property
-    def map_cell(self) -> Any:
-        """The map's cell in metres (`extra`; CELL_M where the run did not say), unchecked."""
+    def map_cell(self) -> Any:  # unchecked: the reader checks it
         return self.extra.get("map_cell") or CELL_M
 
     @property
-    def map_size(self) -> Any:
-        """The map's [rows, cols] (`extra`; the empty terrain's 400 x 400 where the run did
-        not say), unchecked."""
-        return self.extra.get("map_size") or list(DEFAULT_MAP_SIZE)
+    def map_size(self) -> Any:  # [rows, cols], unchecked
+        return self.extra.get("map_size") or [400, 400]  # the empty terrain's
 
     def to_dict(self) -> dict[str, Any]:
         out = {k: getattr(self, k) for k in CONFIG_KEYS}

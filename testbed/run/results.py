@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from common.jsonfile import read_json, write_json_atomic
+from common.jsonfile import read_json
 from node import events, render, stepcore
 from testbed.resultfile import HostStalls, Plan, ResultConfig, RobotResult, RunResult
-from testbed.run import fidelity, isolation
+from testbed.run import fidelity, isolation, robotfile
 from testbed.world.world import World
 
 if TYPE_CHECKING:
@@ -76,7 +76,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
         plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e.e == "plan"],
     )  # fmt: skip
     detail.update({k: summary.get(k) for k in SUMMARY_KEYS})
-    write_json_atomic(os.path.join(rec.out, "robots", f"r{r.k}.json"), detail)
+    robotfile.write(rec.out, r.k, detail)
     return out, summary
 
 
