@@ -46,7 +46,7 @@ from testbed import PROJECT_ROOT
 from testbed.bench.common import write
 from testbed.resultfile import RunResult
 from testbed.run import robotfile
-from testbed.run.robotfile import RobotRecord
+from testbed.run.robotfile import RobotStats
 
 RUNS = 3
 CLK_TCK = os.sysconf("SC_CLK_TCK")
@@ -146,7 +146,7 @@ def _split(samples, root: int, t0: float, t1: float) -> tuple[dict, dict]:
     return inside, outside
 
 
-def _robots(out: str, n: int) -> list[tuple[RobotRecord, str]]:
+def _robots(out: str, n: int) -> list[tuple[RobotStats, str]]:
     """Each robot's robots/rK.json (read once) and the path of its event log."""
     found = []
     for k in range(1, n + 1):
@@ -156,7 +156,7 @@ def _robots(out: str, n: int) -> list[tuple[RobotRecord, str]]:
     return found
 
 
-def _robot_threads(robots: list[tuple[RobotRecord, str]]) -> dict[str, float]:
+def _robot_threads(robots: list[tuple[RobotStats, str]]) -> dict[str, float]:
     total: dict[str, float] = {}
     for d, _ in robots:
         for part, s in d.thread_cpu_s.items():
@@ -164,7 +164,7 @@ def _robot_threads(robots: list[tuple[RobotRecord, str]]) -> dict[str, float]:
     return total
 
 
-def _plans_and_frames(robots: list[tuple[RobotRecord, str]]) -> tuple[list[float], list[dict]]:
+def _plans_and_frames(robots: list[tuple[RobotStats, str]]) -> tuple[list[float], list[dict]]:
     plan_ms, frames = [], []
     for d, events in robots:
         frames.append(dict(d.latency_ms))

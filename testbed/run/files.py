@@ -25,13 +25,14 @@ from typing import TYPE_CHECKING, TextIO
 
 from common.errors import UsageError
 from testbed.resultfile import RESULT_NAME
+from testbed.run.configfile import CONFIG_NAME
 
 if TYPE_CHECKING:
     import _csv
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by
 # the robot processes (robots/).
-RUN_MARKERS = ("config.json", RESULT_NAME, "robots")
+RUN_MARKERS = (CONFIG_NAME, RESULT_NAME, "robots")
 
 
 def holds_run(out: str) -> bool:

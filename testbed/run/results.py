@@ -22,7 +22,7 @@ import numpy as np
 
 from common.jsonfile import read_json
 from node import events, render, stepcore
-from testbed.resultfile import HostStalls, Plan, ResultConfig, RobotResult, RunResult
+from testbed.resultfile import HostStalls, Plan, RobotResult, RunResult
 from testbed.run import fidelity, isolation, robotfile
 from testbed.world.world import World
 
@@ -114,7 +114,7 @@ def contents(rec: RunRecord) -> RunResult:
     )
     # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).
     verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
-    config = ResultConfig.from_config(rec.config)
+    config = rec.config.result_config()
     return RunResult(
         config=config,
         status=rec.status,

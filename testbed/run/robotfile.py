@@ -1,4 +1,4 @@
-"""robots/rK.json as one type: `RobotRecord`, robot K's fuller record of a run, which
+"""robots/rK.json as one type: `RobotStats`, robot K's fuller record of a run, which
 testbed.run.results writes (`write`) and the benchmarks read (`read`).
 
 The record is robot K's entry of result.json (testbed.resultfile.RobotResult: name, finish,
@@ -42,7 +42,7 @@ def _number(v: Any) -> bool:
 
 
 @dataclass(frozen=True)
-class RobotRecord:
+class RobotStats:
     """One robot's record (see the module's docstring); `data` is the whole file."""
 
     data: Mapping[str, Any]
@@ -69,7 +69,7 @@ class RobotRecord:
         return dict(self.data)
 
     @classmethod
-    def from_dict(cls, d: Any) -> RobotRecord:
+    def from_dict(cls, d: Any) -> RobotStats:
         """ValueError naming the key unless `d` is a record its readers can use."""
         if not isinstance(d, dict):
             raise ValueError("not a JSON object")
@@ -89,10 +89,10 @@ def write(out: str | os.PathLike[str], k: int, record: Mapping[str, Any]) -> Non
     write_json_atomic(robot_path(out, k), dict(record))
 
 
-def read(out: str | os.PathLike[str], k: int) -> RobotRecord | None:
+def read(out: str | os.PathLike[str], k: int) -> RobotStats | None:
     """Robot k's record; None when it has none that can be read (see the module's docstring)."""
     try:
         data = boundedfile.read(robot_path(out, k), boundedfile.MAX_JSON_BYTES)
-        return RobotRecord.from_dict(json.loads(data))
+        return RobotStats.from_dict(json.loads(data))
     except (boundedfile.Refused, ValueError, RecursionError):
         return None

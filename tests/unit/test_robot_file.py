@@ -7,7 +7,7 @@ import os
 import pytest
 
 from testbed.run import robotfile
-from testbed.run.robotfile import RobotRecord
+from testbed.run.robotfile import RobotStats
 
 RECORD = {
     "name": "r1", "finish_step": 40, "plans": [[1, "start"]], "crash_step": None,
@@ -29,7 +29,7 @@ def test_what_the_run_writes_reads_back_byte_for_byte(tmp_path):
 
 
 def test_a_record_without_the_summary_reads_as_empty():
-    rec = RobotRecord.from_dict({"name": "r1", "cpu_s": None, "latency_ms": None})
+    rec = RobotStats.from_dict({"name": "r1", "cpu_s": None, "latency_ms": None})
     assert rec.cpu_s is None and rec.max_rss_mb is None
     assert rec.latency_ms == {} and rec.thread_cpu_s == {}
 
@@ -41,7 +41,7 @@ def test_a_record_without_the_summary_reads_as_empty():
 )  # fmt: skip
 def test_a_malformed_record_is_refused(tmp_path, doc):
     with pytest.raises(ValueError):
-        RobotRecord.from_dict(doc)
+        RobotStats.from_dict(doc)
     (tmp_path / "robots").mkdir()
     (tmp_path / "robots" / "r1.json").write_text(json.dumps(doc))
     assert robotfile.read(tmp_path, 1) is None
