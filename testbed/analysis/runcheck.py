@@ -22,13 +22,13 @@ from collections import defaultdict
 
 from node import events
 from testbed.resultfile import RunResult
+from testbed.run import csvfiles
 
 
 def link_timeline(out: str) -> dict[int, list[tuple[str, int, int]]]:
     changes: dict[int, list[tuple[str, int, int]]] = defaultdict(list)
-    with open(os.path.join(out, "links.csv")) as f:
-        for row in csv.DictReader(f):
-            changes[int(row["step"])].append((row["event"], int(row["i"]), int(row["j"])))
+    for c in csvfiles.read_links(out):
+        changes[c.step].append(("add" if c.added else "remove", c.i, c.j))
     return changes
 
 

@@ -13,21 +13,20 @@ page or JSON cannot hold.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import math
 from pathlib import Path
 
 from common import boundedfile
 from testbed.resultfile import RESULT_NAME, RunResult
-from testbed.run import configfile
+from testbed.run import configfile, csvfiles
 from testbed.run.configfile import CONFIG_NAME
+from testbed.run.csvfiles import COVERAGE_NAME, LINKS_NAME, POSITIONS_NAME
 from testbed.view.served import in_run, snapshot, snapshot_steps
-from topology.spec import MAX_COORD_M
 
 __all__ = ["NotARun", "load", "read_config", "snapshot_path", "snapshot_steps"]
 
-MAX_STEP = 10**9
+
+MAX_STEP = csvfiles.MAX_STEP  # the last step a query may ask for
 
 
 class NotARun(ValueError):
@@ -60,30 +59,11 @@ def _rows(d: Path, name: str, parse, required: bool = False) -> list:
             raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
         return []
     try:
-        f = boundedfile.open_text(path)  # checked on the descriptor: no FIFO swapped in
+        return csvfiles.rows(path, parse)
     except boundedfile.Refused as r:
         raise NotARun(f"{d}/{name}: {boundedfile.describe(r)}") from None
-    with f:
-        reader = csv.reader(f)
-        try:
-            next(reader, None)
-            return [parse(row) for row in reader]
-        except (ValueError, csv.Error) as e:  # UnicodeDecodeError is a ValueError
-            why = (str(e).splitlines() or ["unreadable"])[0][:200]
-            raise NotARun(f"{d}/{name} line {reader.line_num}: {why}") from None
-
-
-def _finite(text: str, lo: float, hi: float) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and lo <= value <= hi):
-        raise ValueError(f"{text[:40]!r} is not a number in {lo:g}..{hi:g}")
-    return value
-
-
-def _whole(text: str, lo: int, hi: int) -> int:
-    if not (text.isascii() and text.isdigit() and len(text) <= 10 and lo <= int(text) <= hi):
-        raise ValueError(f"{text[:40]!r} is not a whole number in {lo}..{hi}")
-    return int(text)
+    except csvfiles.CsvError as e:
+        raise NotARun(f"{d}/{name} line {e.line}: {e.why}") from None
 
 
 def load(run_dir: str | Path) -> dict:
@@ -96,31 +76,9 @@ def load(run_dir: str | Path) -> dict:
         status = "unknown"
     n = config["robots"]
 
-    seen = [0]  # rows of positions.csv read: its step column counts them
-
-    def position_row(row: list[str]) -> list[float]:
-        if len(row) != 1 + 2 * n:
-            raise ValueError(f"{len(row)} columns, not {1 + 2 * n} (step, x and y of {n})")
-        if _whole(row[0], 0, MAX_STEP) != seen[0]:
-            raise ValueError(f"step {row[0][:20]!r}, not {seen[0]} (one row a step, in order)")
-        seen[0] += 1
-        return [round(_finite(v, -MAX_COORD_M, MAX_COORD_M), 3) for v in row[1:]]
-
-    positions = _rows(d, "positions.csv", position_row, required=True)
+    positions = _rows(d, POSITIONS_NAME, csvfiles.position_rows(n), required=True)
     last = len(positions) - 1
-
-    def link_row(row: list[str]) -> list:
-        if len(row) != 4 or row[1] not in ("add", "remove"):
-            raise ValueError("not step,add|remove,i,j")
-        i, j = (_whole(v, 1, n + 1) for v in row[2:])  # n + 1: the display robot
-        if i == j:
-            raise ValueError(f"a link of robot {i} to itself")
-        return [_whole(row[0], 0, max(last, 0)), row[1] == "add", i, j]
-
-    def coverage_row(row: list[str]) -> float:
-        if len(row) != 2:
-            raise ValueError("not step,coverage")
-        return _finite(row[1], 0.0, 1.0)
+    links = [list(c) for c in _rows(d, LINKS_NAME, csvfiles.link_rows(n, last))]
 
     return {
         "run": d.name,
@@ -132,8 +90,8 @@ def load(run_dir: str | Path) -> dict:
         "status": status,
         "steps": len(positions) - 1,
         "positions": positions,  # per step: x1, y1, x2, y2, ...
-        "links": _rows(d, "links.csv", link_row),  # [step, added?, i, j]
-        "coverage": _rows(d, "coverage.csv", coverage_row),
+        "links": links,  # [step, added?, i, j]
+        "coverage": _rows(d, COVERAGE_NAME, csvfiles.coverage_row),
         "snapshots": snapshot_steps(d),
     }
 
