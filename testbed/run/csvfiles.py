@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 from collections.abc import Callable
 from typing import NamedTuple, TypeVar
 
@@ -32,8 +33,35 @@ MAX_STEP = 10**9
 T = TypeVar("T")
 
 
+_COLUMN = re.compile(r"([xy])([1-9][0-9]{0,3})")
+
+
 def positions_header(robots: int) -> list[str]:
     return ["step"] + [f"{a}{k}" for k in range(1, robots + 1) for a in "xy"]
+
+
+def position_columns(header: list[str]) -> list[int]:
+    """The robot of each x,y pair of columns of positions.csv's header step,x1,y1,...
+    (the display robot, MAX_ROBOTS + 1, may have its own); ValueError when it is not one."""
+    if not header or header[0] != "step" or len(header) % 2 != 1:
+        raise ValueError("the header is not step,x1,y1,...")
+    robots = []
+    for x, y in zip(header[1::2], header[2::2], strict=True):
+        mx, my = _COLUMN.fullmatch(x), _COLUMN.fullmatch(y)
+        if not (mx and my and mx[1] == "x" and my[1] == "y" and mx[2] == my[2]):
+            raise ValueError(f"columns {x[:20]!r}, {y[:20]!r} are not xK, yK")
+        if int(mx[2]) > MAX_ROBOTS + 1:
+            raise ValueError(f"robot {mx[2]} is more than {MAX_ROBOTS + 1}")
+        robots.append(int(mx[2]))
+    return robots
+
+
+def coordinate(text: str) -> float:
+    """A coordinate of positions.csv (metres, finite, within MAX_COORD_M)."""
+    value = float(text)
+    if not (math.isfinite(value) and abs(value) <= MAX_COORD_M):
+        raise ValueError(f"{text[:40]!r} is not a coordinate")
+    return value
 
 
 class CsvError(ValueError):

@@ -72,3 +72,16 @@ def test_a_missing_or_special_file_is_refused(tmp_path):
     with pytest.raises(boundedfile.Refused) as r:
         csvfiles.read_links(tmp_path)
     assert r.value.kind == "special"
+
+
+def test_the_header_of_positions_names_the_robots():
+    assert csvfiles.position_columns(csvfiles.positions_header(3)) == [1, 2, 3]
+    assert csvfiles.position_columns(["step", "x1001", "y1001"]) == [1001]  # the display
+    for bad in ([], ["t", "x1", "y1"], ["step", "x1"], ["step", "x1", "y2"],
+                ["step", "x1002", "y1002"]):  # fmt: skip
+        with pytest.raises(ValueError):
+            csvfiles.position_columns(bad)
+    assert csvfiles.coordinate("-2.5") == -2.5
+    for bad in ("inf", "nan", "1e8", "x"):
+        with pytest.raises(ValueError):
+            csvfiles.coordinate(bad)
