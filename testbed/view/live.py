@@ -205,6 +205,9 @@ class KernelRoutes:
         self._socks.clear()
 
 
+SEND_LINE, PLAN_LINE = events.line_prefix("send"), events.line_prefix("plan")
+
+
 class RobotEvents:
     """The robots' own event logs (robots/rK.events.jsonl, written by the robot processes as
     they run), followed like `tail -f`: each robot's newest goal (its plan events) and the
@@ -232,10 +235,9 @@ class RobotEvents:
             end = chunk.rfind(b"\n") + 1  # whole lines only; the rest next time
             self.offsets[k] += end
             for line in chunk[:end].splitlines():
-                name = events.event_name(line)
-                if name == "send":
+                if line.startswith(SEND_LINE):
                     sent += 1
-                elif name == "plan":
+                elif line.startswith(PLAN_LINE):
                     ev = events.parse(line)
                     goal = ev.get("goal") if ev else None
                     if goal:

@@ -86,3 +86,14 @@ def test_a_missing_log_is_empty_and_a_fifo_is_refused(tmp_path):
     assert r.value.kind == "special"
     with pytest.raises(boundedfile.Refused):
         events.read(tmp_path)
+
+
+def test_the_line_prefix_is_how_the_writers_start_a_line(tmp_path):
+    path = tmp_path / "r1.events.jsonl"
+    _log(path, ("send", 1, {"kind": "map"}), ("sender", 2, {}), ("plan", 3, {"goal": [1, 2]}))
+    lines = path.read_bytes().splitlines()
+    send = events.line_prefix("send")
+    assert [ln.startswith(send) for ln in lines] == [True, False, False]  # not "sender"
+    assert [events.event_name(ln) for ln in lines] == ["send", "sender", "plan"]
+    # the C++ robot's lines start the same way (native/robot/events.h)
+    assert b'{"e":"plan","step":3,"goal":[1,2]}'.startswith(events.line_prefix("plan"))
