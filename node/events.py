@@ -9,29 +9,30 @@ tell a line's event from its first bytes without parsing it: a reader that wants
 events (the live view counts sends every second) parses only those lines.
 
 Reading: a line cut short by a crash, one that is not a JSON object, or one without a string
-"e" and a whole-number "step" is skipped (a log is evidence, not input to trust); lines
-longer than MAX_LINE are cut there (and so skipped); a missing log is empty; anything but a
-regular file of at most MAX_LOG_BYTES is refused (common.boundedfile.Refused). Values keep
-the type JSON gave them. Nobody else opens an event log to parse its lines
-(tests/unit/test_file_types.py holds this).
+"e" and a whole-number "step" is skipped (a log is evidence, not input to trust), and so
+is a line longer than MAX_LINE; a byte that is not UTF-8 (only in a damaged log) reads as
+U+FFFD; a missing log is empty; anything but a regular file of at most MAX_LOG_BYTES is
+refused (common.boundedfile.Refused). Values keep the type JSON gave them. Nobody else
+opens an event log to parse its lines (tests/unit/test_file_types.py holds this).
 """
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import threading
 from collections.abc import Collection, Iterable, Iterator, Mapping
-from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
+from typing import Any, NamedTuple, cast
 
 from common import boundedfile
 
 EVENTS_SUFFIX = ".events.jsonl"  # robots/rK.events.jsonl; the display's: display/events.jsonl
 MAX_LINE = 1 << 20  # a map diff or a summary is a few kB
-MAX_LOG_BYTES = 1 << 32  # a day-long run of one robot logs well under a GB
+MAX_LOG_BYTES = 1 << 30  # a day-long run of one robot logs well under a GB
 _PREFIX = b'{"e":"'  # how every line starts (json.dumps with compact separators, and C++)
+_NO_FIELDS: Mapping[str, Any] = MappingProxyType({})
 
 
 class EventLog:
@@ -53,14 +54,13 @@ class EventLog:
                 self.f = None
 
 
-@dataclass(frozen=True)
-class Event:
+class Event(NamedTuple):
     """One line of an event log: the event `e`, the robot's `step`, and the event's other
-    fields in the order they were written."""
+    fields in the order they were written (a tuple: a log of a long run holds millions)."""
 
     e: str
     step: int
-    fields: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    fields: Mapping[str, Any] = _NO_FIELDS
 
     def get(self, name: str, default: Any = None) -> Any:
         """Field `name` ("e" and "step" too), `default` where the line has none."""
@@ -83,12 +83,15 @@ class Event:
         """The event an object holds; None unless it has a string "e" and a whole "step"."""
         if not isinstance(d, dict):
             return None
-        e, step = d.get("e"), d.get("step")
-        if not isinstance(e, str) or not isinstance(step, int) or isinstance(step, bool):
-            return None
-        return cls(
-            e, step, MappingProxyType({k: v for k, v in d.items() if k not in ("e", "step")})
-        )
+        return _event(dict(d))
+
+
+def _event(d: dict) -> Event | None:
+    """from_dict of an object of the reader's own (its "e" and "step" taken out of it)."""
+    e, step = d.pop("e", None), d.pop("step", None)
+    if e.__class__ is not str or step.__class__ is not int:  # not a subclass: no bool
+        return None
+    return Event(e, step, d)
 
 
 def line_prefix(name: str) -> bytes:
@@ -116,7 +119,8 @@ def event_name(line: bytes | str) -> str | None:
 def parse(line: bytes | str) -> Event | None:
     """The event on one line; None for a line that holds none (see the module's docstring)."""
     try:
-        return Event.from_dict(json.loads(line))
+        d = json.loads(line)
+        return _event(d) if d.__class__ is dict else None
     except (ValueError, RecursionError):  # JSONDecodeError and UnicodeDecodeError are ValueErrors
         return None
 
@@ -143,9 +147,19 @@ def read(path: str | os.PathLike[str], only: Collection[str] | None = None) -> l
         if r.kind == "missing":
             return []
         raise
-    with f:
-        size = os.fstat(f.fileno()).st_size
-        if size > MAX_LOG_BYTES:
-            raise boundedfile.Refused("too_big", size)
-        raw = f.buffer  # bytes: a bad byte spoils its line, not the log
-        return list(parse_lines(iter(lambda: raw.readline(MAX_LINE), b""), only))
+    size = os.fstat(f.fileno()).st_size
+    if size > MAX_LOG_BYTES:
+        f.close()
+        raise boundedfile.Refused("too_big", size)
+    # the bounded file's bytes again as text, a byte that is not UTF-8 read as U+FFFD
+    raw = cast(io.TextIOWrapper, f).detach()
+    text = io.TextIOWrapper(raw, encoding="utf-8", errors="replace", newline="")
+    with text:
+        if only is not None:
+            return list(parse_lines((ln for ln in text if len(ln) <= MAX_LINE), only))
+        out = []
+        for line in text:
+            ev = parse(line) if len(line) <= MAX_LINE else None
+            if ev is not None:
+                out.append(ev)
+        return out

@@ -74,8 +74,17 @@ def test_a_line_that_is_no_event_is_skipped(line):
 
 def test_a_bad_byte_spoils_its_line_only(tmp_path):
     path = tmp_path / "log"
-    path.write_bytes(b'{"e":"a","step":1}\n{"e":"\xff","step":2}\n{"e":"b","step":3}\n')
-    assert [e.e for e in events.read(path)] == ["a", "b"]
+    path.write_bytes(b'{"e":"a","step":1}\n{"e":"\xff","step":2}\n{"e":"b","step":3}\n\xff\n')
+    assert [e.e for e in events.read(path)] == ["a", "\ufffd", "b"]
+    assert [e.e for e in events.read(path, only=("b",))] == ["b"]
+
+
+def test_a_line_longer_than_max_line_is_skipped(tmp_path, monkeypatch):
+    monkeypatch.setattr(events, "MAX_LINE", 40)
+    path = tmp_path / "log"
+    path.write_text('{"e":"a","step":1}\n{"e":"b","step":2,"x":"' + "y" * 40 + '"}\n')
+    assert [e.e for e in events.read(path)] == ["a"]
+    assert events.read(path, only=("b",)) == []
 
 
 def test_a_missing_log_is_empty_and_a_fifo_is_refused(tmp_path):
