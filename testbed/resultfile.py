@@ -18,7 +18,8 @@ nested dicts (tests/unit/test_result_file.py holds this).
   `routing` aodv, `map` none (the empty terrain), `loss_pct` and `delay_ms` 0,
   `coordination` ours and `start` corner (before those existed, they were all there was),
   no robot stopped (before `--kill` stopped robots, `mean_finish_step_robots` and
-  `survivors_finished` are None), no radio outage, no fidelity verdict.
+  `survivors_finished` are None), no radio outage, no fidelity verdict; in config's `extra`,
+  middleware nanomsg, maps flood, no battery failure, a 400 x 400 map of CELL_M cells.
 - Values keep the type JSON gave them (an int stays an int), so the numbers written from
   them are those the file holds. The diagnostic records that only people and the report's
   text read whole (wall_parts_s, world_timing_s, display, cpu_s, fidelity, network_timers)
@@ -36,8 +37,10 @@ from types import MappingProxyType
 from typing import Any
 
 from common import boundedfile
+from node import messaging
 from testbed.analysis import resultcheck
-from topology.spec import VETH
+from testbed.run.failures import NONE as NO_FAILURE
+from topology.spec import CELL_M, VETH
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
@@ -246,6 +249,30 @@ class ResultConfig:
     def map_name(self) -> str:
         """The map's file stem, or "empty" for the empty terrain."""
         return "empty" if not self.map else Path(self.map).stem
+
+    def _named(self, key: str, default: str) -> str:  # `default`: runs before the option
+        name = self.extra.get(key)
+        return name if isinstance(name, str) else default
+
+    @property
+    def middleware(self) -> str:
+        return self._named("middleware", messaging.DEFAULT)
+
+    @property
+    def maps(self) -> str:
+        return self._named("maps", messaging.DEFAULT_MAPS)
+
+    @property
+    def battery_failure(self) -> str:
+        return self._named("battery_failure", NO_FAILURE)
+
+    @property
+    def map_cell(self) -> Any:  # unchecked: the reader checks it
+        return self.extra.get("map_cell") or CELL_M
+
+    @property
+    def map_size(self) -> Any:  # [rows, cols], unchecked
+        return self.extra.get("map_size") or [400, 400]  # the empty terrain's
 
     def to_dict(self) -> dict[str, Any]:
         out = {k: getattr(self, k) for k in CONFIG_KEYS}

@@ -50,6 +50,7 @@ REGISTRY: dict[str, Entry] = {
 }  # fmt: skip
 MIDDLEWARES = tuple(REGISTRY)
 DEFAULT = "nanomsg"
+DEFAULT_MAPS = "flood"  # how maps are shared (node.messaging.maps.DEFAULT)
 
 
 class MiddlewareUnavailable(Exception):

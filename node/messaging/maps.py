@@ -34,13 +34,13 @@ from collections import Counter
 
 from node import wire
 from node.mapstats import MapStats
-from node.messaging import REGISTRY
+from node.messaging import DEFAULT_MAPS, REGISTRY
 from node.messaging.inbox import Inbox
 
 log = logging.getLogger(__name__)
 
 MAPS = ("flood", "pubsub")
-DEFAULT = "flood"
+DEFAULT = DEFAULT_MAPS
 # The module of each middleware's map topic (what a process may import ahead of using it),
 # from the registry: the middlewares that have one are those `--maps pubsub` can go with.
 MODULES = {name: e.map_topic for name, e in REGISTRY.items() if e.map_topic is not None}

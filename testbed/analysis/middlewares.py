@@ -97,14 +97,15 @@ MEANS = (
 
 def middleware_of(run: FinishedRun) -> str:
     """The run's middleware: result.json's `messaging`, else its config (older: nanomsg)."""
-    name = (run.messaging or {}).get("middleware") or run.config.extra.get("middleware")
+    name = (run.messaging or {}).get("middleware")
+    if not name:
+        return run.config.middleware
     return name if isinstance(name, str) else DEFAULT_MIDDLEWARE
 
 
 def failure_of(run: FinishedRun) -> str:
     """The run's battery failure (`none` for runs made before the option)."""
-    name = run.config.extra.get("battery_failure", NONE)
-    return name if isinstance(name, str) else NONE
+    return run.config.battery_failure
 
 
 def main_messaging(runs: list[FinishedRun]) -> tuple[str, str]:

@@ -23,7 +23,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -36,15 +35,13 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from common import boundedfile
 from testbed.analysis.plots import plt, save_figure
 from testbed.analysis.runs import FinishedRun
-from topology.spec import CELL_M
+from testbed.run import csvfiles
+from testbed.run.csvfiles import coordinate
 
 MAX_POINTS = 2000
 MAX_FILE_BYTES = 256 << 20  # testbed.view.served's limit: a long run's positions.csv
 MAX_MAP_CELLS = 1 << 26  # a 64-megacell map: far more than any run's (hundreds a side)
-MAX_ROBOTS = 1001  # the team and the display robot
-MAX_COORD_M = 10_000_000.0  # docs/security.md's coordinate limit
 _GREYS = np.array([215, 255, 0], dtype=np.uint8)  # unknown, free, occupied
-_COLUMN = re.compile(r"([xy])([1-9][0-9]{0,3})")
 
 
 class PathsError(ValueError):
@@ -62,31 +59,16 @@ def _read(path: Path) -> bytes | None:
 
 
 def _columns(path: Path, header: list[str]) -> list[int]:
-    """The robot of each x,y pair of columns of positions.csv's header step,x1,y1,..."""
-    if not header or header[0] != "step" or len(header) % 2 != 1:
-        raise PathsError(f"{path}: the header is not step,x1,y1,...")
-    robots = []
-    for x, y in zip(header[1::2], header[2::2], strict=True):
-        mx, my = _COLUMN.fullmatch(x), _COLUMN.fullmatch(y)
-        if not (mx and my and mx[1] == "x" and my[1] == "y" and mx[2] == my[2]):
-            raise PathsError(f"{path}: columns {x[:20]!r}, {y[:20]!r} are not xK, yK")
-        if int(mx[2]) > MAX_ROBOTS:
-            raise PathsError(f"{path}: robot {mx[2]} is more than {MAX_ROBOTS}")
-        robots.append(int(mx[2]))
-    return robots
-
-
-def _coordinate(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and abs(value) <= MAX_COORD_M):
-        raise ValueError(f"{text[:40]!r} is not a coordinate")
-    return value
+    try:
+        return csvfiles.position_columns(header)
+    except ValueError as e:
+        raise PathsError(f"{path}: {e}") from None
 
 
 def read_positions(run_dir: Path) -> dict[int, list[tuple[float, float]]]:
     """Robot number -> its (x, y) at every step of positions.csv; {} without the file;
     PathsError (one line: the file, the line, why) when it is not what runs write."""
-    path = Path(run_dir) / "positions.csv"
+    path = Path(run_dir) / csvfiles.POSITIONS_NAME
     data = _read(path)
     if data is None:
         return {}
@@ -100,7 +82,7 @@ def read_positions(run_dir: Path) -> dict[int, list[tuple[float, float]]]:
             for i, k in enumerate(robots):
                 x, y = row[1 + 2 * i : 3 + 2 * i]
                 if x and y:
-                    paths.setdefault(k, []).append((_coordinate(x), _coordinate(y)))
+                    paths.setdefault(k, []).append((coordinate(x), coordinate(y)))
     except (ValueError, csv.Error) as e:  # UnicodeDecodeError is a ValueError
         if isinstance(e, PathsError):
             raise
@@ -147,9 +129,9 @@ def _positive(run: FinishedRun, key: str, value, high: float) -> float:
 
 def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, float]:
     """The map's width and height in metres."""
-    cell = _positive(run, "map_cell", run.config.extra.get("map_cell") or CELL_M, 1000)
+    cell = _positive(run, "map_cell", run.config.map_cell, 1000)
     if shape is None:
-        size = run.config.extra.get("map_size") or [400, 400]
+        size = run.config.map_size
         if not isinstance(size, list) or len(size) != 2:
             raise PathsError(f"{run.path}: config map_size is not [rows, cols]")
         rows = _positive(run, "map_size", size[1], MAX_MAP_CELLS)

@@ -237,9 +237,7 @@ def run_metrics(
             raise runs.ResultError(str(e)) from None
         if partial:
             log.warning("%s: a record cut short at its end (%d bytes) left out", lag_path, partial)
-    middleware = run.config.extra.get("middleware") if run is not None else None
-    if not isinstance(middleware, str):
-        middleware = DEFAULT_MIDDLEWARE
+    middleware = run.config.middleware if run is not None else DEFAULT_MIDDLEWARE
     rtps_read = MIDDLEWARE_FRAMING.get(middleware) in DATAGRAM_FRAMINGS
     captures = read_pcaps(pcaps, udp_payload=True) if rtps_read else read_pcaps(pcaps)
     metrics = compute(

@@ -17,18 +17,18 @@ from __future__ import annotations
 
 import bisect
 import csv
-import json
 import os
 from collections import defaultdict
 
+from node import events
 from testbed.resultfile import RunResult
+from testbed.run import csvfiles
 
 
 def link_timeline(out: str) -> dict[int, list[tuple[str, int, int]]]:
     changes: dict[int, list[tuple[str, int, int]]] = defaultdict(list)
-    with open(os.path.join(out, "links.csv")) as f:
-        for row in csv.DictReader(f):
-            changes[int(row["step"])].append((row["event"], int(row["i"]), int(row["j"])))
+    for c in csvfiles.read_links(out):
+        changes[c.step].append(("add" if c.added else "remove", c.i, c.j))
     return changes
 
 
@@ -67,18 +67,8 @@ def received(out: str, robots: int) -> list[dict]:
     """Every 'recv' event of every robot, with "to" added."""
     evs = []
     for k in range(1, robots + 1):
-        path = os.path.join(out, "robots", f"r{k}.events.jsonl")
-        if not os.path.exists(path):
-            continue
-        with open(path) as f:
-            for line in f:
-                try:
-                    e = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                if e.get("e") == "recv":
-                    e["to"] = k
-                    evs.append(e)
+        path = os.path.join(out, "robots", f"r{k}{events.EVENTS_SUFFIX}")
+        evs += [{**e.to_dict(), "to": k} for e in events.read(path, only=("recv",))]
     return evs
 
 

@@ -11,10 +11,12 @@ the sweep's own back-offs (lower concurrency, a changed time scale).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from testbed.analysis.runs import FinishedRun
 from testbed.sweep import state as sweepstate
+from testbed.sweep.state import SweepRun, SweepState
 
 
 def seconds(x: float) -> str:
@@ -25,47 +27,37 @@ def seconds(x: float) -> str:
 
 def lines(sweep_dir: Path, runs: list[FinishedRun]) -> list[str]:
     """The section's sentences (Markdown paragraphs)."""
-    state = sweepstate.read(sweep_dir) or {}
-    out = _spec_lines(state.get("spec") or {}, state)
-    out += _finished_lines(runs, state.get("runs") or [])
+    state = sweepstate.read(sweep_dir) or sweepstate.SweepState(format=None)
+    out = _spec_lines(state)
+    out += _finished_lines(runs, state.runs)
     out += _timing_lines(runs)
     out += _scale_lines(runs, state)
     out += _backoff_lines(state)
     return out
 
 
-def _spec_value(spec: dict, name: str, listed: bool = False):
-    """Field `name` of a sweep's runs as sweep.json records it: the grid's values, or the
-    one value of [run] (in a list where `listed`). Sweeps before grids were declared per
-    option recorded every field at the top level."""
-    grid, run = spec.get("grid"), spec.get("run")
-    if not isinstance(grid, dict) or not isinstance(run, dict):
-        return spec.get(name)
-    if name in grid:
-        return grid[name]
-    return [run.get(name)] if listed else run.get(name)
-
-
-def _spec_lines(spec: dict, state: dict) -> list[str]:
+def _spec_lines(state: sweepstate.SweepState) -> list[str]:
+    spec = state.spec
     if not spec:
         return []
     by_team = spec.get("time_scale_by_robots") or {}
     scales = (
         ", ".join(f"{v:g} for {k}" for k, v in by_team.items()) + " robots"
         if by_team
-        else _spec_value(spec, "time_scale")
+        else state.spec_value("time_scale")
     )
-    teams, ranges, lasers, loss, delay = (_spec_value(spec, k, listed=True) for k in
+    teams, ranges, lasers, loss, delay = (state.spec_value(k, listed=True) for k in
                                           ("robots", "comm_range", "laser_range", "loss_pct",
                                            "delay_ms"))  # fmt: skip
+    made_by = "?" if state.sweep_file is None else state.sweep_file
     return [
-        f"Sweep file `{state.get('sweep_file', '?')}`: teams {teams}, ranges {ranges} m, "
+        f"Sweep file `{made_by}`: teams {teams}, ranges {ranges} m, "
         f"lasers {lasers} m, loss {loss} %, delay {delay} ms, {spec.get('runs')} run(s) per "
-        f"point, time scale {scales}, routing {_spec_value(spec, 'routing')}."
+        f"point, time scale {scales}, routing {state.spec_value('routing')}."
     ]
 
 
-def _finished_lines(runs: list[FinishedRun], planned: list[dict]) -> list[str]:
+def _finished_lines(runs: list[FinishedRun], planned: Sequence[SweepRun]) -> list[str]:
     status: dict[str, int] = {}
     for r in runs:
         status[r.status] = status.get(r.status, 0) + 1
@@ -77,11 +69,11 @@ def _finished_lines(runs: list[FinishedRun], planned: list[dict]) -> list[str]:
         + "). Runs that crashed or failed are left out of the figures."
     ]
     out += _fidelity_lines(runs)
-    skipped = [r for r in planned if r.get("status") == "skipped"]
+    skipped = [r for r in planned if r.status == "skipped"]
     if skipped:
-        out.append(f"Skipped {len(skipped)} run(s): {skipped[0].get('reason')}.")
+        out.append(f"Skipped {len(skipped)} run(s): {skipped[0].reason}.")
     done = {run.run_id for run in runs}
-    missing = [r["id"] for r in planned if r.get("status") != "skipped" and r["id"] not in done]
+    missing = [r.id for r in planned if r.status != "skipped" and r.id not in done]
     if missing:
         out.append(
             f"Not finished: {len(missing)} run(s) ({', '.join(missing[:5])}"
@@ -139,7 +131,7 @@ def _timing_lines(runs: list[FinishedRun]) -> list[str]:
     return out
 
 
-def _scale_lines(runs: list[FinishedRun], state: dict) -> list[str]:
+def _scale_lines(runs: list[FinishedRun], state: SweepState) -> list[str]:
     """Which time scales each team size ran at (a sweep may move them), and what calibration
     found where it ran."""
     by_team: dict[int, dict[float, int]] = {}
@@ -156,7 +148,7 @@ def _scale_lines(runs: list[FinishedRun], state: dict) -> list[str]:
             for n, sc in sorted(by_team.items())
         ]  # fmt: skip
         out.append("Time scales the runs ran at, per team size: " + "; ".join(parts) + ".")
-    cal = state.get("calibration") or {}
+    cal = state.calibration
     if cal:
         found = [
             f"{n} robots x{c['factor']:g} of the file's scale after {len(c['trials'])} trial(s)"
@@ -169,14 +161,14 @@ def _scale_lines(runs: list[FinishedRun], state: dict) -> list[str]:
     return out
 
 
-def _backoff_lines(state: dict) -> list[str]:
+def _backoff_lines(state: SweepState) -> list[str]:
     """What the sweep changed as runs missed deadlines: its concurrency, its time scales."""
     out = []
-    backoffs = state.get("backoffs") or []
+    backoffs = state.backoffs
     concurrency = [b for b in backoffs if {"jobs", "load_limit", "cpu_limit"} & set(b)]
     if concurrency:
-        now = f"{state.get('jobs')} job(s) at most"
-        cpu_limit = state.get("cpu_limit")
+        now = f"{state.jobs} job(s) at most"
+        cpu_limit = state.cpu_limit
         if isinstance(cpu_limit, int | float) and not isinstance(cpu_limit, bool):
             now += f", within {cpu_limit:g} cores"
         out.append(
@@ -185,7 +177,7 @@ def _backoff_lines(state: dict) -> list[str]:
         )
     scale = [b for b in backoffs if "time_scale_factor" in b]
     if scale:
-        factors = state.get("time_scale_factor") or {}
+        factors = state.time_scale_factor
         out.append(
             f"The sweep changed a team size's time scale {len(scale)} time(s) as runs missed step "
             "deadlines or were not faithful alone (down) or ran clean (up); the factors it ended "

@@ -28,7 +28,6 @@ about 1% of a core.
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import shutil
 import subprocess
@@ -40,9 +39,14 @@ import uuid
 
 import numpy as np
 
+from common import boundedfile
+from node import events as nodeevents
+from node.events import EVENTS_SUFFIX
 from testbed import PROJECT_ROOT
 from testbed.bench.common import write
 from testbed.resultfile import RunResult
+from testbed.run import robotfile
+from testbed.run.robotfile import RobotStats
 
 RUNS = 3
 CLK_TCK = os.sysconf("SC_CLK_TCK")
@@ -142,38 +146,32 @@ def _split(samples, root: int, t0: float, t1: float) -> tuple[dict, dict]:
     return inside, outside
 
 
-def _robots(out: str, n: int) -> list[tuple[dict, str]]:
+def _robots(out: str, n: int) -> list[tuple[RobotStats, str]]:
     """Each robot's robots/rK.json (read once) and the path of its event log."""
     found = []
     for k in range(1, n + 1):
-        try:
-            with open(os.path.join(out, "robots", f"r{k}.json")) as f:
-                found.append((json.load(f), os.path.join(out, "robots", f"r{k}.events.jsonl")))
-        except (OSError, ValueError):
-            continue
+        record = robotfile.read(out, k)
+        if record is not None:
+            found.append((record, os.path.join(out, "robots", f"r{k}{EVENTS_SUFFIX}")))
     return found
 
 
-def _robot_threads(robots: list[tuple[dict, str]]) -> dict[str, float]:
+def _robot_threads(robots: list[tuple[RobotStats, str]]) -> dict[str, float]:
     total: dict[str, float] = {}
     for d, _ in robots:
-        for part, s in (d.get("thread_cpu_s") or {}).items():
+        for part, s in d.thread_cpu_s.items():
             total[part] = total.get(part, 0.0) + s
     return total
 
 
-def _plans_and_frames(robots: list[tuple[dict, str]]) -> tuple[list[float], list[dict]]:
+def _plans_and_frames(robots: list[tuple[RobotStats, str]]) -> tuple[list[float], list[dict]]:
     plan_ms, frames = [], []
     for d, events in robots:
-        frames.append(d.get("latency_ms") or {})
+        frames.append(dict(d.latency_ms))
         try:
-            with open(events) as f:
-                for line in f:
-                    if '"plan"' in line:
-                        e = json.loads(line)
-                        if e.get("e") == "plan" and "ms" in e:
-                            plan_ms.append(float(e["ms"]))
-        except (OSError, ValueError):
+            plans = nodeevents.read(events, only=("plan",))
+            plan_ms += [float(e.fields["ms"]) for e in plans if "ms" in e.fields]
+        except (boundedfile.Refused, TypeError, ValueError):
             continue
     return plan_ms, frames
 

@@ -17,7 +17,6 @@ Targets: plan <= 20 ms median; a 10-robot run at time scale >= 5 missing < 1 % o
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import statistics
@@ -34,6 +33,7 @@ from node.grid import OccupancyGrid
 from node.planner import PlannerParams, plan
 from node.rays import _BIAS, Laser
 from testbed.bench.common import median, write
+from testbed.run import robotfile
 from testbed.world.world import World
 from testbed.world.worldmap import empty_terrain, free_space, start_positions
 
@@ -115,18 +115,15 @@ def ten_robot_run(time_scale: float, seed: int = 3) -> dict:
     load = os.getloadavg()[0]
     try:
         r = run(cfg, out, name, progress=False)
-        robots = []
-        for k in range(1, 11):
-            with open(os.path.join(out, "robots", f"r{k}.json")) as f:
-                robots.append(json.load(f))
+        robots = [rec for k in range(1, 11) if (rec := robotfile.read(out, k)) is not None]
     finally:
         destroy(name)
         shutil.rmtree(out, ignore_errors=True)
     wall = r.step_loop_wall_s or 1e-9
     steps = r.steps or 0
-    cpu = [d["cpu_s"] for d in robots if d.get("cpu_s") is not None]
-    rss = [d["max_rss_mb"] for d in robots if d.get("max_rss_mb") is not None]
-    answer = [d["latency_ms"]["answer"]["p50"] for d in robots if d.get("latency_ms")]
+    cpu = [d.cpu_s for d in robots if d.cpu_s is not None]
+    rss = [d.max_rss_mb for d in robots if d.max_rss_mb is not None]
+    answer = [d.latency_ms["answer"]["p50"] for d in robots if d.latency_ms]
     return {
         "time_scale": time_scale,
         "status": r.status,

@@ -67,6 +67,7 @@ from testbed.resultfile import RunResult
 from testbed.run import isolation, robotchoice
 from testbed.run import results as runresults
 from testbed.run.config import RunConfig, add_arguments, config_from_args
+from testbed.run.configfile import RunConfigFile
 from testbed.run.files import RunFiles
 from testbed.run.prepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
 from testbed.run.progress import ProgressLine, summary_line
@@ -379,7 +380,8 @@ class Run:
     ) -> RunRecord:
         """The run's frozen record, for testbed.run.results to write."""
         return RunRecord(
-            out=self.prep.out, config=self.prep.config, time_scale=self.cfg.time_scale,
+            out=self.prep.out, config=RunConfigFile.from_dict(self.prep.config),
+            time_scale=self.cfg.time_scale,
             status=status[0], detail=status[1], world=self.prep.world,
             robots=tuple(r.outcome() for r in self.robots.values()),
             clock=loop.clock.summary() if loop else no_clock(self.n),

@@ -25,13 +25,22 @@ from typing import TYPE_CHECKING, TextIO
 
 from common.errors import UsageError
 from testbed.resultfile import RESULT_NAME
+from testbed.run.configfile import CONFIG_NAME
+from testbed.run.csvfiles import (
+    COVERAGE_HEADER,
+    COVERAGE_NAME,
+    LINKS_HEADER,
+    LINKS_NAME,
+    POSITIONS_NAME,
+    positions_header,
+)
 
 if TYPE_CHECKING:
     import _csv
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by
 # the robot processes (robots/).
-RUN_MARKERS = ("config.json", RESULT_NAME, "robots")
+RUN_MARKERS = (CONFIG_NAME, RESULT_NAME, "robots")
 
 
 def holds_run(out: str) -> bool:
@@ -91,10 +100,9 @@ class RunFiles:
             w.writerow(header)
             return w
 
-        self._links = writer("links.csv", ["step", "event", "i", "j"])
-        self._coverage = writer("coverage.csv", ["step", "coverage"])
-        xy = [f"{a}{k}" for k in range(1, self.robots + 1) for a in "xy"]
-        self._positions = writer("positions.csv", ["step"] + xy)
+        self._links = writer(LINKS_NAME, list(LINKS_HEADER))
+        self._coverage = writer(COVERAGE_NAME, list(COVERAGE_HEADER))
+        self._positions = writer(POSITIONS_NAME, positions_header(self.robots))
         self._events = open(os.path.join(self.out, "events.jsonl"), "w")  # noqa: SIM115
         self._files.append(self._events)
         return self

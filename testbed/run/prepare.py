@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.errors import UsageError
-from common.jsonfile import write_json_atomic
 from node.rays import Laser
+from testbed.run import configfile
 from testbed.run.config import RunConfig, network_fields
 from testbed.run.failures import battery_kill
 from testbed.run.files import claim_directory, make_directory
@@ -106,7 +106,7 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
         config["battery_kill"] = f"r{planned[0]}:{planned[1]}"
     prepared = PreparedRun(cfg, out, name, truth, world, phases, display_pos, spec, config)
     try:
-        write_json_atomic(prepared.path("config.json"), prepared.config)
+        configfile.write(prepared.out, prepared.config)
         if cfg.map:  # the replay shows the run's own copy (testbed.view.served)
             shutil.copyfile(cfg.map, prepared.path("map.png"))
     except OSError as e:

@@ -23,6 +23,7 @@ from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, ClockSummary
 from testbed.world.world import World
 
 if TYPE_CHECKING:
+    from testbed.run.configfile import RunConfigFile
     from topology.kernel.forkserver import Forked
 
 
@@ -124,7 +125,7 @@ class RunRecord:
     """Everything the results of one run are written from (testbed.run.results)."""
 
     out: str
-    config: dict  # config.json's contents
+    config: RunConfigFile  # config.json's contents
     time_scale: float  # requested
     status: str
     detail: str

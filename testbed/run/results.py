@@ -10,7 +10,6 @@ results.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import logging
@@ -21,10 +20,10 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from common.jsonfile import read_json, write_json_atomic
-from node import render, stepcore
-from testbed.resultfile import HostStalls, Plan, ResultConfig, RobotResult, RunResult
-from testbed.run import fidelity, isolation
+from common.jsonfile import read_json
+from node import events, render, stepcore
+from testbed.resultfile import HostStalls, Plan, RobotResult, RunResult
+from testbed.run import fidelity, isolation, robotfile
 from testbed.world.world import World
 
 if TYPE_CHECKING:
@@ -50,32 +49,19 @@ MAPS_MAX = ("blocked_max_s",)
 PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
 
 
-def read_events(path: str) -> list[dict]:
-    """A robot's event log; a line cut short by a crash is skipped, a missing log is empty."""
-    out = []
-    try:
-        with open(path) as f:
-            for line in f:
-                with contextlib.suppress(json.JSONDecodeError):
-                    out.append(json.loads(line))
-    except FileNotFoundError:
-        pass
-    return out
-
-
 def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
     """Robot r's entry in result.json, and its summary event ({} when it left none: its
     lateness, node.lateness, and CPU); its fuller record goes to robots/rK.json."""
-    ev = read_events(os.path.join(rec.out, "robots", f"r{r.k}.events.jsonl"))
-    plans = tuple(Plan(e["step"], e["cause"]) for e in ev if e["e"] == "plan")
+    ev = events.read(os.path.join(rec.out, "robots", f"r{r.k}{events.EVENTS_SUFFIX}"))
+    plans = tuple(Plan(e.step, e.fields["cause"]) for e in ev if e.e == "plan")
     sent: dict[str, int] = {}
     received: dict[str, int] = {}
     for e in ev:
-        if e["e"] == "send":
-            sent[e["kind"]] = sent.get(e["kind"], 0) + 1
-        elif e["e"] == "recv":
-            received[e["kind"]] = received.get(e["kind"], 0) + 1
-    summary: dict = next((e for e in reversed(ev) if e["e"] == "summary"), {})
+        if e.e == "send":
+            sent[e.fields["kind"]] = sent.get(e.fields["kind"], 0) + 1
+        elif e.e == "recv":
+            received[e.fields["kind"]] = received.get(e.fields["kind"], 0) + 1
+    summary: dict = next((e.to_dict() for e in reversed(ev) if e.e == "summary"), {})
     b = rec.world.bodies[r.k - 1]
     out = RobotResult(
         name=f"r{r.k}", finish_step=r.finish_step, crashed=r.crashed, plans=plans, sent=sent,
@@ -87,10 +73,10 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
         crash_step=r.crash_step, deadlines_missed=r.missed,
         deadlines_missed_steps=list(r.missed_steps),
         collisions=b.collisions, final_pose=[round(b.x, 3), round(b.y, 3)],
-        plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e["e"] == "plan"],
+        plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e.e == "plan"],
     )  # fmt: skip
     detail.update({k: summary.get(k) for k in SUMMARY_KEYS})
-    write_json_atomic(os.path.join(rec.out, "robots", f"r{r.k}.json"), detail)
+    robotfile.write(rec.out, r.k, detail)
     return out, summary
 
 
@@ -128,8 +114,9 @@ def contents(rec: RunRecord) -> RunResult:
     )
     # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).
     verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
+    config = rec.config.result_config()
     return RunResult(
-        config=ResultConfig.from_config(rec.config),
+        config=config,
         status=rec.status,
         status_detail=rec.detail,
         steps=clock.steps,
@@ -164,12 +151,10 @@ def contents(rec: RunRecord) -> RunResult:
         world_missed_steps_ms_late=tuple(tuple(m) for m in clock.world_missed_steps),
         robots=tuple(r for r, _ in robots),
         cpu_s=cpu_seconds(rec, summaries, display, daemons),
-        messaging=messaging(
-            rec.config.get("middleware", "nanomsg"), {r.name: sm for r, sm in robots}
-        ),
+        messaging=messaging(config.middleware, {r.name: sm for r, sm in robots}),
         maps=map_sharing(
-            rec.config.get("maps", "flood"),
-            rec.config.get("middleware", "nanomsg"),
+            config.maps,
+            config.middleware,
             {r.name: sm for r, sm in robots},
             display.get("maps"),
         ),  # fmt: skip
@@ -249,8 +234,8 @@ def channel_relay_lag(out: str) -> dict | None:
 
 def display_summary(out: str) -> dict:
     """The display's summary event ({} when it wrote none)."""
-    ev = read_events(os.path.join(out, "display", "events.jsonl"))
-    return next((e for e in reversed(ev) if e.get("e") == "summary"), {})
+    ev = events.read(os.path.join(out, "display", "events.jsonl"), only=("summary",))
+    return ev[-1].to_dict() if ev else {}
 
 
 def daemon_stats(out: str, n: int) -> list[dict]:

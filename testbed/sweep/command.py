@@ -125,11 +125,11 @@ def _print_status(out: Path) -> int:
     state = sweepstate.read(out)
     if state is None:
         raise UsageError(f"--status {out}: no sweep.json: not a sweep directory")
-    planned = state.get("runs", [])
+    planned = state.runs
     if slurm.submitted(out):
         rows = slurm.status(out, planned)
     else:
-        rows = [(e["id"], "done" if is_done(out, e["id"]) else e.get("status", "?"))
+        rows = [(e.id, "done" if is_done(out, e.id) else ("?" if e.status is None else e.status))
                 for e in planned]  # fmt: skip
     for rid, st in rows:
         print(f"{rid}\t{st}")
@@ -209,7 +209,8 @@ def _check_same_sweep(out: Path, runs: list[PlannedRun], sweep_file: str) -> Non
     """--resume continues the sweep that made `out`, never another one into it."""
     diff = other_sweep(out, runs)
     if diff:
-        made_by = (sweepstate.read(out) or {}).get("sweep_file") or "another sweep file"
+        state = sweepstate.read(out)
+        made_by = (state.sweep_file if state else None) or "another sweep file"
         raise UsageError(
             f"--out {out} is the sweep of {made_by}, not of {sweep_file}: {diff}; resume it "
             "with its own sweep file, or give this one a new --out"

@@ -8,6 +8,7 @@ nothing here starts a process.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -73,15 +74,12 @@ def other_sweep(out: Path, runs: list[PlannedRun]) -> str | None:
     per point, a value more in a list) extends the sweep and is the same one."""
     planned = {r.run_id: r.config for r in runs}
     state = sweepstate.read(out)
-    recorded = state.get("runs") if isinstance(state, dict) else None
-    for entry in recorded if isinstance(recorded, list) else []:
-        rid = entry.get("id") if isinstance(entry, dict) else None
-        if not isinstance(rid, str):
-            continue
+    for entry in state.runs if state else ():
+        rid = entry.id
         if rid not in planned:
             return f"its sweep.json plans run {rid}, which this sweep file does not"
-        config = entry.get("config")
-        differs = _plan_difference(config, planned[rid]) if isinstance(config, dict) else None
+        config = entry.config
+        differs = _plan_difference(config, planned[rid]) if config is not None else None
         if differs:
             return f"run {rid} has {differs}"
     runs_dir = out / "runs"
@@ -95,7 +93,7 @@ def other_sweep(out: Path, runs: list[PlannedRun]) -> str | None:
 _DEFAULTS = RunConfig(robots=1, comm_range=1.0).to_dict()
 
 
-def _plan_difference(recorded: dict, config: RunConfig) -> str | None:
+def _plan_difference(recorded: Mapping, config: RunConfig) -> str | None:
     """How a plan as sweep.json recorded it (plan_dict: options at their default may be left
     out) differs from `config`, its time scale aside; None when it does not."""
     mine = config.to_dict()

@@ -59,7 +59,6 @@ from pathlib import Path
 from typing import BinaryIO
 
 from common.errors import TestbedError
-from common.jsonfile import write_json_atomic
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
 from testbed.sweep import cores as sweepcores
@@ -213,37 +212,39 @@ class Sweep:
 
     def _write_state(self) -> None:
         sch = self.schedule
-        data = {
-            "format": 1,
-            "sweep_file": self.sweep_file,
-            "spec": self.spec.to_dict(),
-            "jobs_requested": sch.jobs_requested,
-            "jobs": sch.jobs,
-            "load_limit_requested": sch.load_limit_requested,
-            "load_limit": sch.load_limit,
-            "cpu_limit_requested": sch.cpu_limit_requested,
-            "cpu_limit": sch.cpu_limit,
-            "time_scale_factor": {
-                str(n): round(f, 3) for n, f in sorted(sch.scale_factors.items())
-            },
-            "netem": self.netem,
-            "calibration": {
-                str(n): {"factor": sch.ceilings.get(n), "trials": trials}
-                for n, trials in sorted(sch.calibration.items())
-            },
-            "backoffs": sch.backoffs,
-            "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-            "runs": [
-                {
-                    "id": r.run_id,
-                    "index": r.index,
-                    "config": plan_dict(r.config),
-                    **self.status[r.run_id],
-                }
-                for r in self.runs
-            ],
-        }
-        write_json_atomic(self.out / "sweep.json", data)
+        sweepstate.write(
+            self.out,
+            sweepstate.SweepState(
+                format=sweepstate.STATE_FORMAT,
+                sweep_file=self.sweep_file,
+                spec=self.spec.to_dict(),
+                jobs_requested=sch.jobs_requested,
+                jobs=sch.jobs,
+                load_limit_requested=sch.load_limit_requested,
+                load_limit=sch.load_limit,
+                cpu_limit_requested=sch.cpu_limit_requested,
+                cpu_limit=sch.cpu_limit,
+                time_scale_factor={
+                    str(n): round(f, 3) for n, f in sorted(sch.scale_factors.items())
+                },
+                netem=self.netem,
+                calibration={
+                    str(n): {"factor": sch.ceilings.get(n), "trials": trials}
+                    for n, trials in sorted(sch.calibration.items())
+                },
+                backoffs=tuple(sch.backoffs),
+                updated=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                runs=tuple(
+                    sweepstate.SweepRun(
+                        id=r.run_id,
+                        index=r.index,
+                        config=plan_dict(r.config),
+                        record=self.status[r.run_id],
+                    )
+                    for r in self.runs
+                ),
+            ),
+        )
 
     def _counts(self):
         st = [s["status"] for s in self.status.values()]
@@ -525,11 +526,9 @@ def wait_for_orphans(out: Path, timeout: float = 60.0) -> None:
     """A SIGKILLed sweep's children get SIGINT (PDEATHSIG); wait until they are gone before
     redoing their runs, and SIGKILL any still running after `timeout` (only the very processes
     recorded in sweep.json: pid and start time)."""
-    state = sweepstate.read(out) or {}
+    state = sweepstate.read(out) or sweepstate.SweepState()
     procs = [
-        (e["pid"], e.get("pid_start"))
-        for e in state.get("runs", [])
-        if e.get("status") == "running" and isinstance(e.get("pid"), int)
+        (e.pid, e.pid_start) for e in state.runs if e.status == "running" and isinstance(e.pid, int)
     ]
     procs = [(pid, start) for pid, start in procs if is_alive(pid, start)]
     deadline = time.monotonic() + timeout

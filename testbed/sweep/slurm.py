@@ -29,6 +29,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -195,13 +196,13 @@ def submit(
     return jobs
 
 
-def status(out: Path, plan_runs: list[dict]) -> list[tuple[str, str]]:
+def status(out: Path, plan_runs: Sequence[sweepstate.SweepRun]) -> list[tuple[str, str]]:
     """(run id, done | running | pending | failed | not submitted) for every planned run."""
     in_queue = queued(out)
     ever = {rid for j in submitted(out) for rid in j["runs"]}
     rows = []
     for entry in plan_runs:
-        rid = entry["id"]
+        rid = entry.id
         if is_done(out, rid):
             rows.append((rid, "done"))
         elif rid in in_queue:
@@ -211,7 +212,7 @@ def status(out: Path, plan_runs: list[dict]) -> list[tuple[str, str]]:
         elif rid in ever:
             rows.append((rid, "failed"))
         else:
-            rows.append((rid, entry.get("status", "not submitted")))
+            rows.append((rid, "not submitted" if entry.status is None else entry.status))
     return rows
 
 
@@ -227,12 +228,13 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
         return 2
     rid = run_ids[index - 1]
     try:
-        plan = {e["id"]: e for e in (sweepstate.read(out) or {}).get("runs", [])}
+        state = sweepstate.read(out)
     except UsageError as e:
         print(f"testbed slurm task: {e}", file=sys.stderr)
         return 2
-    if rid not in plan:
-        print(f"testbed slurm task: {rid} is not in {out}/sweep.json", file=sys.stderr)
+    planned = state.run(rid) if state else None
+    if planned is None:
+        print(f"testbed slurm task: {rid} is not in {sweepstate.state_path(out)}", file=sys.stderr)
         return 2
     if is_done(out, rid):
         print(f"{rid}: already done", file=sys.stderr)
@@ -242,7 +244,7 @@ def task_main(out: Path, task_list: Path, index: int) -> int:
     if rdir.exists():
         shutil.rmtree(rdir)  # a partial run of an earlier attempt
     print(f"{rid}: on {os.uname().nodename}", file=sys.stderr, flush=True)
-    status = cli_main(["run", *run_argv([], plan[rid]["config"], rdir)])
+    status = cli_main(["run", *run_argv([], dict(planned.config or {}), rdir)])
     if cli.terminated:
         _mark_interrupted(rdir)
     return status

@@ -1,9 +1,11 @@
-"""sweep.json as the readers take it: checked before anything is drawn from it.
+"""sweep.json as one type: `SweepState` (the sweep's bookkeeping) and `SweepRun` (one
+planned run and its status record), which testbed.sweep.runner writes and everyone reads.
 
 A sweep directory may come from elsewhere, and `testbed report`, `sweep --status`,
-`sweep --resume` and the Slurm tasks read its sweep.json (testbed.sweep.runner writes it).
-`read(out)` reads it through the one bounded reader (common.boundedfile: a FIFO is refused,
-not waited on; strict JSON, no NaN or 1e400) and checks the shape every reader relies on:
+`sweep --resume` and the Slurm tasks read its sweep.json (testbed.sweep.runner writes it
+with `write`, from a `SweepState`). `read(out)` reads it through the one bounded reader
+(common.boundedfile: a FIFO is refused, not waited on; strict JSON, no NaN or 1e400) and
+checks the shape every reader relies on:
 
 - the document is an object; `runs` a list of objects, each with an `id` that is a run
   directory's name (letters, digits, `.`, `_`, `-`, at most 100) and, where present, a
@@ -12,7 +14,16 @@ not waited on; strict JSON, no NaN or 1e400) and checks the shape every reader r
   Slurm tasks build a run's command line from it);
 - `spec` an object whose `grid` and `run` are objects and `time_scale_by_robots` maps team
   sizes (1..1000) to positive numbers; `time_scale_factor` maps team sizes to positive
-  numbers; `backoffs` a list; `sweep_file` a string.
+  numbers; `backoffs` a list of objects; `calibration` maps team sizes to objects;
+  `sweep_file` a string.
+
+Keys that files written by older versions lack get their defaults here and only here: no
+runs, an empty spec, no sweep file, no factors, calibration or back-offs; a run without a
+status record has none (`status` None). Sweeps before grids were declared per option
+recorded every field of the spec at the top level (`SweepState.spec_value` reads both).
+`to_dict()` gives the keys in the order the runner always wrote them, so the file is what it
+was before the type existed. Nobody else spells the file's name or opens it
+(tests/unit/test_file_types.py holds this).
 
 A sweep.json that fails is one line naming the file and the field (UsageError, exit 2);
 None when there is none. Strings are made one line (testbed.resultfile.one_line).
@@ -23,15 +34,146 @@ from __future__ import annotations
 import os
 import re
 from argparse import ArgumentTypeError
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
+from typing import Any
 
 from common import boundedfile
 from common.errors import UsageError
+from common.jsonfile import write_json_atomic
 from testbed.resultfile import one_line
 
 STATE_NAME = "sweep.json"
+STATE_FORMAT = 1
 RUN_ID = re.compile(r"[A-Za-z0-9._-]{1,100}")
 MAX_TEAM = 1000
+_EMPTY: Mapping[str, Any] = MappingProxyType({})
+# A run's keys that are not its status record (SweepRun.record holds the others, in order).
+_RUN_KEYS = ("id", "index", "config")
+
+
+@dataclass(frozen=True)
+class SweepRun:
+    """One run of the plan: its directory's name, its place in the plan, its options as
+    testbed.sweep.rundir.plan_dict records them, and its status record (`status`, `attempts`,
+    `pid`, `pid_start`, `reason`, `result_status`, ... in the order the runner set them)."""
+
+    id: str
+    index: int | None = None
+    config: Mapping[str, Any] | None = None
+    record: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+
+    @property
+    def status(self) -> str | None:
+        return self.record.get("status")
+
+    @property
+    def reason(self) -> str | None:
+        return self.record.get("reason")
+
+    @property
+    def pid(self) -> int | None:
+        return self.record.get("pid")
+
+    @property
+    def pid_start(self) -> Any:
+        return self.record.get("pid_start")
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"id": self.id}
+        if self.index is not None:
+            out["index"] = self.index
+        if self.config is not None:
+            out["config"] = dict(self.config)
+        out.update(self.record)
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SweepRun:
+        """A run of a checked document (see `check`)."""
+        return cls(
+            id=d["id"], index=d.get("index"), config=d.get("config"),
+            record={k: v for k, v in d.items() if k not in _RUN_KEYS},
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SweepState:
+    """The whole of sweep.json, its keys in the file's order (see the module's docstring)."""
+
+    format: int | None = STATE_FORMAT
+    sweep_file: str | None = None
+    spec: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    jobs_requested: Any = None
+    jobs: Any = None
+    load_limit_requested: Any = None
+    load_limit: Any = None
+    cpu_limit_requested: Any = None
+    cpu_limit: Any = None
+    time_scale_factor: Mapping[str, float] = field(
+        default_factory=lambda: _EMPTY
+    )  # team size -> factor of the file's scale
+    netem: Any = None
+    calibration: Mapping[str, Mapping[str, Any]] = field(
+        default_factory=lambda: _EMPTY
+    )  # team size -> {factor, trials}
+    backoffs: tuple[Mapping[str, Any], ...] = ()
+    updated: str | None = None
+    runs: tuple[SweepRun, ...] = field(default=())
+
+    def to_dict(self) -> dict[str, Any]:
+        """The document the runner writes (keys in this order; nested values as given)."""
+        return {
+            "format": self.format,
+            "sweep_file": self.sweep_file,
+            "spec": dict(self.spec),
+            "jobs_requested": self.jobs_requested,
+            "jobs": self.jobs,
+            "load_limit_requested": self.load_limit_requested,
+            "load_limit": self.load_limit,
+            "cpu_limit_requested": self.cpu_limit_requested,
+            "cpu_limit": self.cpu_limit,
+            "time_scale_factor": dict(self.time_scale_factor),
+            "netem": self.netem,
+            "calibration": dict(self.calibration),
+            "backoffs": list(self.backoffs),
+            "updated": self.updated,
+            "runs": [r.to_dict() for r in self.runs],
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any) -> SweepState:
+        """The document checked (`check`) with old files' defaults; ValueError naming the
+        field when it is not a sweep.json."""
+        d = check(doc)
+        return cls(
+            format=d.get("format"), sweep_file=d.get("sweep_file"),
+            spec=MappingProxyType(d["spec"]), jobs_requested=d.get("jobs_requested"),
+            jobs=d.get("jobs"), load_limit_requested=d.get("load_limit_requested"),
+            load_limit=d.get("load_limit"), cpu_limit_requested=d.get("cpu_limit_requested"),
+            cpu_limit=d.get("cpu_limit"),
+            time_scale_factor=MappingProxyType(d.get("time_scale_factor") or {}),
+            netem=d.get("netem"), calibration=MappingProxyType(d.get("calibration") or {}),
+            backoffs=tuple(d.get("backoffs") or ()), updated=d.get("updated"),
+            runs=tuple(SweepRun.from_dict(e) for e in d["runs"]),
+        )  # fmt: skip
+
+    def run(self, run_id: str) -> SweepRun | None:
+        """The planned run `run_id`, None when the plan has none."""
+        return next((r for r in self.runs if r.id == run_id), None)
+
+    def spec_value(self, name: str, listed: bool = False) -> Any:
+        """Field `name` of the sweep's runs as the spec records it: the grid's values, or the
+        one value of [run] (in a list where `listed`). Sweeps before grids were declared per
+        option recorded every field at the top level."""
+        grid, run = self.spec.get("grid"), self.spec.get("run")
+        if not isinstance(grid, dict) or not isinstance(run, dict):
+            return self.spec.get(name)
+        if name in grid:
+            return grid[name]
+        return [run.get(name)] if listed else run.get(name)
 
 
 def _number(v) -> bool:
@@ -110,8 +252,17 @@ def check(doc) -> dict:
             raise ValueError(f"spec.{key} is not an object")
     _team_map("spec.time_scale_by_robots", spec.get("time_scale_by_robots"))
     _team_map("time_scale_factor", doc.get("time_scale_factor"))
-    if doc.get("backoffs") is not None and not isinstance(doc["backoffs"], list):
-        raise ValueError("backoffs is not a list")
+    backoffs = doc.get("backoffs")
+    if backoffs is not None and (
+        not isinstance(backoffs, list) or not all(isinstance(b, dict) for b in backoffs)
+    ):
+        raise ValueError("backoffs is not a list of objects")
+    calibration = doc.get("calibration")
+    if calibration is not None and (
+        not isinstance(calibration, dict)
+        or not all(isinstance(c, dict) for c in calibration.values())
+    ):
+        raise ValueError("calibration is not an object of objects")
     if doc.get("sweep_file") is not None:
         if not isinstance(doc["sweep_file"], str):
             raise ValueError("sweep_file is not a string")
@@ -120,15 +271,25 @@ def check(doc) -> dict:
     return out
 
 
-def read(out: Path) -> dict | None:
+def state_path(out: str | Path) -> Path:
+    """Where a sweep directory's sweep.json is."""
+    return Path(out) / STATE_NAME
+
+
+def read(out: str | Path) -> SweepState | None:
     """DIR/sweep.json checked (see the module's docstring); None when there is none;
     UsageError (one line naming the file and the field) when it is not one."""
-    path = Path(out) / STATE_NAME
+    path = state_path(out)
     if not os.path.lexists(path):
         return None
     try:
-        return check(boundedfile.load_json(path))
+        return SweepState.from_dict(boundedfile.load_json(path))
     except boundedfile.Refused as r:
         raise UsageError(f"{path}: {boundedfile.describe(r)}") from None
     except ValueError as e:
         raise UsageError(f"{path}: {e}") from None
+
+
+def write(out: str | Path, state: SweepState) -> None:
+    """DIR/sweep.json holds `state` (atomically: the old file or the new one, never a part)."""
+    write_json_atomic(state_path(out), state.to_dict())

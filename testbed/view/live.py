@@ -13,13 +13,13 @@ the robots' processes and sends nothing on the emulated radio.
 from __future__ import annotations
 
 import asyncio
-import json
 import threading
 import time
 
 from aiohttp import web
 
 from common.jsonfile import read_json
+from node import events
 from testbed.view import server
 from testbed.view.served import snapshot_steps
 
@@ -205,6 +205,9 @@ class KernelRoutes:
         self._socks.clear()
 
 
+SEND_LINE, PLAN_LINE = events.line_prefix("send"), events.line_prefix("plan")
+
+
 class RobotEvents:
     """The robots' own event logs (robots/rK.events.jsonl, written by the robot processes as
     they run), followed like `tail -f`: each robot's newest goal (its plan events) and the
@@ -232,10 +235,11 @@ class RobotEvents:
             end = chunk.rfind(b"\n") + 1  # whole lines only; the rest next time
             self.offsets[k] += end
             for line in chunk[:end].splitlines():
-                if line.startswith(b'{"e":"send"'):
+                if line.startswith(SEND_LINE):
                     sent += 1
-                elif line.startswith(b'{"e":"plan"'):
-                    goal = json.loads(line).get("goal")
+                elif line.startswith(PLAN_LINE):
+                    ev = events.parse(line)
+                    goal = ev.get("goal") if ev else None
                     if goal:
                         self.goals[k] = goal
         if self._last:

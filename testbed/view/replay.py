@@ -13,80 +13,41 @@ page or JSON cannot hold.
 
 from __future__ import annotations
 
-import csv
-import json
-import math
+import dataclasses
 from pathlib import Path
 
 from common import boundedfile
 from testbed.resultfile import RESULT_NAME, RunResult
+from testbed.run import configfile, csvfiles
+from testbed.run.configfile import CONFIG_NAME
+from testbed.run.csvfiles import COVERAGE_NAME, LINKS_NAME, POSITIONS_NAME
 from testbed.view.served import in_run, snapshot, snapshot_steps
-from topology.names import MAX_ROBOTS
-from topology.spec import CELL_M, MAX_COORD_M
 
 __all__ = ["NotARun", "load", "read_config", "snapshot_path", "snapshot_steps"]
 
-MAX_MAP_CELLS = 1 << 20  # cells along one side of the map (a run's maps have hundreds)
-MAX_STEP = 10**9
+
+MAX_STEP = csvfiles.MAX_STEP  # the last step a query may ask for
 
 
 class NotARun(ValueError):
     """The directory holds no finished run the view can replay."""
 
 
-def _json_object(d: Path, name: str, required: bool) -> dict:
-    path = in_run(d, name)
-    if path is None:
-        if required:
-            raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
-        return {}
-    try:  # a regular file only, bounded; its values are checked field by field below
-        doc = json.loads(boundedfile.read(path, boundedfile.MAX_JSON_BYTES))
-    except (boundedfile.Refused, ValueError, RecursionError):
-        doc = None
-    if not isinstance(doc, dict):
-        if required:
-            raise NotARun(f"{d}/{name}: not a JSON object")
-        return {}
-    return doc
-
-
-def _number(doc: dict, key: str, where: str, lo: float, hi: float, default=None) -> float:
-    value = doc.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise NotARun(f"{where}: {key} is not a number")
-    if not (math.isfinite(value) and lo <= value <= hi):
-        raise NotARun(f"{where}: {key} {value:g} is not in {lo:g}..{hi:g}")
-    return value
-
-
 def read_config(d: Path) -> dict:
-    """What the view takes from config.json, checked: robots, comm_range, map_m, map_cell,
-    display (a position or nothing) and map (what it names, unchecked: testbed.view.served
-    decides whether to serve it)."""
-    config = _json_object(d, "config.json", required=True)
-    where = f"{d}/config.json"
-    robots = _number(config, "robots", where, 1, MAX_ROBOTS)
-    if robots != int(robots):
-        raise NotARun(f"{where}: robots {robots:g} is not a whole number")
-    comm_range = float(_number(config, "comm_range", where, 0, MAX_COORD_M))
-    cell = float(_number(config, "map_cell", where, 1e-6, 1e3, default=CELL_M))
-    size = config.get("map_size")
-    if size is None:
-        map_m = [20.0, 20.0]
-    else:
-        if not (isinstance(size, list) and len(size) == 2):
-            raise NotARun(f"{where}: map_size is not [rows, cols]")
-        rows, cols = (_number({"map_size": v}, "map_size", where, 1, MAX_MAP_CELLS) for v in size)
-        map_m = [int(cols) * CELL_M, int(rows) * CELL_M]
-    display = config.get("display_pos") or []
-    if display:
-        if not (isinstance(display, list) and len(display) == 2):
-            raise NotARun(f"{where}: display_pos is not [x, y]")
-        display = [float(_number({"display_pos": v}, "display_pos", where, -MAX_COORD_M,
-                                 MAX_COORD_M)) for v in display]  # fmt: skip
-    return {"robots": int(robots), "comm_range": comm_range, "map_m": map_m, "map_cell": cell,
-            "display": display, "map": config.get("map")}  # fmt: skip
+    """What the view takes from config.json, checked (testbed.run.configfile): robots,
+    comm_range, map_m, map_cell, display (a position or nothing) and map (what it names,
+    unchecked: testbed.view.served decides whether to serve it)."""
+    path = in_run(d, CONFIG_NAME)
+    if path is None:
+        raise NotARun(f"{d}: not a run directory with {CONFIG_NAME} (runs made since 2026-11-24)")
+    try:  # a regular file only, bounded; its values are checked field by field
+        config = configfile.read(path)
+    except (boundedfile.Refused, configfile.ConfigError):
+        raise NotARun(f"{d}/{CONFIG_NAME}: not a JSON object") from None
+    try:
+        return dataclasses.asdict(config.view())
+    except configfile.ConfigError as e:
+        raise NotARun(f"{d}/{CONFIG_NAME}: {e}") from None
 
 
 def _rows(d: Path, name: str, parse, required: bool = False) -> list:
@@ -98,30 +59,11 @@ def _rows(d: Path, name: str, parse, required: bool = False) -> list:
             raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
         return []
     try:
-        f = boundedfile.open_text(path)  # checked on the descriptor: no FIFO swapped in
+        return csvfiles.rows(path, parse)
     except boundedfile.Refused as r:
         raise NotARun(f"{d}/{name}: {boundedfile.describe(r)}") from None
-    with f:
-        reader = csv.reader(f)
-        try:
-            next(reader, None)
-            return [parse(row) for row in reader]
-        except (ValueError, csv.Error) as e:  # UnicodeDecodeError is a ValueError
-            why = (str(e).splitlines() or ["unreadable"])[0][:200]
-            raise NotARun(f"{d}/{name} line {reader.line_num}: {why}") from None
-
-
-def _finite(text: str, lo: float, hi: float) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and lo <= value <= hi):
-        raise ValueError(f"{text[:40]!r} is not a number in {lo:g}..{hi:g}")
-    return value
-
-
-def _whole(text: str, lo: int, hi: int) -> int:
-    if not (text.isascii() and text.isdigit() and len(text) <= 10 and lo <= int(text) <= hi):
-        raise ValueError(f"{text[:40]!r} is not a whole number in {lo}..{hi}")
-    return int(text)
+    except csvfiles.CsvError as e:
+        raise NotARun(f"{d}/{name} line {e.line}: {e.why}") from None
 
 
 def load(run_dir: str | Path) -> dict:
@@ -134,31 +76,9 @@ def load(run_dir: str | Path) -> dict:
         status = "unknown"
     n = config["robots"]
 
-    seen = [0]  # rows of positions.csv read: its step column counts them
-
-    def position_row(row: list[str]) -> list[float]:
-        if len(row) != 1 + 2 * n:
-            raise ValueError(f"{len(row)} columns, not {1 + 2 * n} (step, x and y of {n})")
-        if _whole(row[0], 0, MAX_STEP) != seen[0]:
-            raise ValueError(f"step {row[0][:20]!r}, not {seen[0]} (one row a step, in order)")
-        seen[0] += 1
-        return [round(_finite(v, -MAX_COORD_M, MAX_COORD_M), 3) for v in row[1:]]
-
-    positions = _rows(d, "positions.csv", position_row, required=True)
+    positions = _rows(d, POSITIONS_NAME, csvfiles.position_rows(n), required=True)
     last = len(positions) - 1
-
-    def link_row(row: list[str]) -> list:
-        if len(row) != 4 or row[1] not in ("add", "remove"):
-            raise ValueError("not step,add|remove,i,j")
-        i, j = (_whole(v, 1, n + 1) for v in row[2:])  # n + 1: the display robot
-        if i == j:
-            raise ValueError(f"a link of robot {i} to itself")
-        return [_whole(row[0], 0, max(last, 0)), row[1] == "add", i, j]
-
-    def coverage_row(row: list[str]) -> float:
-        if len(row) != 2:
-            raise ValueError("not step,coverage")
-        return _finite(row[1], 0.0, 1.0)
+    links = [list(c) for c in _rows(d, LINKS_NAME, csvfiles.link_rows(n, last))]
 
     return {
         "run": d.name,
@@ -170,8 +90,8 @@ def load(run_dir: str | Path) -> dict:
         "status": status,
         "steps": len(positions) - 1,
         "positions": positions,  # per step: x1, y1, x2, y2, ...
-        "links": _rows(d, "links.csv", link_row),  # [step, added?, i, j]
-        "coverage": _rows(d, "coverage.csv", coverage_row),
+        "links": links,  # [step, added?, i, j]
+        "coverage": _rows(d, COVERAGE_NAME, csvfiles.coverage_row),
         "snapshots": snapshot_steps(d),
     }
 

@@ -191,18 +191,17 @@ def test_a_grid_dimension_is_declared_once_on_its_option():
 
 def test_the_report_reads_both_shapes_of_a_sweeps_spec():
     from testbed.analysis.sweepinfo import _spec_lines
+    from testbed.sweep.state import SweepState
 
     spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0, 20.0), laser_range=(2.0,),
                                   runs=2, time_scale=4.0)  # fmt: skip
     older = {"robots": [1, 2], "comm_range": [5.0, 20.0], "laser_range": [2.0],
              "loss_pct": [0.0], "delay_ms": [0.0], "runs": 2, "time_scale": 4.0,
              "routing": "aodv", "time_scale_by_robots": {}}  # fmt: skip
-    state = {"sweep_file": "s.toml"}
-    assert _spec_lines(spec.to_dict(), state) == _spec_lines(older, state)
-    assert (
-        "teams [1, 2], ranges [5.0, 20.0] m, lasers [2.0] m, loss [0.0] %"
-        in (_spec_lines(spec.to_dict(), state)[0])
-    )
+    new = SweepState.from_dict({"sweep_file": "s.toml", "spec": spec.to_dict()})
+    old = SweepState.from_dict({"sweep_file": "s.toml", "spec": older})
+    assert _spec_lines(new) == _spec_lines(old)
+    assert "teams [1, 2], ranges [5.0, 20.0] m, lasers [2.0] m, loss [0.0] %" in _spec_lines(new)[0]
 
 
 def test_the_robots_parameters_are_declared_once_in_node_launch():

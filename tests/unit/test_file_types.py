@@ -1,0 +1,163 @@
+"""Every file the testbed writes and reads again has one type (issue 41, item 1): sweep.json
+(testbed.sweep.state), a robot's events.jsonl (node.events), result.json and its config
+(testbed.resultfile). Checked here on the source of every module: no module but the type's
+own opens sweep.json or parses event lines by hand, and the old files' defaults of a run's
+config are the type's; and the config's two descriptions (the run's option table and
+result.json's config) do not drift apart."""
+
+import ast
+import dataclasses
+import re
+from pathlib import Path
+
+import pytest
+
+from testbed.resultfile import CONFIG_KEYS, ResultConfig
+from testbed.run.config import BY_NAME
+
+REPO = Path(__file__).resolve().parents[2]
+PACKAGES = ("testbed", "topology", "node", "aodv", "common")
+SWEEP_OWNER = "testbed/sweep/state.py"
+EVENTS_OWNER = "node/events.py"
+SWEEP_SPELLED = re.compile(r"(?:^|/)sweep\.json$")
+EVENTS_MENTIONED = re.compile(r"events\.jsonl|EVENTS_SUFFIX")
+# An event line's first bytes, as a reader matching lines by hand spells them.
+EVENT_PREFIX = re.compile(r"""\{\s*\\?["']e\\?["']\s*:""")
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    ids = set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = n.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                ids.add(id(body[0].value))
+    return ids
+
+
+def _strings(tree: ast.AST) -> list[tuple[int, str]]:
+    docs = _docstrings(tree)
+    out = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Constant) and id(n) not in docs:
+            if isinstance(n.value, str):
+                out.append((n.lineno, n.value))
+            elif isinstance(n.value, bytes):
+                out.append((n.lineno, n.value.decode("latin-1")))
+    return out
+
+
+def _calls(tree: ast.AST) -> list[tuple[int, str]]:
+    out = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Call):
+            f = n.func
+            name = (
+                f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+            )
+            out.append((n.lineno, name))
+    return out
+
+
+def sweep_reads(source: str) -> list[str]:
+    """Where `source` reaches sweep.json but through its type: its name spelled as a path,
+    the type module's name constant, or its check of a raw document."""
+    tree = ast.parse(source)
+    found = [f"{ln}: spells sweep.json" for ln, s in _strings(tree) if SWEEP_SPELLED.search(s)]
+    for n in ast.walk(tree):
+        if isinstance(n, ast.alias) and n.name == "STATE_NAME":
+            found.append(f"{n.lineno}: imports STATE_NAME")
+        elif isinstance(n, ast.Attribute) and n.attr == "STATE_NAME":
+            found.append(f"{n.lineno}: uses STATE_NAME")
+        elif (isinstance(n, ast.Attribute) and n.attr == "check"
+              and isinstance(n.value, ast.Name) and n.value.id == "sweepstate"):  # fmt: skip
+            found.append(f"{n.lineno}: checks a raw sweep.json")
+    return found
+
+
+def event_parses(source: str) -> list[str]:
+    """Where `source` parses event-log lines by hand: an event line's first bytes spelled,
+    or json.load(s) in a module that names an event log."""
+    tree = ast.parse(source)
+    found = [f"{ln}: matches an event line's bytes" for ln, s in _strings(tree)
+             if EVENT_PREFIX.search(s)]  # fmt: skip
+    if EVENTS_MENTIONED.search(source):
+        found += [f"{ln}: {name}() in a module that reads an event log"
+                  for ln, name in _calls(tree) if name == "loads"]  # fmt: skip
+    return found
+
+
+def _modules(owner: str):
+    for pkg in PACKAGES:
+        for path in sorted((REPO / pkg).rglob("*.py")):
+            rel = str(path.relative_to(REPO))
+            if rel != owner:
+                yield pytest.param(path, id=rel)
+
+
+def test_the_checks_see_what_they_must():
+    assert sweep_reads("x = read_json(out / 'sweep.json')\n")
+    assert sweep_reads("p = os.path.join(d, 'sweep.json')\n")
+    assert sweep_reads("p = out / sweepstate.STATE_NAME\n")
+    assert sweep_reads("from testbed.sweep.state import STATE_NAME\n")
+    assert sweep_reads("doc = sweepstate.check(json.load(f))\n")
+    assert not sweep_reads('"""Reads sweep.json."""\ns = sweepstate.read(out)\n')
+    assert event_parses('if line.startswith(b\'{"e":"send"\'):\n    pass\n')
+    assert event_parses("p = 'r1.events.jsonl'\nevs = [json.loads(x) for x in open(p)]\n")
+    assert event_parses("p = f'r{k}{EVENTS_SUFFIX}'\ne = json.loads(line)\n")
+    assert not event_parses("p = 'r1.events.jsonl'\nevs = events.read(p, only=('plan',))\n")
+    assert not event_parses("d = json.loads(text)\n")  # not a module about event logs
+
+
+@pytest.mark.parametrize("path", list(_modules(SWEEP_OWNER)))
+def test_no_module_but_the_type_reads_sweep_json(path):
+    assert sweep_reads(path.read_text()) == []
+
+
+@pytest.mark.parametrize("path", list(_modules(EVENTS_OWNER)))
+def test_no_module_but_the_type_parses_event_lines(path):
+    assert event_parses(path.read_text()) == []
+
+
+# ---------------------------------------------------------------- config.json's two descriptions
+
+
+def test_result_configs_keys_are_run_options():
+    """result.json's config repeats options of the run's table (testbed.run.config): each of
+    its keys is one, and its fields are those keys and the few it draws from `extra`."""
+    assert [k for k in CONFIG_KEYS if k not in BY_NAME] == []
+    fields = [f.name for f in dataclasses.fields(ResultConfig)]
+    drawn = ("medium", "wifi_standard", "wifi_rate", "extra")
+    assert sorted(fields) == sorted([*CONFIG_KEYS, *drawn])
+    assert [k for k in drawn[:-1] if k not in BY_NAME] == []
+    defaulted = ("middleware", "maps", "battery_failure")
+    assert [k for k in defaulted if k not in BY_NAME] == []
+
+
+def test_result_config_defaults_match_the_options_defaults():
+    """A run that left an option at its default and an old run without it read the same."""
+    from testbed.run.config import RunConfig
+
+    new = RunConfig(robots=2, comm_range=20.0).to_dict()
+    new.update(map_size=[400, 400])
+    cfg = ResultConfig.from_config(new)
+    old = ResultConfig.from_dict({"robots": 2, "comm_range": 20.0, "laser_range": 1.0})
+    for prop in ("middleware", "maps", "battery_failure", "routing", "coordination", "start",
+                 "medium", "loss_pct", "delay_ms"):  # fmt: skip
+        assert getattr(old, prop) == getattr(cfg, prop), prop
+    assert old.map_size == [400, 400] and old.map_cell == cfg.map_cell
+
+
+def test_old_configs_defaults_are_the_types():
+    old = ResultConfig.from_dict({"robots": 2, "comm_range": 20, "laser_range": 1.0})
+    assert (old.middleware, old.maps, old.battery_failure) == ("nanomsg", "flood", "none")
+    assert old.map_cell == 0.05 and old.map_size == [400, 400]
+    given = ResultConfig.from_dict({"robots": 2, "comm_range": 20, "laser_range": 1.0,
+                                    "extra": {"middleware": "zenoh", "maps": "pubsub",
+                                              "battery_failure": "midrun", "map_cell": 0.1,
+                                              "map_size": [10, 20]}})  # fmt: skip
+    assert (given.middleware, given.maps, given.battery_failure) == ("zenoh", "pubsub", "midrun")
+    assert given.map_cell == 0.1 and given.map_size == [10, 20]
+    odd = ResultConfig.from_dict({"robots": 2, "comm_range": 20, "laser_range": 1.0,
+                                  "extra": {"middleware": 3, "maps": None}})  # fmt: skip
+    assert (odd.middleware, odd.maps) == ("nanomsg", "flood")
