@@ -32,12 +32,15 @@ what they return:
     aodv/datapath.py     DataPath           route use (6.2), the kernel's copy of the table
     aodv/actions.py      the actions above
 
-The state's attributes (seq, table, neighbors, ...) read and write through the core as
-before the split.
+Each part holds the state only its section touches (the rate limits, the kernel's copy
+of the table) and is handed the collaborators it calls: discovery answers a RREQ through
+the replies, maintenance repairs a route through discovery. Where a discovery's outcome
+concerns maintenance (a local repair that ended), the core passes it on. The state's
+attributes (seq, table, neighbors, ...) read and write through the core as before the
+split.
 
 Where the RFC leaves a choice, the decision is written next to the rule as "Decision:", in
-the module of its section.
-The main ones, for a reader in a hurry:
+the module of its section. The main ones, for a reader in a hurry:
 
 - Parameters: section 10 with its notes (MY_ROUTE_TIMEOUT 11.2 s, TTL_START 2,
   BLACKLIST_TIMEOUT for the ring search, DELETE_PERIOD 5 * max(ACTIVE_ROUTE_TIMEOUT,
