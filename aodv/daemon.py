@@ -1,23 +1,23 @@
-"""The AODV daemon of one robot: sockets, kernel routes, the TUN device and the clock.
+"""The AODV daemon of one robot: start-up and teardown, and the loop that turns IO into
+events of the protocol core.
 
 Theory of operation
 -------------------
-One thread, one `selectors` loop over three file descriptors: the UDP socket on port 654
-(control messages), the TUN device (data packets that found no kernel route) and a signal
-wake-up socket. Everything protocol-related is delegated to `AodvCore`; this module only
-turns IO into core events (with `time.monotonic()` as `now`) and core actions into IO:
+One thread, one `selectors` loop over the daemon's file descriptors: the UDP socket on port
+654 (control messages), the TUN device (data packets that found no kernel route), the
+route-use reader, rtnetlink, a raw ICMP socket and a signal wake-up socket. Everything
+protocol-related is delegated to `AodvCore`; `Daemon` makes the kernel objects and sockets,
+turns what they report into core events (with `time.monotonic()` as `now`) and hands the
+core's actions to `Actuator` (aodv.actuator), which carries them out:
 
     UDP 654 datagram  -> decode -> core.on_control(src, ttl)   Unicast/Broadcast -> sendto
     TUN packet        -> core.on_no_route(src, dst)            Install/DeleteRoute -> netlink
     nft "used" set    -> core.on_route_used(addr)               ReleasePackets -> raw socket
     deadline reached  -> core.on_timer()                        DropPackets -> ICMP via TUN
 
-Control socket: bound to 0.0.0.0:654 and to the interface (SO_BINDTODEVICE), with
-SO_BROADCAST; the IP TTL is set before each send and read on receipt (IP_RECVTTL = 12,
-missing from Python 3.11's socket module). Broadcasts go to 255.255.255.255; unicasts use
-MSG_DONTROUTE, as a control message always goes to a neighbour on the link. The socket
-hears our own broadcasts: a socket filter drops them by source address (`_on_udp` checks
-again).
+The control socket and its TTLs are aodv.control's (`ControlChannel`); the ICMP written
+and read, aodv.icmp's; the statistics, aodv.stats' (written every STATS_PERIOD and on
+SIGUSR1).
 
 Routes of the daemon carry protocol number RTPROT_AODV; they are flushed at start and at
 exit. A start is a restart (RFC 6.13 reboot rule: DELETE_PERIOD without originating
@@ -45,23 +45,16 @@ import struct
 import time
 
 from aodv import packet as wire
-from aodv.core import (
-    AodvCore,
-    Broadcast,
-    DeleteRoute,
-    DiscoveryDone,
-    DropPackets,
-    InstallRoute,
-    ReleasePackets,
-    Unicast,
-)
+from aodv.actuator import Actuator
+from aodv.control import ControlChannel, open_control_socket
+from aodv.core import AodvCore
+from aodv.icmp import _checksum, icmp_host_unreachable, quoted_datagram
 from aodv.kernel import (
     KernelError,
     KernelRoutes,
     SetReader,
     Tun,
     UseMonitor,
-    drop_own_datagrams,
 )
 from aodv.params import Params
 from aodv.persist import CounterStore
@@ -71,69 +64,12 @@ from common.sched import DEADLINE_PRIORITY, deadline_priority
 
 log = logging.getLogger(__name__)
 
-IP_RECVTTL = 12  # linux/in.h; not in Python 3.11's socket module
-IP_TTL_CMSG = 2  # IP_TTL: the cmsg type of a received TTL
-BROADCAST = "255.255.255.255"
+# The ICMP helpers live in aodv.icmp; they are named here too (tests import them from here).
+__all__ = ["Daemon", "_checksum", "icmp_host_unreachable", "quoted_datagram"]
+
 STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
 _U32 = struct.Struct("!I")
-ICMP_DEST_UNREACH = 3
-_I32 = struct.Struct("i")  # a received TTL's cmsg data (native int)
 HOSTS_REMEMBERED = 4096  # bound of the checked-address memory
-
-
-def _checksum(data: bytes) -> int:
-    if len(data) % 2:
-        data += b"\0"
-    s = sum(struct.unpack(f"!{len(data) // 2}H", data))
-    s = (s >> 16) + (s & 0xFFFF)
-    s += s >> 16
-    return ~s & 0xFFFF
-
-
-def icmp_host_unreachable(own: str, original: bytes) -> bytes:
-    """An ICMP destination unreachable (type 3, code 1) about `original`, to its sender."""
-    ihl = (original[0] & 0x0F) * 4
-    quoted = original[: ihl + 8]
-    icmp = struct.pack("!BBHI", 3, 1, 0, 0) + quoted
-    icmp = icmp[:2] + struct.pack("!H", _checksum(icmp)) + icmp[4:]
-    total = 20 + len(icmp)
-    hdr = struct.pack(
-        "!BBHHHBBH4s4s",
-        0x45,
-        0,
-        total,
-        0,
-        0,
-        64,
-        socket.IPPROTO_ICMP,
-        0,
-        socket.inet_aton(own),
-        original[12:16],
-    )
-    hdr = hdr[:10] + struct.pack("!H", _checksum(hdr)) + hdr[12:]
-    return hdr + icmp
-
-
-def quoted_datagram(icmp_packet: bytes, own: str) -> tuple[int, bytes] | None:
-    """From an IPv4 packet carrying an ICMP destination unreachable, the AODV datagram it
-    quotes if `own` sent it (UDP from port 654 to port 654): (its UDP length, the quoted
-    part of its payload); None for anything else, short or malformed packets included."""
-    try:
-        outer = (icmp_packet[0] & 0x0F) * 4
-        if icmp_packet[outer] != ICMP_DEST_UNREACH:
-            return None
-        inner = outer + 8
-        ihl = (icmp_packet[inner] & 0x0F) * 4
-        if icmp_packet[inner + 9] != socket.IPPROTO_UDP:
-            return None
-        if icmp_packet[inner + 12 : inner + 16] != socket.inet_aton(own):
-            return None
-        sport, dport, length = struct.unpack_from("!HHH", icmp_packet, inner + ihl)
-    except (IndexError, struct.error):
-        return None
-    if sport != wire.AODV_PORT or dport != wire.AODV_PORT or length < 8:
-        return None
-    return length, icmp_packet[inner + ihl + 8 : inner + ihl + length]
 
 
 def _quietly(what: str, fn, *args) -> None:
@@ -168,8 +104,6 @@ class Daemon:
         self._malformed_logged = 0
         self._hosts: set[str] = set()  # addresses _check_addresses found in our network
         self._poll_started = 0.0
-        # When the newest RREQ of our own for each destination went to sendto().
-        self._rreq_sent: dict[str, float] = {}
         # Made by run(), in this order, and undone in the reverse order by its ExitStack
         # (declared here, set there: nothing reads them before).
         self.routes: KernelRoutes  # rtnetlink: our kernel routes
@@ -179,12 +113,13 @@ class Daemon:
         self.monitor: UseMonitor  # nftables set of route uses
         self.reader: SetReader  # reads that set over NETLINK_NETFILTER
         self.sock: socket.socket  # UDP 654, control messages
-        self._ttl: int | None = None  # the IP TTL `sock` sends with now
         self.raw: socket.socket  # re-sends buffered packets
         self.icmp: socket.socket  # ICMP errors about our datagrams
+        self.control: ControlChannel  # sends and receives on `sock`, reads `icmp`
         self._wake_r: socket.socket  # signal wake-up (set_wakeup_fd)
         self._wake_w: socket.socket
         self.core: AodvCore | None = None  # None until the end of start-up
+        self._actuator: Actuator  # carries out the core's actions (made with the core)
 
     @property
     def _core(self) -> AodvCore:
@@ -243,6 +178,9 @@ class Daemon:
         )
         if self.store:
             self.store.cover(seq, rreq_id)  # a restart's own file says so from now on
+        self._actuator = Actuator(
+            self.core, self.control, self.routes, self.raw, self.tun, self.stats, self.store
+        )
         # What start-up allocated lives for good: keep it out of the collector's
         # full passes, which would otherwise walk it on some discovery's hot path.
         gc.freeze()
@@ -252,16 +190,7 @@ class Daemon:
         return self.p.active_route_timeout / 3
 
     def _open_sockets(self, undo: contextlib.ExitStack) -> None:
-        s = undo.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, self.iface.encode())
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        s.setsockopt(socket.IPPROTO_IP, IP_RECVTTL, 1)
-        s.bind(("0.0.0.0", wire.AODV_PORT))
-        drop_own_datagrams(s, self.addr)
-        s.setblocking(False)
-        self.sock = s
+        self.sock = undo.enter_context(open_control_socket(self.iface, self.addr))
         self.raw = undo.enter_context(
             socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
         )
@@ -269,8 +198,9 @@ class Daemon:
             socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_ICMP)
         )
         self.icmp.setblocking(False)
+        self.control = ControlChannel(self.sock, self.icmp, self.addr, self.stats)
         # Closed after the others, so what the kernel reported meanwhile is counted.
-        undo.callback(_quietly, "read the last ICMP errors", self._on_icmp)
+        undo.callback(_quietly, "read the last ICMP errors", self.control.read_icmp)
         self._wake_r, self._wake_w = socket.socketpair()
         undo.enter_context(self._wake_r)
         undo.enter_context(self._wake_w)
@@ -309,9 +239,9 @@ class Daemon:
         sel.register(self.sock, selectors.EVENT_READ, self._on_udp)
         sel.register(self.tun.fd, selectors.EVENT_READ, self._on_tun)
         sel.register(self._wake_r, selectors.EVENT_READ, self._on_wake)
-        sel.register(self.routes.nl, selectors.EVENT_READ, self._on_netlink)
+        sel.register(self.routes.nl, selectors.EVENT_READ, self._actuator.read_route_acks)
         sel.register(self.reader.sock, selectors.EVENT_READ, self._on_poll_answer)
-        sel.register(self.icmp, selectors.EVENT_READ, self._on_icmp)
+        sel.register(self.icmp, selectors.EVENT_READ, self.control.read_icmp)
         next_poll = time.monotonic() + self._poll_period()
         next_stats = time.monotonic()
         while not self._stop:
@@ -327,7 +257,7 @@ class Daemon:
                 for key, _ in sel.select(0):
                     key.data()
                 now = time.monotonic()
-                self._execute(self._core.on_timer(now), now)
+                self._actuator.execute(self._core.on_timer(now), now)
                 deadline = self._core.next_deadline()
             if now >= next_poll:
                 next_poll = now + self._poll_period()
@@ -345,11 +275,6 @@ class Daemon:
                 pass
         except BlockingIOError:
             pass
-
-    def _on_netlink(self) -> None:
-        for failure in self.routes.read_acks():
-            self.stats.dropped["kernel_route_error"] += 1
-            log.warning("kernel refused %s", failure)
 
     def _poll_use(self, now: float) -> None:
         """Ask for the nftables set of used addresses, unless a request is under way.
@@ -380,21 +305,10 @@ class Daemon:
         now = time.monotonic()
         for addr in used:
             self.stats.route_uses += 1
-            self._execute(self._core.on_route_used(self._poll_started, addr), now)
+            self._actuator.execute(self._core.on_route_used(self._poll_started, addr), now)
 
     def _on_udp(self) -> None:
-        for _ in range(64):
-            try:
-                data, anc, _flags, (src, _port) = self.sock.recvmsg(4096, socket.CMSG_SPACE(4))
-            except BlockingIOError:
-                return
-            if src == self.addr:
-                continue  # our own broadcast
-            ttl = 0
-            for level, ctype, cdata in anc:
-                if level == socket.IPPROTO_IP and ctype == IP_TTL_CMSG and len(cdata) >= 4:
-                    ttl = _I32.unpack_from(cdata)[0]
-            self.stats.bytes_received += len(data)
+        for src, ttl, data in self.control.receive():
             try:
                 msg = wire.decode(data)
                 self._check_addresses(src, msg)
@@ -405,35 +319,10 @@ class Daemon:
             self.stats.received[kind] += 1
             now = time.monotonic()
             try:
-                self._execute(self._core.on_control(now, src, ttl, msg), now)
+                self._actuator.execute(self._core.on_control(now, src, ttl, msg), now)
             except Exception:  # a bug must not kill the daemon; count it loudly
                 self.stats.dropped["error"] += 1
                 log.exception("error handling %s from %s", kind, src)
-
-    def _on_icmp(self) -> None:
-        """ICMP errors about datagrams of ours: the kernel took a message (`_send` counted it
-        as sent) but never transmitted it. A unicast to a neighbour whose ARP failed (the
-        link broke) is dropped with an ICMP host unreachable to its sender, here through lo.
-        The UDP socket cannot be told (IP_RECVERR finds no socket bound to wlan0 for an
-        error that arrives on lo), so a raw ICMP socket reads them. Counted by kind as not
-        transmitted: sent minus not transmitted is what went on the air, as a capture of
-        wlan0 sees it."""
-        for _ in range(64):
-            try:
-                data = self.icmp.recv(2048)
-            except BlockingIOError:
-                return
-            quoted = quoted_datagram(data, self.addr)
-            if quoted is None:
-                continue
-            udp_len, payload = quoted
-            try:
-                kind = wire.decode(payload).type_name
-            except wire.MalformedPacket:
-                kind = "unknown"
-            self.stats.not_transmitted[kind] += 1
-            self.stats.bytes_not_transmitted += udp_len - 8
-            log.info("a %s of ours was not transmitted (ICMP destination unreachable)", kind)
 
     def _check_addresses(self, src: str, msg: wire.Message) -> None:
         """Every address a peer names must be a host of our network (integer math: the
@@ -480,91 +369,4 @@ class Daemon:
             if src == self.addr:
                 self.stats.packets_buffered += 1
             now = time.monotonic()
-            self._execute(self._core.on_no_route(now, src, dst, pkt), now)
-
-    # -- actions -------------------------------------------------------------------------
-    def _execute(self, actions: list, now: float) -> None:
-        if self.store:
-            # RFC 6.13: the numbers these messages carry are on disk before they leave.
-            self.store.cover(self._core.seq, self._core.rreq_id)
-        routed = now  # when the last route change of this batch was in the kernel
-        # In the core's order (AodvCore._finish): control messages, route changes,
-        # releases, RREP-ACKs. Installs are rtnetlink writes whose acknowledgements the
-        # loop reads later (`_on_netlink`). Route changes are logged at DEBUG: at INFO
-        # the line cost more than the netlink request on a discovery's critical path.
-        for a in actions:
-            if isinstance(a, Unicast):
-                self._send(a.msg, a.dst, a.ttl, socket.MSG_DONTROUTE)
-            elif isinstance(a, Broadcast):
-                self._send(a.msg, BROADCAST, a.ttl, 0)
-            elif isinstance(a, InstallRoute):
-                self.routes.install(a.dest, a.next_hop)
-                routed = time.monotonic()
-                self.stats.route_installs += 1
-                log.debug("route %s via %s (%d hops)", a.dest, a.next_hop, a.hops)
-            elif isinstance(a, DeleteRoute):
-                self.routes.delete(a.dest)
-                routed = time.monotonic()
-                self.stats.route_deletes += 1
-                log.debug("route %s deleted", a.dest)
-            elif isinstance(a, ReleasePackets):
-                for pkt in a.packets:
-                    try:
-                        self.raw.sendto(pkt, (a.dest, 0))
-                        self.stats.packets_released += 1
-                    except OSError as e:
-                        self.stats.dropped["release_failed"] += 1
-                        log.warning("re-send to %s failed: %s", a.dest, e)
-            elif isinstance(a, DropPackets):
-                for pkt in a.packets:
-                    if pkt[12:16] == socket.inet_aton(self.addr):
-                        self.tun.write(icmp_host_unreachable(self.addr, pkt))
-                        self.stats.icmp_unreachable += 1
-            elif isinstance(a, DiscoveryDone) and a.repair:
-                self.stats.local_repairs["ok" if a.ok else "failed"] += 1
-                log.info("local repair of %s %s", a.dest, "succeeded" if a.ok else "failed")
-            elif isinstance(a, DiscoveryDone):
-                # Both latencies end when the route is in the kernel (the core's run to
-                # `now`, the install took until `routed`). The round starts when the RREQ
-                # that succeeded went to sendto() (the core's round starts at the event
-                # that made it send, before the core ran and the RREQ was encoded).
-                extra = routed - now
-                sent = self._rreq_sent.pop(a.dest, None)
-                rnd = a.round_latency + extra if sent is None else routed - sent
-                self.stats.discoveries.append(
-                    {
-                        "dest": a.dest,
-                        "ok": a.ok,
-                        "latency_s": round(a.latency + extra, 6),
-                        "round_latency_s": round(rnd, 6),
-                        "t": round(time.time(), 3),
-                    }
-                )
-                log.info(
-                    "discovery of %s %s after %.1f ms",
-                    a.dest,
-                    "succeeded" if a.ok else "failed",
-                    1000 * (a.latency + extra),
-                )
-
-    def _send(self, msg: wire.Message, dst: str, ttl: int, flags: int) -> None:
-        try:
-            data = wire.encode(msg)
-        except ValueError as e:  # a core bug: count it, and let the route actions run
-            self.stats.dropped["encode_failed"] += 1
-            log.error("could not encode %s to %s: %s", msg.type_name, dst, e)
-            return
-        if ttl != self._ttl:
-            self.sock.setsockopt(socket.IPPROTO_IP, socket.IP_TTL, ttl)
-            self._ttl = ttl
-        if isinstance(msg, wire.Rreq) and msg.orig == self.addr:
-            self._rreq_sent[msg.dest] = time.monotonic()
-        try:
-            self.sock.sendto(data, flags, (dst, wire.AODV_PORT))
-        except OSError as e:
-            self.stats.dropped["send_failed"] += 1
-            log.warning("send %s to %s failed: %s", msg.type_name, dst, e)
-            return
-        kind = "HELLO" if wire.is_hello(msg, self.addr) else msg.type_name
-        self.stats.sent[kind] += 1
-        self.stats.bytes_sent += len(data)
+            self._actuator.execute(self._core.on_no_route(now, src, dst, pkt), now)

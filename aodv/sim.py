@@ -19,8 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from aodv import packet as wire
-from aodv.core import (
-    AodvCore,
+from aodv.actions import (
     Broadcast,
     DeleteRoute,
     DiscoveryDone,
@@ -29,6 +28,7 @@ from aodv.core import (
     ReleasePackets,
     Unicast,
 )
+from aodv.core import AodvCore
 from aodv.params import Params
 
 
