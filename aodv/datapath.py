@@ -49,12 +49,43 @@ class DataPath:
 
     def sync(self) -> list[Action]:
         """Install/delete actions that bring the kernel in line with the valid entries.
-        (One pass over the table: this runs after every event.)"""
+        This runs after every event, so it looks only at the entries the event touched
+        (RoutingTable.take_touched), or at all of them after a loop over the table."""
+        table = self.s.table
+        touched = table.take_touched()
+        if touched is None:
+            return self._sync_all()
+        acts: list[Action] = []
+        installed = self.installed
+        gone = []
+        for dest in touched:
+            r = table.peek(dest)
+            if r is None:
+                if dest in installed:
+                    gone.append(dest)
+            elif r.valid:
+                key = r.kernel_key()
+                if installed.get(dest) != key:
+                    installed[dest] = key
+                    acts.append(InstallRoute(dest, *key))
+            elif dest in installed:
+                del installed[dest]
+                acts.append(DeleteRoute(dest))
+        if len(gone) > 1:  # in the order the full pass deletes them
+            left = set(gone)
+            gone = [d for d in installed if d in left]
+        for dest in gone:
+            del installed[dest]
+            acts.append(DeleteRoute(dest))
+        return acts
+
+    def _sync_all(self) -> list[Action]:
+        """sync over every entry (one pass over the table)."""
         acts: list[Action] = []
         table = self.s.table
         installed = self.installed
         n_valid = 0
-        for r in table.entries():
+        for r in table.peek_all():
             if r.valid:
                 n_valid += 1
                 key = r.kernel_key()
@@ -65,7 +96,12 @@ class DataPath:
                 del installed[r.dest]
                 acts.append(DeleteRoute(r.dest))
         if len(installed) > n_valid:  # installed entries that left the table
-            for dest in [d for d in installed if table.valid(d) is None]:
+            for dest in [d for d in installed if not self._valid_in(table, d)]:
                 del installed[dest]
                 acts.append(DeleteRoute(dest))
         return acts
+
+    @staticmethod
+    def _valid_in(table, dest: str) -> bool:
+        r = table.peek(dest)
+        return r is not None and r.valid
