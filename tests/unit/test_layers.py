@@ -246,3 +246,25 @@ def test_the_project_root_is_the_checkout():
         if re.search(r"dirname\(os\.path\.dirname\(|\.parents\[|\.parent\.parent\b", open(p).read())
     ]
     assert roots == [os.path.join(REPO, "common", "paths.py")], f"take common.paths: {roots}"
+
+
+MODULE_LINES = 600  # the house's limit for a module
+CLASS_LINES = 400  # and for a class: past it, it holds more than one job
+
+
+def test_no_module_over_600_lines_and_no_class_over_400():
+    """The house's size rules (docs/architecture.md): a module that grows past them is split
+    by job, as pcapmetrics.py, the AODV core and daemon, Network, Sweep and Robot were."""
+    too_long = []
+    for package in ("common", "node", "topology", "aodv", "testbed"):
+        for path in modules(package):
+            source = open(path).read()
+            rel = os.path.relpath(path, REPO)
+            if source.count("\n") > MODULE_LINES:
+                too_long.append(f"{rel}: {source.count(chr(10))} lines")
+            for node in ast.walk(ast.parse(source)):
+                if isinstance(node, ast.ClassDef):
+                    n = (node.end_lineno or node.lineno) - node.lineno + 1
+                    if n > CLASS_LINES:
+                        too_long.append(f"{rel}: class {node.name} {n} lines")
+    assert not too_long, "split by job: " + "; ".join(too_long)
