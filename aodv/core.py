@@ -295,4 +295,4 @@ class AodvCore:
     # == inspection =======================================================================
     def routes(self) -> dict[str, tuple[str, int]]:
         """Valid routes: destination -> (next hop, hops)."""
-        return {r.dest: r.kernel_key() for r in self.state.table if r.valid}
+        return {r.dest: r.kernel_key() for r in self.state.table.peek_all() if r.valid}

@@ -76,7 +76,7 @@ class Hellos:
         # MAY broadcast a RREP with TTL = 1, called a Hello message". Decision: the next
         # check is HELLO_INTERVAL after the last broadcast, so a neighbour never waits
         # more than HELLO_INTERVAL between two broadcasts from us.
-        active = any(r.valid and r.active_until > now for r in s.table)
+        active = any(r.valid and r.active_until > now for r in s.table.peek_all())
         if active and s.reboot_until is None:
             hello = Rrep(
                 dest=s.addr,
