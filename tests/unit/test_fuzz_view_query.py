@@ -9,8 +9,9 @@ import json
 
 import pytest
 from aiohttp.test_utils import TestClient, TestServer
-from hypothesis import given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
+from yarl import URL
 
 from testbed.view import served, server
 from testbed.view.live import LiveFeed
@@ -92,10 +93,16 @@ def test_a_route_query_is_refused_unless_a_robot_and_a_network(clients, to):
 
 @settings(max_examples=300, **FUZZ)
 @given(st.text(st.characters(blacklist_categories=("Cs",)), max_size=30))
+@example("\r/0")  # found on 2026-11-27: the client made it "//0"
+@example("a\r/b")  # a line break inside a path: the client drops it
 def test_any_path_is_the_page_or_nothing_and_json_is_strict(clients, path):
     loop, replay_client, live_client = clients
+    target = "/" + path.lstrip("/")
+    # The client parses the target as a URL, which drops tabs and line breaks ("/\r/0" is
+    # "//0", a host): such a path never reaches a server as a path, so there is nothing to ask.
+    assume(not URL(target).absolute)
     for client in (replay_client, live_client):
-        status, body = fetch(loop, client, "/" + path.lstrip("/"))
+        status, body = fetch(loop, client, target)
         check(status, body)
         if status == 200 and path.strip("/") == "api/run":
             json.loads(body, parse_constant=lambda c: pytest.fail(f"{c} in /api/run"))
