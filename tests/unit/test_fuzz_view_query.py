@@ -56,12 +56,16 @@ def clients(tmp_path_factory):
     loop.close()
 
 
+FETCH_TIMEOUT_S = 30.0
+
+
 def fetch(loop, client, path: str, params=None) -> tuple[int, bytes]:
     async def go():
         r = await client.get(path, params=params)
         return r.status, await r.read()
 
-    return loop.run_until_complete(go())
+    # A server that never answers fails the test rather than stalling the suite.
+    return loop.run_until_complete(asyncio.wait_for(go(), FETCH_TIMEOUT_S))
 
 
 def check(status: int, body: bytes) -> None:
@@ -94,13 +98,12 @@ def test_a_route_query_is_refused_unless_a_robot_and_a_network(clients, to):
 @settings(max_examples=300, **FUZZ)
 @given(st.text(st.characters(blacklist_categories=("Cs",)), max_size=30))
 @example("\r/0")  # found on 2026-11-27: the client made it "//0"
-@example("a\r/b")  # a line break inside a path: the client drops it
 def test_any_path_is_the_page_or_nothing_and_json_is_strict(clients, path):
     loop, replay_client, live_client = clients
     target = "/" + path.lstrip("/")
-    # The client parses the target as a URL, which drops tabs and line breaks ("/\r/0" is
-    # "//0", a host): such a path never reaches a server as a path, so there is nothing to ask.
-    assume(not URL(target).absolute)
+    # A tab or line break cannot be part of an HTTP request target, and the client's URL
+    # parsing drops them ("/\r/0" becomes "//0", a host): nothing a server is ever asked.
+    assume(not set(target) & set("\t\r\n") and not URL(target).absolute)
     for client in (replay_client, live_client):
         status, body = fetch(loop, client, target)
         check(status, body)
