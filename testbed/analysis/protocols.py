@@ -22,7 +22,7 @@ from pathlib import Path
 from common.jsonfile import read_json
 from testbed.analysis import stats
 from testbed.analysis.runs import FinishedRun
-from testbed.resultfile import DEFAULT_MEDIUM
+from testbed.run.resultconfig import DEFAULT_MEDIUM
 from topology.spec import ROUTINGS, VETH
 
 PROACTIVE = ("babel", "batman")

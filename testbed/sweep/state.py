@@ -26,7 +26,7 @@ was before the type existed. Nobody else spells the file's name or opens it
 (tests/unit/test_file_types.py holds this).
 
 A sweep.json that fails is one line naming the file and the field (UsageError, exit 2);
-None when there is none. Strings are made one line (testbed.resultfile.one_line).
+None when there is none. Strings are made one line (testbed.run.resultvalues.one_line).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from typing import Any
 from common import boundedfile
 from common.errors import UsageError
 from common.jsonfile import write_json_atomic
-from testbed.resultfile import one_line
+from testbed.run.resultvalues import one_line
 
 STATE_NAME = "sweep.json"
 STATE_FORMAT = 1

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from testbed.resultfile import CONFIG_KEYS, ResultConfig
 from testbed.run.config import BY_NAME
+from testbed.run.resultconfig import CONFIG_KEYS, ResultConfig
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("testbed", "topology", "node", "aodv", "common")
@@ -132,6 +132,28 @@ def test_result_configs_keys_are_run_options():
     assert [k for k in drawn[:-1] if k not in BY_NAME] == []
     defaulted = ("middleware", "maps", "battery_failure")
     assert [k for k in defaulted if k not in BY_NAME] == []
+
+
+def test_result_configs_keys_come_from_the_option_table(monkeypatch):
+    """The keys are the options marked in_result, in the order result.json has always had
+    them; a marked option without a ResultConfig field, or a field whose annotation is not
+    its option's kind, stops the import."""
+    from testbed.run import resultconfig
+    from testbed.run.config import OPTIONS
+
+    assert tuple(o.name for o in OPTIONS if o.in_result) == CONFIG_KEYS
+    assert CONFIG_KEYS == ("robots", "comm_range", "laser_range", "seed", "time_scale",
+                           "routing", "map", "loss_pct", "delay_ms", "capture", "max_steps",
+                           "coordination", "start")  # fmt: skip
+    resultconfig._check_config_fields()
+    monkeypatch.setattr(resultconfig, "CONFIG_KEYS", (*CONFIG_KEYS, "range_model"))
+    with pytest.raises(TypeError, match="fields"):
+        resultconfig._check_config_fields()
+    monkeypatch.setattr(resultconfig, "CONFIG_KEYS", CONFIG_KEYS)
+    kind = dataclasses.replace(BY_NAME["seed"], kind=str)
+    monkeypatch.setitem(resultconfig.BY_NAME, "seed", kind)
+    with pytest.raises(TypeError, match="ResultConfig.seed"):
+        resultconfig._check_config_fields()
 
 
 def test_result_config_defaults_match_the_options_defaults():
