@@ -1,9 +1,10 @@
 """Every file the testbed writes and reads again has one type (issue 41, item 1): sweep.json
 (testbed.sweep.state), a robot's events.jsonl (node.events), result.json and its config
-(testbed.resultfile). Checked here on the source of every module: no module but the type's
-own opens sweep.json or parses event lines by hand, and the old files' defaults of a run's
-config are the type's; and the config's two descriptions (the run's option table and
-result.json's config) do not drift apart."""
+(testbed.resultfile, testbed.run.resultconfig), a Slurm sweep's jobs file
+(testbed.sweep.slurmjobs). Checked here on the source of every module: no module but the
+type's own opens sweep.json or the jobs file or parses event lines by hand, and the old
+files' defaults of a run's config are the type's; and result.json's config is made from the
+run's option table (its keys, its fields' names and kinds)."""
 
 import ast
 import dataclasses
@@ -19,7 +20,11 @@ REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("testbed", "topology", "node", "aodv", "common")
 SWEEP_OWNER = "testbed/sweep/state.py"
 EVENTS_OWNER = "node/events.py"
+JOBS_OWNER = "testbed/sweep/slurmjobs.py"
 SWEEP_SPELLED = re.compile(r"(?:^|/)sweep\.json$")
+JOBS_SPELLED = re.compile(r"(?:^|/)jobs\.json$")
+# Calls that read a file's or a string's JSON (or its text, for a JSON reader to parse).
+RAW_READERS = {"load", "loads", "read_json", "load_json", "parse_json", "read_text", "read_bytes"}
 EVENTS_MENTIONED = re.compile(r"events\.jsonl|EVENTS_SUFFIX")
 # An event line's first bytes, as a reader matching lines by hand spells them.
 EVENT_PREFIX = re.compile(r"""\{\s*\\?["']e\\?["']\s*:""")
@@ -87,6 +92,32 @@ def event_parses(source: str) -> list[str]:
     return found
 
 
+def _names(tree: ast.AST, name: str) -> list[int]:
+    """The lines where `name` is imported, named or taken as an attribute."""
+    out = []
+    for n in ast.walk(tree):
+        if (isinstance(n, ast.alias) and n.name == name
+                or isinstance(n, ast.Attribute) and n.attr == name
+                or isinstance(n, ast.Name) and n.id == name):  # fmt: skip
+            out.append(n.lineno)
+    return out
+
+
+def jobs_reads(source: str) -> list[str]:
+    """Where `source` reaches the Slurm jobs file but through its type: its name spelled as a
+    path, the type module's name constant, its check of a raw document, or its path handed
+    to a raw JSON reader in the same module."""
+    tree = ast.parse(source)
+    found = [f"{ln}: spells jobs.json" for ln, s in _strings(tree) if JOBS_SPELLED.search(s)]
+    found += [f"{ln}: uses JOBS_NAME" for ln in _names(tree, "JOBS_NAME")]
+    found += [f"{ln}: checks a raw jobs file" for ln in _names(tree, "from_json")
+              if "SlurmJobs" in source]  # fmt: skip
+    if _names(tree, "jobs_path"):
+        found += [f"{ln}: {name}() beside jobs_path" for ln, name in _calls(tree)
+                  if name in RAW_READERS]  # fmt: skip
+    return found
+
+
 def _modules(owner: str):
     for pkg in PACKAGES:
         for path in sorted((REPO / pkg).rglob("*.py")):
@@ -107,6 +138,17 @@ def test_the_checks_see_what_they_must():
     assert event_parses("p = f'r{k}{EVENTS_SUFFIX}'\ne = json.loads(line)\n")
     assert not event_parses("p = 'r1.events.jsonl'\nevs = events.read(p, only=('plan',))\n")
     assert not event_parses("d = json.loads(text)\n")  # not a module about event logs
+    assert jobs_reads("jobs = read_json(out / 'slurm' / 'jobs.json')['jobs']\n")
+    assert jobs_reads("p = os.path.join(out, 'slurm/jobs.json')\n")
+    assert jobs_reads("from testbed.sweep.slurmjobs import JOBS_NAME\n")
+    assert jobs_reads("d = json.loads(slurmjobs.jobs_path(out).read_text())\n")
+    assert jobs_reads("j = SlurmJobs.from_json(json.load(f))\n")
+    assert not jobs_reads('"""Reads slurm/jobs.json."""\njobs = slurmjobs.read(out).jobs\n')
+
+
+@pytest.mark.parametrize("path", list(_modules(JOBS_OWNER)))
+def test_no_module_but_the_type_reads_the_slurm_jobs_file(path):
+    assert jobs_reads(path.read_text()) == []
 
 
 @pytest.mark.parametrize("path", list(_modules(SWEEP_OWNER)))
