@@ -208,7 +208,9 @@ def map_sharing(
     }
 
 
-def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:
+def cpu_seconds(
+    rec: RunRecord, summaries: list[dict], display: dict, daemons: list[DaemonStats]
+) -> dict:
     """CPU seconds of the run's processes (the robots', the display's, the world's step
     loop, the AODV daemons'), and all of it per robot-step in ms: what a cluster's run
     needs per robot (testbed.sweep.slurm)."""
@@ -216,7 +218,7 @@ def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: l
         "robots": sum(sm.get("cpu_s") or 0.0 for sm in summaries),
         "display": display.get("cpu_s") or 0.0,
         "world": rec.world_timing.get("world_cpu_s", 0.0),
-        "routing": sum(d.get("cpu_s") or 0.0 for d in daemons),
+        "routing": sum(d.cpu_s or 0.0 for d in daemons),
     }
     out = {k: round(v, 3) for k, v in parts.items()}
     robot_steps = rec.clock.steps * len(rec.robots)

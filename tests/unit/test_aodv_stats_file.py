@@ -188,3 +188,15 @@ def test_a_file_that_is_not_one_is_one_line(tmp_path):
     os.mkfifo(tmp_path / "fifo.json")
     with pytest.raises(StatsError, match="not a regular file"):
         DaemonStats.read(tmp_path / "fifo.json")
+
+
+def test_the_run_reads_its_daemons_through_the_type(tmp_path):
+    """testbed.run.results: the fidelity verdict's timer lateness and the routing CPU seconds
+    come from the daemons whose file is one; a malformed one is left out like a missing one."""
+    from testbed.run.results import daemon_stats
+
+    (tmp_path / "aodv").mkdir()
+    DaemonStats.from_json(WRITTEN).write(run_stats_path(tmp_path, 1))
+    run_stats_path(tmp_path, 2).write_text('{"messages_sent": {"RREQ": -1}}')
+    (daemon,) = daemon_stats(str(tmp_path), 3)
+    assert daemon.robot == "r1" and daemon.cpu_s == 2.25 and daemon.timer_lateness_ms
