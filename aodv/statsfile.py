@@ -132,7 +132,7 @@ def _discovery(i: int, d: Any) -> Mapping[str, Any]:
         _of(f"{where}.{key}", d.get(key), (int, float), "a number")
     if d["ok"] and d.get("latency_s") is None:
         raise StatsError(f"{where} succeeded without a latency_s")
-    return _frozen(d)
+    return MappingProxyType(dict(d))
 
 
 def _timer(kind: str, t: dict[str, Any]) -> None:

@@ -40,16 +40,9 @@ from typing import Any
 
 from common import boundedfile
 from testbed.analysis import resultcheck
-from testbed.run.resultconfig import ResultConfig
-from testbed.run.resultvalues import (
-    EMPTY,
-    NUM,
-    ResultError,
-    get_list,
-    get_mapping,
-    get_value,
-    plain,
-)
+from testbed.run.resultconfig import ResultConfig as ResultConfig  # re-exported: its config
+from testbed.run.resultvalues import EMPTY, NUM, get_list, get_mapping, get_value, plain
+from testbed.run.resultvalues import ResultError as ResultError  # re-exported: its error
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1

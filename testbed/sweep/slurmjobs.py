@@ -68,9 +68,9 @@ class SlurmJob:
         for i, rid in enumerate(runs):
             if not isinstance(rid, str) or not RUN_ID.fullmatch(rid):
                 raise ValueError(f"{where}.runs[{i}] is {one_line(repr(rid), 60)}, not a run id")
-        counts = {key: _whole(f"{where}.{key}", d.get(key), 0) for key in _COUNTS}
+        robots, cpus, minutes = (_whole(f"{where}.{key}", d.get(key), 0) for key in _COUNTS)
         return cls(job=_whole(f"{where}.job", d.get("job"), 1), task_list=task_list,
-                   runs=tuple(runs), **counts)  # fmt: skip
+                   robots=robots, cpus=cpus, minutes=minutes, runs=tuple(runs))  # fmt: skip
 
 
 @dataclass(frozen=True)
