@@ -1,15 +1,15 @@
-"""Counters of one AODV daemon, written as JSON (atomically: a temporary file renamed)."""
+"""Counters of one AODV daemon, written as its statistics file (aodv.statsfile.DaemonStats,
+atomically: a temporary file renamed)."""
 
 from __future__ import annotations
 
 import heapq
-import json
 import os
 import signal
 import time
 from collections import Counter
 
-from common.jsonfile import write_json_atomic
+from aodv.statsfile import DaemonStats
 
 TIMER_BOUNDS_MS = (10, 25, 50, 100, 200)  # emulated ms late: histogram bounds
 WORST_KEPT = 128  # the most late firings, kept with their times
@@ -84,47 +84,47 @@ class Stats:
         # (route, neighbour, discovery and acknowledgement expiries).
         self.timer_lateness = {"hello": TimerLateness(), "expiry": TimerLateness()}
 
-    def as_dict(self) -> dict:
+    def snapshot(self) -> DaemonStats:
+        """The counters now, as the statistics file holds them."""
         ok = [d for d in self.discoveries if d["ok"]]
-        return {
-            "robot": self.robot,
-            "addr": self.addr,
-            "pid": os.getpid(),
-            "uptime_s": round(time.time() - self.started, 3),
-            "messages_sent": dict(self.sent),
-            "messages_not_transmitted": dict(self.not_transmitted),
-            "bytes_not_transmitted": self.bytes_not_transmitted,
-            "messages_received": dict(self.received),
-            "bytes_sent": self.bytes_sent,
-            "bytes_received": self.bytes_received,
-            "dropped": dict(self.dropped),
-            "protocol_dropped": dict(self.protocol_dropped),
-            "local_repairs": dict(self.local_repairs),
-            "routes": self.routes,
-            "route_installs": self.route_installs,
-            "route_deletes": self.route_deletes,
-            "packets_buffered": self.packets_buffered,
-            "packets_released": self.packets_released,
-            "icmp_unreachable_sent": self.icmp_unreachable,
-            "route_use_refreshes": self.route_uses,
-            "discoveries_ok": len(ok),
-            "discoveries_failed": len(self.discoveries) - len(ok),
-            "discoveries": self.discoveries[-1000:],
-            "timer_lateness_ms": {k: v.as_dict() for k, v in self.timer_lateness.items()},
-            "cpu_s": round(time.process_time(), 3),
-        }
+        return DaemonStats(
+            robot=self.robot,
+            addr=self.addr,
+            pid=os.getpid(),
+            uptime_s=round(time.time() - self.started, 3),
+            messages_sent=dict(self.sent),
+            messages_not_transmitted=dict(self.not_transmitted),
+            bytes_not_transmitted=self.bytes_not_transmitted,
+            messages_received=dict(self.received),
+            bytes_sent=self.bytes_sent,
+            bytes_received=self.bytes_received,
+            dropped=dict(self.dropped),
+            protocol_dropped=dict(self.protocol_dropped),
+            local_repairs=dict(self.local_repairs),
+            routes=self.routes,
+            route_installs=self.route_installs,
+            route_deletes=self.route_deletes,
+            packets_buffered=self.packets_buffered,
+            packets_released=self.packets_released,
+            icmp_unreachable_sent=self.icmp_unreachable,
+            route_use_refreshes=self.route_uses,
+            discoveries_ok=len(ok),
+            discoveries_failed=len(self.discoveries) - len(ok),
+            discoveries=tuple(self.discoveries[-1000:]),
+            timer_lateness_ms={k: v.as_dict() for k, v in self.timer_lateness.items()},
+            cpu_s=round(time.process_time(), 3),
+        )
 
     def write(self, path: str) -> None:
-        write_json_atomic(path, self.as_dict(), sort_keys=True)
+        self.snapshot().write(path)
 
 
-def read_fresh(path: str, proc, timeout: float = 3.0) -> dict:
+def read_fresh(path: str, proc, timeout: float = 3.0) -> DaemonStats:
     """Ask a running daemon (`proc`, a Popen) for fresh statistics and read them: SIGUSR1
-    makes it rewrite `path`; wait for the rewrite (or `timeout`), then load the file."""
+    makes it rewrite `path`; wait for the rewrite (or `timeout`), then read the file."""
     before = os.stat(path).st_mtime_ns
     proc.send_signal(signal.SIGUSR1)
     deadline = time.monotonic() + timeout
     while os.stat(path).st_mtime_ns == before and time.monotonic() < deadline:
         time.sleep(0.005)
-    with open(path) as f:
-        return json.load(f)
+    return DaemonStats.read(path)

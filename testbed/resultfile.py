@@ -14,12 +14,15 @@ nested dicts (tests/unit/test_result_file.py holds this).
 - `from_json` checks what it reads: a key the readers cannot do without (the status, the
   team size and both ranges) missing, or any key of the wrong type, is a `ResultError`, one
   line naming the file and the key.
-- Keys that files written by older versions lack get their defaults here and only here:
-  `routing` aodv, `map` none (the empty terrain), `loss_pct` and `delay_ms` 0,
-  `coordination` ours and `start` corner (before those existed, they were all there was),
-  no robot stopped (before `--kill` stopped robots, `mean_finish_step_robots` and
-  `survivors_finished` are None), no radio outage, no fidelity verdict; in config's `extra`,
-  middleware nanomsg, maps flood, no battery failure, a 400 x 400 map of CELL_M cells.
+- Keys that files written by older versions lack get their defaults here and only here
+  (the config's in its type, testbed.run.resultconfig): `routing` aodv, `map` none (the
+  empty terrain), `loss_pct` and `delay_ms` 0, `coordination` ours and `start` corner
+  (before those existed, they were all there was), no robot stopped (before `--kill`
+  stopped robots, `mean_finish_step_robots` and `survivors_finished` are None), no radio
+  outage, no fidelity verdict; in config's `extra`, middleware nanomsg, maps flood, no
+  battery failure, a 400 x 400 map of CELL_M cells.
+- The config's keys are the run options' (testbed.run.config declares which result.json
+  repeats); the checked reading of values is testbed.run.resultvalues'.
 - Values keep the type JSON gave them (an int stays an int), so the numbers written from
   them are those the file holds. The diagnostic records that only people and the report's
   text read whole (wall_parts_s, world_timing_s, display, cpu_s, fidelity, network_timers)
@@ -33,34 +36,18 @@ import statistics
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import MappingProxyType
 from typing import Any
 
 from common import boundedfile
-from node import messaging
 from testbed.analysis import resultcheck
-from testbed.run.failures import NONE as NO_FAILURE
-from topology.spec import CELL_M, VETH
+from testbed.run.resultconfig import ResultConfig as ResultConfig  # re-exported: its config
+from testbed.run.resultvalues import EMPTY, NUM, get_list, get_mapping, get_value, plain
+from testbed.run.resultvalues import ResultError as ResultError  # re-exported: its error
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
-# The keys of config.json that result.json repeats under "config" (the rest: under "extra").
-CONFIG_KEYS = (
-    "robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map", "loss_pct",
-    "delay_ms", "capture", "max_steps", "coordination", "start",
-)  # fmt: skip
-DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
-DEFAULT_ROUTING = "aodv"
-DEFAULT_MEDIUM = VETH
 # The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
 CPU_PARTS = ("robots", "display", "world", "routing")
-_EMPTY: Mapping[str, Any] = MappingProxyType({})
-_NUM = (int, float)
-
-
-class ResultError(ValueError):
-    """A result.json that cannot be read as one; str() is one line (naming the file when
-    it was read from one)."""
 
 
 def result_path(run_dir: str | Path) -> Path:
@@ -71,77 +58,6 @@ def result_path(run_dir: str | Path) -> Path:
 def has_result(run_dir: str | Path) -> bool:
     """Whether the run in `run_dir` finished (its result.json exists, whatever it says)."""
     return result_path(run_dir).is_file()
-
-
-# ---------------------------------------------------------------- checked reading
-
-
-def one_line(text: str, limit: int = 500) -> str:
-    """`text` as one printable line: a control character (newline, ESC, ...) shown as its
-    Python escape, so that neither a report's markdown nor a terminal takes it as markup;
-    at most `limit` characters (an ellipsis marks the cut)."""
-    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-    return out if len(out) <= limit else out[: limit - 1] + "…"
-
-
-def _one_lines(value: Any) -> Any:
-    """A record's strings, nested ones included, each made one line (one_line)."""
-    if isinstance(value, str):
-        return one_line(value)
-    if isinstance(value, Mapping):
-        return {one_line(str(k)): _one_lines(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_one_lines(v) for v in value]
-    return value
-
-
-def _get(
-    doc: Mapping[str, Any],
-    key: str,
-    kinds: tuple[type, ...],
-    default: Any = None,
-    required: bool = False,
-) -> Any:
-    """doc[key] checked against `kinds` (bool is not a number); default when absent or null."""
-    value = doc.get(key)
-    if value is None:
-        if required:
-            raise ResultError(f"no {key!r}")
-        return default
-    number = kinds in ((int,), _NUM)
-    if not isinstance(value, kinds) or (number and isinstance(value, bool)):
-        want = " or ".join(k.__name__ for k in kinds)
-        raise ResultError(f"{key!r} is {type(value).__name__}, not {want}")
-    return one_line(value) if isinstance(value, str) else value
-
-
-def _mapping(doc: Mapping[str, Any], key: str) -> Mapping[str, Any]:
-    value = doc.get(key)
-    if value is None:
-        return _EMPTY
-    if not isinstance(value, Mapping):
-        raise ResultError(f"{key!r} is {type(value).__name__}, not an object")
-    return MappingProxyType(_one_lines(dict(value)))
-
-
-def _list(doc: Mapping[str, Any], key: str) -> list[Any]:
-    value = doc.get(key)
-    if value is None:
-        return []
-    if not isinstance(value, list):
-        raise ResultError(f"{key!r} is {type(value).__name__}, not a list")
-    return value
-
-
-def _plain(value: Any) -> Any:
-    """A value as JSON holds it: mappings as dicts, tuples as lists, dataclasses by to_dict."""
-    if hasattr(value, "to_dict"):
-        return value.to_dict()
-    if isinstance(value, Mapping):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    return value
 
 
 # ---------------------------------------------------------------- the parts
@@ -167,8 +83,8 @@ class RobotResult:
     finish_step: int | None
     crashed: bool
     plans: tuple[Plan, ...] = ()
-    sent: Mapping[str, int] = field(default_factory=lambda: _EMPTY)  # messages, by kind
-    received: Mapping[str, int] = field(default_factory=lambda: _EMPTY)
+    sent: Mapping[str, int] = field(default_factory=lambda: EMPTY)  # messages, by kind
+    received: Mapping[str, int] = field(default_factory=lambda: EMPTY)
     path_length_m: float | None = None
     stopped_step: int | None = None  # the run killed it on purpose at this step (--kill)
     exit_status: int | None = None
@@ -205,113 +121,21 @@ class RobotResult:
         if not isinstance(plans, list):
             raise ResultError(f"robot {name}: 'plans' is not a list")
         try:
-            plans = tuple(Plan(_get(p, "step", _NUM, required=True), _get(p, "cause", (str,)))
-                          for p in plans)  # fmt: skip
+            plans = tuple(Plan(get_value(p, "step", NUM, required=True),
+                               get_value(p, "cause", (str,))) for p in plans)  # fmt: skip
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ResultError(f"robot {name}: a plan without a step ({e})") from None
-        messages = _mapping(doc, "messages")
+        messages = get_mapping(doc, "messages")
         return cls(
             name=name,
-            finish_step=_get(doc, "finish_step", _NUM),
+            finish_step=get_value(doc, "finish_step", NUM),
             crashed=bool(doc.get("crashed")),
             plans=plans,
-            sent=_mapping(messages, "sent"),
-            received=_mapping(messages, "received"),
-            path_length_m=_get(doc, "path_length_m", _NUM),
-            stopped_step=_get(doc, "stopped_step", (int,)),
-            exit_status=_get(doc, "exit_status", (int,)),
-        )
-
-
-@dataclass(frozen=True)
-class ResultConfig:
-    """result.json's `config`: what the run was asked to do, defaults applied."""
-
-    robots: int
-    comm_range: float
-    laser_range: float
-    time_scale: float | None = None
-    routing: str = DEFAULT_ROUTING
-    map: str | None = None
-    loss_pct: float = 0.0
-    delay_ms: float = 0.0
-    coordination: str = DEFAULT_VARIANT[0]
-    start: str = DEFAULT_VARIANT[1]
-    seed: int | None = None
-    capture: bool = False
-    max_steps: int | None = None
-    medium: str = DEFAULT_MEDIUM  # from `extra`
-    wifi_standard: str | None = None  # ns3-wifi only (None: the run did not say)
-    wifi_rate: str | None = None  # ns3-wifi only; "" is the standard's fastest
-    extra: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)  # the rest of config.json
-
-    @property
-    def map_name(self) -> str:
-        """The map's file stem, or "empty" for the empty terrain."""
-        return "empty" if not self.map else Path(self.map).stem
-
-    def _named(self, key: str, default: str) -> str:  # `default`: runs before the option
-        name = self.extra.get(key)
-        return name if isinstance(name, str) else default
-
-    @property
-    def middleware(self) -> str:
-        return self._named("middleware", messaging.DEFAULT)
-
-    @property
-    def maps(self) -> str:
-        return self._named("maps", messaging.DEFAULT_MAPS)
-
-    @property
-    def battery_failure(self) -> str:
-        return self._named("battery_failure", NO_FAILURE)
-
-    @property
-    def map_cell(self) -> Any:  # unchecked: the reader checks it
-        return self.extra.get("map_cell") or CELL_M
-
-    @property
-    def map_size(self) -> Any:  # [rows, cols], unchecked
-        return self.extra.get("map_size") or [400, 400]  # the empty terrain's
-
-    def to_dict(self) -> dict[str, Any]:
-        out = {k: getattr(self, k) for k in CONFIG_KEYS}
-        out["extra"] = _plain(self.extra)
-        return out
-
-    @classmethod
-    def from_config(cls, config: Mapping[str, Any]) -> ResultConfig:
-        """From config.json's contents (a run's whole configuration): the contract's keys,
-        and everything else under `extra`."""
-        doc = {k: config[k] for k in CONFIG_KEYS}
-        doc["extra"] = {k: v for k, v in config.items() if k not in CONFIG_KEYS}
-        return cls.from_dict(doc)
-
-    @classmethod
-    def from_dict(cls, c: Mapping[str, Any]) -> ResultConfig:
-        """From result.json's `config` (or a sweep plan's, which keeps everything at the
-        top); ResultError when malformed."""
-        extra = _mapping(c, "extra")
-        return cls(
-            robots=_get(c, "robots", (int,), required=True),
-            comm_range=_get(c, "comm_range", _NUM, required=True),
-            laser_range=_get(c, "laser_range", _NUM, required=True),
-            time_scale=_get(c, "time_scale", _NUM),
-            routing=_get(c, "routing", (str,), DEFAULT_ROUTING),
-            map=_get(c, "map", (str,)),
-            loss_pct=_get(c, "loss_pct", _NUM, 0.0),
-            delay_ms=_get(c, "delay_ms", _NUM, 0.0),
-            coordination=_get(c, "coordination", (str,))
-            or _get(extra, "coordination", (str,), DEFAULT_VARIANT[0]),
-            start=_get(c, "start", (str,)) or _get(extra, "start", (str,), DEFAULT_VARIANT[1]),
-            seed=_get(c, "seed", (int,)),
-            capture=bool(c.get("capture")),
-            max_steps=_get(c, "max_steps", (int,)),
-            # result.json keeps these under config.extra; a sweep's plan at the top
-            medium=_get(c, "medium", (str,)) or _get(extra, "medium", (str,), DEFAULT_MEDIUM),
-            wifi_standard=_get(c, "wifi_standard", (str,)) or _get(extra, "wifi_standard", (str,)),
-            wifi_rate=_get(c, "wifi_rate", (str,), _get(extra, "wifi_rate", (str,))),
-            extra=extra,
+            sent=get_mapping(messages, "sent"),
+            received=get_mapping(messages, "received"),
+            path_length_m=get_value(doc, "path_length_m", NUM),
+            stopped_step=get_value(doc, "stopped_step", (int,)),
+            exit_status=get_value(doc, "exit_status", (int,)),
         )
 
 
@@ -329,9 +153,9 @@ class HostStalls:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> HostStalls:
         return cls(
-            events=_get(d, "events", (int,), 0),
-            stalled_s=_get(d, "stalled_s", _NUM, 0.0),
-            deadlines_missed=_get(d, "deadlines_missed", (int,), 0),
+            events=get_value(d, "events", (int,), 0),
+            stalled_s=get_value(d, "stalled_s", NUM, 0.0),
+            deadlines_missed=get_value(d, "deadlines_missed", (int,), 0),
         )
 
 
@@ -352,9 +176,9 @@ class Isolated:
         if not isinstance(d, Mapping):
             raise ResultError("an 'isolated' entry is not an object")
         return cls(
-            robot=_get(d, "robot", (str,), required=True),
-            from_step=_get(d, "from_step", (int,), required=True),
-            back_step=_get(d, "back_step", (int,)),
+            robot=get_value(d, "robot", (str,), required=True),
+            from_step=get_value(d, "from_step", (int,), required=True),
+            back_step=get_value(d, "back_step", (int,)),
         )
 
 
@@ -385,21 +209,21 @@ class RunResult:
     deadline_miss_fraction_outside_stalls: float = 0.0
     wall_time_s: float | None = None
     step_loop_wall_s: float | None = None
-    wall_parts_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    wall_parts_s: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
     world_priority: str | None = None
     step_core: str | None = None
     robot: str | None = None  # "cpp", "python", "mixed" (a test's team); None: older file
     robot_reason: str = ""  # why that one (testbed.run.robotchoice)
-    display: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
-    world_timing_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    display: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
+    world_timing_s: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
     world_missed_steps_ms_late: tuple[Any, ...] = ()
     robots: tuple[RobotResult, ...] = ()  # in the file's order
-    cpu_s: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
+    cpu_s: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
     messaging: Mapping[str, Any] | None = (
         None  # the goals' middleware and its counters (None: older)
     )
     maps: Mapping[str, Any] | None = None  # how maps were shared and the counters (None: older)
-    fidelity: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)  # {} : made before verdicts
+    fidelity: Mapping[str, Any] = field(default_factory=lambda: EMPTY)  # {} : made before verdicts
     network_timers: Mapping[str, Any] | None = None
 
     # -- what code asks of it
@@ -491,7 +315,7 @@ class RunResult:
     def to_json(self) -> dict[str, Any]:
         """The file's contents, keys in the file's order."""
         out = {
-            f.name: _plain(getattr(self, f.name))
+            f.name: plain(getattr(self, f.name))
             for f in dataclasses.fields(RunResult)  # a subclass's own fields are not the file's
         }
         out["robots"] = {r.name: r.to_dict() for r in self.robots}  # by name, in order
@@ -546,54 +370,56 @@ class RunResult:
     def _parse(cls, doc: object) -> RunResult:
         if not isinstance(doc, Mapping):
             raise ResultError("not a JSON object")
-        c = _mapping(doc, "config")
+        c = get_mapping(doc, "config")
         if not c:
             raise ResultError("no 'config'")
-        fidelity = _mapping(doc, "fidelity")
-        _get(fidelity, "ok", (bool,))
-        _get(fidelity, "reason", (str,))
-        network = _mapping(fidelity, "network")
-        _get(network, "ok", (bool,))
-        _get(network, "reason", (str,))
+        fidelity = get_mapping(doc, "fidelity")
+        get_value(fidelity, "ok", (bool,))
+        get_value(fidelity, "reason", (str,))
+        network = get_mapping(fidelity, "network")
+        get_value(network, "ok", (bool,))
+        get_value(network, "reason", (str,))
         timers = doc.get("network_timers")
         return cls(
-            format=_get(doc, "format", (int,), RESULT_FORMAT),
+            format=get_value(doc, "format", (int,), RESULT_FORMAT),
             config=ResultConfig.from_dict(c),
-            status=_get(doc, "status", (str,), required=True),
-            status_detail=_get(doc, "status_detail", (str,), ""),
-            steps=_get(doc, "steps", _NUM),
-            last_finish_step=_get(doc, "last_finish_step", _NUM),
-            mean_finish_step=_get(doc, "mean_finish_step", _NUM),
-            mean_finish_step_robots=_get(doc, "mean_finish_step_robots", (int,)),
-            survivors_finished=_get(doc, "survivors_finished", (bool,)),
-            isolated=tuple(Isolated.from_dict(d) for d in _list(doc, "isolated")),
-            coverage_final=_get(doc, "coverage_final", _NUM),
-            time_scale_requested=_get(doc, "time_scale_requested", _NUM),
-            time_scale_achieved=_get(doc, "time_scale_achieved", _NUM),
-            deadlines_missed=_get(doc, "deadlines_missed", (int,), 0),
-            deadline_miss_fraction=_get(doc, "deadline_miss_fraction", _NUM, 0.0),
-            deadlines_missed_world=_get(doc, "deadlines_missed_world", (int,)),
-            host_stalls=HostStalls.from_dict(_mapping(doc, "host_stalls")),
-            deadline_miss_fraction_outside_stalls=_get(
-                doc, "deadline_miss_fraction_outside_stalls", _NUM, 0.0
+            status=get_value(doc, "status", (str,), required=True),
+            status_detail=get_value(doc, "status_detail", (str,), ""),
+            steps=get_value(doc, "steps", NUM),
+            last_finish_step=get_value(doc, "last_finish_step", NUM),
+            mean_finish_step=get_value(doc, "mean_finish_step", NUM),
+            mean_finish_step_robots=get_value(doc, "mean_finish_step_robots", (int,)),
+            survivors_finished=get_value(doc, "survivors_finished", (bool,)),
+            isolated=tuple(Isolated.from_dict(d) for d in get_list(doc, "isolated")),
+            coverage_final=get_value(doc, "coverage_final", NUM),
+            time_scale_requested=get_value(doc, "time_scale_requested", NUM),
+            time_scale_achieved=get_value(doc, "time_scale_achieved", NUM),
+            deadlines_missed=get_value(doc, "deadlines_missed", (int,), 0),
+            deadline_miss_fraction=get_value(doc, "deadline_miss_fraction", NUM, 0.0),
+            deadlines_missed_world=get_value(doc, "deadlines_missed_world", (int,)),
+            host_stalls=HostStalls.from_dict(get_mapping(doc, "host_stalls")),
+            deadline_miss_fraction_outside_stalls=get_value(
+                doc, "deadline_miss_fraction_outside_stalls", NUM, 0.0
             ),
-            wall_time_s=_get(doc, "wall_time_s", _NUM),
-            step_loop_wall_s=_get(doc, "step_loop_wall_s", _NUM),
-            wall_parts_s=_mapping(doc, "wall_parts_s"),
-            world_priority=_get(doc, "world_priority", (str,)),
-            step_core=_get(doc, "step_core", (str,)),
-            robot=_get(doc, "robot", (str,)),
-            robot_reason=_get(doc, "robot_reason", (str,), ""),
-            display=_mapping(doc, "display"),
-            world_timing_s=_mapping(doc, "world_timing_s"),
+            wall_time_s=get_value(doc, "wall_time_s", NUM),
+            step_loop_wall_s=get_value(doc, "step_loop_wall_s", NUM),
+            wall_parts_s=get_mapping(doc, "wall_parts_s"),
+            world_priority=get_value(doc, "world_priority", (str,)),
+            step_core=get_value(doc, "step_core", (str,)),
+            robot=get_value(doc, "robot", (str,)),
+            robot_reason=get_value(doc, "robot_reason", (str,), ""),
+            display=get_mapping(doc, "display"),
+            world_timing_s=get_mapping(doc, "world_timing_s"),
             world_missed_steps_ms_late=tuple(
                 tuple(m) if isinstance(m, list) else m
-                for m in _list(doc, "world_missed_steps_ms_late")
+                for m in get_list(doc, "world_missed_steps_ms_late")
             ),
-            robots=tuple(RobotResult.from_dict(k, v) for k, v in _mapping(doc, "robots").items()),
-            cpu_s=_mapping(doc, "cpu_s"),
-            messaging=_mapping(doc, "messaging") if doc.get("messaging") is not None else None,
-            maps=_mapping(doc, "maps") if doc.get("maps") is not None else None,
+            robots=tuple(
+                RobotResult.from_dict(k, v) for k, v in get_mapping(doc, "robots").items()
+            ),
+            cpu_s=get_mapping(doc, "cpu_s"),
+            messaging=get_mapping(doc, "messaging") if doc.get("messaging") is not None else None,
+            maps=get_mapping(doc, "maps") if doc.get("maps") is not None else None,
             fidelity=fidelity,
-            network_timers=None if timers is None else _mapping(doc, "network_timers"),
+            network_timers=None if timers is None else get_mapping(doc, "network_timers"),
         )

@@ -9,9 +9,10 @@ Theory of operation. A results directory may come from elsewhere, so:
   MAX_CAPTURE_BYTES that starts with a pcap or pcapng header. Any other is left out and
   named (`Captures.left_out`), so no robot's frames are credited to another (mergecap skips
   an empty file, which shifts every later capture's interface id onto the wrong robot);
-- the daemons' counters and tcpdump's logs go through the one bounded reader
-  (common.boundedfile): a FIFO is refused, not waited on; a count that is not a whole
-  number from 0 to MAX_COUNT leaves that robot's counters out, said so;
+- the daemons' counters are read through their type (aodv.statsfile), tcpdump's logs
+  through the one bounded reader (common.boundedfile): a FIFO is refused, not waited on; a
+  count that is not a whole number from 0 to its MAX_COUNT leaves that robot's counters
+  out, said so;
 - the routing-metrics cache is keyed on a SHA-256 of every capture's (and the relay-lag
   file's) content, which a tarball cannot carry over from other captures as it does mtimes.
 """
@@ -26,13 +27,13 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from common import boundedfile
 
 log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 1000  # topology.names.MAX_ROBOTS (the analysis reads results without topology)
 MAX_CAPTURE_BYTES = 512 << 20  # a 10-robot run of 5000 steps captures about 20 MB a robot
-MAX_COUNT = 10**15  # more packets or bytes than any run sends
 MAX_LOG_BYTES = 1 << 20
 PCAP_MAGICS = (b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\xc3\xd4", b"\x4d\x3c\xb2\xa1", b"\xa1\xb2\x3c\x4d")
 PCAPNG_MAGIC = b"\x0a\x0d\x0d\x0a"
@@ -142,41 +143,31 @@ def cache_refusal(doc) -> str | None:
     return None
 
 
-def _count(value) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_COUNT:
-        raise ValueError(f"{str(value)[:40]} is not a count (a whole number 0..{MAX_COUNT:g})")
-    return value
-
-
 def daemon_counts(run_dir: Path) -> dict[str, dict] | None:
-    """Per robot, what its AODV daemon says it transmitted (aodv/rK.json, written by
-    aodv/stats.py): {"packets": n, "bytes": UDP payload bytes, "by_type": {...}}.
+    """Per robot, what its AODV daemon says it transmitted (aodv/rK.json, read through its
+    type, aodv.statsfile): {"packets": n, "bytes": UDP payload bytes, "by_type": {...}}.
     None if the run has no such files; a file that is not one is left out, said so."""
-    d = Path(run_dir) / "aodv"
-    if not d.is_dir():
+    files = run_stats_files(run_dir)
+    if files is None:
         return None
     out = {}
-    for p in sorted(d.glob("r*.json")):
+    for p in files:
         try:
-            doc = boundedfile.load_json(p)
-            by_type = Counter({str(k): _count(v) for k, v in doc["messages_sent"].items()})
-            # What the kernel took but reported back untransmitted (a unicast whose next
-            # hop's ARP failed) never reaches wlan0, so no capture can hold it.
-            unsent = Counter(
-                {str(k): _count(v) for k, v in doc.get("messages_not_transmitted", {}).items()}
-            )
-            by_type.subtract(unsent)
-            sent = _count(doc.get("bytes_sent", 0)) - _count(doc.get("bytes_not_transmitted", 0))
-            out[p.stem[:40]] = {
-                "packets": sum(by_type.values()),
-                "bytes": sent,
-                "by_type": {k[:40]: n for k, n in by_type.items() if n},
-                "not_transmitted": sum(unsent.values()),
-            }
-        except boundedfile.Refused as r:
-            log.warning("%s: AODV counters not read: %s", p, boundedfile.describe(r))
-        except (ValueError, KeyError, TypeError, AttributeError) as e:
-            log.warning("%s: unreadable AODV counters (%s)", p, str(e)[:200])
+            stats = DaemonStats.read(p)
+        except StatsError as e:
+            log.warning("unreadable AODV counters: %s", e)
+            continue
+        by_type = Counter(stats.messages_sent)
+        # What the kernel took but reported back untransmitted (a unicast whose next hop's
+        # ARP failed) never reaches wlan0, so no capture can hold it.
+        unsent = Counter(stats.messages_not_transmitted)
+        by_type.subtract(unsent)
+        out[p.stem[:40]] = {
+            "packets": sum(by_type.values()),
+            "bytes": stats.bytes_sent - stats.bytes_not_transmitted,
+            "by_type": {k[:40]: n for k, n in by_type.items() if n},
+            "not_transmitted": sum(unsent.values()),
+        }
     return out or None
 
 

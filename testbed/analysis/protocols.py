@@ -19,10 +19,10 @@ from __future__ import annotations
 import statistics
 from pathlib import Path
 
-from common.jsonfile import read_json
+from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
 from testbed.analysis.runs import FinishedRun
-from testbed.resultfile import DEFAULT_MEDIUM
+from testbed.run.resultconfig import DEFAULT_MEDIUM
 from topology.spec import ROUTINGS, VETH
 
 PROACTIVE = ("babel", "batman")
@@ -58,9 +58,11 @@ def _map_delivery(run: FinishedRun) -> float | None:
 def _discovery_ms(run_dir: Path) -> float | None:
     """Median latency of the successful route discoveries of the run's AODV daemons."""
     lat = []
-    for p in sorted((Path(run_dir) / "aodv").glob("r*.json")):
-        doc = read_json(p) or {}
-        lat += [1000 * d["latency_s"] for d in doc.get("discoveries", []) if d.get("ok")]
+    for p in run_stats_files(run_dir) or []:
+        try:
+            lat += [1000 * s for s in DaemonStats.read(p).discovery_latencies_s]
+        except StatsError:
+            continue
     return statistics.median(lat) if lat else None
 
 

@@ -40,15 +40,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from common import boundedfile
-from testbed.resultfile import (
-    DEFAULT_VARIANT,
-    RESULT_NAME,
-    ResultError,
-    RunResult,
-    _get,
-    _mapping,
-    one_line,
-)
+from testbed.resultfile import RESULT_NAME, ResultError, RunResult
+from testbed.run.resultconfig import DEFAULT_VARIANT
+from testbed.run.resultvalues import get_mapping, get_value, one_line
 
 log = logging.getLogger(__name__)
 
@@ -149,20 +143,20 @@ def parse_channel(doc) -> ChannelRecord:
         if not isinstance(r, Mapping):
             raise ResultError(f"robot {k} is not an object")
         try:
-            counts = {f: _get(r, key, (int,), 0) for f, key in _CHANNEL_COUNTS.items()}
-            airtime = _get(r, "airtime_s", _NUM, 0.0)
+            counts = {f: get_value(r, key, (int,), 0) for f, key in _CHANNEL_COUNTS.items()}
+            airtime = get_value(r, "airtime_s", _NUM, 0.0)
         except ResultError as e:
             raise ResultError(f"robot {k}: {e}") from None
         out.append(ChannelRobot(name=f"r{k}", airtime_s=airtime, **counts))
-    lag, late = _mapping(doc, "relay_lag"), _mapping(doc, "lateness")
-    frames = _get(lag, "frames", (int,), 0)
-    over = _get(lag, "over_1ms", (int,), 0)
+    lag, late = get_mapping(doc, "relay_lag"), get_mapping(doc, "lateness")
+    frames = get_value(lag, "frames", (int,), 0)
+    over = get_value(lag, "over_1ms", (int,), 0)
     return ChannelRecord(
-        duration_s=_get(doc, "now_s", _NUM, required=True),
+        duration_s=get_value(doc, "now_s", _NUM, required=True),
         robots=tuple(out),
-        relay_lag_mean_ms=_get(lag, "mean_ms", _NUM),
+        relay_lag_mean_ms=get_value(lag, "mean_ms", _NUM),
         relay_lag_over_1ms=over / frames if frames else None,
-        lateness_max_ms=_get(late, "max_ms", _NUM),
+        lateness_max_ms=get_value(late, "max_ms", _NUM),
     )
 
 

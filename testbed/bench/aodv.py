@@ -38,8 +38,10 @@ import uuid
 from typing import IO
 
 from aodv.stats import read_fresh
+from aodv.statsfile import DaemonStats
 from testbed.bench.common import median, write
 from topology.network import Network, destroy
+from topology.routing import aodv_stats_file
 from topology.spec import NetworkSpec
 
 REPEATS = 20
@@ -90,7 +92,7 @@ def _daemon(net: Network, k: int):
 
 def _wait_ready(net: Network, n: int) -> None:
     deadline = time.monotonic() + 60
-    while not all(os.path.exists(f"{net.state_dir}/r{k}.aodv.json") for k in range(1, n + 1)):
+    while not all(os.path.exists(aodv_stats_file(k, net.state_dir)) for k in range(1, n + 1)):
         if time.monotonic() > deadline:
             raise RuntimeError("AODV daemons did not start")
         time.sleep(0.05)
@@ -102,8 +104,8 @@ def _pipe(f: IO[str] | None) -> IO[str]:
     return f
 
 
-def _stats(net: Network, k: int) -> dict:
-    return read_fresh(f"{net.state_dir}/r{k}.aodv.json", _daemon(net, k))
+def _stats(net: Network, k: int) -> DaemonStats:
+    return read_fresh(aodv_stats_file(k, net.state_dir), _daemon(net, k))
 
 
 def discovery_once() -> dict[int, tuple[float, float]]:
@@ -139,7 +141,7 @@ def discovery_once() -> dict[int, tuple[float, float]]:
                     raise RuntimeError(f"datagram to robot {dst} not delivered; r1 log:\n{log}")
                 first = float(_pipe(rx[dst].stdout).readline()) - t_tx
                 time.sleep(0.2)
-                disc = [d for d in _stats(net, 1)["discoveries"] if d["dest"] == f"10.0.0.{dst}"]
+                disc = [d for d in _stats(net, 1).discoveries if d.get("dest") == f"10.0.0.{dst}"]
                 if not disc or not disc[-1]["ok"]:
                     raise RuntimeError(f"discovery of robot {dst} not recorded")
                 out[h] = (disc[-1]["round_latency_s"], first)
@@ -176,7 +178,7 @@ def steady_state() -> dict:
                 )  # fmt: skip
             time.sleep(WARMUP_S)
             pids = {k: _daemon(net, k).pid for k in range(1, n + 1)}
-            sent0 = {k: sum(_stats(net, k)["messages_sent"].values()) for k in pids}
+            sent0 = {k: _stats(net, k).sent_total for k in pids}
             cpu0 = {k: _proc_cpu_s(p) for k, p in pids.items()}
             t0 = time.monotonic()
             time.sleep(STEADY_S)
@@ -184,10 +186,10 @@ def steady_state() -> dict:
             cpu = {k: (_proc_cpu_s(p) - cpu0[k]) / dt for k, p in pids.items()}
             rss = {k: _rss_mb(p) for k, p in pids.items()}
             stats = {k: _stats(net, k) for k in pids}
-            sent = sum(sum(stats[k]["messages_sent"].values()) - sent0[k] for k in pids)
+            sent = sum(stats[k].sent_total - sent0[k] for k in pids)
             by_type: dict[str, int] = {}
             for s in stats.values():
-                for kind, c in s["messages_sent"].items():
+                for kind, c in s.messages_sent.items():
                     by_type[kind] = by_type.get(kind, 0) + c
             return {
                 "robots": n,

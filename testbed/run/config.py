@@ -109,24 +109,26 @@ class RunConfig:
     testbed.run.options): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
 
     robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=50, metavar="N",
-                         sweep={GRID},
+                         sweep={GRID}, in_result=True,
                          grid=GridDim(0, lambda n: f"n{n:02d}", seeded=True))  # fmt: skip
     comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
                                maximum=MAX_COORD_M,
-                               sweep={GRID}, net=True,
+                               sweep={GRID}, net=True, in_result=True,
                                grid=GridDim(1, lambda r: f"c{fmt(r)}", seeded=True))  # fmt: skip
     laser_range: float = option(float, f"laser range, at most {MAX_LASER_RANGE_M:g} m and the "
                                 "map's diagonal", **robot("laser_range"), unit="metres",
                                 maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID},
+                                in_result=True,
                                 grid=GridDim(2, lambda r: f"l{fmt(r)}", seeded=True))  # fmt: skip
-    seed: int = option(int, SEED_HELP, 1, minimum=0, maximum=2**63 - 1, metavar="S")
+    seed: int = option(int, SEED_HELP, 1, minimum=0, maximum=2**63 - 1, metavar="S", in_result=True)
     time_scale: float = option(
         float, f"speed-up of robot time over wall time: a step of {STEP_S_TEXT} lasts "
         f"{STEP_S_TEXT} / K", **robot("time_scale"), unit="factor",
-        metavar="K", sweep={RUN}, net=True,
+        metavar="K", sweep={RUN}, net=True, in_result=True,
     )  # fmt: skip
     routing: str = option(str, "routing protocol", "aodv", choices=ROUTINGS,
-                          sweep={GRID, RUN}, net=True, grid=GridDim(7, str, VARIED))  # fmt: skip
+                          sweep={GRID, RUN}, net=True, in_result=True,
+                          grid=GridDim(7, str, VARIED))  # fmt: skip
     aodv_profile: str = option(
         str, "AODV parameters (routing aodv): rfc, RFC 3561 section 10, or ns3, ns-3's "
         "defaults", "rfc", choices=AODV_PROFILES, sweep={RUN}, newer=True, net=True,
@@ -134,16 +136,17 @@ class RunConfig:
     map: str | None = option(
         str, "PNG map: dark pixels are obstacles, and walls for the los range models", None,
         metavar="PNG", default_text="an empty 20 x 20 m terrain", sweep={GRID, RUN},
+        in_result=True,
         grid=GridDim(8, lambda m: f"m{map_label(m)}", VARIED),
     )  # fmt: skip
     loss_pct: float = option(float, "packet loss on every link", 0.0, unit="percent",
                              minimum=0, maximum=100, metavar="PCT", cli="--loss",
-                             sweep={GRID}, net=True,
+                             sweep={GRID}, net=True, in_result=True,
                              grid=GridDim(3, lambda p: f"p{fmt(p)}", NONZERO,
                                           seeded=True))  # fmt: skip
     delay_ms: float = option(float, "delay on every link, with sch_netem", 0.0, unit="ms",
                              minimum=0, maximum=60_000, metavar="MS", cli="--delay",
-                             sweep={GRID}, net=True,
+                             sweep={GRID}, net=True, in_result=True,
                              grid=GridDim(4, lambda d: f"d{fmt(d)}", NONZERO,
                                           seeded=True))  # fmt: skip
     range_model: str = option(
@@ -172,18 +175,19 @@ class RunConfig:
         net=True,
     )  # fmt: skip
     capture: bool = option(bool, "write pcaps/rK.pcap, one capture per robot", False,
-                           sweep={RUN})  # fmt: skip
+                           sweep={RUN}, in_result=True)  # fmt: skip
     max_steps: int = option(int, "stop the run after this many steps", 3000, metavar="N",
                             unit=f"steps of {STEP_S_TEXT}", minimum=1, maximum=MAX_STEPS,
-                            sweep={RUN})  # fmt: skip
+                            sweep={RUN}, in_result=True)  # fmt: skip
     coordination: str = option(
         str, "goal coordination: 'paper' reads the paper's rules literally, 'ours' departs "
         "from them where the text is silent; see docs/guide.md, 'Coordination'",
-        **robot("coordination"), sweep={GRID}, grid=GridDim(5, str, CHANGED),
+        **robot("coordination"), sweep={GRID}, in_result=True,
+        grid=GridDim(5, str, CHANGED),
     )  # fmt: skip
     start: str = option(str, "start placement: clustered near a corner (as in the paper), "
                         "clustered at the centre, or spread over the map", "corner",
-                        choices=START_PLACEMENTS, sweep={GRID},
+                        choices=START_PLACEMENTS, sweep={GRID}, in_result=True,
                         grid=GridDim(6, str, CHANGED))  # fmt: skip
     middleware: str = option(
         str, "the middleware of the robots' goal messages (goals, requests to plan again): "
@@ -202,7 +206,8 @@ class RunConfig:
         "and laser; docs/middleware.md)", "none", choices=failures.BATTERY_FAILURES,
         sweep={GRID, RUN}, newer=True, grid=GridDim(11, str, CHANGED),
     )  # fmt: skip
-    # Beyond the contract's config keys (recorded too, so a run is reproducible):
+    # Beyond the contract's config keys (recorded too, so a run is reproducible; result.json
+    # keeps them under config's `extra`):
     map_cell: float = option(float, "size of a pixel of --map", CELL_M, unit="metres",
                              minimum=0.001, maximum=100, metavar="M", net=True)  # fmt: skip
     laser_rays: int = option(int, "rays of a laser scan", **robot("laser_rays"), metavar="N",

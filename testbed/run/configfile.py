@@ -5,7 +5,7 @@ The document is the run's options (testbed.run.config.RunConfig.to_dict, the tab
 and what preparing the run found (`map_size` [rows, cols], `starts`, `timer_phases`, the
 display robot and its `display_pos`, the testbed's `name`, the `snapshots`, a planned
 `battery_kill`), keys in the order written; `to_dict()` is the file. `result_config()` is
-the part result.json repeats (testbed.resultfile.ResultConfig, the file's one description
+the part result.json repeats (testbed.run.resultconfig.ResultConfig, the file's one description
 of the run's options and of their old runs' defaults).
 
 A config.json may come from elsewhere (the view replays any run directory): `view()` checks

@@ -78,8 +78,9 @@ leaves `ok` alone.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
+from typing import Any
 
 from aodv.params import Params as AodvParams
 from node.timing import STEP_S
@@ -173,7 +174,7 @@ def measures(
     miss_fraction: float | None,
     robots: Iterable[dict | None],
     display: dict | None = None,
-    daemons: Iterable[dict | None] = (),
+    daemons: Iterable[Mapping[str, Any] | None] = (),
     channel: dict | None = None,
     stepping: tuple[float, float] | None = None,
 ) -> Measures:
@@ -195,7 +196,7 @@ def measures(
         timer_max = max(timer_max, t.get("max", 0))
     hello = expiry = None
     for d in daemons:
-        if not isinstance(d, dict):
+        if not isinstance(d, Mapping):
             continue
         h, e = d.get("hello") or {}, d.get("expiry") or {}
         hello = max(hello or 0.0, _late_within(h, stepping))

@@ -10,6 +10,8 @@ one table from which are made:
 - a config from parsed arguments (`config_kwargs`: flags whose unit differs from the
   field's, such as `--speed` in m/s for a field in metres per step, are converted here);
 - the argv that parses back into a given config (`to_argv`), which a sweep hands each run;
+- the keys result.json repeats under `config` (`in_result`: testbed.run.resultconfig takes its
+  list of keys, and checks its fields, from these);
 - the checks of a sweep file's `[run]` values and `[grid]` lists (`check_value`), for the
   options marked `sweep`; and for those a sweep may vary, their `GridDim`: where they sit in
   the grid, their part of a run's id and whether they feed its seed (testbed.sweep.file
@@ -81,6 +83,9 @@ class Option:
     # that the plans (and the run argv) of older sweeps stay as they were.
     newer: bool = False
     net: bool = False  # `testbed net up` takes it too
+    # result.json repeats it under `config` (testbed.run.resultconfig.ResultConfig); the other
+    # options go under config's `extra`.
+    in_result: bool = False
     cli: str | None = None  # the flag, when not --name-with-dashes
     grid: GridDim | None = None  # with sweep={GRID}: how it varies in a sweep
 

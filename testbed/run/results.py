@@ -11,7 +11,6 @@ results.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import os
 import time
@@ -20,6 +19,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from aodv.statsfile import DaemonStats, StatsError, run_stats_path
 from common.jsonfile import read_json
 from node import events, render, stepcore
 from testbed.resultfile import HostStalls, Plan, RobotResult, RunResult
@@ -107,7 +107,7 @@ def contents(rec: RunRecord) -> RunResult:
             clock.miss_fraction_outside_stalls if clock.steps else None,
             [sm.get("lateness") for sm in summaries],
             display.get("lateness"),
-            [d.get("timer_lateness_ms") for d in daemons],
+            [d.timer_lateness_ms for d in daemons],
             channel_relay_lag(rec.out),
             clock.stepping,
         )
@@ -208,7 +208,9 @@ def map_sharing(
     }
 
 
-def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: list[dict]) -> dict:
+def cpu_seconds(
+    rec: RunRecord, summaries: list[dict], display: dict, daemons: list[DaemonStats]
+) -> dict:
     """CPU seconds of the run's processes (the robots', the display's, the world's step
     loop, the AODV daemons'), and all of it per robot-step in ms: what a cluster's run
     needs per robot (testbed.sweep.slurm)."""
@@ -216,7 +218,7 @@ def cpu_seconds(rec: RunRecord, summaries: list[dict], display: dict, daemons: l
         "robots": sum(sm.get("cpu_s") or 0.0 for sm in summaries),
         "display": display.get("cpu_s") or 0.0,
         "world": rec.world_timing.get("world_cpu_s", 0.0),
-        "routing": sum(d.get("cpu_s") or 0.0 for d in daemons),
+        "routing": sum(d.cpu_s or 0.0 for d in daemons),
     }
     out = {k: round(v, 3) for k, v in parts.items()}
     robot_steps = rec.clock.steps * len(rec.robots)
@@ -238,17 +240,15 @@ def display_summary(out: str) -> dict:
     return ev[-1].to_dict() if ev else {}
 
 
-def daemon_stats(out: str, n: int) -> list[dict]:
-    """The AODV daemons' statistics (aodv/rK.json), for those that wrote them."""
+def daemon_stats(out: str, n: int) -> list[DaemonStats]:
+    """The AODV daemons' statistics (aodv/rK.json), for those that wrote them (a file that is
+    not one is left out, as one that is missing)."""
     found = []
     for k in range(1, n + 1):
         try:
-            with open(os.path.join(out, "aodv", f"r{k}.json")) as f:
-                stats = json.load(f)
-        except (OSError, ValueError):
+            found.append(DaemonStats.read(run_stats_path(out, k)))
+        except StatsError:
             continue
-        if isinstance(stats, dict):
-            found.append(stats)
     return found
 
 

@@ -160,13 +160,13 @@ def _submit(args, spec, runs: list[PlannedRun], out: Path, p: Plan) -> int:
     jobs = (
         slurm.submit(out, todo, args.partition, args.account, args.sbatch_arg, args.sudo)
         if todo
-        else []
+        else ()
     )
     new = jobs[before:]
     print(
         f"sweep {args.file}: {len(runs)} runs, {len(p.done)} done, {len(in_queue)} still "
         f"queued, {len(todo)} submitted to Slurm"
-        + (f" as job(s) {', '.join(str(j['job']) for j in new)}" if todo else ""),
+        + (f" as job(s) {', '.join(str(j.job) for j in new)}" if todo else ""),
         file=sys.stderr,
     )
     return 0

@@ -13,9 +13,10 @@ every task of an array the same CPUs and time limit, and those depend on the tea
 it lands on: it reads the i-th run id of LIST, finds the run's configuration in the plan,
 removes a partial directory an earlier attempt left, and runs `testbed run` in-process,
 which tears its namespaces down on SIGTERM (what `scancel` and a time limit send first).
-The job ids go to `DIR/slurm/jobs.json`. A task killed outright (SIGKILL, a node lost)
-leaves a directory without result.json: `--status` calls it failed, and the next `--resume
---slurm` resubmits exactly the runs that are neither done nor queued, never a finished one.
+The job ids go to `DIR/slurm/jobs.json` (its type: testbed.sweep.slurmjobs). A task killed
+outright (SIGKILL, a node lost) leaves a directory without result.json: `--status` calls it
+failed, and the next `--resume --slurm` resubmits exactly the runs that are neither done nor
+queued, never a finished one.
 
 `status` joins the directory with `squeue` (pending or running array tasks): done, running,
 pending, failed (submitted, not done, no longer queued) or not submitted.
@@ -34,10 +35,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from common.errors import TestbedError, UsageError
-from common.jsonfile import make_dirs, read_json, write_atomic, write_json_atomic
+from common.jsonfile import make_dirs, write_atomic
 from testbed import PROJECT_ROOT
 from testbed.resultfile import RESULT_NAME, RunResult
 from testbed.run.config import RunConfig
+from testbed.sweep import slurmjobs
 from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, run_argv, run_dir
@@ -107,13 +109,10 @@ def node_cpus(partition: str | None) -> int | None:
     return max(values) if values else None
 
 
-def _jobs_file(out: Path) -> Path:
-    return out / "slurm" / "jobs.json"
-
-
-def submitted(out: Path) -> list[dict]:
-    """The job arrays submitted for this sweep: [{"job": id, "list": path, "runs": [...]}]."""
-    return (read_json(_jobs_file(out)) or {}).get("jobs", [])
+def submitted(out: Path) -> tuple[slurmjobs.SlurmJob, ...]:
+    """The job arrays submitted for this sweep, in the order they were (UsageError when its
+    jobs file is not one)."""
+    return slurmjobs.read(out).jobs
 
 
 def queued(out: Path) -> dict[str, str]:
@@ -121,9 +120,9 @@ def queued(out: Path) -> dict[str, str]:
     jobs = submitted(out)
     if not jobs:
         return {}
-    ids = ",".join(str(j["job"]) for j in jobs)
+    ids = ",".join(str(j.job) for j in jobs)
     text = _run([_tool("squeue"), "-h", "-r", "-j", ids, "-o", "%i %T"])
-    by_job = {str(j["job"]): j["runs"] for j in jobs}
+    by_job = {str(j.job): j.runs for j in jobs}
     state = {}
     for line in text.splitlines():
         parts = line.split()
@@ -158,14 +157,14 @@ def submit(
     account: str | None = None,
     sbatch_args: list[str] | None = None,
     sudo: bool = False,
-) -> list[dict]:
+) -> tuple[slurmjobs.SlurmJob, ...]:
     """Submit one job array per team size for `todo`; returns the jobs (also recorded)."""
     sbatch = _tool("sbatch")
     cap = node_cpus(partition)
     measured = measured_cpu_per_robot_step(out)
     slurm_dir = out / "slurm"
     make_dirs(slurm_dir / "logs", root=out)  # never through a link
-    jobs = submitted(out)
+    jobs = list(submitted(out))
     groups: dict[int, list[PlannedRun]] = {}
     for run in todo:
         groups.setdefault(run.config.robots, []).append(run)
@@ -190,16 +189,17 @@ def submit(
         job = _run(argv).strip().split(";")[0]
         if not job.isdigit():
             raise TestbedError(f"sbatch answered {job!r}, not a job id")
-        jobs.append({"job": int(job), "list": str(task_list), "robots": robots, "cpus": cpus,
-                     "minutes": minutes, "runs": [r.run_id for r in runs]})  # fmt: skip
-        write_json_atomic(_jobs_file(out), {"jobs": jobs})
-    return jobs
+        jobs.append(slurmjobs.SlurmJob(job=int(job), task_list=str(task_list), robots=robots,
+                                       cpus=cpus, minutes=minutes,
+                                       runs=tuple(r.run_id for r in runs)))  # fmt: skip
+        slurmjobs.write(out, slurmjobs.SlurmJobs(tuple(jobs)))
+    return tuple(jobs)
 
 
 def status(out: Path, plan_runs: Sequence[sweepstate.SweepRun]) -> list[tuple[str, str]]:
     """(run id, done | running | pending | failed | not submitted) for every planned run."""
     in_queue = queued(out)
-    ever = {rid for j in submitted(out) for rid in j["runs"]}
+    ever = {rid for j in submitted(out) for rid in j.runs}
     rows = []
     for entry in plan_runs:
         rid = entry.id

@@ -12,6 +12,8 @@ checks the shape every reader relies on:
   string `status` and `reason`, whole numbers `index` and `pid`, and a `config` whose every
   key is a run option with a value its table allows (testbed.run.options.check_value; the
   Slurm tasks build a run's command line from it);
+- `format`, `jobs_requested` and `jobs` whole numbers, the load and cpu limits (as asked
+  and as they are now) positive numbers, `netem` true or false, `updated` a string;
 - `spec` an object whose `grid` and `run` are objects and `time_scale_by_robots` maps team
   sizes (1..1000) to positive numbers; `time_scale_factor` maps team sizes to positive
   numbers; `backoffs` a list of objects; `calibration` maps team sizes to objects;
@@ -26,7 +28,7 @@ was before the type existed. Nobody else spells the file's name or opens it
 (tests/unit/test_file_types.py holds this).
 
 A sweep.json that fails is one line naming the file and the field (UsageError, exit 2);
-None when there is none. Strings are made one line (testbed.resultfile.one_line).
+None when there is none. Strings are made one line (testbed.run.resultvalues.one_line).
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from typing import Any
 from common import boundedfile
 from common.errors import UsageError
 from common.jsonfile import write_json_atomic
-from testbed.resultfile import one_line
+from testbed.run.resultvalues import one_line
 
 STATE_NAME = "sweep.json"
 STATE_FORMAT = 1
@@ -52,6 +54,8 @@ MAX_TEAM = 1000
 _EMPTY: Mapping[str, Any] = MappingProxyType({})
 # A run's keys that are not its status record (SweepRun.record holds the others, in order).
 _RUN_KEYS = ("id", "index", "config")
+_WHOLE = ("format", "jobs_requested", "jobs")  # whole numbers
+_LIMITS = ("load_limit_requested", "load_limit", "cpu_limit_requested", "cpu_limit")  # > 0
 
 
 @dataclass(frozen=True)
@@ -106,16 +110,16 @@ class SweepState:
     format: int | None = STATE_FORMAT
     sweep_file: str | None = None
     spec: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
-    jobs_requested: Any = None
-    jobs: Any = None
-    load_limit_requested: Any = None
-    load_limit: Any = None
-    cpu_limit_requested: Any = None
-    cpu_limit: Any = None
+    jobs_requested: int | None = None  # --jobs
+    jobs: int | None = None  # the concurrency now (the policy may have lowered it)
+    load_limit_requested: float | None = None  # the sweep file's, and what it is now
+    load_limit: float | None = None
+    cpu_limit_requested: float | None = None  # cores, likewise
+    cpu_limit: float | None = None
     time_scale_factor: Mapping[str, float] = field(
         default_factory=lambda: _EMPTY
     )  # team size -> factor of the file's scale
-    netem: Any = None
+    netem: bool | None = None  # whether sch_netem was there (impairments need it)
     calibration: Mapping[str, Mapping[str, Any]] = field(
         default_factory=lambda: _EMPTY
     )  # team size -> {factor, trials}
@@ -233,11 +237,28 @@ def _config(where: str, config: dict) -> None:
         raise ValueError(f"{where}.config: {one_line(str(e), 120)}") from None
 
 
+def _scalars(doc: dict) -> None:
+    """ValueError naming the key unless the sweep's scalars are of their kinds (or null)."""
+    for key in _WHOLE:
+        v = doc.get(key)
+        if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v < 0):
+            raise ValueError(f"{key} is {one_line(str(v), 40)}, not a whole number")
+    for key in _LIMITS:
+        v = doc.get(key)
+        if v is not None and not (_number(v) and v > 0):
+            raise ValueError(f"{key} is {one_line(str(v), 40)}, not a positive number")
+    for key, kind in (("netem", bool), ("updated", str)):
+        v = doc.get(key)
+        if v is not None and not isinstance(v, kind):
+            raise ValueError(f"{key} is {type(v).__name__}, not {kind.__name__}")
+
+
 def check(doc) -> dict:
     """The checked sweep.json document (see the module's docstring); ValueError naming the
     field otherwise."""
     if not isinstance(doc, dict):
         raise ValueError("not a JSON object")
+    _scalars(doc)
     runs = doc.get("runs", [])
     if not isinstance(runs, list):
         raise ValueError("runs is not a list")

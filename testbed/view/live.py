@@ -18,7 +18,7 @@ import time
 
 from aiohttp import web
 
-from common.jsonfile import read_json
+from aodv.statsfile import DaemonStats, StatsError
 from node import events
 from testbed.view import server
 from testbed.view.served import snapshot_steps
@@ -65,8 +65,10 @@ class LiveFeed:
             return rate
         total = 0
         for f in self.stats_files:
-            doc = read_json(f) or {}
-            total += sum((doc.get("messages_sent") or {}).values())
+            try:
+                total += DaemonStats.read(f).sent_total
+            except StatsError:
+                continue  # not written yet, or not one: it counts nothing
         if when:
             rate = round((total - sent) / (now - when), 1)
         self._rate = (now, total, rate)

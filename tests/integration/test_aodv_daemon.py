@@ -17,6 +17,7 @@ import uuid
 
 from aodv import packet as wire
 from aodv.stats import read_fresh
+from aodv.statsfile import DaemonStats
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 
@@ -67,8 +68,8 @@ def stats_path(net, k):
 
 
 def stats(net, k):
-    """Fresh statistics: SIGUSR1 makes the daemon rewrite its file."""
-    return read_fresh(stats_path(net, k), daemon(net, k))
+    """Fresh statistics (SIGUSR1 makes the daemon rewrite its file), as the file holds them."""
+    return read_fresh(stats_path(net, k), daemon(net, k)).to_json()
 
 
 def routes(net, k):
@@ -340,8 +341,7 @@ def test_sigterm_writes_stats_and_leaves_no_kernel_state():
         assert routes(net, 1)
         proc.terminate()
         assert proc.wait(timeout=10) == 0
-        with open(stats_path(net, 1)) as f:
-            final = json.load(f)
+        final = DaemonStats.read(stats_path(net, 1)).to_json()
         assert final["robot"] == "r1" and final["discoveries_ok"] == 1
         assert final["messages_sent"]["RREQ"] >= 1 and final["bytes_sent"] > 0
         assert routes(net, 1) == {}

@@ -11,6 +11,8 @@ import sys
 
 import pytest
 
+from aodv.statsfile import DaemonStats, run_stats_path
+
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 LONE = ["--robots", "1", "--comm-range", "20", "--laser-range", "2", "--seed", "1",
         "--routing", "aodv", "--quiet"]  # fmt: skip
@@ -63,8 +65,9 @@ def test_a_lone_robot_drives_the_same_path_at_a_low_and_a_higher_faithful_scale(
     assert set(priority) == {"motion", "planner", "timer"}
     if high["world_priority"].startswith("SCHED_RR"):
         assert set(priority.values()) == {"SCHED_RR 1"}
-    with open(fast_out / "aodv" / "r1.json") as fh:
-        hello = json.load(fh)["timer_lateness_ms"]["hello"]
+    lateness = DaemonStats.read(run_stats_path(fast_out, 1)).timer_lateness_ms
+    assert lateness is not None
+    hello = lateness["hello"]
     assert hello["n"] > 0 and 0 < len(hello["worst"]) <= hello["n"]
     assert all(fired >= due and ms >= 0 for due, fired, ms in hello["worst"])
 

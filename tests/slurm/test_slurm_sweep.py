@@ -13,6 +13,8 @@ import time
 import tomllib
 from pathlib import Path
 
+from testbed.sweep import slurmjobs
+
 REPO = Path(__file__).resolve().parents[2]
 SHORT = REPO / "testbed" / "experiments" / "short.toml"
 SLOW = REPO / "tests" / "slurm" / "slow.toml"
@@ -54,9 +56,9 @@ def test_slurm_sweep_lands_like_a_local_one_and_reports(cluster, tmp_path):
     out = tmp_path / "slurm"
     r = run_testbed("sweep", SHORT, "--out", out, "--slurm", "--partition", "tb")
     assert r.returncode == 0, r.stderr
-    jobs = json.loads((out / "slurm" / "jobs.json").read_text())["jobs"]
-    assert [j["robots"] for j in jobs] == [1, 2, 3]  # one array per team size
-    assert all(j["cpus"] >= 1 and j["minutes"] >= 1 for j in jobs)
+    jobs = slurmjobs.read(out).jobs
+    assert [j.robots for j in jobs] == [1, 2, 3]  # one array per team size
+    assert all(j.cpus >= 1 and j.minutes >= 1 for j in jobs)
     wait_until(lambda: set(status(out).values()) == {"done"}, 900, "every run done")
     assert run_testbed("report", out).returncode == 0
 
@@ -86,11 +88,11 @@ def test_a_cancelled_task_is_redone_by_resume_and_nothing_else(cluster, tmp_path
     out = tmp_path / "cancel"
     r = run_testbed("sweep", SLOW, "--out", out, "--slurm")
     assert r.returncode == 0, r.stderr
-    (job,) = json.loads((out / "slurm" / "jobs.json").read_text())["jobs"]
-    victim, other = job["runs"]
+    (job,) = slurmjobs.read(out).jobs
+    victim, other = job.runs
     # Cancel the first task once its run is under way (its config.json is written).
     wait_until(lambda: (out / "runs" / victim / "config.json").exists(), 300, "run 1 to start")
-    subprocess.run(["scancel", f"{job['job']}_1"], check=True)
+    subprocess.run(["scancel", f"{job.job}_1"], check=True)
     wait_until(lambda: status(out).get(victim) == "failed", 120, "the cancelled task to end")
     assert not (out / "runs" / victim / "result.json").exists() or (
         json.loads((out / "runs" / victim / "result.json").read_text())["status"] == "interrupted"
@@ -104,8 +106,8 @@ def test_a_cancelled_task_is_redone_by_resume_and_nothing_else(cluster, tmp_path
     r = run_testbed("sweep", SLOW, "--out", out, "--slurm", "--resume")
     assert r.returncode == 0, r.stderr
     assert re.search(r"1 submitted", r.stderr), r.stderr
-    jobs = json.loads((out / "slurm" / "jobs.json").read_text())["jobs"]
-    assert jobs[-1]["runs"] == [victim]  # exactly the cancelled run
+    jobs = slurmjobs.read(out).jobs
+    assert jobs[-1].runs == (victim,)  # exactly the cancelled run
     wait_until(lambda: set(status(out).values()) == {"done"}, 600, "the redone run")
     assert (out / "runs" / other / "result.json").stat().st_mtime_ns == done_at
     assert json.loads((out / "runs" / victim / "result.json").read_text())["status"] in (

@@ -1,9 +1,11 @@
 """Every file the testbed writes and reads again has one type (issue 41, item 1): sweep.json
 (testbed.sweep.state), a robot's events.jsonl (node.events), result.json and its config
-(testbed.resultfile). Checked here on the source of every module: no module but the type's
-own opens sweep.json or parses event lines by hand, and the old files' defaults of a run's
-config are the type's; and the config's two descriptions (the run's option table and
-result.json's config) do not drift apart."""
+(testbed.resultfile, testbed.run.resultconfig), a Slurm sweep's jobs file
+(testbed.sweep.slurmjobs), an AODV daemon's statistics (aodv.statsfile). Checked here on the
+source of every module: no module but the type's own opens sweep.json, the jobs file or a
+daemon's statistics or parses event lines by hand, and the old files' defaults of a run's
+config are the type's; and result.json's config is made from the run's option table (its
+keys, its fields' names and kinds)."""
 
 import ast
 import dataclasses
@@ -12,14 +14,25 @@ from pathlib import Path
 
 import pytest
 
-from testbed.resultfile import CONFIG_KEYS, ResultConfig
 from testbed.run.config import BY_NAME
+from testbed.run.resultconfig import CONFIG_KEYS, ResultConfig
+from tests.unit.test_result_file import _call_name, _scope
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("testbed", "topology", "node", "aodv", "common")
 SWEEP_OWNER = "testbed/sweep/state.py"
 EVENTS_OWNER = "node/events.py"
+JOBS_OWNER = "testbed/sweep/slurmjobs.py"
+STATS_OWNER = "aodv/statsfile.py"
 SWEEP_SPELLED = re.compile(r"(?:^|/)sweep\.json$")
+JOBS_SPELLED = re.compile(r"(?:^|/)jobs\.json$")
+# An AODV daemon's statistics file as a path spells it: the daemon's own (rK.aodv.json in the
+# testbed's state directory) and a run's copy (aodv/rK.json); and the names that give them.
+STATS_SPELLED = re.compile(r"\.aodv\.json$|(?:^|/)aodv/r[^/]*\.json$")
+STATS_MARKERS = {"aodv_stats_file", "run_stats_path", "run_stats_files", "RUN_DIR",
+                 "STATS_FILES", "stats_files"}  # fmt: skip
+# Calls that read a file's or a string's JSON (or its text, for a JSON reader to parse).
+RAW_READERS = {"load", "loads", "read_json", "load_json", "parse_json", "read_text", "read_bytes"}
 EVENTS_MENTIONED = re.compile(r"events\.jsonl|EVENTS_SUFFIX")
 # An event line's first bytes, as a reader matching lines by hand spells them.
 EVENT_PREFIX = re.compile(r"""\{\s*\\?["']e\\?["']\s*:""")
@@ -87,6 +100,96 @@ def event_parses(source: str) -> list[str]:
     return found
 
 
+def _names(tree: ast.AST, name: str) -> list[int]:
+    """The lines where `name` is imported, named or taken as an attribute."""
+    out = []
+    for n in ast.walk(tree):
+        if (isinstance(n, ast.alias) and n.name == name
+                or isinstance(n, ast.Attribute) and n.attr == name
+                or isinstance(n, ast.Name) and n.id == name):  # fmt: skip
+            out.append(n.lineno)
+    return out
+
+
+def jobs_reads(source: str) -> list[str]:
+    """Where `source` reaches the Slurm jobs file but through its type: its name spelled as a
+    path, the type module's name constant, its check of a raw document, or its path handed
+    to a raw JSON reader in the same module."""
+    tree = ast.parse(source)
+    found = [f"{ln}: spells jobs.json" for ln, s in _strings(tree) if JOBS_SPELLED.search(s)]
+    found += [f"{ln}: uses JOBS_NAME" for ln in _names(tree, "JOBS_NAME")]
+    found += [f"{ln}: checks a raw jobs file" for ln in _names(tree, "from_json")
+              if "SlurmJobs" in source]  # fmt: skip
+    if _names(tree, "jobs_path"):
+        found += [f"{ln}: {name}() beside jobs_path" for ln, name in _calls(tree)
+                  if name in RAW_READERS]  # fmt: skip
+    return found
+
+
+def _stats_place(n: ast.AST) -> bool:
+    """Whether `n` names where a statistics file is: spelled, or "aodv" as a part of a path
+    (`d / "aodv"`, `os.path.join(d, "aodv", ...)`)."""
+    aodv = [n.left, n.right] if isinstance(n, ast.BinOp) and isinstance(n.op, ast.Div) else (
+        n.args if isinstance(n, ast.Call) and _call_name(n) == "join" else [])  # fmt: skip
+    if any(isinstance(a, ast.Constant) and a.value == "aodv" for a in aodv):
+        return True
+    return (
+        isinstance(n, ast.Constant)
+        and isinstance(n.value, str)
+        and bool(STATS_SPELLED.search(n.value))
+    )
+
+
+def _reaches(node: ast.AST, tainted: set[str]) -> bool:
+    for n in ast.walk(node):
+        name = n.id if isinstance(n, ast.Name) else n.attr if isinstance(n, ast.Attribute) else ""
+        if name in tainted or _stats_place(n):
+            return True
+    return False
+
+
+def stats_reads(source: str) -> list[str]:
+    """Where `source` reads an AODV daemon's statistics file but through its type: within a
+    function, a value made from the file's place (spelled, "aodv" joined to a directory, or
+    a name that gives it) reaching a raw reader (directly, through a variable or a loop over
+    it); or the type's check of a raw document."""
+    tree = ast.parse(source)
+    found = [f"{ln}: checks a raw statistics document" for ln in _names(tree, "from_json")
+             if "DaemonStats" in source]  # fmt: skip
+    scopes = [n for n in ast.walk(tree)
+              if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda)]  # fmt: skip
+    for fn in [tree, *scopes]:
+        tainted = set(STATS_MARKERS)
+        changed = True
+        while changed:  # names assigned (or looped over) from a statistics file's place
+            changed = False
+            for n in _scope(fn):
+                targets, value = [], None
+                if isinstance(n, ast.Assign):
+                    targets, value = n.targets, n.value
+                elif isinstance(n, ast.AnnAssign | ast.AugAssign | ast.NamedExpr):
+                    targets, value = [n.target], n.value
+                elif isinstance(n, ast.For | ast.comprehension):
+                    targets, value = [n.target], n.iter
+                elif isinstance(n, ast.withitem) and n.optional_vars is not None:
+                    targets, value = [n.optional_vars], n.context_expr
+                if value is None or not _reaches(value, tainted):
+                    continue
+                for t in targets:
+                    for name in ast.walk(t):
+                        if isinstance(name, ast.Name) and name.id not in tainted:
+                            tainted.add(name.id)
+                            changed = True
+        for n in _scope(fn):
+            if isinstance(n, ast.Call) and _call_name(n) in RAW_READERS | {"open"}:
+                parts = [*n.args, *(k.value for k in n.keywords)]
+                if isinstance(n.func, ast.Attribute):
+                    parts.append(n.func.value)  # path.read_text()
+                if any(_reaches(p, tainted) for p in parts):
+                    found.append(f"{n.lineno}: {_call_name(n)}() of a statistics file")
+    return sorted(set(found))
+
+
 def _modules(owner: str):
     for pkg in PACKAGES:
         for path in sorted((REPO / pkg).rglob("*.py")):
@@ -107,6 +210,47 @@ def test_the_checks_see_what_they_must():
     assert event_parses("p = f'r{k}{EVENTS_SUFFIX}'\ne = json.loads(line)\n")
     assert not event_parses("p = 'r1.events.jsonl'\nevs = events.read(p, only=('plan',))\n")
     assert not event_parses("d = json.loads(text)\n")  # not a module about event logs
+    assert jobs_reads("jobs = read_json(out / 'slurm' / 'jobs.json')['jobs']\n")
+    assert jobs_reads("p = os.path.join(out, 'slurm/jobs.json')\n")
+    assert jobs_reads("from testbed.sweep.slurmjobs import JOBS_NAME\n")
+    assert jobs_reads("d = json.loads(slurmjobs.jobs_path(out).read_text())\n")
+    assert jobs_reads("j = SlurmJobs.from_json(json.load(f))\n")
+    assert not jobs_reads('"""Reads slurm/jobs.json."""\njobs = slurmjobs.read(out).jobs\n')
+
+    # the AODV statistics' readers this project had before the type, one per pattern
+    bad = [
+        "def f(out, k):\n    with open(os.path.join(out, 'aodv', f'r{k}.json')) as f:\n"
+        "        return json.load(f)\n",
+        "def f(run_dir):\n    d = Path(run_dir) / 'aodv'\n    for p in sorted(d.glob('r*.json')):\n"
+        "        doc = boundedfile.load_json(p)\n",
+        "def f(run_dir):\n    for p in sorted((Path(run_dir) / 'aodv').glob('r*.json')):\n"
+        "        doc = read_json(p) or {}\n",
+        "def f(self):\n    for f in self.stats_files:\n        doc = read_json(f) or {}\n",
+        "def f(net, k):\n    p = Path(f'{net.state_dir}/r{k}.aodv.json')\n"
+        "    return json.loads(p.read_text())\n",
+        "def f(net, k):\n    return read_json(aodv_stats_file(k, net.state_dir))\n",
+        "def f(p):\n    return DaemonStats.from_json(json.load(open(p)))\n",
+    ]
+    for src in bad:
+        assert stats_reads(src), src
+    good = [
+        "def f(out, k):\n    return DaemonStats.read(run_stats_path(out, k))\n",
+        "def f(d):\n    for p in run_stats_files(d) or []:\n        s = DaemonStats.read(p)\n"
+        "    return read_json(os.path.join(d, 'medium.json'))\n",
+        '"""Reads aodv/rK.json."""\ndef f(p):\n    return read_json(p)\n',
+    ]
+    for src in good:
+        assert stats_reads(src) == [], src
+
+
+@pytest.mark.parametrize("path", list(_modules(STATS_OWNER)))
+def test_no_module_but_the_type_reads_an_aodv_statistics_file(path):
+    assert stats_reads(path.read_text()) == []
+
+
+@pytest.mark.parametrize("path", list(_modules(JOBS_OWNER)))
+def test_no_module_but_the_type_reads_the_slurm_jobs_file(path):
+    assert jobs_reads(path.read_text()) == []
 
 
 @pytest.mark.parametrize("path", list(_modules(SWEEP_OWNER)))
@@ -132,6 +276,28 @@ def test_result_configs_keys_are_run_options():
     assert [k for k in drawn[:-1] if k not in BY_NAME] == []
     defaulted = ("middleware", "maps", "battery_failure")
     assert [k for k in defaulted if k not in BY_NAME] == []
+
+
+def test_result_configs_keys_come_from_the_option_table(monkeypatch):
+    """The keys are the options marked in_result, in the order result.json has always had
+    them; a marked option without a ResultConfig field, or a field whose annotation is not
+    its option's kind, stops the import."""
+    from testbed.run import resultconfig
+    from testbed.run.config import OPTIONS
+
+    assert tuple(o.name for o in OPTIONS if o.in_result) == CONFIG_KEYS
+    assert CONFIG_KEYS == ("robots", "comm_range", "laser_range", "seed", "time_scale",
+                           "routing", "map", "loss_pct", "delay_ms", "capture", "max_steps",
+                           "coordination", "start")  # fmt: skip
+    resultconfig._check_config_fields()
+    monkeypatch.setattr(resultconfig, "CONFIG_KEYS", (*CONFIG_KEYS, "range_model"))
+    with pytest.raises(TypeError, match="fields"):
+        resultconfig._check_config_fields()
+    monkeypatch.setattr(resultconfig, "CONFIG_KEYS", CONFIG_KEYS)
+    kind = dataclasses.replace(BY_NAME["seed"], kind=str)
+    monkeypatch.setitem(resultconfig.BY_NAME, "seed", kind)
+    with pytest.raises(TypeError, match="ResultConfig.seed"):
+        resultconfig._check_config_fields()
 
 
 def test_result_config_defaults_match_the_options_defaults():

@@ -4,7 +4,7 @@ import json
 from pathlib import Path
 
 from testbed.run.config import RunConfig
-from testbed.sweep import slurm
+from testbed.sweep import slurm, slurmjobs
 
 
 def test_resources_grow_with_team_and_time_scale_and_fit_a_node():
@@ -51,7 +51,6 @@ def test_a_cancelled_run_is_recorded_as_interrupted_whatever_it_ended_with(tmp_p
 
 def test_submit_makes_one_array_per_team_size_from_the_planned_configs(tmp_path, monkeypatch):
     """Stand-ins for sinfo and sbatch on PATH (real programs, recording their arguments)."""
-    import json
     import os
 
     from testbed.sweep import file as sweepfile
@@ -71,15 +70,15 @@ def test_submit_makes_one_array_per_team_size_from_the_planned_configs(tmp_path,
     runs = sweepfile.expand(spec)
     out = tmp_path / "out"
     jobs = slurm.submit(out, runs, partition="p1")
-    assert [(j["job"], j["robots"]) for j in jobs] == [(1, 1), (2, 4)]
+    assert [(j.job, j.robots) for j in jobs] == [(1, 1), (2, 4)]
     lines = (tmp_path / "sbatch.log").read_text().splitlines()
     for job, line in zip(jobs, lines, strict=True):
-        team = [r for r in runs if r.config.robots == job["robots"]]
-        assert job["runs"] == [r.run_id for r in team]
+        team = [r for r in runs if r.config.robots == job.robots]
+        assert job.runs == tuple(r.run_id for r in team)
         cpus, minutes = slurm.resources(team[0].config, 64)
         assert f"--array=1-{len(team)}" in line and f"--cpus-per-task={cpus}" in line
         assert f"--time={minutes}" in line and "--partition=p1" in line
-    assert json.loads((out / "slurm" / "jobs.json").read_text())["jobs"] == jobs
+    assert slurmjobs.read(out).jobs == jobs
 
 
 def test_sizing_uses_the_cpu_per_robot_step_the_sweeps_runs_measured(tmp_path):

@@ -60,6 +60,17 @@ def test_an_old_file_gets_its_defaults():
     assert run == SweepRun(id="a") and run.status is None and run.to_dict() == {"id": "a"}
 
 
+def test_the_scalars_are_typed():
+    state = SweepState.from_dict(WRITTEN)
+    assert (state.jobs_requested, state.jobs, state.netem) == (2, 1, True)
+    assert (state.load_limit_requested, state.load_limit) == (None, None)
+    assert (state.cpu_limit_requested, state.cpu_limit) == (1.5, 1.2)
+    old = SweepState.from_dict({})
+    assert (old.jobs, old.load_limit, old.cpu_limit, old.netem, old.updated) == (None,) * 5
+    whole = SweepState.from_dict({"load_limit": 60, "cpu_limit_requested": 2})
+    assert whole.to_dict()["load_limit"] == 60  # an int stays an int: the same bytes
+
+
 def test_no_file_is_none(tmp_path):
     assert sweepstate.read(tmp_path) is None
 
@@ -75,6 +86,14 @@ def test_no_file_is_none(tmp_path):
         ({"calibration": {"2": 1}}, "calibration"),
         ({"time_scale_factor": {"x": 1}}, "time_scale_factor"),
         ({"spec": {"grid": []}}, "spec.grid"),
+        ({"jobs": "auto"}, "jobs"),
+        ({"jobs_requested": 1.5}, "jobs_requested"),
+        ({"format": True}, "format"),
+        ({"load_limit": 0}, "load_limit"),
+        ({"cpu_limit_requested": "2"}, "cpu_limit_requested"),
+        ({"cpu_limit": [1]}, "cpu_limit"),
+        ({"netem": 1}, "netem"),
+        ({"updated": 5}, "updated"),
     ],
 )
 def test_a_malformed_file_is_refused_naming_the_field(tmp_path, doc, field):
