@@ -101,7 +101,7 @@ def plot_fig4_variants(runs: list[FinishedRun], stem: Path) -> list[Path]:
     if not variants:
         return []
     fig, axes = plt.subplots(len(variants), 1, figsize=(7, 2.2 * len(variants)), squeeze=False)
-    colors = {"timer": "tab:blue", "request": "tab:red"}
+    colors: dict[str | None, str] = {"timer": "tab:blue", "request": "tab:red"}
     for ax, variant in zip(axes[:, 0], variants, strict=True):
         run = _fig4_point(runs, variant)[0]
         pts = plan_intervals(run)

@@ -119,7 +119,7 @@ def _line(ax, pts: list[Point], label: str) -> bool:
 def plot_fig4(rows: list[Fig4Row], stem: Path) -> list[Path]:
     teams = sorted({r.robots for r in rows})
     fig, axes = plt.subplots(len(teams), 1, figsize=(7, 2.2 * len(teams)), squeeze=False)
-    colors = {"timer": "tab:blue", "request": "tab:red"}
+    colors: dict[str | None, str] = {"timer": "tab:blue", "request": "tab:red"}
     for ax, n, letter in zip(axes[:, 0], teams, "abcdefgh", strict=False):
         pts = [r for r in rows if r.robots == n]
         for cause in sorted({p.plan.cause for p in pts}, key=str):

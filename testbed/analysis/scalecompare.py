@@ -62,6 +62,10 @@ RULE = (
 )
 
 
+# A measure's (mean, low, high) over a point's runs, or (mean,) for one run.
+Estimate = tuple[float, float, float] | tuple[float]
+
+
 @dataclass(frozen=True)
 class ScaleRun:
     """One run's point and MEASURES, for the comparison of two sweeps."""
@@ -101,7 +105,7 @@ class ScalePoint:
     n: int
     time_scale: float | None
     tcp_emulated: bool
-    values: Mapping[str, tuple[float, ...] | None]
+    values: Mapping[str, Estimate | None]
 
 
 MEASURE_KEYS = tuple(k for k, _, _ in MEASURES)
@@ -145,7 +149,7 @@ def points(rows: list[ScaleRun]) -> dict[tuple, ScalePoint]:
     out = {}
     for key, items in sorted(groups.items()):
         scales = [s for i in items if (s := i.time_scale)]
-        values: dict[str, tuple[float, ...] | None] = {}
+        values: dict[str, Estimate | None] = {}
         for k in MEASURE_KEYS:
             vals = [v for i in items if (v := i.measure(k)) is not None]
             values[k] = stats.mean_ci(vals) or ((statistics.fmean(vals),) if vals else None)

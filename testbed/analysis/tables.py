@@ -374,8 +374,8 @@ def impairment_rows(runs: list[FinishedRun], per_run: list[RoutingRun]) -> list[
                           r.config.loss_pct, r.exploration_steps, pdf.get(r.run_id))
             for r in usable]  # fmt: skip
     return [
-        ImpairmentRow(*key, len(items), **means)
-        for key, items, means in aggregate(
+        ImpairmentRow(robots, comm, delay, loss, len(items), **means)
+        for (robots, comm, delay, loss), items, means in aggregate(
             each, lambda r: (r.robots, r.comm_range, r.delay_ms, r.loss_pct), IMPAIRMENT_METRICS
         )
     ]

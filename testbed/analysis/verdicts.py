@@ -210,13 +210,14 @@ def verdict_smaller_range(fig2: list[Fig2Row]) -> Verdict:
     for r in fig2:
         if r.robots >= 2:
             by.setdefault((r.laser_range, r.robots), {})[r.comm_range] = r
-    results, within = [], []
+    results: list[bool | None] = []
+    within: list[int | None] = []
     for (laser, robots), pts in sorted(by.items()):
         if len(pts) < 2:
             continue
         small, large = pts[min(pts)], pts[max(pts)]
         a, b = small.steps.ci, large.steps.ci
-        ok = small.steps.mean > large.steps.mean and stats.separated(a, b)
+        ok: bool | None = small.steps.mean > large.steps.mean and stats.separated(a, b)
         if _few([small, large]):
             ok = None
         results.append(ok)
