@@ -19,21 +19,18 @@ variant, and `ablation_fig4` plots each variant's first run as the paper's Fig. 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from testbed.analysis import stats
 from testbed.analysis.plots import plt, save
+from testbed.analysis.rows import Spread
 from testbed.analysis.runs import FinishedRun
-from testbed.analysis.tables import plan_intervals
+from testbed.analysis.tables import Fig2Row, plan_intervals
 
-THIRDS = ("start", "middle", "end")
 FIG4_ROBOTS = 10
 FIG4_RANGE = 20.0
 FIG4_LASER = 2.0
-
-
-def _variant(row: dict) -> tuple[str, str]:
-    return row["coordination"], row["start_placement"]
 
 
 def _name(variant: tuple[str, str]) -> str:
@@ -67,20 +64,33 @@ def _fig4_point(runs: list[FinishedRun], variant: tuple[str, str]) -> list[Finis
     )
 
 
-def request_thirds_rows(runs: list[FinishedRun]) -> list[dict]:
+@dataclass(frozen=True)
+class ThirdsRow:
+    """A run of the Fig. 4(d) point: its on-request plan generations per third of its steps."""
+
+    coordination: str
+    start_placement: str
+    run: str
+    steps: int | None
+    request_start: int
+    request_middle: int
+    request_end: int
+    timer: int
+
+    @property
+    def variant(self) -> tuple[str, str]:
+        return self.coordination, self.start_placement
+
+
+def request_thirds_rows(runs: list[FinishedRun]) -> list[ThirdsRow]:
     """Per variant, per run of 10 robots at 20 m (laser 2 m): on-request generations per third,
     and the plans on the timer, for the report and ablation_thirds.csv."""
     rows = []
     for variant in sorted({r.variant for r in runs if r.usable}):
         for run in _fig4_point(runs, variant):
-            thirds = request_thirds(run)
+            start, middle, end = request_thirds(run)
             timer = sum(p.cause == "timer" for rob in run.robots for p in rob.plans)
-            rows.append({
-                "coordination": variant[0], "start_placement": variant[1], "run": run.run_id,
-                "steps": run.steps,
-                **{f"request_{t}": n for t, n in zip(THIRDS, thirds, strict=True)},
-                "timer": timer,
-            })  # fmt: skip
+            rows.append(ThirdsRow(*variant, run.run_id, run.steps, start, middle, end, timer))
     return rows
 
 
@@ -91,13 +101,13 @@ def plot_fig4_variants(runs: list[FinishedRun], stem: Path) -> list[Path]:
     if not variants:
         return []
     fig, axes = plt.subplots(len(variants), 1, figsize=(7, 2.2 * len(variants)), squeeze=False)
-    colors = {"timer": "tab:blue", "request": "tab:red"}
+    colors: dict[str | None, str] = {"timer": "tab:blue", "request": "tab:red"}
     for ax, variant in zip(axes[:, 0], variants, strict=True):
         run = _fig4_point(runs, variant)[0]
         pts = plan_intervals(run)
-        for cause in sorted({p["cause"] for p in pts}, key=str):
-            sel = [p for p in pts if p["cause"] == cause]
-            ax.scatter([p["step"] for p in sel], [p["interval"] for p in sel], s=8,
+        for cause in sorted({p.cause for p in pts}, key=str):
+            sel = [p for p in pts if p.cause == cause]
+            ax.scatter([p.step for p in sel], [p.interval for p in sel], s=8,
                        color=colors.get(cause, "tab:gray"), label=str(cause))  # fmt: skip
         steps = run.steps or 1
         for k in (1, 2):
@@ -117,20 +127,21 @@ def plot_fig4_variants(runs: list[FinishedRun], stem: Path) -> list[Path]:
 # ---------------------------------------------------------------- the report's section
 
 
-def rise(pts: dict[int, dict]) -> tuple[bool, str]:
+def rise(pts: dict[int, Fig2Row]) -> tuple[bool, str]:
     """Whether a group's steps fall and then rise beyond the noise (see the module docstring),
     with the words that say why. `pts`: team size -> fig2 row."""
     if len(pts) < 3:
         return False, "fewer than three team sizes"
-    best = min(pts, key=lambda n: pts[n]["mean"])
+    best = min(pts, key=lambda n: pts[n].steps.mean)
     lo, hi = min(pts), max(pts)
     if not lo < best < hi:
         return False, f"fewest steps at {best} robots: no rise"
-    a, b = _ci(pts[best]), _ci(pts[hi])
-    size = pts[hi]["mean"] - pts[best]["mean"]
-    need = runs_needed(pts[best], pts[hi])
-    words = (f"fewest {pts[best]['mean']:.0f} {_interval(a)} at {best} robots, "
-             f"{pts[hi]['mean']:.0f} {_interval(b)} at {hi}: rise {size:.0f} steps")  # fmt: skip
+    fewest, largest = pts[best].steps, pts[hi].steps
+    a, b = fewest.ci, largest.ci
+    size = largest.mean - fewest.mean
+    need = runs_needed(fewest, largest)
+    words = (f"fewest {fewest.mean:.0f} {_interval(a)} at {best} robots, "
+             f"{largest.mean:.0f} {_interval(b)} at {hi}: rise {size:.0f} steps")  # fmt: skip
     if stats.separated(a, b):
         return True, words + ", beyond the noise"
     if a is None or b is None:
@@ -139,28 +150,22 @@ def rise(pts: dict[int, dict]) -> tuple[bool, str]:
                            if need else ", within the noise")  # fmt: skip
 
 
-def runs_needed(a: dict, b: dict) -> int | None:
-    """Runs per point that would tell two fig2 rows' means apart (their sd pooled); None
-    when a point has one run (no sd)."""
-    if a["std"] is None or b["std"] is None:
+def runs_needed(a: Spread, b: Spread) -> int | None:
+    """Runs per point that would tell two points' means apart (their sd pooled); None when
+    a point has one run (no sd)."""
+    if a.std is None or b.std is None:
         return None
-    sd = ((a["std"] ** 2 + b["std"] ** 2) / 2) ** 0.5
-    return stats.runs_to_resolve(b["mean"] - a["mean"], sd)
-
-
-def _ci(row: dict) -> tuple[float, float, float] | None:
-    if row.get("ci_low") is None:
-        return None
-    return row["mean"], row["ci_low"], row["ci_high"]
+    sd = ((a.std**2 + b.std**2) / 2) ** 0.5
+    return stats.runs_to_resolve(b.mean - a.mean, sd)
 
 
 def _interval(ci) -> str:
     return f"[{ci[1]:.0f}, {ci[2]:.0f}]" if ci else "[one run]"
 
 
-def section(fig2_all: list[dict], thirds: list[dict]) -> list[str]:
+def section(fig2_all: list[Fig2Row], thirds: list[ThirdsRow]) -> list[str]:
     """The report's ablation section (Markdown lines); empty when the sweep has one variant."""
-    variants = sorted({_variant(r) for r in fig2_all})
+    variants = sorted({r.variant for r in fig2_all})
     if len(variants) < 2:
         return []
     out = ["## Ablation: what makes big teams slow", ""]
@@ -173,22 +178,22 @@ def section(fig2_all: list[dict], thirds: list[dict]) -> list[str]:
         "",
     ]
     rises: dict[tuple, bool] = {}
-    groups = sorted({(r["laser_range"], r["comm_range"]) for r in fig2_all}, reverse=True)
+    groups = sorted({(r.laser_range, r.comm_range) for r in fig2_all}, reverse=True)
     for laser, comm in groups:
         out += [f"### Laser {laser:g} m, range {comm:g} m", ""]
-        teams = sorted({r["robots"] for r in fig2_all
-                        if (r["laser_range"], r["comm_range"]) == (laser, comm)})  # fmt: skip
+        teams = sorted({r.robots for r in fig2_all
+                        if (r.laser_range, r.comm_range) == (laser, comm)})  # fmt: skip
         out += ["| variant | " + " | ".join(str(n) for n in teams) + " | rise |",
                 "|---|" + "---|" * (len(teams) + 1)]  # fmt: skip
         notes = []
         for v in variants:
-            pts = {r["robots"]: r for r in fig2_all if _variant(r) == v
-                   and (r["laser_range"], r["comm_range"]) == (laser, comm)}  # fmt: skip
+            pts = {r.robots: r for r in fig2_all if r.variant == v
+                   and (r.laser_range, r.comm_range) == (laser, comm)}  # fmt: skip
             if not pts:
                 continue
             ok, why = rise(pts)
             rises[(v, laser, comm)] = ok
-            cells = [f"{pts[n]['mean']:.0f} {_interval(_ci(pts[n]))}" if n in pts else "–"
+            cells = [f"{pts[n].steps.mean:.0f} {_interval(pts[n].steps.ci)}" if n in pts else "–"
                      for n in teams]  # fmt: skip
             out.append(f"| {_name(v)} | " + " | ".join(cells) + f" | {'yes' if ok else 'no'} |")
             notes.append(f"- {_name(v)}: {why}")
@@ -217,7 +222,7 @@ def _factor_lines(rises: dict[tuple, bool]) -> list[str]:
     return out
 
 
-def _thirds_lines(rows: list[dict]) -> list[str]:
+def _thirds_lines(rows: list[ThirdsRow]) -> list[str]:
     if not rows:
         return ["No runs of 10 robots at 20 m (laser 2 m): no Fig. 4 phases to count.", ""]
     out = [
@@ -230,11 +235,12 @@ def _thirds_lines(rows: list[dict]) -> list[str]:
         "| variant | runs | start | middle | end | on the timer |",
         "|---|---|---|---|---|---|",
     ]
-    for v in sorted({_variant(r) for r in rows}):
-        sel = [r for r in rows if _variant(r) == v]
-        mean = {k: sum(r[k] for r in sel) / len(sel)
-                for k in ("request_start", "request_middle", "request_end", "timer")}  # fmt: skip
-        out.append(f"| {_name(v)} | {len(sel)} | {mean['request_start']:.1f} | "
-                   f"{mean['request_middle']:.1f} | {mean['request_end']:.1f} | "
-                   f"{mean['timer']:.0f} |")  # fmt: skip
+    for v in sorted({r.variant for r in rows}):
+        sel = [r for r in rows if r.variant == v]
+        start, middle, end, timer = (
+            sum(getattr(r, k) for r in sel) / len(sel)
+            for k in ("request_start", "request_middle", "request_end", "timer")
+        )
+        out.append(f"| {_name(v)} | {len(sel)} | {start:.1f} | {middle:.1f} | {end:.1f} | "
+                   f"{timer:.0f} |")  # fmt: skip
     return out + ["", "![ablation Fig. 4](figures/ablation_fig4.png)", ""]

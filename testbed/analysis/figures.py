@@ -37,6 +37,7 @@ from __future__ import annotations
 import logging
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from common import boundedfile
@@ -51,11 +52,56 @@ from testbed.analysis import (
     protocols,
     tables,
 )
+from testbed.analysis.ablation import ThirdsRow
+from testbed.analysis.media import MediaPoint, MediaRun
+from testbed.analysis.middlewares import MiddlewarePoint, MiddlewareRun
+from testbed.analysis.protocols import ProtocolPoint, ProtocolRun
 from testbed.analysis.runs import FinishedRun, load_runs
-from testbed.analysis.tables import MetricsOf, write_table
+from testbed.analysis.tables import (
+    Fig2Row,
+    Fig4Row,
+    ImpairmentRow,
+    MetricsOf,
+    PlanCauseRow,
+    RoutingRow,
+    RoutingRun,
+    write_table,
+)
 from testbed.view import served
 
 log = logging.getLogger(__name__)
+
+
+@dataclass
+class Tables:
+    """The tables behind a sweep's figures and sections (each empty when the sweep has no
+    data for it): what the report renders and decides its verdicts on."""
+
+    fig2: list[Fig2Row] = field(default_factory=list)  # the main variant's points
+    fig2_all: list[Fig2Row] = field(default_factory=list)  # every variant's
+    fig4: list[Fig4Row] = field(default_factory=list)
+    plans: list[PlanCauseRow] = field(default_factory=list)  # the main variant's runs
+    ablation_thirds: list[ThirdsRow] = field(default_factory=list)
+    protocols_runs: list[ProtocolRun] = field(default_factory=list)
+    protocols: list[ProtocolPoint] = field(default_factory=list)
+    media_runs: list[MediaRun] = field(default_factory=list)
+    media: list[MediaPoint] = field(default_factory=list)
+    middlewares_runs: list[MiddlewareRun] = field(default_factory=list)
+    middlewares: list[MiddlewarePoint] = field(default_factory=list)
+    routing_runs: list[RoutingRun] = field(default_factory=list)
+    routing: list[RoutingRow] = field(default_factory=list)
+    impairments: list[ImpairmentRow] = field(default_factory=list)
+
+
+@dataclass
+class Made:
+    """What `make_all` made: the files written, the sweep's runs, the tables, and why the
+    runs left out were (one line each)."""
+
+    runs: list[FinishedRun]
+    files: list[Path] = field(default_factory=list)
+    tables: Tables = field(default_factory=Tables)
+    left_out: list[str] = field(default_factory=list)
 
 
 def capture_metrics(run: FinishedRun) -> dict | None:
@@ -106,31 +152,28 @@ def _copy_paths_png(src: Path, dest: Path) -> Path | None:
     return dest
 
 
-def _paper_figures(runs: list[FinishedRun], figdir: Path, made: dict) -> None:
+def _paper_figures(runs: list[FinishedRun], figdir: Path, made: Made) -> None:
     """Figs. 2 and 4, the plan causes, and the ablation's tables when variants ran."""
-    fig2_all = tables.fig2_rows(runs)
-    write_table(fig2_all, figdir / "fig2")
+    t = made.tables
+    t.fig2_all = tables.fig2_rows(runs)
+    write_table(t.fig2_all, figdir / "fig2")
     main = tables.main_variant(runs)
-    fig2 = [r for r in fig2_all if (r["coordination"], r["start_placement"]) == main]
-    made["tables"]["fig2"], made["tables"]["fig2_all"] = fig2, fig2_all
-    lasers = sorted({r["laser_range"] for r in fig2}, reverse=True)
+    t.fig2 = [r for r in t.fig2_all if r.variant == main]
+    lasers = sorted({r.laser_range for r in t.fig2}, reverse=True)
     for laser, letter in zip(lasers, "abcdefgh", strict=False):
-        made["files"] += plots.plot_fig2(fig2, laser, figdir / f"fig2{letter}", letter)
+        made.files += plots.plot_fig2(t.fig2, laser, figdir / f"fig2{letter}", letter)
 
-    fig4 = tables.fig4_rows(runs)
-    made["tables"]["fig4"] = fig4
-    write_table(fig4, figdir / "fig4")
-    if fig4:
-        made["files"] += plots.plot_fig4(fig4, figdir / "fig4")
+    t.fig4 = tables.fig4_rows(runs)
+    write_table(t.fig4, figdir / "fig4")
+    if t.fig4:
+        made.files += plots.plot_fig4(t.fig4, figdir / "fig4")
     plans = tables.plan_cause_rows(runs)
     write_table(plans, figdir / "plans")
-    made["tables"]["plans"] = [
-        r for r in plans if (r["coordination"], r["start_placement"]) == main
-    ]
+    t.plans = [r for r in plans if r.variant == main]
     if len({r.variant for r in runs if r.usable}) > 1:
-        made["tables"]["ablation_thirds"] = ablation.request_thirds_rows(runs)
-        write_table(made["tables"]["ablation_thirds"], figdir / "ablation_thirds")
-        made["files"] += ablation.plot_fig4_variants(runs, figdir / "ablation_fig4")
+        t.ablation_thirds = ablation.request_thirds_rows(runs)
+        write_table(t.ablation_thirds, figdir / "ablation_thirds")
+        made.files += ablation.plot_fig4_variants(runs, figdir / "ablation_fig4")
 
 
 def _all_metrics(runs: list[FinishedRun], metrics_of: MetricsOf) -> dict[str, dict | None]:
@@ -140,66 +183,64 @@ def _all_metrics(runs: list[FinishedRun], metrics_of: MetricsOf) -> dict[str, di
         return dict(zip((r.run_id for r in runs), pool.map(metrics_of, runs), strict=True))
 
 
-def _protocol_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
+def _protocol_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
     """The protocols comparison's tables, when the sweep ran more than one routing."""
     if len({r.config.routing for r in all_runs if r.usable}) < 2:
         return
-    proto_runs = [
+    t = made.tables
+    t.protocols_runs = [
         protocols.run_row(r, r.exploration_steps, metrics[r.run_id]) for r in all_runs if r.usable
     ]
-    made["tables"]["protocols_runs"] = proto_runs
-    write_table(proto_runs, figdir / "protocols_runs")
-    made["tables"]["protocols"] = protocols.point_rows(proto_runs)
-    write_table(made["tables"]["protocols"], figdir / "protocols")
+    write_table(t.protocols_runs, figdir / "protocols_runs")
+    t.protocols = protocols.point_rows(t.protocols_runs)
+    write_table(t.protocols, figdir / "protocols")
 
 
-def _media_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
+def _media_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
     """The media comparison's tables, when the sweep ran more than one medium."""
     usable = [r for r in all_runs if r.usable]
     if len({r.config.medium for r in usable}) < 2:
         return
-    per_run = [media.run_row(r, metrics[r.run_id]) for r in usable]
-    made["tables"]["media_runs"] = per_run
-    write_table(per_run, figdir / "media_runs")
-    made["tables"]["media"] = media.point_rows(per_run)
-    write_table(made["tables"]["media"], figdir / "media")
+    t = made.tables
+    t.media_runs = [media.run_row(r, metrics[r.run_id]) for r in usable]
+    write_table(t.media_runs, figdir / "media_runs")
+    t.media = media.point_rows(t.media_runs)
+    write_table(t.media, figdir / "media")
 
 
 def _middleware_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path,
-                       made: dict) -> None:  # fmt: skip
+                       made: Made) -> None:  # fmt: skip
     """The middlewares' comparison (the paper's Section 3), when the sweep ran more than
     one middleware."""
     if len({middlewares.middleware_of(r) for r in all_runs if r.usable}) < 2:
         return
-    per_run, rows = middlewares.tables(all_runs, metrics)
-    made["tables"]["middlewares_runs"], made["tables"]["middlewares"] = per_run, rows
-    write_table(per_run, figdir / "middlewares_runs")
-    write_table(rows, figdir / "middlewares")
+    t = made.tables
+    t.middlewares_runs, t.middlewares = middlewares.tables(all_runs, metrics)
+    write_table(t.middlewares_runs, figdir / "middlewares_runs")
+    write_table(t.middlewares, figdir / "middlewares")
 
 
-def _routing_figures(runs: list[FinishedRun], metrics: dict, figdir: Path, made: dict) -> None:
+def _routing_figures(runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
     """Section 2.4's routing metrics, and the impairments when loss or delay varied."""
-    per_run = tables.routing_per_run(runs, lambda run: metrics[run.run_id])
-    made["tables"]["routing_runs"] = per_run
-    write_table(per_run, figdir / "routing_runs")
-    routing = tables.routing_rows(per_run)
-    made["tables"]["routing"] = routing
-    write_table(routing, figdir / "routing")
-    if routing:
-        made["files"] += plots.plot_routing(routing, figdir / "routing")
-    imp = tables.impairment_rows(runs, per_run)
-    made["tables"]["impairments"] = imp
-    if imp:
-        write_table(imp, figdir / "impairments")
-        made["files"] += plots.plot_impairments(imp, figdir / "impairments")
+    t = made.tables
+    t.routing_runs = tables.routing_per_run(runs, lambda run: metrics[run.run_id])
+    write_table(t.routing_runs, figdir / "routing_runs")
+    t.routing = tables.routing_rows(t.routing_runs)
+    write_table(t.routing, figdir / "routing")
+    if t.routing:
+        made.files += plots.plot_routing(t.routing, figdir / "routing")
+    t.impairments = tables.impairment_rows(runs, t.routing_runs)
+    if t.impairments:
+        write_table(t.impairments, figdir / "impairments")
+        made.files += plots.plot_impairments(t.impairments, figdir / "impairments")
 
 
 def make_all(
     sweep_dir: str | Path, metrics_of: MetricsOf | None = None, unfaithful: bool = False
-) -> dict:
-    """Write every figure the sweep has data for into DIR/figures/; returns what was made:
-    {"files": [...], "runs": [FinishedRun, ...], "tables": {name: rows}}. Runs not faithful
-    to their time scale are left out unless `unfaithful`."""
+) -> Made:
+    """Write every figure the sweep has data for into DIR/figures/; returns what was made
+    (`Made`: the files, the runs, the tables). Runs not faithful to their time scale are
+    left out unless `unfaithful`."""
     sweep_dir = Path(sweep_dir)
     figdir = make_dirs(sweep_dir / "figures", root=sweep_dir)  # refused if it is a link
     left_out: list[str] = []
@@ -208,12 +249,12 @@ def make_all(
     messaging = middlewares.main_messaging(all_runs)
     runs = [r for r in all_runs if r.network == network
             and (middlewares.middleware_of(r), middlewares.failure_of(r)) == messaging]  # fmt: skip
-    made: dict = {"files": [], "runs": all_runs, "tables": {}, "left_out": left_out}
+    made = Made(runs=all_runs, left_out=left_out)
     _paper_figures(runs, figdir, made)
     metrics = _all_metrics(all_runs, metrics_of or capture_metrics)
     _protocol_tables(all_runs, metrics, figdir, made)
     _media_tables(all_runs, metrics, figdir, made)
     _middleware_tables(all_runs, metrics, figdir, made)
     _routing_figures(runs, metrics, figdir, made)
-    made["files"] += collect_paths(runs, figdir / "paths")
+    made.files += collect_paths(runs, figdir / "paths")
     return made

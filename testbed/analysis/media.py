@@ -36,8 +36,10 @@ from __future__ import annotations
 import math
 import re
 import statistics
+from dataclasses import dataclass, field, fields
 
 from testbed.analysis import stats
+from testbed.analysis.rows import INLINE, MeanCI
 from testbed.analysis.runs import FinishedRun
 from topology.spec import NS3_WIFI as WIFI
 from topology.spec import VETH
@@ -109,6 +111,80 @@ def traffic_airtime_s(packets: float, eth_bytes: float, family: str, mbps: float
 # ---------------------------------------------------------------- rows
 
 
+@dataclass(frozen=True)
+class MediaRun:
+    """One run's numbers for the media comparison."""
+
+    run: str
+    medium: str
+    routing: str
+    comm_range: float
+    robots: int
+    steps: float | None
+    pdf: float | None
+    delay_ms: float | None
+    control_pkts_per_robot_s: float | None
+    control_bytes_per_robot_s: float | None
+    control_airtime_share: float | None
+    channel_airtime_share: float | None
+    channel_retry_rate: float | None
+    channel_drops: int | None
+    channel_relay_lag_ms: float | None
+    channel_relay_lag_over_1ms: float | None
+    # ns3-wifi: the median delay before the relay-lag correction (None: not corrected)
+    delay_raw_ms: float | None
+    delay_lag_corrected: bool
+
+
+@dataclass(frozen=True)
+class MediaCompared:
+    """The COMPARED measures of a point: each one's mean and 95% interval."""
+
+    steps: MeanCI
+    pdf: MeanCI
+    delay_ms: MeanCI
+    control_pkts_per_robot_s: MeanCI
+    control_bytes_per_robot_s: MeanCI
+    control_airtime_share: MeanCI
+
+    def of(self, key: str) -> MeanCI:
+        """One measure, by a name of COMPARED."""
+        if key not in COMPARED_KEYS:
+            raise KeyError(key)
+        value: MeanCI = getattr(self, key)
+        return value
+
+
+@dataclass(frozen=True)
+class ChannelMeans:
+    """The CHANNEL measures of a point: each one's mean over its runs (None: no run had it)."""
+
+    channel_airtime_share: float | None
+    channel_retry_rate: float | None
+    channel_drops: float | None
+    channel_relay_lag_ms: float | None
+    channel_relay_lag_over_1ms: float | None
+    delay_raw_ms: float | None
+
+
+@dataclass(frozen=True)
+class MediaPoint:
+    """Per (routing, range, team, medium): the compared measures with their intervals, the
+    channel's means, and in how many runs the delay was corrected for the relay lag."""
+
+    routing: str
+    comm_range: float
+    robots: int
+    medium: str
+    n: int
+    compared: MediaCompared = field(metadata=INLINE)
+    channel: ChannelMeans = field(metadata=INLINE)
+    delay_lag_corrected_runs: int
+
+
+COMPARED_KEYS = tuple(f.name for f in fields(MediaCompared))
+
+
 def _control_airtime_share(run: FinishedRun, metrics: dict) -> float | None:
     tx_p, tx_b = metrics.get("tx_packets"), metrics.get("tx_bytes")
     ctl_p, ctl_b = metrics.get("control_tx_packets"), metrics.get("control_tx_bytes")
@@ -119,7 +195,7 @@ def _control_airtime_share(run: FinishedRun, metrics: dict) -> float | None:
     return traffic_airtime_s(ctl_p, ctl_b, *phy) / total if total else None
 
 
-def run_row(run: FinishedRun, metrics: dict | None) -> dict:
+def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
     """One run's numbers (`metrics`: its pcapmetrics, or None without captures)."""
     c = run.config
     m = metrics or {}
@@ -132,69 +208,65 @@ def run_row(run: FinishedRun, metrics: dict | None) -> dict:
 
     ch = run.channel
     raw = m.get("delay_raw_ms_median")
-    return {
-        "run": run.run_id,
-        "medium": c.medium,
-        "routing": c.routing,
-        "comm_range": c.comm_range,
-        "robots": c.robots,
-        "steps": run.exploration_steps,
-        "pdf": m.get("pdf"),
-        "delay_ms": m["delay_ms_median"] * scale if m.get("delay_ms_median") is not None else None,
-        "control_pkts_per_robot_s": per_robot_s("control_tx_packets"),
-        "control_bytes_per_robot_s": per_robot_s("control_tx_bytes"),
-        "control_airtime_share": _control_airtime_share(run, m) if metrics else None,
-        "channel_airtime_share": ch.airtime_share if ch else None,
-        "channel_retry_rate": ch.retry_rate if ch else None,
-        "channel_drops": ch.drops if ch else None,
-        "channel_relay_lag_ms": ch.relay_lag_mean_ms if ch else None,
-        "channel_relay_lag_over_1ms": ch.relay_lag_over_1ms if ch else None,
-        # ns3-wifi: the median delay before the relay-lag correction (None: not corrected)
-        "delay_raw_ms": raw * scale if raw is not None else None,
-        "delay_lag_corrected": "relay_lag" in m,
-    }
+    return MediaRun(
+        run=run.run_id,
+        medium=c.medium,
+        routing=c.routing,
+        comm_range=c.comm_range,
+        robots=c.robots,
+        steps=run.exploration_steps,
+        pdf=m.get("pdf"),
+        delay_ms=m["delay_ms_median"] * scale if m.get("delay_ms_median") is not None else None,
+        control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
+        control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+        control_airtime_share=_control_airtime_share(run, m) if metrics else None,
+        channel_airtime_share=ch.airtime_share if ch else None,
+        channel_retry_rate=ch.retry_rate if ch else None,
+        channel_drops=ch.drops if ch else None,
+        channel_relay_lag_ms=ch.relay_lag_mean_ms if ch else None,
+        channel_relay_lag_over_1ms=ch.relay_lag_over_1ms if ch else None,
+        delay_raw_ms=raw * scale if raw is not None else None,
+        delay_lag_corrected="relay_lag" in m,
+    )
 
 
-def point_rows(per_run: list[dict]) -> list[dict]:
+def _present(items: list[MediaRun], key: str) -> list[float]:
+    return [v for i in items if (v := getattr(i, key)) is not None]
+
+
+def point_rows(per_run: list[MediaRun]) -> list[MediaPoint]:
     """Per (routing, range, team, medium): each measure's mean and, for the compared ones,
     its 95% interval (`KEY_ci_low`, `KEY_ci_high`; None for fewer than two runs)."""
-    groups: dict[tuple, list[dict]] = {}
+    groups: dict[tuple[str, float, int, str], list[MediaRun]] = {}
     for r in per_run:
-        key = (r["routing"], r["comm_range"], r["robots"], r["medium"])
+        key = (r.routing, r.comm_range, r.robots, r.medium)
         groups.setdefault(key, []).append(r)
     order = {m: i for i, m in enumerate(MEDIA_ORDER)}
     out = []
     for key, items in sorted(groups.items(), key=lambda kv: (*kv[0][:3], order.get(kv[0][3], 9))):
-        row = dict(zip(("routing", "comm_range", "robots", "medium"), key, strict=True))
-        row["n"] = len(items)
-        for k, _, _ in COMPARED:
-            vals = [i[k] for i in items if i.get(k) is not None]
-            ci = stats.mean_ci(vals)
-            row[k] = statistics.fmean(vals) if vals else None
-            row[f"{k}_ci_low"], row[f"{k}_ci_high"] = (ci[1], ci[2]) if ci else (None, None)
+        compared = MediaCompared(**{k: MeanCI.of(_present(items, k)) for k in COMPARED_KEYS})
+        means = {}
         for k in CHANNEL:
-            vals = [i[k] for i in items if i.get(k) is not None]
-            row[k] = statistics.fmean(vals) if vals else None
-        row["delay_lag_corrected_runs"] = sum(bool(i.get("delay_lag_corrected")) for i in items)
-        out.append(row)
+            vals = _present(items, k)
+            means[k] = statistics.fmean(vals) if vals else None
+        out.append(MediaPoint(*key, len(items), compared, ChannelMeans(**means),
+                              sum(bool(i.delay_lag_corrected) for i in items)))  # fmt: skip
     return out
 
 
-def ci(row: dict, key: str) -> tuple[float, float, float] | None:
+def ci(row: MediaPoint, key: str) -> tuple[float, float, float] | None:
     """(mean, low, high) of a point row's measure, None without an interval."""
-    if row.get(f"{key}_ci_low") is None or row.get(key) is None:
-        return None
-    return row[key], row[f"{key}_ci_low"], row[f"{key}_ci_high"]
+    return row.compared.of(key).ci
 
 
 # ---------------------------------------------------------------- the section
 
 
-def pairs(rows: list[dict]) -> dict[tuple, dict[str, dict]]:
+def pairs(rows: list[MediaPoint]) -> dict[tuple, dict[str, MediaPoint]]:
     """{(routing, range, team): {medium: row}} for the points that ran both media."""
-    points: dict[tuple, dict[str, dict]] = {}
+    points: dict[tuple, dict[str, MediaPoint]] = {}
     for r in rows:
-        points.setdefault((r["routing"], r["comm_range"], r["robots"]), {})[r["medium"]] = r
+        points.setdefault((r.routing, r.comm_range, r.robots), {})[r.medium] = r
     return {k: v for k, v in points.items() if VETH in v and WIFI in v}
 
 
@@ -203,13 +275,13 @@ def _label(point: tuple) -> str:
     return f"{routing}, {comm:g} m, {robots} robots"
 
 
-def noise_sentence(key: str, name: str, spec: str, both: dict[tuple, dict[str, dict]]) -> str:
+def noise_sentence(key: str, name: str, spec: str, both: dict[tuple, dict[str, MediaPoint]]) -> str:
     """One sentence for one measure: at which points veth's answer is within the noise of
     802.11's, at which it is not (and which way), at which the noise is unknown."""
     within, beyond, unknown = [], [], []
     for point, by in both.items():
         v, w = by[VETH], by[WIFI]
-        if v.get(key) is None or w.get(key) is None:
+        if v.compared.of(key).mean is None or w.compared.of(key).mean is None:
             continue
         cv, cw = ci(v, key), ci(w, key)
         if cv is None or cw is None:
@@ -233,12 +305,13 @@ def noise_sentence(key: str, name: str, spec: str, both: dict[tuple, dict[str, d
     return text + (f"; not judged: {one_run}." if unknown else ".")
 
 
-def _cell(row: dict, key: str, spec: str) -> str:
-    if row.get(key) is None:
+def _cell(row: MediaPoint, key: str, spec: str) -> str:
+    m = row.compared.of(key)
+    if m.mean is None:
         return "–"
-    c = ci(row, key)
+    c = m.ci
     if c is None:
-        return format(row[key], spec)
+        return format(m.mean, spec)
     return f"{format(c[0], spec)} [{format(c[1], spec)}, {format(c[2], spec)}]"
 
 
@@ -246,10 +319,10 @@ def _fmt(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
-def section(rows: list[dict]) -> list[str]:
+def section(rows: list[MediaPoint]) -> list[str]:
     """The report's "What perfect links get wrong" section (empty unless the sweep ran more
     than one medium)."""
-    if len({r["medium"] for r in rows}) < 2:
+    if len({r.medium for r in rows}) < 2:
         return []
     both = pairs(rows)
     out = ["## What perfect links get wrong: veth against 802.11 (ns3-wifi)", ""]
@@ -273,8 +346,7 @@ def section(rows: list[dict]) -> list[str]:
     for r in rows:
         cells = " | ".join(_cell(r, k, spec) for k, _, spec in COMPARED)
         out.append(
-            f"| {r['routing']} | {r['comm_range']:g} | {r['robots']} | {r['medium']} | "
-            f"{r['n']} | {cells} |"
+            f"| {r.routing} | {r.comm_range:g} | {r.robots} | {r.medium} | {r.n} | {cells} |"
         )
     out += ["", f"**Rule.** {NOISE_RULE}", ""]
     if not both:
@@ -285,9 +357,9 @@ def section(rows: list[dict]) -> list[str]:
     return out + _channel_lines(rows)
 
 
-def _channel_lines(rows: list[dict]) -> list[str]:
+def _channel_lines(rows: list[MediaPoint]) -> list[str]:
     """What the 802.11 channel itself counted, per ns3-wifi point (medium.json)."""
-    wifi = [r for r in rows if r["medium"] == WIFI and r.get("channel_airtime_share") is not None]
+    wifi = [r for r in rows if r.medium == WIFI and r.channel.channel_airtime_share is not None]
     if not wifi:
         return []
     out = [
@@ -306,12 +378,13 @@ def _channel_lines(rows: list[dict]) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in wifi:
+        ch = r.channel
         out.append(
-            f"| {r['routing']} | {r['comm_range']:g} | {r['robots']} | "
-            f"{_fmt(r['channel_airtime_share'], '.3f')} | "
-            f"{_fmt(r['channel_retry_rate'], '.3f')} | {_fmt(r['channel_drops'], '.1f')} | "
-            f"{_fmt(r['channel_relay_lag_ms'], '.2f')} | "
-            f"{_fmt(r['channel_relay_lag_over_1ms'], '.1%')} | "
-            f"{_fmt(r['delay_raw_ms'], '.2f')} | {r['delay_lag_corrected_runs']} of {r['n']} |"
+            f"| {r.routing} | {r.comm_range:g} | {r.robots} | "
+            f"{_fmt(ch.channel_airtime_share, '.3f')} | "
+            f"{_fmt(ch.channel_retry_rate, '.3f')} | {_fmt(ch.channel_drops, '.1f')} | "
+            f"{_fmt(ch.channel_relay_lag_ms, '.2f')} | "
+            f"{_fmt(ch.channel_relay_lag_over_1ms, '.1%')} | "
+            f"{_fmt(ch.delay_raw_ms, '.2f')} | {r.delay_lag_corrected_runs} of {r.n} |"
         )
     return out + [""]

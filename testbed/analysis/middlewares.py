@@ -47,11 +47,12 @@ it is undecided, or too few runs when a middleware it needs had too few.
 
 from __future__ import annotations
 
-import statistics
+from dataclasses import dataclass, field, fields
 
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from testbed.analysis import stats
+from testbed.analysis.rows import INLINE, MeanCI
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.verdicts import FAILS, HOLDS, TOO_FEW
 from testbed.run.failures import MIDRUN, NONE
@@ -95,6 +96,73 @@ MEANS = (
 )
 
 
+@dataclass(frozen=True)
+class MiddlewareRun:
+    """One run's numbers for the middlewares' comparison."""
+
+    run: str
+    middleware: str
+    battery_failure: str
+    comm_range: float
+    robots: int
+    steps: float | None
+    survivors_finished: int | None  # 1: every robot not stopped finished; None: unknown
+    delivery: float | None
+    failed: float | None
+    duplicates: float | None
+    late: float | None
+    blocked_share: float | None
+    blocked_max_s: float | None
+    sending: float | None
+    air_bytes_per_robot_s: float | None
+    air_own_share: float | None
+
+
+@dataclass(frozen=True)
+class MiddlewareMeans:
+    """The MEANS of a point: each one's mean over its runs with its 95% interval."""
+
+    steps: MeanCI
+    delivery: MeanCI
+    failed: MeanCI
+    duplicates: MeanCI
+    late: MeanCI
+    blocked_share: MeanCI
+    blocked_max_s: MeanCI
+    air_bytes_per_robot_s: MeanCI
+    air_own_share: MeanCI
+
+    def of(self, key: str) -> MeanCI:
+        """One measure, by a name of MEANS."""
+        if key not in MEANS_KEYS:
+            raise KeyError(key)
+        value: MeanCI = getattr(self, key)
+        return value
+
+
+@dataclass(frozen=True)
+class MiddlewarePoint:
+    """Per (team, range, failure, middleware): the MEANS with their intervals, and the
+    survivors' share of runs with its Wilson interval."""
+
+    robots: int
+    comm_range: float
+    battery_failure: str
+    middleware: str
+    n: int
+    left_out: int  # the point's runs the report did not count
+    means: MiddlewareMeans = field(metadata=INLINE)
+    survivors_runs: int
+    survivors_finished_runs: int
+    survivors_share: float | None
+    survivors_ci_low: float | None
+    survivors_ci_high: float | None
+    sending_runs: int
+
+
+MEANS_KEYS = tuple(f.name for f in fields(MiddlewareMeans))
+
+
 def middleware_of(run: FinishedRun) -> str:
     """The run's middleware: result.json's `messaging`, else its config (older: nanomsg)."""
     name = (run.messaging or {}).get("middleware")
@@ -134,7 +202,7 @@ def _air(run: FinishedRun, metrics: dict | None) -> tuple[float | None, float | 
     return per_robot_s, (own / tx if own is not None and tx else None)
 
 
-def run_row(run: FinishedRun, metrics: dict | None) -> dict:
+def run_row(run: FinishedRun, metrics: dict | None) -> MiddlewareRun:
     """One run's numbers (`metrics`: its pcapmetrics, or None without captures)."""
     team = (run.messaging or {}).get("team") or {}
     sent, received = _number(team.get("sent")), _number(team.get("received"))
@@ -142,26 +210,26 @@ def run_row(run: FinishedRun, metrics: dict | None) -> dict:
     blocked = _number(team.get("blocked_s"))
     air, own = _air(run, metrics)
     survived = run.survivors_finished
-    return {
-        "run": run.run_id,
-        "middleware": middleware_of(run),
-        "battery_failure": failure_of(run),
-        "comm_range": run.config.comm_range,
-        "robots": run.config.robots,
-        "steps": run.exploration_steps,
-        "survivors_finished": None if survived is None else int(survived),
-        "delivery": received / sent if sent and received is not None else None,
-        "failed": _number(team.get("failed")),
-        "duplicates": _number(team.get("duplicates")),
-        "late": _number(team.get("late")),
-        "blocked_share": blocked / (counted * wall)
+    return MiddlewareRun(
+        run=run.run_id,
+        middleware=middleware_of(run),
+        battery_failure=failure_of(run),
+        comm_range=run.config.comm_range,
+        robots=run.config.robots,
+        steps=run.exploration_steps,
+        survivors_finished=None if survived is None else int(survived),
+        delivery=received / sent if sent and received is not None else None,
+        failed=_number(team.get("failed")),
+        duplicates=_number(team.get("duplicates")),
+        late=_number(team.get("late")),
+        blocked_share=blocked / (counted * wall)
         if blocked is not None and counted and wall
         else None,
-        "blocked_max_s": _number(team.get("blocked_max_s")),
-        "sending": _number(team.get("sending")),
-        "air_bytes_per_robot_s": air,
-        "air_own_share": own,
-    }
+        blocked_max_s=_number(team.get("blocked_max_s")),
+        sending=_number(team.get("sending")),
+        air_bytes_per_robot_s=air,
+        air_own_share=own,
+    )
 
 
 def _sort_key(key: tuple) -> tuple:
@@ -173,44 +241,47 @@ def _index(order: tuple, value) -> int:
     return order.index(value) if value in order else len(order)
 
 
-def point_rows(per_run: list[dict], left_out: dict[tuple, int] | None = None) -> list[dict]:
+PointKey = tuple[int, float, str, str]  # (robots, comm_range, battery_failure, middleware)
+
+
+def point_rows(
+    per_run: list[MiddlewareRun], left_out: dict[PointKey, int] | None = None
+) -> list[MiddlewarePoint]:
     """Per (team, range, failure, middleware): each of MEANS with its 95% interval
     (`KEY_ci_low`, `KEY_ci_high`; None for fewer than two values), the survivors' share
     with its Wilson interval, and `left_out`, the point's runs the report did not count."""
-    groups: dict[tuple, list[dict]] = {}
+    groups: dict[PointKey, list[MiddlewareRun]] = {}
     for r in per_run:
-        key = (r["robots"], r["comm_range"], r["battery_failure"], r["middleware"])
+        key = (r.robots, r.comm_range, r.battery_failure, r.middleware)
         groups.setdefault(key, []).append(r)
     for key in left_out or {}:
         groups.setdefault(key, [])
     out = []
     for key, items in sorted(groups.items(), key=lambda kv: _sort_key(kv[0])):
-        row = dict(zip(("robots", "comm_range", "battery_failure", "middleware"), key,
-                       strict=True))  # fmt: skip
-        row["n"], row["left_out"] = len(items), (left_out or {}).get(key, 0)
-        for k, _, _ in MEANS:
-            vals = [i[k] for i in items if i.get(k) is not None]
-            ci = stats.mean_ci(vals)
-            row[k] = statistics.fmean(vals) if vals else None
-            row[f"{k}_ci_low"], row[f"{k}_ci_high"] = (ci[1], ci[2]) if ci else (None, None)
-        judged = [i["survivors_finished"] for i in items if i.get("survivors_finished") is not None]
-        row["survivors_runs"], row["survivors_finished_runs"] = len(judged), sum(judged)
+        means = {
+            k: MeanCI.of([v for i in items if (v := getattr(i, k)) is not None]) for k in MEANS_KEYS
+        }
+        judged = [i.survivors_finished for i in items if i.survivors_finished is not None]
         share = stats.share_ci(sum(judged), len(judged))
-        row["survivors_share"], row["survivors_ci_low"], row["survivors_ci_high"] = share or (
-            None,
-            None,
-            None,
-        )
-        row["sending_runs"] = sum(1 for i in items if i.get("sending"))
-        out.append(row)
+        out.append(MiddlewarePoint(
+            *key, n=len(items), left_out=(left_out or {}).get(key, 0),
+            means=MiddlewareMeans(**means),
+            survivors_runs=len(judged), survivors_finished_runs=sum(judged),
+            survivors_share=share[0] if share else None,
+            survivors_ci_low=share[1] if share else None,
+            survivors_ci_high=share[2] if share else None,
+            sending_runs=sum(1 for i in items if i.sending),
+        ))  # fmt: skip
     return out
 
 
-def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[dict], list[dict]]:
+def tables(
+    runs: list[FinishedRun], metrics: dict
+) -> tuple[list[MiddlewareRun], list[MiddlewarePoint]]:
     """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
     id's pcapmetrics (or None)."""
     per_run = [run_row(r, metrics.get(r.run_id)) for r in runs if r.usable]
-    left: dict[tuple, int] = {}
+    left: dict[PointKey, int] = {}
     for r in runs:
         if not r.usable:
             key = (r.config.robots, r.config.comm_range, failure_of(r), middleware_of(r))
@@ -221,20 +292,20 @@ def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[dict], list[dic
 # ---------------------------------------------------------------- the verdict
 
 
-def pooled(rows: list[dict]) -> dict[str, dict[str, tuple[int, int]]]:
+def pooled(rows: list[MiddlewarePoint]) -> dict[str, dict[str, tuple[int, int]]]:
     """{middleware: {failure: (runs whose survivors finished, runs)}} over the points (team,
     range) that ran the middleware both without and with the failure."""
-    by: dict[tuple, dict[str, dict]] = {}
+    by: dict[tuple, dict[str, MiddlewarePoint]] = {}
     for r in rows:
-        by.setdefault((r["middleware"], r["robots"], r["comm_range"]), {})[r["battery_failure"]] = r
+        by.setdefault((r.middleware, r.robots, r.comm_range), {})[r.battery_failure] = r
     out: dict[str, dict[str, list[int]]] = {}
     for (mw, _, _), modes in by.items():
         if not all(f in modes for f in FAILURE_ORDER):
             continue
         acc = out.setdefault(mw, {f: [0, 0] for f in FAILURE_ORDER})
         for f in FAILURE_ORDER:
-            acc[f][0] += modes[f]["survivors_finished_runs"]
-            acc[f][1] += modes[f]["survivors_runs"]
+            acc[f][0] += modes[f].survivors_finished_runs
+            acc[f][1] += modes[f].survivors_runs
     return {mw: {f: (v[0], v[1]) for f, v in acc.items()} for mw, acc in out.items()}
 
 
@@ -284,7 +355,7 @@ def paper_verdict(by_middleware: dict[str, tuple[str, str]]) -> tuple[str, str]:
     return worst, f"not decided for {', '.join(open_)}"
 
 
-def verdicts(rows: list[dict]) -> tuple[dict[str, tuple[str, str]], tuple[str, str]]:
+def verdicts(rows: list[MiddlewarePoint]) -> tuple[dict[str, tuple[str, str]], tuple[str, str]]:
     """({middleware: (verdict, why)}, the paper's reading) of a sweep's point rows."""
     pools = pooled(rows)
     by = {m: middleware_verdict(p[NONE], p[MIDRUN]) for m, p in pools.items()}
@@ -295,25 +366,26 @@ def verdicts(rows: list[dict]) -> tuple[dict[str, tuple[str, str]], tuple[str, s
 # ---------------------------------------------------------------- the section
 
 
-def _cell(row: dict, key: str, spec: str) -> str:
-    if row.get(key) is None:
+def _cell(row: MiddlewarePoint, key: str, spec: str) -> str:
+    m = row.means.of(key)
+    if m.mean is None:
         return "not measured" if key.startswith("air_") else "–"
-    if row.get(f"{key}_ci_low") is None:
-        return format(row[key], spec)
-    return (f"{format(row[key], spec)} [{format(row[f'{key}_ci_low'], spec)}, "
-            f"{format(row[f'{key}_ci_high'], spec)}]")  # fmt: skip
+    if m.ci_low is None:
+        return format(m.mean, spec)
+    return (f"{format(m.mean, spec)} [{format(m.ci_low, spec)}, "
+            f"{format(m.ci_high, spec)}]")  # fmt: skip
 
 
-def _survivors(row: dict) -> str:
-    if not row["survivors_runs"]:
+def _survivors(row: MiddlewarePoint) -> str:
+    if not row.survivors_runs:
         return "–"
-    return f"{row['survivors_finished_runs']} of {row['survivors_runs']}"
+    return f"{row.survivors_finished_runs} of {row.survivors_runs}"
 
 
-def section(rows: list[dict]) -> list[str]:
+def section(rows: list[MiddlewarePoint]) -> list[str]:
     """The report's "Which middleware a team can rely on" section (empty unless the sweep
     ran more than one middleware)."""
-    if len({r["middleware"] for r in rows}) < 2:
+    if len({r.middleware for r in rows}) < 2:
         return []
     out = ["## Which middleware a team can rely on (the paper's Section 3)", ""]
     out += [
@@ -342,9 +414,9 @@ def section(rows: list[dict]) -> list[str]:
     for r in rows:
         cells = " | ".join(_cell(r, k, spec) for k, _, spec in MEANS)
         out.append(
-            f"| {r['robots']} | {r['comm_range']:g} | {r['battery_failure']} | "
-            f"{r['middleware']} | {r['n']} | {r['left_out']} | {_survivors(r)} | {cells} | "
-            f"{r['sending_runs']} of {r['n']} |"
+            f"| {r.robots} | {r.comm_range:g} | {r.battery_failure} | "
+            f"{r.middleware} | {r.n} | {r.left_out} | {_survivors(r)} | {cells} | "
+            f"{r.sending_runs} of {r.n} |"
         )
     out += ["", f"**Rule.** {VERDICT_RULE}", ""]
     by, (paper, why) = verdicts(rows)
@@ -352,7 +424,7 @@ def section(rows: list[dict]) -> list[str]:
         return out + ["No middleware ran both with and without the failure: no verdict.", ""]
     out += [f"**Does the paper's claim hold?** {paper}: {why}.", ""]
     out += [f"- {m}: {v}; {text}." for m, (v, text) in by.items()]
-    if any(r["left_out"] for r in rows):
+    if any(r.left_out for r in rows):
         out += [
             "",
             "Runs left out are not in the verdict; a send that blocks the planner also makes "

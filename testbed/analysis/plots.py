@@ -9,13 +9,15 @@ generation's interval against its step, by cause, with the 20-step timer dashed.
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
 from matplotlib.ticker import MaxNLocator
 
 from common.jsonfile import write_atomic
-from testbed.analysis.tables import ROUTING_METRICS
+from testbed.analysis.rows import MeanRange
+from testbed.analysis.tables import ROUTING_METRICS, Fig2Row, Fig4Row, ImpairmentRow, RoutingRow
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -45,17 +47,19 @@ def _fmt(x: float) -> str:
     return f"{x:g}"
 
 
-def fig2_figure(rows: list[dict], laser: float, label: str):
+def fig2_figure(rows: list[Fig2Row], laser: float, label: str):
     """Fig. 2 for one laser range: each range's line of means, its 95% intervals where a
     point has them, and each point's number of runs."""
     fig, ax = plt.subplots(figsize=(6, 4))
     bars = False
-    for comm in sorted({r["comm_range"] for r in rows if r["laser_range"] == laser}):
+    for comm in sorted({r.comm_range for r in rows if r.laser_range == laser}):
         pts = sorted(
-            (r for r in rows if r["laser_range"] == laser and r["comm_range"] == comm),
-            key=lambda r: r["robots"],
+            (r for r in rows if r.laser_range == laser and r.comm_range == comm),
+            key=lambda r: r.robots,
         )
-        bars |= _line(ax, pts, "robots", "mean", ("ci_low", "ci_high"), f"range {_fmt(comm)} m")
+        points = [Point(r.robots, r.steps.mean, r.steps.ci_low, r.steps.ci_high, r.steps.n)
+                  for r in pts]  # fmt: skip
+        bars |= _line(ax, points, f"range {_fmt(comm)} m")
     ax.set_xlabel("team size (robots)")
     ax.set_ylabel("exploration steps (mean over robots)")
     ax.set_title(f"Fig. 2({label}): laser range {_fmt(laser)} m")
@@ -68,7 +72,7 @@ def fig2_figure(rows: list[dict], laser: float, label: str):
     return fig
 
 
-def plot_fig2(rows: list[dict], laser: float, stem: Path, label: str) -> list[Path]:
+def plot_fig2(rows: list[Fig2Row], laser: float, stem: Path, label: str) -> list[Path]:
     return save(fig2_figure(rows, laser, label), stem)
 
 
@@ -82,36 +86,47 @@ def _note(ax, text: str) -> None:
             color="0.35")  # fmt: skip
 
 
-def _line(ax, pts: list[dict], x: str, y: str, bounds: tuple[str, str], label: str) -> bool:
-    """One line of `y` against `x` with error bars from bounds (low, high) where a point has
-    them and they span something, each point labelled with its n. The legend shows the line
-    alone: bars that are not drawn get no entry. True when a bar was drawn."""
-    xs, ys = [p[x] for p in pts], [p[y] for p in pts]
+@dataclass(frozen=True)
+class Point:
+    """A point of a line: x, y, the error bar's ends (None: no bar) and its number of runs."""
+
+    x: float
+    y: float
+    low: float | None
+    high: float | None
+    n: int
+
+
+def _line(ax, pts: list[Point], label: str) -> bool:
+    """One line of y against x with error bars from low to high where a point has them and
+    they span something, each point labelled with its n. The legend shows the line alone:
+    bars that are not drawn get no entry. True when a bar was drawn."""
+    xs, ys = [p.x for p in pts], [p.y for p in pts]
     (line,) = ax.plot(xs, ys, marker="o", label=label)
-    lo, hi = bounds
-    barred = [p for p in pts if p[lo] is not None and p[hi] is not None and p[hi] > p[lo]]
+    barred = [(p.x, p.y, p.low, p.high) for p in pts
+              if p.low is not None and p.high is not None and p.high > p.low]  # fmt: skip
     if barred:
-        err = [[p[y] - p[lo] for p in barred], [p[hi] - p[y] for p in barred]]
-        ax.errorbar([p[x] for p in barred], [p[y] for p in barred], yerr=err, fmt="none",
+        err = [[y - lo for _, y, lo, _ in barred], [hi - y for _, y, _, hi in barred]]
+        ax.errorbar([x for x, *_ in barred], [y for _, y, *_ in barred], yerr=err, fmt="none",
                     ecolor=line.get_color(), capsize=3)  # fmt: skip
     ax.margins(x=0.08, y=0.12)  # room for the n labels inside the frame
     for p in pts:
-        ax.annotate(f"n={p['n']}", (p[x], p[y]), textcoords="offset points", xytext=(4, 4),
+        ax.annotate(f"n={p.n}", (p.x, p.y), textcoords="offset points", xytext=(4, 4),
                     fontsize=7, color=line.get_color())  # fmt: skip
     return bool(barred)
 
 
-def plot_fig4(rows: list[dict], stem: Path) -> list[Path]:
-    teams = sorted({r["robots"] for r in rows})
+def plot_fig4(rows: list[Fig4Row], stem: Path) -> list[Path]:
+    teams = sorted({r.robots for r in rows})
     fig, axes = plt.subplots(len(teams), 1, figsize=(7, 2.2 * len(teams)), squeeze=False)
-    colors = {"timer": "tab:blue", "request": "tab:red"}
+    colors: dict[str | None, str] = {"timer": "tab:blue", "request": "tab:red"}
     for ax, n, letter in zip(axes[:, 0], teams, "abcdefgh", strict=False):
-        pts = [r for r in rows if r["robots"] == n]
-        for cause in sorted({p["cause"] for p in pts}, key=str):
-            sel = [p for p in pts if p["cause"] == cause]
+        pts = [r for r in rows if r.robots == n]
+        for cause in sorted({p.plan.cause for p in pts}, key=str):
+            sel = [p.plan for p in pts if p.plan.cause == cause]
             ax.scatter(
-                [p["step"] for p in sel],
-                [p["interval"] for p in sel],
+                [p.step for p in sel],
+                [p.interval for p in sel],
                 s=10,
                 color=colors.get(cause, "tab:gray"),
                 label=str(cause),
@@ -120,7 +135,7 @@ def plot_fig4(rows: list[dict], stem: Path) -> list[Path]:
             PLAN_TIMER_STEPS, color="k", ls="--", lw=1, label=f"{PLAN_TIMER_STEPS}-step timer"
         )
         ax.set_ylabel("interval (steps)")
-        run = pts[0]["run"] if pts else ""
+        run = pts[0].run if pts else ""
         ax.set_title(f"Fig. 4({letter}): {n} robot{'s' if n > 1 else ''} ({run})", fontsize=9)
         ax.legend(fontsize=7, loc="upper right")
         ax.grid(alpha=0.3)
@@ -129,17 +144,18 @@ def plot_fig4(rows: list[dict], stem: Path) -> list[Path]:
     return save(fig, stem)
 
 
-def routing_figure(rows: list[dict]):
+def routing_figure(rows: list[RoutingRow]):
     fig, axes = plt.subplots(2, 2, figsize=(9, 6.5))
     for ax, (key, label) in zip(axes.flat, ROUTING_METRICS, strict=True):
-        for comm in sorted({r["comm_range"] for r in rows}):
+        for comm in sorted({r.comm_range for r in rows}):
             pts = sorted(
-                (r for r in rows if r["comm_range"] == comm and r[f"{key}_mean"] is not None),
-                key=lambda r: r["robots"],
+                (r for r in rows if r.comm_range == comm and r.means.of(key).mean is not None),
+                key=lambda r: r.robots,
             )
             if not pts:
                 continue
-            _spread_line(ax, pts, "robots", key, f"range {_fmt(comm)} m")
+            _spread_line(ax, [(r.robots, r.means.of(key), r.n) for r in pts],
+                         f"range {_fmt(comm)} m")  # fmt: skip
         ax.set_xlabel("team size (robots)")
         ax.set_ylabel(label, fontsize=8)
         _team_axis(ax)
@@ -151,7 +167,7 @@ def routing_figure(rows: list[dict]):
     return fig
 
 
-def plot_routing(rows: list[dict], stem: Path) -> list[Path]:
+def plot_routing(rows: list[RoutingRow], stem: Path) -> list[Path]:
     return save(routing_figure(rows), stem)
 
 
@@ -164,33 +180,32 @@ def _legend_or_no_data(ax) -> None:
         ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
 
 
-def _spread_line(ax, pts: list[dict], x: str, key: str, label: str) -> None:
-    """One line of means against `x`, with error bars from each point's min to max."""
-    _line(ax, pts, x, f"{key}_mean", (f"{key}_min", f"{key}_max"), label)
+def _spread_line(ax, pts: list[tuple[float, MeanRange, int]], label: str) -> None:
+    """One line of means against x, with error bars from each point's min to max; `pts`:
+    (x, the point's metric, its number of runs), each with a mean."""
+    _line(ax, [Point(x, m.mean, m.min, m.max, n) for x, m, n in pts if m.mean is not None], label)
 
 
-def plot_impairments(rows: list[dict], stem: Path) -> list[Path]:
+def plot_impairments(rows: list[ImpairmentRow], stem: Path) -> list[Path]:
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
     for ax, key, label in (
         (axes[0], "steps", "exploration steps"),
         (axes[1], "pdf", "packet delivery fraction"),
     ):
-        for robots, comm, delay in sorted(
-            {(r["robots"], r["comm_range"], r["delay_ms"]) for r in rows}
-        ):
+        for robots, comm, delay in sorted({(r.robots, r.comm_range, r.delay_ms) for r in rows}):
             pts = sorted(
                 (
                     r
                     for r in rows
-                    if (r["robots"], r["comm_range"], r["delay_ms"]) == (robots, comm, delay)
-                    and r[f"{key}_mean"] is not None
+                    if (r.robots, r.comm_range, r.delay_ms) == (robots, comm, delay)
+                    and r.of(key).mean is not None
                 ),
-                key=lambda r: r["loss_pct"],
+                key=lambda r: r.loss_pct,
             )
             if not pts:
                 continue
             label = f"{robots} robots, {_fmt(comm)} m, delay {_fmt(delay)} ms"
-            _spread_line(ax, pts, "loss_pct", key, label)
+            _spread_line(ax, [(r.loss_pct, r.of(key), r.n) for r in pts], label)
         ax.set_xlabel("link loss (%)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)

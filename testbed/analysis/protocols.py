@@ -17,12 +17,12 @@ choice holds, by the rule in `CHOICE_RULE` (fixed before any sweep was run).
 from __future__ import annotations
 
 import statistics
+from dataclasses import dataclass
 from pathlib import Path
 
 from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
 from testbed.analysis.runs import FinishedRun
-from testbed.run.resultconfig import DEFAULT_MEDIUM
 from topology.spec import ROUTINGS, VETH
 
 PROACTIVE = ("babel", "batman")
@@ -40,6 +40,64 @@ CHOICE_RULE = (
     "below theirs or overlaps it). It fails at a point when a proactive protocol needs "
     "fewer steps beyond noise, or sends fewer control packets."
 )
+
+
+@dataclass(frozen=True)
+class ProtocolRun:
+    """One run's numbers for the protocols comparison."""
+
+    run: str
+    routing: str
+    map: str
+    medium: str
+    comm_range: float
+    robots: int
+    steps: float | None
+    control_pkts_per_robot_s: float | None
+    control_bytes_per_robot_s: float | None
+    pdf: float | None
+    delay_ms: float | None
+    map_delivery: float | None
+    discovery_ms: float | None
+    # AODV: captured control packets against its daemons' own counts (pcapmetrics).
+    daemon_difference: float | None
+
+
+@dataclass(frozen=True)
+class ProtocolPoint:
+    """Per (map, medium, range, team, routing): each of METRICS's mean over the runs, and
+    the 95% interval of the steps' mean."""
+
+    map: str
+    medium: str
+    comm_range: float
+    robots: int
+    routing: str
+    n: int
+    daemon_difference_max: float | None
+    steps: float | None
+    control_pkts_per_robot_s: float | None
+    control_bytes_per_robot_s: float | None
+    pdf: float | None
+    delay_ms: float | None
+    map_delivery: float | None
+    discovery_ms: float | None
+    steps_ci_low: float | None
+    steps_ci_high: float | None
+
+    @property
+    def steps_ci(self) -> tuple[float, float, float] | None:
+        """(mean, low, high) of the steps, None without an interval."""
+        if self.steps is None or self.steps_ci_low is None or self.steps_ci_high is None:
+            return None
+        return self.steps, self.steps_ci_low, self.steps_ci_high
+
+    def measure(self, key: str) -> float | None:
+        """One of METRICS, by name."""
+        if key not in METRICS:
+            raise KeyError(key)
+        value: float | None = getattr(self, key)
+        return value
 
 
 def _map_delivery(run: FinishedRun) -> float | None:
@@ -66,7 +124,7 @@ def _discovery_ms(run_dir: Path) -> float | None:
     return statistics.median(lat) if lat else None
 
 
-def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> dict:
+def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> ProtocolRun:
     """One run's numbers (`metrics`: its pcapmetrics, or None)."""
     c = run.config
     n = c.robots + 1  # the display robot transmits too
@@ -79,58 +137,52 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> dict
             return None
         return metrics[key] / n / robot_s
 
-    return {
-        "run": run.run_id,
-        "routing": c.routing,
-        "map": c.map_name,
-        "medium": c.medium,
-        "comm_range": c.comm_range,
-        "robots": c.robots,
-        "steps": steps,
-        "control_pkts_per_robot_s": per_robot_s("control_tx_packets"),
-        "control_bytes_per_robot_s": per_robot_s("control_tx_bytes"),
-        "pdf": metrics.get("pdf") if metrics else None,
-        "delay_ms": metrics.get("delay_ms_median") if metrics else None,
-        "map_delivery": _map_delivery(run),
-        "discovery_ms": _discovery_ms(run.path),
-        # AODV: captured control packets against its daemons' own counts (pcapmetrics).
-        "daemon_difference": ((metrics or {}).get("daemon_comparison") or {}).get(
+    return ProtocolRun(
+        run=run.run_id,
+        routing=c.routing,
+        map=c.map_name,
+        medium=c.medium,
+        comm_range=c.comm_range,
+        robots=c.robots,
+        steps=steps,
+        control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
+        control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+        pdf=metrics.get("pdf") if metrics else None,
+        delay_ms=metrics.get("delay_ms_median") if metrics else None,
+        map_delivery=_map_delivery(run),
+        discovery_ms=_discovery_ms(run.path),
+        daemon_difference=((metrics or {}).get("daemon_comparison") or {}).get(
             "relative_difference"
         ),
-    }
+    )
 
 
-def point_rows(per_run: list[dict]) -> list[dict]:
+def point_rows(per_run: list[ProtocolRun]) -> list[ProtocolPoint]:
     """Per (map, medium, range, team, routing): each metric's mean; steps with their 95%
     interval."""
-    groups: dict[tuple, list[dict]] = {}
+    groups: dict[tuple[str, str, float, int, str], list[ProtocolRun]] = {}
     for r in per_run:
-        medium = r.get("medium", DEFAULT_MEDIUM)
-        key = (r["map"], medium, r["comm_range"], r["robots"], r["routing"])
+        key = (r.map, r.medium, r.comm_range, r.robots, r.routing)
         groups.setdefault(key, []).append(r)
     out = []
     order = {p: i for i, p in enumerate(ROUTINGS)}  # protocols in the order of the choices
     for key, items in sorted(groups.items(), key=lambda kv: (*kv[0][:4], order.get(kv[0][4], 9))):
-        row = dict(zip(("map", "medium", "comm_range", "robots", "routing"), key, strict=True))
-        row["n"] = len(items)
-        diffs = [i["daemon_difference"] for i in items if i.get("daemon_difference") is not None]
-        row["daemon_difference_max"] = max(diffs) if diffs else None
+        diffs = [i.daemon_difference for i in items if i.daemon_difference is not None]
+        means = {}
         for m in METRICS:
-            vals = [i[m] for i in items if i.get(m) is not None]
-            row[m] = statistics.fmean(vals) if vals else None
-        ci = stats.mean_ci([i["steps"] for i in items if i.get("steps") is not None])
-        row["steps_ci_low"], row["steps_ci_high"] = (ci[1], ci[2]) if ci else (None, None)
-        out.append(row)
+            vals = [v for i in items if (v := getattr(i, m)) is not None]
+            means[m] = statistics.fmean(vals) if vals else None
+        ci = stats.mean_ci([i.steps for i in items if i.steps is not None])
+        mp, medium, comm, robots, routing = key
+        out.append(ProtocolPoint(
+            map=mp, medium=medium, comm_range=comm, robots=robots, routing=routing,
+            n=len(items), daemon_difference_max=max(diffs) if diffs else None, **means,
+            steps_ci_low=ci[1] if ci else None, steps_ci_high=ci[2] if ci else None,
+        ))  # fmt: skip
     return out
 
 
-def _ci(row: dict) -> tuple[float, float, float] | None:
-    if row.get("steps_ci_low") is None:
-        return None
-    return row["steps"], row["steps_ci_low"], row["steps_ci_high"]
-
-
-def choice_holds(point: dict[str, dict]) -> tuple[bool | None, str]:
+def choice_holds(point: dict[str, ProtocolPoint]) -> tuple[bool | None, str]:
     """CHOICE_RULE at one point ({routing: row}); None when AODV or no proactive protocol ran."""
     a = point.get("aodv")
     rivals = [point[p] for p in PROACTIVE if p in point]
@@ -138,14 +190,14 @@ def choice_holds(point: dict[str, dict]) -> tuple[bool | None, str]:
         return None, "needs AODV and a proactive protocol"
     reasons, unknown = [], False
     for r in rivals:
-        ca, cr = a["control_pkts_per_robot_s"], r["control_pkts_per_robot_s"]
+        ca, cr = a.control_pkts_per_robot_s, r.control_pkts_per_robot_s
         if ca is not None and cr is not None and ca >= cr:
-            reasons.append(f"{r['routing']} sends fewer control packets ({cr:.2f} vs {ca:.2f})")
-        ia, ir = _ci(a), _ci(r)
+            reasons.append(f"{r.routing} sends fewer control packets ({cr:.2f} vs {ca:.2f})")
+        ia, ir = a.steps_ci, r.steps_ci
         unknown = unknown or not (ia and ir)
         if ia and ir and stats.separated(ia, ir) and ir[0] < ia[0]:
             reasons.append(
-                f"{r['routing']} needs fewer steps beyond noise ({ir[0]:.0f} vs {ia[0]:.0f})"
+                f"{r.routing} needs fewer steps beyond noise ({ir[0]:.0f} vs {ia[0]:.0f})"
             )
     if reasons:
         return False, "; ".join(reasons)
@@ -162,7 +214,7 @@ BESIDE_THE_RULE = (
 )
 
 
-def beside_the_rule(points: list[dict[str, dict]]) -> list[str]:
+def beside_the_rule(points: list[dict[str, ProtocolPoint]]) -> list[str]:
     """At how many points AODV beats every proactive protocol on each BESIDE_THE_RULE
     measure (points where AODV or no proactive protocol ran, or a value is missing, are not
     counted)."""
@@ -171,20 +223,21 @@ def beside_the_rule(points: list[dict[str, dict]]) -> list[str]:
         wins = total = 0
         for by in points:
             a, rivals = by.get("aodv"), [by[p] for p in PROACTIVE if p in by]
-            values = [r.get(key) for r in rivals] + [a.get(key) if a else None]
-            if not rivals or a is None or any(v is None for v in values):
+            ours = a.measure(key) if a else None
+            theirs = [r.measure(key) for r in rivals]
+            if not rivals or ours is None or any(v is None for v in theirs):
                 continue
             total += 1
-            wins += all(sign * (a[key] - r[key]) > 0 for r in rivals)
+            wins += all(sign * (ours - v) > 0 for v in theirs if v is not None)
         if total:
             out.append(f"- AODV {says} than each proactive protocol at {wins} of {total} points.")
     return out
 
 
-def _control_check(rows: list[dict]) -> list[str]:
+def _control_check(rows: list[ProtocolPoint]) -> list[str]:
     """Is each protocol's captured control traffic what its daemons sent?"""
     lines = []
-    aodv = [r["daemon_difference_max"] for r in rows if r["routing"] == "aodv"]
+    aodv = [r.daemon_difference_max for r in rows if r.routing == "aodv"]
     checked = [d for d in aodv if d is not None]
     if checked:
         lines.append(
@@ -193,14 +246,15 @@ def _control_check(rows: list[dict]) -> list[str]:
             f"its daemons counted sending (largest difference {max(checked):.2%})."
         )
     for p in PROACTIVE:
-        if any(r["routing"] == p for r in rows):
+        if any(r.routing == p for r in rows):
             lines.append(
                 f"- {p}: its daemon keeps no count of what it sends, so its captured control "
                 "traffic cannot be checked against the daemon; it is counted on its port "
                 f"({'UDP 6696' if p == 'babel' else 'UDP 4305'}) at each transmitter."
             )
-    oracle = [r["control_pkts_per_robot_s"] for r in rows if r["routing"] == "oracle"]
-    oracle = [x for x in oracle if x is not None]
+    oracle = [
+        x for r in rows if r.routing == "oracle" and (x := r.control_pkts_per_robot_s) is not None
+    ]
     if oracle:
         lines.append(
             "- oracle: no control packet in its captures, as there must be none."
@@ -215,12 +269,12 @@ def _fmt(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
-def _steps(row: dict) -> str:
-    if row.get("steps") is None:
+def _steps(row: ProtocolPoint) -> str:
+    if row.steps is None:
         return "–"
-    if row.get("steps_ci_low") is None:
-        return f"{row['steps']:.0f}"
-    return f"{row['steps']:.0f} [{row['steps_ci_low']:.0f}, {row['steps_ci_high']:.0f}]"
+    if row.steps_ci_low is None:
+        return f"{row.steps:.0f}"
+    return f"{row.steps:.0f} [{row.steps_ci_low:.0f}, {row.steps_ci_high:.0f}]"
 
 
 def _vs(x, base, ratio: bool = True) -> str:
@@ -231,9 +285,9 @@ def _vs(x, base, ratio: bool = True) -> str:
     return f" ({x - base:+.2f})"
 
 
-def section(rows: list[dict]) -> list[str]:
+def section(rows: list[ProtocolPoint]) -> list[str]:
     """The report's "Routing protocols" section (empty if the sweep ran one routing)."""
-    if len({r["routing"] for r in rows}) < 2:
+    if len({r.routing for r in rows}) < 2:
         return []
     out = ["## Routing protocols against the oracle", ""]
     out += [
@@ -249,43 +303,48 @@ def section(rows: list[dict]) -> list[str]:
         "ctl bytes/robot/s | PDF | delay (ms) | map floods | discovery (ms) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    points: dict[tuple, dict[str, dict]] = {}
+    points: dict[tuple, dict[str, ProtocolPoint]] = {}
     for r in rows:
-        points.setdefault((_where(r), r["comm_range"], r["robots"]), {})[r["routing"]] = r
+        points.setdefault((_where(r), r.comm_range, r.robots), {})[r.routing] = r
     out += _table_rows(points)
     out += [""] + _control_check(rows) + ["", f"**Rule.** {CHOICE_RULE}", ""]
     return out + _choice_lines(points)
 
 
-def _where(row: dict) -> str:
+def _where(row: ProtocolPoint) -> str:
     """The map column: the map, and the medium when it is not veth (a media sweep)."""
-    medium = row.get("medium", DEFAULT_MEDIUM)
-    return row["map"] if medium == VETH else f"{row['map']} ({medium})"
+    return row.map if row.medium == VETH else f"{row.map} ({row.medium})"
 
 
-def _table_rows(points: dict[tuple, dict[str, dict]]) -> list[str]:
+def _table_rows(points: dict[tuple, dict[str, ProtocolPoint]]) -> list[str]:
     """One table row per (point, protocol), each beside the oracle at the same point."""
     out = []
     for (mp, comm, robots), by in points.items():
-        o = by.get("oracle", {})
+        o = by.get("oracle")
         for r in by.values():
-            base = r["routing"] == "oracle"
             out.append(
-                f"| {mp} | {comm:g} | {robots} | {r['routing']} | {r['n']} | {_steps(r)}"
-                f"{'' if base else _vs(r['steps'], o.get('steps'))} | "
-                f"{_fmt(r['control_pkts_per_robot_s'], '.2f')} | "
-                f"{_fmt(r['control_bytes_per_robot_s'], '.0f')} | {_fmt(r['pdf'], '.3f')}"
-                f"{'' if base else _vs(r['pdf'], o.get('pdf'), False)} | "
-                f"{_fmt(r['delay_ms'], '.2f')}"
-                f"{'' if base else _vs(r['delay_ms'], o.get('delay_ms'))} | "
-                f"{_fmt(r['map_delivery'], '.3f')}"
-                f"{'' if base else _vs(r['map_delivery'], o.get('map_delivery'), False)} | "
-                f"{_fmt(r['discovery_ms'], '.1f')} |"
+                f"| {mp} | {comm:g} | {robots} | {r.routing} | {r.n} | {_steps(r)}"
+                f"{_beside(r, o, 'steps')} | "
+                f"{_fmt(r.control_pkts_per_robot_s, '.2f')} | "
+                f"{_fmt(r.control_bytes_per_robot_s, '.0f')} | {_fmt(r.pdf, '.3f')}"
+                f"{_beside(r, o, 'pdf', False)} | "
+                f"{_fmt(r.delay_ms, '.2f')}"
+                f"{_beside(r, o, 'delay_ms')} | "
+                f"{_fmt(r.map_delivery, '.3f')}"
+                f"{_beside(r, o, 'map_delivery', False)} | "
+                f"{_fmt(r.discovery_ms, '.1f')} |"
             )
     return out
 
 
-def _choice_lines(points: dict[tuple, dict[str, dict]]) -> list[str]:
+def _beside(r: ProtocolPoint, oracle: ProtocolPoint | None, key: str, ratio: bool = True) -> str:
+    """A measure against the oracle's at the same point (nothing for the oracle itself)."""
+    if r.routing == "oracle":
+        return ""
+    return _vs(r.measure(key), oracle.measure(key) if oracle else None, ratio)
+
+
+def _choice_lines(points: dict[tuple, dict[str, ProtocolPoint]]) -> list[str]:
     """Whether the paper's choice holds, point by point, and the measures beside the rule."""
     out = []
     verdicts = [(key, *choice_holds(by)) for key, by in points.items()]

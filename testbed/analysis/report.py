@@ -32,8 +32,10 @@ from testbed.analysis import (
     runreport,
     sweepinfo,
 )
+from testbed.analysis.figures import Made, Tables
 from testbed.analysis.protocols import DAEMON_AGREEMENT
 from testbed.analysis.runs import ResultError, load_run
+from testbed.analysis.tables import RoutingRow, RoutingRun
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
 from testbed.resultfile import has_result
 from testbed.run.resultvalues import one_line
@@ -45,11 +47,11 @@ def _f(x: float) -> str:
     return f"{x:g}"
 
 
-def _daemon_section(per_run: list[dict]) -> list[str]:
+def _daemon_section(per_run: list[RoutingRun]) -> list[str]:
     diffs = [
-        (r["run"], r["daemon_relative_difference"])
+        (r.run, r.daemon_relative_difference)
         for r in per_run
-        if r.get("daemon_relative_difference") is not None
+        if r.daemon_relative_difference is not None
     ]
     if not diffs:
         return ["No run has both captures and AODV daemon counters to compare."]
@@ -60,8 +62,8 @@ def _daemon_section(per_run: list[dict]) -> list[str]:
         f"{within} of {len(diffs)} runs agree within {DAEMON_AGREEMENT:.0%}; largest "
         f"difference {worst:.2%} ({worst_run})."
     ]
-    drops = [(r["run"], r["capture_dropped_packets"]) for r in per_run
-             if r.get("capture_dropped_packets")]  # fmt: skip
+    drops = [(r.run, r.capture_dropped_packets) for r in per_run
+             if r.capture_dropped_packets]  # fmt: skip
     if drops:
         worst_run, worst = max(drops, key=lambda d: d[1])
         lines.append(
@@ -76,12 +78,12 @@ def _img(name: str, figdir: Path) -> str | None:
     return f"![{name}](figures/{name}.png)" if (figdir / f"{name}.png").is_file() else None
 
 
-def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
+def render(sweep_dir: Path, made: Made, vs: list[Verdict]) -> str:
     figdir = sweep_dir / "figures"
-    tables = made["tables"]
+    tables = made.tables
     out = [f"# Sweep report: {one_line(sweep_dir.name)}", ""]
-    out += sweepinfo.lines(sweep_dir, made["runs"]) + [""]
-    left_out = made.get("left_out") or []
+    out += sweepinfo.lines(sweep_dir, made.runs) + [""]
+    left_out = made.left_out
     if left_out:
         out += [f"**Left out: {len(left_out)} run(s) whose files are not a run's** "
                 f"(nothing is drawn from them): {'; '.join(left_out[:3])}"
@@ -101,10 +103,10 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
         "",
     ]
     out += [f"- {rule}" for rule in RULES] + [""]
-    out += ablation.section(tables.get("fig2_all", []), tables.get("ablation_thirds", []))
-    out += protocols.section(tables.get("protocols", []))
-    out += media.section(tables.get("media", []))
-    out += middlewares.section(tables.get("middlewares", []))
+    out += ablation.section(tables.fig2_all, tables.ablation_thirds)
+    out += protocols.section(tables.protocols)
+    out += media.section(tables.media)
+    out += middlewares.section(tables.middlewares)
     out += ["## Figures", ""]
     for name, data, caption in (
         ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),
@@ -128,30 +130,32 @@ def render(sweep_dir: Path, made: dict, vs: list[Verdict]) -> str:
     return "\n".join(out)
 
 
-def _routing_section(tables: dict) -> list[str]:
+def _routing_section(tables: Tables) -> list[str]:
     out = ["## Routing (Section 2.4)", ""]
-    if not tables["routing"]:
+    if not tables.routing:
         return out + ["No run has packet captures (sweep file: `capture = true`).", ""]
     out += [
         "| range (m) | robots | runs | overhead (pkts) | PDF | delay median (ms, wall) | "
         "delay median (ms, emulated) | throughput (kbit/s, wall) |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    rows = tables["routing"]
+    rows = tables.routing
     # PDF and delay of rows at different time scales are set side by side only where TCP
     # kept emulated time (testbed.run.fidelity.network_verdict): else their cells are marked.
-    mixed = len({s for r in rows for s in r.get("time_scales", [])}) > 1
-    marked = [r for r in rows if mixed and not r.get("tcp_emulated", True)]
+    mixed = len({s for r in rows for s in r.time_scales}) > 1
+    marked = [r for r in rows if mixed and not r.tcp_emulated]
     for r in rows:
         mark = " †" if r in marked else ""
+        m = r.means
+        kbps = m.throughput_bps.mean and m.throughput_bps.mean / 1000
         out.append(
-            f"| {_f(r['comm_range'])} | {r['robots']} | {r['n']} | "
-            f"{_num(r['overhead_packets_mean'], '.3f')} | {_num(r['pdf_mean'], '.3f')}{mark} | "
-            f"{_num(r['delay_ms_median_mean'], '.3f')} | "
-            f"{_num(r['delay_ms_median_emulated_mean'], '.3f')}{mark} | "
-            f"{_num(r['throughput_bps_mean'] and r['throughput_bps_mean'] / 1000, '.1f')} |"
+            f"| {_f(r.comm_range)} | {r.robots} | {r.n} | "
+            f"{_num(m.overhead_packets.mean, '.3f')} | {_num(m.pdf.mean, '.3f')}{mark} | "
+            f"{_num(m.delay_ms_median.mean, '.3f')} | "
+            f"{_num(m.delay_ms_median_emulated.mean, '.3f')}{mark} | "
+            f"{_num(kbps, '.1f')} |"
         )
-    out += [""] + _daemon_section(tables["routing_runs"]) + [""]
+    out += [""] + _daemon_section(tables.routing_runs) + [""]
     out += [
         "Delays and throughput are host wall-clock, as the captures are stamped; with time "
         "scale K, emulated time runs K times faster, so an emulated delay is the wall delay "
@@ -163,10 +167,10 @@ def _routing_section(tables: dict) -> list[str]:
     return out
 
 
-def _tcp_time_note(rows: list[dict], marked: list[dict]) -> list[str]:
+def _tcp_time_note(rows: list[RoutingRow], marked: list[RoutingRow]) -> list[str]:
     """What the PDF and delay of rows at different time scales can be compared for."""
     if marked:
-        which = ", ".join(f"{r['robots']} robots at {_f(r['comm_range'])} m" for r in marked)
+        which = ", ".join(f"{r.robots} robots at {_f(r.comm_range)} m" for r in marked)
         return [
             f"† Ran dilated without TCP's retransmission timer dilated (the kernel lacks "
             f"`tcp_rto_min_us`, Linux 6.11, or the time scale is past its jiffy; result.json's "
@@ -176,7 +180,7 @@ def _tcp_time_note(rows: list[dict], marked: list[dict]) -> list[str]:
             'depend on it (docs/architecture.md, "Invariance for teams").',
             "",
         ]
-    if len({s for r in rows for s in r.get("time_scales", [])}) > 1:
+    if len({s for r in rows for s in r.time_scales}) > 1:
         return [
             "TCP's timers were dilated with each run's time scale (result.json's "
             "`network_timers`); what the kernel cannot dilate (a SYN's first timeout, the "
@@ -197,7 +201,7 @@ def write_report(
 ) -> tuple[Path, list[Verdict]]:
     sweep_dir = Path(sweep_dir)
     made = figures.make_all(sweep_dir, metrics_of=metrics_of, unfaithful=unfaithful)
-    vs = verdicts(made["tables"])
+    vs = verdicts(made.tables)
     path = sweep_dir / "report.md"
     text = render(sweep_dir, made, vs) + "\n"
     write_atomic(path, text)  # never through a link (common.jsonfile)

@@ -34,6 +34,8 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 from common.errors import UsageError
@@ -60,26 +62,77 @@ RULE = (
 )
 
 
-def run_row(run: FinishedRun, metrics: dict | None) -> dict:
+# A measure's (mean, low, high) over a point's runs, or (mean,) for one run.
+Estimate = tuple[float, float, float] | tuple[float]
+
+
+@dataclass(frozen=True)
+class ScaleRun:
+    """One run's point and MEASURES, for the comparison of two sweeps."""
+
+    routing: str
+    laser_range: float
+    comm_range: float
+    robots: int
+    time_scale: float | None
+    tcp_emulated: bool
+    steps: float | None
+    requests: float | None
+    pdf: float | None
+    delay_ms: float | None
+    delay_mean_ms: float | None
+    retrans_per_flow: float | None
+    control_pkts_per_robot_s: float | None
+    control_bytes_per_robot_s: float | None
+
+    @property
+    def point(self) -> tuple[str, float, float, int]:
+        return self.routing, self.laser_range, self.comm_range, self.robots
+
+    def measure(self, key: str) -> float | None:
+        """One of MEASURES, by name."""
+        if key not in MEASURE_KEYS:
+            raise KeyError(key)
+        value: float | None = getattr(self, key)
+        return value
+
+
+@dataclass(frozen=True)
+class ScalePoint:
+    """A point's runs in one sweep: their number, median time scale, whether TCP kept
+    emulated time in all, and each measure's (mean, low, high), or (mean,) for one run."""
+
+    n: int
+    time_scale: float | None
+    tcp_emulated: bool
+    values: Mapping[str, Estimate | None]
+
+
+MEASURE_KEYS = tuple(k for k, _, _ in MEASURES)
+
+
+def run_row(run: FinishedRun, metrics: dict | None) -> ScaleRun:
     """One run's measures."""
     row = media.run_row(run, metrics)
     counted = run.counted_robots  # a robot stopped on purpose (--kill) is not averaged
     plans = [p for r in counted for p in r.plans]
-    row["requests"] = (
-        sum(1 for p in plans if p.cause == "request") / len(counted) if counted else None
-    )
-    row["time_scale"] = run.time_scale_achieved or run.config.time_scale
-    row["laser_range"] = run.config.laser_range
-    row["tcp_emulated"] = run.tcp_in_emulated_time
+    requests = sum(1 for p in plans if p.cause == "request") / len(counted) if counted else None
+    scale = run.time_scale_achieved or run.config.time_scale
     m = metrics or {}
     mean = m.get("delay_ms_mean")
-    row["delay_mean_ms"] = None if mean is None else mean * (row["time_scale"] or 1.0)
     flows, tx, segments = m.get("tcp_flows"), m.get("tcp_transmissions"), m.get("tcp_segments_sent")
-    row["retrans_per_flow"] = (tx - segments) / flows if flows and tx is not None else None
-    return row
+    return ScaleRun(
+        routing=row.routing, laser_range=run.config.laser_range, comm_range=row.comm_range,
+        robots=row.robots, time_scale=scale, tcp_emulated=run.tcp_in_emulated_time,
+        steps=row.steps, requests=requests, pdf=row.pdf, delay_ms=row.delay_ms,
+        delay_mean_ms=None if mean is None else mean * (scale or 1.0),
+        retrans_per_flow=(tx - segments) / flows if flows and tx is not None else None,
+        control_pkts_per_robot_s=row.control_pkts_per_robot_s,
+        control_bytes_per_robot_s=row.control_bytes_per_robot_s,
+    )  # fmt: skip
 
 
-def rows_of(sweep_dir: str | Path, unfaithful: bool = False) -> tuple[list[dict], int]:
+def rows_of(sweep_dir: str | Path, unfaithful: bool = False) -> tuple[list[ScaleRun], int]:
     """Per-run rows of a sweep directory, and how many finished runs were left out as not
     faithful to their time scale."""
     every = load_runs(sweep_dir, unfaithful=unfaithful)
@@ -88,22 +141,24 @@ def rows_of(sweep_dir: str | Path, unfaithful: bool = False) -> tuple[list[dict]
     return [run_row(r, pcapmetrics.run_metrics(r.path, run=r)) for r in kept], dropped
 
 
-def points(rows: list[dict]) -> dict[tuple, dict]:
-    """{(routing, laser, range, robots): {n, time scale, KEY: (mean, low, high) or (mean,)}}."""
-    groups: dict[tuple, list[dict]] = {}
+def points(rows: list[ScaleRun]) -> dict[tuple, ScalePoint]:
+    """{(routing, laser, range, robots): the point's runs (ScalePoint)}."""
+    groups: dict[tuple, list[ScaleRun]] = {}
     for r in rows:
-        key = (r["routing"], r["laser_range"], r["comm_range"], r["robots"])
-        groups.setdefault(key, []).append(r)
+        groups.setdefault(r.point, []).append(r)
     out = {}
     for key, items in sorted(groups.items()):
-        p: dict = {"n": len(items)}
-        scales = [i["time_scale"] for i in items if i.get("time_scale")]
-        p["time_scale"] = statistics.median(scales) if scales else None
-        p["tcp_emulated"] = all(i.get("tcp_emulated", True) for i in items)
-        for k, _, _ in MEASURES:
-            vals = [i[k] for i in items if i.get(k) is not None]
-            p[k] = stats.mean_ci(vals) or ((statistics.fmean(vals),) if vals else None)
-        out[key] = p
+        scales = [s for i in items if (s := i.time_scale)]
+        values: dict[str, Estimate | None] = {}
+        for k in MEASURE_KEYS:
+            vals = [v for i in items if (v := i.measure(k)) is not None]
+            values[k] = stats.mean_ci(vals) or ((statistics.fmean(vals),) if vals else None)
+        out[key] = ScalePoint(
+            n=len(items),
+            time_scale=statistics.median(scales) if scales else None,
+            tcp_emulated=all(i.tcp_emulated for i in items),
+            values=values,
+        )
     return out
 
 
@@ -120,19 +175,26 @@ def _label(point: tuple) -> str:
     return f"{routing}, laser {laser:g} m, range {comm:g} m, {robots} robots"
 
 
-def comparable(key: str, pa: dict, pb: dict) -> bool:
+def comparable(key: str, pa: ScalePoint, pb: ScalePoint) -> bool:
     """Whether a point's measure `key` may be set beside the other sweep's: always, but for
     TCP's measures across time scales where a side's TCP did not keep emulated time."""
-    if key not in NETWORK_MEASURES or pa.get("time_scale") == pb.get("time_scale"):
+    if key not in NETWORK_MEASURES or pa.time_scale == pb.time_scale:
         return True
-    return pa.get("tcp_emulated", True) and pb.get("tcp_emulated", True)
+    return pa.tcp_emulated and pb.tcp_emulated
 
 
-def sentence(key: str, name: str, spec: str, a: dict, b: dict, names: tuple[str, str]) -> str:
+def sentence(
+    key: str,
+    name: str,
+    spec: str,
+    a: dict[tuple, ScalePoint],
+    b: dict[tuple, ScalePoint],
+    names: tuple[str, str],
+) -> str:
     """At which common points `key` agrees within the noise, at which not (and which way)."""
     within, beyond, unknown, undilated = [], [], 0, 0
     for point in sorted(set(a) & set(b)):
-        va, vb = a[point].get(key), b[point].get(key)
+        va, vb = a[point].values.get(key), b[point].values.get(key)
         if va is None or vb is None:
             continue
         if not comparable(key, a[point], b[point]):
@@ -164,7 +226,10 @@ def sentence(key: str, name: str, spec: str, a: dict, b: dict, names: tuple[str,
 
 
 def section(
-    a_rows: list[dict], b_rows: list[dict], names: tuple[str, str], dropped: tuple[int, int]
+    a_rows: list[ScaleRun],
+    b_rows: list[ScaleRun],
+    names: tuple[str, str],
+    dropped: tuple[int, int],
 ) -> list[str]:
     """Markdown: each point's measures in both sweeps, and one sentence per measure."""
     a, b = points(a_rows), points(b_rows)
@@ -181,11 +246,11 @@ def section(
             p = side.get(point)
             if p is None:
                 continue
-            cells = " | ".join(_cell(p[k], spec) for k, _, spec in MEASURES)
-            scale = "–" if p["time_scale"] is None else f"{p['time_scale']:g}"
-            if not p.get("tcp_emulated", True):
+            cells = " | ".join(_cell(p.values.get(k), spec) for k, _, spec in MEASURES)
+            scale = "–" if p.time_scale is None else f"{p.time_scale:g}"
+            if not p.tcp_emulated:
                 scale += " (TCP undilated)"
-            out.append(f"| {_label(point)} | {name} | {p['n']} | {scale} | {cells} |")
+            out.append(f"| {_label(point)} | {name} | {p.n} | {scale} | {cells} |")
     out += ["", f"**Rule.** {RULE}", ""]
     out += [sentence(k, n, spec, a, b, names) for k, n, spec in MEASURES]
     return out + [""]

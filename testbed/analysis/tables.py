@@ -1,10 +1,11 @@
 """The numbers behind the figures: pure functions of a sweep's runs (`FinishedRun`s).
 
-Theory of operation. Each figure of the report is drawn from one table (a list of flat
-dicts) computed here and written next to it as CSV and JSON (`write_table`), so a reader or
-a test can check a figure against the runs' own result.json; the report's verdicts are
-decided on the same tables. Which runs count is the caller's choice of runs plus
-`FinishedRun.usable` and `.unimpaired` (testbed.analysis.runs).
+Theory of operation. Each figure of the report is drawn from one table (a list of frozen
+dataclass rows, declared here; the records they share in testbed.analysis.rows) computed
+here and written next to it as CSV and JSON (`write_table`), so a reader or a test can
+check a figure against the runs' own result.json; the report's verdicts are decided on the
+same tables. Which runs count is the caller's choice of runs plus `FinishedRun.usable` and
+`.unimpaired` (testbed.analysis.runs).
 
 - `fig2_rows`: exploration steps per (variant, laser, range, team size) with each point's
   spread and the 95% interval of its mean (testbed.analysis.stats). A point of one run has
@@ -23,12 +24,13 @@ import io
 import json
 import logging
 import math
-import statistics
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any, TypeVar
 
 from common.jsonfile import write_atomic
-from testbed.analysis import stats
+from testbed.analysis.rows import INLINE, MeanRange, Spread, columns
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 from topology.spec import VETH
 
@@ -45,38 +47,167 @@ ROUTING_METRICS = (
 log = logging.getLogger(__name__)
 
 MetricsOf = Callable[[FinishedRun], "dict | None"]
+USUAL_CAUSES = ("start", "timer", "request")
 
 
-def plan_intervals(run: FinishedRun) -> list[dict]:
+@dataclass(frozen=True)
+class PlanInterval:
+    """A plan generation after a robot's first: its step, cause and interval since the last."""
+
+    robot: str
+    step: int
+    interval: int
+    cause: str | None
+
+
+@dataclass(frozen=True)
+class Fig2Row:
+    """A Fig. 2 point: exploration steps of a (variant, laser, range, team size) over runs."""
+
+    coordination: str
+    start_placement: str
+    laser_range: float
+    comm_range: float
+    robots: int
+    steps: Spread = field(metadata=INLINE)
+    steps_per_run: tuple[float, ...]
+    runs: tuple[str, ...]
+
+    @property
+    def variant(self) -> tuple[str, str]:
+        return self.coordination, self.start_placement
+
+
+@dataclass(frozen=True)
+class Fig4Row:
+    """A plan interval of the run Fig. 4 shows for a team size."""
+
+    robots: int
+    comm_range: float
+    laser_range: float
+    run: str
+    plan: PlanInterval = field(metadata=INLINE)
+
+
+@dataclass(frozen=True)
+class PlanCauseRow:
+    """A usable unimpaired run's plan generations by cause."""
+
+    run: str
+    coordination: str
+    start_placement: str
+    robots: int
+    comm_range: float
+    laser_range: float
+    start: int
+    timer: int
+    request: int
+    other_causes: Mapping[str, int] = field(default_factory=dict, metadata=INLINE)
+
+    @property
+    def variant(self) -> tuple[str, str]:
+        return self.coordination, self.start_placement
+
+
+@dataclass(frozen=True)
+class RoutingRun:
+    """A usable run's routing metrics from its captures."""
+
+    run: str
+    robots: int
+    comm_range: float
+    laser_range: float
+    loss_pct: float
+    delay_ms: float
+    time_scale: float | None
+    tcp_emulated: bool  # may PDF and delay meet other scales'
+    overhead_packets: float | None
+    pdf: float | None
+    delay_ms_median: float | None
+    throughput_bps: float | None
+    delay_ms_median_emulated: float | None
+    control_tx_packets: int | None
+    tx_packets: int | None
+    daemon_tx_packets: int | None
+    daemon_relative_difference: float | None
+    capture_dropped_packets: int | None
+
+
+@dataclass(frozen=True)
+class RoutingMeans:
+    """Each routing metric's mean and range over a point's runs (ROUTING_METRICS, then the
+    emulated delay)."""
+
+    overhead_packets: MeanRange
+    pdf: MeanRange
+    delay_ms_median: MeanRange
+    throughput_bps: MeanRange
+    delay_ms_median_emulated: MeanRange
+
+    def of(self, metric: str) -> MeanRange:
+        """One metric's record, by a name of ROUTING_METRICS."""
+        if metric not in ROUTING_FIELDS:
+            raise KeyError(metric)
+        value: MeanRange = getattr(self, metric)
+        return value
+
+
+@dataclass(frozen=True)
+class RoutingRow:
+    """Routing metrics per (range, team size) over the unimpaired runs, lasers pooled."""
+
+    comm_range: float
+    robots: int
+    n: int
+    means: RoutingMeans = field(metadata=INLINE)
+    time_scales: tuple[float, ...]
+    tcp_emulated: bool
+
+
+@dataclass(frozen=True)
+class ImpairmentRun:
+    """A usable run's exploration steps and PDF at its loss and delay."""
+
+    robots: int
+    comm_range: float
+    delay_ms: float
+    loss_pct: float
+    steps: float | None
+    pdf: float | None
+
+
+@dataclass(frozen=True)
+class ImpairmentRow:
+    """Exploration steps and PDF per (team, range, delay, loss)."""
+
+    robots: int
+    comm_range: float
+    delay_ms: float
+    loss_pct: float
+    n: int
+    steps: MeanRange
+    pdf: MeanRange
+
+    def of(self, metric: str) -> MeanRange:
+        """`steps` or `pdf`."""
+        if metric not in IMPAIRMENT_METRICS:
+            raise KeyError(metric)
+        value: MeanRange = getattr(self, metric)
+        return value
+
+
+ROUTING_FIELDS = tuple(f.name for f in fields(RoutingMeans))
+IMPAIRMENT_METRICS = ("steps", "pdf")
+
+
+def plan_intervals(run: FinishedRun) -> list[PlanInterval]:
     """Each plan generation after a robot's first: its step, cause and interval."""
     rows = []
     for robot in run.robots_by_number():
         plans = sorted(robot.plans, key=lambda p: p.step)
         for prev, cur in zip(plans, plans[1:], strict=False):
-            rows.append(
-                {
-                    "robot": robot.name,
-                    "step": cur.step,
-                    "interval": cur.step - prev.step,
-                    "cause": cur.cause,
-                }
-            )
+            rows.append(PlanInterval(robot.name, cur.step, cur.step - prev.step, cur.cause))
     return rows
-
-
-def spread(values: list[float]) -> dict:
-    """n, mean, min, max, std and the 95% interval of the mean; std and the interval are
-    None (an empty cell in the CSV) for one value: one run says nothing about the noise."""
-    ci = stats.mean_ci(values)
-    return {
-        "n": len(values),
-        "mean": statistics.fmean(values),
-        "min": min(values),
-        "max": max(values),
-        "std": statistics.stdev(values) if len(values) > 1 else None,
-        "ci_low": ci[1] if ci else None,
-        "ci_high": ci[2] if ci else None,
-    }
 
 
 MAIN_NETWORK = ("aodv", "empty", VETH)
@@ -95,7 +226,7 @@ def main_variant(runs: list[FinishedRun]) -> tuple[str, str]:
     return DEFAULT_VARIANT if DEFAULT_VARIANT in present or not present else min(present)
 
 
-def fig2_rows(runs: list[FinishedRun]) -> list[dict]:
+def fig2_rows(runs: list[FinishedRun]) -> list[Fig2Row]:
     """Exploration steps per (variant, laser, range, team size) over the usable unimpaired
     runs, with the 95% confidence interval of each point's mean."""
     groups: dict[tuple, list[tuple[str, float]]] = {}
@@ -112,12 +243,9 @@ def fig2_rows(runs: list[FinishedRun]) -> list[dict]:
     for (coord, start, laser, comm, robots), items in sorted(
         groups.items(), key=lambda kv: (kv[0][:2], -kv[0][2], *kv[0][3:])
     ):
-        row = {"coordination": coord, "start_placement": start, "laser_range": laser,
-               "comm_range": comm, "robots": robots}  # fmt: skip
-        row.update(spread([s for _, s in items]))
-        row["steps_per_run"] = [s for _, s in items]
-        row["runs"] = [rid for rid, _ in items]
-        rows.append(row)
+        per_run = [s for _, s in items]
+        rows.append(Fig2Row(coord, start, laser, comm, robots, Spread.of(per_run),
+                            tuple(per_run), tuple(rid for rid, _ in items)))  # fmt: skip
     return rows
 
 
@@ -143,51 +271,36 @@ def fig4_runs(runs: list[FinishedRun]) -> list[FinishedRun]:
     return [by_team[n] for n in sorted(teams)]
 
 
-def fig4_rows(runs: list[FinishedRun]) -> list[dict]:
+def fig4_rows(runs: list[FinishedRun]) -> list[Fig4Row]:
     rows = []
     for run in fig4_runs(runs):
         c = run.config
-        for r in plan_intervals(run):
-            rows.append(
-                {
-                    "robots": c.robots,
-                    "comm_range": c.comm_range,
-                    "laser_range": c.laser_range,
-                    "run": run.run_id,
-                    **r,
-                }
-            )
+        for plan in plan_intervals(run):
+            rows.append(Fig4Row(c.robots, c.comm_range, c.laser_range, run.run_id, plan))
     return rows
 
 
-def plan_cause_rows(runs: list[FinishedRun]) -> list[dict]:
+def plan_cause_rows(runs: list[FinishedRun]) -> list[PlanCauseRow]:
     """Per usable unimpaired run: how many plan generations each cause produced."""
     rows = []
     for run in runs:
         if not (run.usable and run.unimpaired):
             continue
-        counts = {"start": 0, "timer": 0, "request": 0}
+        counts = dict.fromkeys(USUAL_CAUSES, 0)
         for robot in run.robots:
             for p in robot.plans:
                 cause = p.cause if p.cause is not None else "other"
                 counts[cause] = counts.get(cause, 0) + 1
         c = run.config
-        rows.append(
-            {
-                "run": run.run_id,
-                "coordination": run.variant[0],
-                "start_placement": run.variant[1],
-                "robots": c.robots,
-                "comm_range": c.comm_range,
-                "laser_range": c.laser_range,
-                **counts,
-            }
-        )
+        start, timer, request = (counts.pop(k) for k in USUAL_CAUSES)
+        rows.append(PlanCauseRow(run.run_id, *run.variant, c.robots, c.comm_range,
+                                 c.laser_range, start, timer, request, counts))  # fmt: skip
     return rows
 
 
-def routing_per_run(runs: list[FinishedRun], metrics_of: MetricsOf) -> list[dict]:
-    """One row per usable run that has captures: its routing metrics (metrics_of(run) -> dict)."""
+def routing_per_run(runs: list[FinishedRun], metrics_of: MetricsOf) -> list[RoutingRun]:
+    """One row per usable run that has captures: its routing metrics (metrics_of(run): its
+    routing.json, testbed.analysis.pcapmetrics)."""
     rows = []
     for run in runs:
         if not run.usable:
@@ -196,91 +309,85 @@ def routing_per_run(runs: list[FinishedRun], metrics_of: MetricsOf) -> list[dict
         if not m:
             continue
         c = run.config
-        row = {
-            "run": run.run_id,
-            "robots": c.robots,
-            "comm_range": c.comm_range,
-            "laser_range": c.laser_range,
-            "loss_pct": c.loss_pct,
-            "delay_ms": c.delay_ms,
-            "time_scale": run.time_scale_requested or c.time_scale,
-            "tcp_emulated": run.tcp_in_emulated_time,  # may PDF and delay meet other scales'
-        }
-        for key, _ in ROUTING_METRICS:
-            row[key] = m.get(key)
-        row["delay_ms_median_emulated"] = (m.get("emulated") or {}).get("delay_ms_median")
-        row["control_tx_packets"] = m.get("control_tx_packets")
-        row["tx_packets"] = m.get("tx_packets")
         cmp = m.get("daemon_comparison") or {}
-        row["daemon_tx_packets"] = cmp.get("daemon_tx_packets")
-        row["daemon_relative_difference"] = cmp.get("relative_difference")
-        row["capture_dropped_packets"] = (m.get("capture_dropped") or {}).get("packets")
-        rows.append(row)
+        rows.append(RoutingRun(
+            run=run.run_id, robots=c.robots, comm_range=c.comm_range,
+            laser_range=c.laser_range, loss_pct=c.loss_pct, delay_ms=c.delay_ms,
+            time_scale=run.time_scale_requested or c.time_scale,
+            tcp_emulated=run.tcp_in_emulated_time,
+            overhead_packets=m.get("overhead_packets"), pdf=m.get("pdf"),
+            delay_ms_median=m.get("delay_ms_median"), throughput_bps=m.get("throughput_bps"),
+            delay_ms_median_emulated=(m.get("emulated") or {}).get("delay_ms_median"),
+            control_tx_packets=m.get("control_tx_packets"), tx_packets=m.get("tx_packets"),
+            daemon_tx_packets=cmp.get("daemon_tx_packets"),
+            daemon_relative_difference=cmp.get("relative_difference"),
+            capture_dropped_packets=(m.get("capture_dropped") or {}).get("packets"),
+        ))  # fmt: skip
     return rows
 
 
-def aggregate(rows: list[dict], keys: tuple[str, ...], metrics: list[str]) -> list[dict]:
-    """Per value of `keys`: n, and each metric's mean, min and max (None when no row has it)."""
-    groups: dict[tuple, list[dict]] = {}
+Row = TypeVar("Row")
+Key = TypeVar("Key", bound=tuple)
+
+
+def aggregate(
+    rows: Sequence[Row], key: Callable[[Row], Key], metrics: tuple[str, ...]
+) -> list[tuple[Key, list[Row], dict[str, MeanRange]]]:
+    """Per value of key(row), in its order: the rows, and each metric's (a field of the rows,
+    by name) mean, min and max over them (None when no row has it)."""
+    groups: dict[Key, list[Row]] = {}
     for r in rows:
-        groups.setdefault(tuple(r[k] for k in keys), []).append(r)
+        groups.setdefault(key(r), []).append(r)
     out = []
-    for key, items in sorted(groups.items()):
-        row = dict(zip(keys, key, strict=True))
-        row["n"] = len(items)
+    for k, items in sorted(groups.items(), key=lambda kv: kv[0]):
+        means = {}
         for m in metrics:
-            vals = [i[m] for i in items if i.get(m) is not None]
-            if vals:
-                s = spread(vals)
-                row[f"{m}_mean"], row[f"{m}_min"], row[f"{m}_max"] = s["mean"], s["min"], s["max"]
-            else:
-                row[f"{m}_mean"] = row[f"{m}_min"] = row[f"{m}_max"] = None
-        out.append(row)
+            means[m] = MeanRange.of([v for i in items if (v := getattr(i, m)) is not None])
+        out.append((k, items, means))
     return out
 
 
-def routing_rows(per_run: list[dict]) -> list[dict]:
+def routing_rows(per_run: list[RoutingRun]) -> list[RoutingRow]:
     """Routing metrics per (range, team size) over the unimpaired runs, lasers pooled; with
     the time scales they ran at and whether TCP kept emulated time in every one of them."""
-    base = [r for r in per_run if not r["loss_pct"] and not r["delay_ms"]]
-    metrics = [k for k, _ in ROUTING_METRICS] + ["delay_ms_median_emulated"]
-    rows = aggregate(base, ("comm_range", "robots"), metrics)
-    for row in rows:
-        runs = [r for r in base if (r["comm_range"], r["robots"]) == (row["comm_range"],
-                                                                      row["robots"])]  # fmt: skip
-        row["time_scales"] = sorted({r["time_scale"] for r in runs if r.get("time_scale")})
-        row["tcp_emulated"] = all(r.get("tcp_emulated", True) for r in runs)
+    base = [r for r in per_run if not r.loss_pct and not r.delay_ms]
+    rows = []
+    for (comm, robots), runs, means in aggregate(
+        base, lambda r: (r.comm_range, r.robots), ROUTING_FIELDS
+    ):
+        rows.append(RoutingRow(
+            comm_range=comm, robots=robots, n=len(runs), means=RoutingMeans(**means),
+            time_scales=tuple(sorted({r.time_scale for r in runs if r.time_scale})),
+            tcp_emulated=all(r.tcp_emulated for r in runs),
+        ))  # fmt: skip
     return rows
 
 
-def impairment_rows(runs: list[FinishedRun], per_run: list[dict]) -> list[dict]:
+def impairment_rows(runs: list[FinishedRun], per_run: list[RoutingRun]) -> list[ImpairmentRow]:
     """Exploration steps and PDF per (team, range, delay, loss) when the sweep varied loss or
     delay; empty otherwise."""
     usable = [r for r in runs if r.usable]
     if len({(r.config.loss_pct, r.config.delay_ms) for r in usable}) < 2:
         return []
-    pdf = {r["run"]: r["pdf"] for r in per_run}
-    rows = []
-    for run in usable:
-        c = run.config
-        rows.append(
-            {
-                "robots": c.robots,
-                "comm_range": c.comm_range,
-                "delay_ms": c.delay_ms,
-                "loss_pct": c.loss_pct,
-                "steps": run.exploration_steps,
-                "pdf": pdf.get(run.run_id),
-            }
+    pdf = {r.run: r.pdf for r in per_run}
+    each = [ImpairmentRun(r.config.robots, r.config.comm_range, r.config.delay_ms,
+                          r.config.loss_pct, r.exploration_steps, pdf.get(r.run_id))
+            for r in usable]  # fmt: skip
+    return [
+        ImpairmentRow(robots, comm, delay, loss, len(items), **means)
+        for (robots, comm, delay, loss), items, means in aggregate(
+            each, lambda r: (r.robots, r.comm_range, r.delay_ms, r.loss_pct), IMPAIRMENT_METRICS
         )
-    return aggregate(rows, ("robots", "comm_range", "delay_ms", "loss_pct"), ["steps", "pdf"])
+    ]
 
 
-def _finite_rows(rows: list[dict], stem: Path) -> list[dict]:
-    """rows with every number that is not finite (a NaN mean) as None, each said in the log:
-    a table never holds NaN silently, and its JSON stays strict."""
+def _finite_rows(rows: Sequence[Any], stem: Path) -> list[dict[str, Any]]:
+    """Each row's columns (testbed.analysis.rows.columns) with every number that is not
+    finite (a NaN mean) as None, each said in the log: a table never holds NaN silently, and
+    its JSON stays strict."""
     out = []
-    for r in rows:
+    for row in rows:
+        r = columns(row)
         bad = [k for k, v in r.items() if isinstance(v, float) and not math.isfinite(v)]
         for k in bad:
             point = {k2: v for k2, v in r.items() if k2 in ("robots", "comm_range")}
@@ -289,17 +396,18 @@ def _finite_rows(rows: list[dict], stem: Path) -> list[dict]:
     return out
 
 
-def write_table(rows: list[dict], stem: Path) -> None:
-    """rows as stem.csv (lists joined by ';') and stem.json; a number that is not finite is
-    written empty, and said (_finite_rows)."""
-    rows = _finite_rows(rows, stem)
-    write_atomic(stem.with_suffix(".json"), json.dumps(rows, indent=1) + "\n")
-    fields: list[str] = []
-    for r in rows:
-        fields += [k for k in r if k not in fields]
+def write_table(rows: Sequence[Any], stem: Path) -> None:
+    """rows (frozen dataclass rows, in their columns) as stem.csv (sequences joined by ';')
+    and stem.json; a number that is not finite is written empty, and said (_finite_rows)."""
+    cells = _finite_rows(rows, stem)
+    write_atomic(stem.with_suffix(".json"), json.dumps(cells, indent=1) + "\n")
+    names: list[str] = []
+    for r in cells:
+        names += [k for k in r if k not in names]
     f = io.StringIO(newline="")
-    w = csv.DictWriter(f, fieldnames=fields)
+    w = csv.DictWriter(f, fieldnames=names)
     w.writeheader()
-    for r in rows:
-        w.writerow({k: ";".join(map(str, v)) if isinstance(v, list) else v for k, v in r.items()})
+    for r in cells:
+        w.writerow({k: ";".join(map(str, v)) if isinstance(v, list | tuple) else v
+                    for k, v in r.items()})  # fmt: skip
     write_atomic(stem.with_suffix(".csv"), f.getvalue())

@@ -43,12 +43,17 @@ decided on the means alone say so in their evidence when a point rests on one ru
 from __future__ import annotations
 
 import statistics
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from testbed.analysis import ablation, stats
+from testbed.analysis.tables import Fig2Row, PlanCauseRow
+
+if TYPE_CHECKING:  # figures imports middlewares, which imports this module
+    from testbed.analysis.figures import Tables
 
 HOLDS, PARTLY, FAILS, NO_DATA = "holds", "partly holds", "does not hold", "not enough data"
 TOO_FEW = "too few runs to decide"
@@ -111,18 +116,18 @@ def _overall(results: Sequence[bool | None]) -> str:
     return PARTLY if any(decided) else FAILS
 
 
-def _few(rows) -> list[int]:
+def _few(rows: Iterable[Fig2Row]) -> list[int]:
     """The team sizes among fig2 `rows` whose point has fewer than MIN_RUNS runs."""
-    return sorted(r["robots"] for r in rows if r["n"] < MIN_RUNS)
+    return sorted(r.robots for r in rows if r.steps.n < MIN_RUNS)
 
 
 def _yes_no(ok: bool | None) -> str:
     return "too few runs" if ok is None else "yes" if ok else "no"
 
 
-def _single_run_note(rows: list[dict]) -> list[str]:
+def _single_run_note(rows: list[Fig2Row]) -> list[str]:
     """For the claims decided on means alone: say when they compare single runs."""
-    few = [r for r in rows if r["n"] < MIN_RUNS]
+    few = [r for r in rows if r.steps.n < MIN_RUNS]
     if not few:
         return []
     return [
@@ -131,19 +136,19 @@ def _single_run_note(rows: list[dict]) -> list[str]:
     ]
 
 
-def _points(fig2: list[dict]) -> dict[tuple, dict[int, float]]:
+def _points(fig2: list[Fig2Row]) -> dict[tuple, dict[int, float]]:
     """(laser, range) -> {team size: mean steps}."""
     out: dict[tuple, dict[int, float]] = {}
     for r in fig2:
-        out.setdefault((r["laser_range"], r["comm_range"]), {})[r["robots"]] = r["mean"]
+        out.setdefault((r.laser_range, r.comm_range), {})[r.robots] = r.steps.mean
     return out
 
 
-def _rows(fig2: list[dict]) -> dict[tuple, dict[int, dict]]:
+def _rows(fig2: list[Fig2Row]) -> dict[tuple, dict[int, Fig2Row]]:
     """(laser, range) -> {team size: fig2 row} (mean, interval, spread)."""
-    out: dict[tuple, dict[int, dict]] = {}
+    out: dict[tuple, dict[int, Fig2Row]] = {}
     for r in fig2:
-        out.setdefault((r["laser_range"], r["comm_range"]), {})[r["robots"]] = r
+        out.setdefault((r.laser_range, r.comm_range), {})[r.robots] = r
     return out
 
 
@@ -151,7 +156,7 @@ def _group_name(laser, comm) -> str:
     return f"laser {_f(laser)} m, range {_f(comm)} m"
 
 
-def verdict_team_beats_one(fig2: list[dict]) -> Verdict:
+def verdict_team_beats_one(fig2: list[Fig2Row]) -> Verdict:
     v = Verdict(
         "5.1", "Team work beats one robot: every team needs fewer steps than one robot", NO_DATA
     )
@@ -174,7 +179,7 @@ def verdict_team_beats_one(fig2: list[dict]) -> Verdict:
     return v
 
 
-def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
+def verdict_fall_then_rise(fig2: list[Fig2Row]) -> Verdict:
     """Noise-aware: the rise from the fewest steps to the largest team must exceed the spread
     of the runs (their 95% intervals do not overlap; testbed.analysis.ablation.rise)."""
     v = Verdict("5.1", "Exploration steps fall, then rise again as the team grows", NO_DATA)
@@ -189,7 +194,7 @@ def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
         if few:
             ok = None
             why = f"one run at {', '.join(map(str, few))} robots, so the noise is unknown"
-        elif min(pts, key=lambda n: pts[n]["mean"]) == max(pts):
+        elif min(pts, key=lambda n: pts[n].steps.mean) == max(pts):
             note = " (the sweep may stop short of the turning point)"
         results.append(ok)
         v.evidence.append(f"{_group_name(laser, comm)}: {why} -> {_yes_no(ok)}{note}")
@@ -197,30 +202,31 @@ def verdict_fall_then_rise(fig2: list[dict]) -> Verdict:
     return v
 
 
-def verdict_smaller_range(fig2: list[dict]) -> Verdict:
+def verdict_smaller_range(fig2: list[Fig2Row]) -> Verdict:
     """Noise-aware: for each laser and team of two or more, the smallest range needs more
     steps than the largest and their 95% intervals do not overlap."""
     v = Verdict("5.1", "A smaller communication range needs more steps", NO_DATA)
-    by: dict[tuple, dict[float, dict]] = {}
+    by: dict[tuple, dict[float, Fig2Row]] = {}
     for r in fig2:
-        if r["robots"] >= 2:
-            by.setdefault((r["laser_range"], r["robots"]), {})[r["comm_range"]] = r
-    results, within = [], []
+        if r.robots >= 2:
+            by.setdefault((r.laser_range, r.robots), {})[r.comm_range] = r
+    results: list[bool | None] = []
+    within: list[int | None] = []
     for (laser, robots), pts in sorted(by.items()):
         if len(pts) < 2:
             continue
         small, large = pts[min(pts)], pts[max(pts)]
-        a, b = ablation._ci(small), ablation._ci(large)
-        ok = small["mean"] > large["mean"] and stats.separated(a, b)
+        a, b = small.steps.ci, large.steps.ci
+        ok: bool | None = small.steps.mean > large.steps.mean and stats.separated(a, b)
         if _few([small, large]):
             ok = None
         results.append(ok)
-        if small["mean"] > large["mean"] and not ok and a is not None and b is not None:
-            within.append(ablation.runs_needed(large, small))
+        if small.steps.mean > large.steps.mean and not ok and a is not None and b is not None:
+            within.append(ablation.runs_needed(large.steps, small.steps))
         v.evidence.append(
             f"laser {_f(laser)} m, {robots} robots: range {_f(min(pts))} m "
-            f"{small['mean']:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
-            f"{large['mean']:.0f} {ablation._interval(b)} -> {_yes_no(ok)}"
+            f"{small.steps.mean:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
+            f"{large.steps.mean:.0f} {ablation._interval(b)} -> {_yes_no(ok)}"
         )
     v.verdict = _overall(results)
     decided = [r for r in results if r is not None]
@@ -241,24 +247,24 @@ def verdict_smaller_range(fig2: list[dict]) -> Verdict:
     return v
 
 
-def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
+def verdict_shorter_laser(fig2: list[Fig2Row]) -> Verdict:
     v = Verdict(
         "5.1",
         "A shorter laser needs more steps, at the same steps-to-team ratio",
         NO_DATA,
     )
-    lasers = sorted({r["laser_range"] for r in fig2})
+    lasers = sorted({r.laser_range for r in fig2})
     if len(lasers) < 2:
         return v
     short, long_ = lasers[0], lasers[-1]
-    by: dict[tuple, dict[float, dict]] = {}
+    by: dict[tuple, dict[float, Fig2Row]] = {}
     for r in fig2:
-        by.setdefault((r["comm_range"], r["robots"]), {})[r["laser_range"]] = r
+        by.setdefault((r.comm_range, r.robots), {})[r.laser_range] = r
     more: list[bool] = []
-    pairs_by_range: dict[float, list[tuple[dict, dict]]] = {}
+    pairs_by_range: dict[float, list[tuple[Fig2Row, Fig2Row]]] = {}
     for (comm, _robots), pts in sorted(by.items()):
         if short in pts and long_ in pts:
-            more.append(pts[short]["mean"] > pts[long_]["mean"])
+            more.append(pts[short].steps.mean > pts[long_].steps.mean)
             pairs_by_range.setdefault(comm, []).append((pts[short], pts[long_]))
     if not more:
         return v
@@ -271,7 +277,7 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     for comm, pairs in sorted(pairs_by_range.items()):
         if len(pairs) < 2:
             continue
-        ratios = [a["mean"] / b["mean"] for a, b in pairs]
+        ratios = [a.steps.mean / b.steps.mean for a, b in pairs]
         mean = statistics.fmean(ratios)
         cv = statistics.pstdev(ratios) / mean
         band = _ratio_cv_band(pairs)
@@ -312,7 +318,7 @@ def verdict_shorter_laser(fig2: list[dict]) -> Verdict:
     return v
 
 
-def _ratio_cv_band(pairs: list[tuple[dict, dict]]) -> tuple[float, float] | None:
+def _ratio_cv_band(pairs: list[tuple[Fig2Row, Fig2Row]]) -> tuple[float, float] | None:
     """The 2.5 and 97.5 percentiles of the CV of the (shorter / longer laser) steps ratios
     over team sizes when each point's mean is drawn from its sampling distribution; None
     when a point has fewer than MIN_RUNS runs (its noise is unknown)."""
@@ -320,8 +326,8 @@ def _ratio_cv_band(pairs: list[tuple[dict, dict]]) -> tuple[float, float] | None
     if _few(rows):
         return None
     rng = np.random.default_rng(0)  # the same report from the same runs
-    means = np.array([r["mean"] for r in rows])
-    sems = np.array([r["std"] / np.sqrt(r["n"]) for r in rows])
+    means = np.array([r.steps.mean for r in rows])
+    sems = np.array([(r.steps.std or 0.0) / np.sqrt(r.steps.n) for r in rows])
     draws = rng.normal(means, sems, size=(CV_DRAWS, len(rows)))
     ratios = draws[:, 0::2] / draws[:, 1::2]
     cvs = ratios.std(axis=1) / ratios.mean(axis=1)
@@ -329,11 +335,11 @@ def _ratio_cv_band(pairs: list[tuple[dict, dict]]) -> tuple[float, float] | None
     return float(lo), float(hi)
 
 
-def verdict_single_robot_timer(plans: list[dict]) -> Verdict:
+def verdict_single_robot_timer(plans: list[PlanCauseRow]) -> Verdict:
     v = Verdict("5.2", "A single robot generates its plans on the timer", NO_DATA)
-    alone = [p for p in plans if p["robots"] == 1]
-    timer = sum(p.get("timer", 0) for p in alone)
-    total = sum(p.get("timer", 0) + p.get("request", 0) for p in alone)
+    alone = [p for p in plans if p.robots == 1]
+    timer = sum(p.timer for p in alone)
+    total = sum(p.timer + p.request for p in alone)
     if not total:
         return v
     share = timer / total
@@ -372,11 +378,11 @@ def spearman(xs: list[float], ys: list[float]) -> float | None:
     return sum((a - mx) * (b - my) for a, b in zip(rx, ry, strict=True)) / (sx * sy)
 
 
-def verdict_requests_grow(plans: list[dict]) -> Verdict:
+def verdict_requests_grow(plans: list[PlanCauseRow]) -> Verdict:
     v = Verdict("5.2", "On-request plan generations grow with team size", NO_DATA)
     by_team: dict[int, list[int]] = {}
     for p in plans:
-        by_team.setdefault(p["robots"], []).append(p.get("request", 0))
+        by_team.setdefault(p.robots, []).append(p.request)
     if len(by_team) < 2:
         return v
     teams = sorted(by_team)
@@ -403,8 +409,8 @@ def verdict_requests_grow(plans: list[dict]) -> Verdict:
     return v
 
 
-def verdicts(tables: dict) -> list[Verdict]:
-    fig2, plans = tables["fig2"], tables["plans"]
+def verdicts(tables: Tables) -> list[Verdict]:
+    fig2, plans = tables.fig2, tables.plans
     return [
         verdict_team_beats_one(fig2),
         verdict_fall_then_rise(fig2),

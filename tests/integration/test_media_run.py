@@ -56,8 +56,8 @@ def test_a_short_exploration_runs_on_ns3_wifi_and_keeps_the_channel_counters(tb_
     lost = (metrics.get("capture_dropped") or {}).get("packets", 0)
     assert abs(seen - sent) <= max(5, 0.02 * sent) + lost, (seen, sent, lost)
     row = media.run_row(rec, metrics)
-    assert row["medium"] == "ns3-wifi" and 0 < row["control_airtime_share"] < 1
-    assert row["channel_airtime_share"] == ch.airtime_share
+    assert row.medium == "ns3-wifi" and 0 < row.control_airtime_share < 1
+    assert row.channel_airtime_share == ch.airtime_share
 
     # Nothing of the testbed is left: no state, no namespace, no ns-3 process.
     assert not os.path.exists(state.state_path(tb_name))

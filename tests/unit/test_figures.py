@@ -10,7 +10,9 @@ from matplotlib.container import ErrorbarContainer
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from testbed.analysis import figures, pathsfig, plots, tables
-from testbed.analysis.runs import load_runs
+from testbed.analysis.rows import MeanRange, Spread
+from testbed.analysis.runs import DEFAULT_VARIANT, load_runs
+from testbed.analysis.tables import Fig2Row, RoutingMeans, RoutingRow
 from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
@@ -101,8 +103,8 @@ def test_only_usable_unimpaired_runs_count(tmp_path):
     write_run(tmp_path, runs[2], capped)
     rows = tables.fig2_rows(load_runs(tmp_path))
     assert len(rows) == 1
-    assert rows[0]["runs"] == [runs[0].run_id, runs[2].run_id]
-    assert rows[0]["steps_per_run"][1] == (100 + 3000) / 2
+    assert rows[0].runs == (runs[0].run_id, runs[2].run_id)
+    assert rows[0].steps_per_run[1] == (100 + 3000) / 2
 
 
 def test_unreadable_results_are_skipped(tmp_path):
@@ -119,7 +121,7 @@ def test_plan_causes_are_counted(tmp_path):
     plans = {1: timer_plans(100, requests=3), 2: timer_plans(100)}
     write_run(tmp_path, run, result_doc(run.config, [90, 95], 100, plans))
     (row,) = tables.plan_cause_rows(load_runs(tmp_path))
-    assert row["start"] == 2 and row["request"] == 3 and row["timer"] == 2 * 4
+    assert row.start == 2 and row.request == 3 and row.timer == 2 * 4
 
 
 def test_routing_and_impairment_tables(tmp_path):
@@ -138,18 +140,18 @@ def test_routing_and_impairment_tables(tmp_path):
         for r in runs
     }
     m = figures.make_all(tmp_path, metrics_of=lambda run: fake[run.run_id])
-    routing = m["tables"]["routing"]
+    routing = m.tables.routing
     assert len(routing) == 1  # the unimpaired point only
-    assert routing[0]["n"] == 2
-    assert routing[0]["overhead_packets_mean"] == pytest.approx(0.25)
-    imp = m["tables"]["impairments"]
-    assert [r["loss_pct"] for r in imp] == [0.0, 30.0]
-    assert imp[1]["pdf_mean"] == pytest.approx(0.70 - 0.015)
+    assert routing[0].n == 2
+    assert routing[0].means.overhead_packets.mean == pytest.approx(0.25)
+    imp = m.tables.impairments
+    assert [r.loss_pct for r in imp] == [0.0, 30.0]
+    assert imp[1].pdf.mean == pytest.approx(0.70 - 0.015)
     steps = {
         r.run_id: steps_from_result_file(tmp_path / "runs" / r.run_id / "result.json") for r in runs
     }
     lossy = [steps[r.run_id] for r in runs if r.config.loss_pct == 30.0]
-    assert imp[1]["steps_mean"] == pytest.approx(statistics.fmean(lossy))
+    assert imp[1].steps.mean == pytest.approx(statistics.fmean(lossy))
     for name in ("routing", "impairments"):
         assert (tmp_path / "figures" / f"{name}.png").is_file()
         assert (tmp_path / "figures" / f"{name}.pdf").is_file()
@@ -166,13 +168,12 @@ def test_path_pictures_are_collected(tmp_path):
     got = sorted(p.name for p in (tmp_path / "figures" / "paths").iterdir())
     assert got == ["n01-c5-l2-k1.png", "n02-c5-l2-k1.png"]  # first run of each point
     assert (tmp_path / "figures" / "paths" / got[0]).read_bytes().endswith(b"n01-c5-l2-k1")
-    assert len([f for f in made["files"] if f.parent.name == "paths"]) == 2
+    assert len([f for f in made.files if f.parent.name == "paths"]) == 2
 
 
 def _fig2_one_run_per_point():
     return [
-        {"laser_range": 2.0, "comm_range": comm, "robots": n, "n": 1, "mean": 2000.0 / n,
-         "ci_low": None, "ci_high": None}
+        Fig2Row(*DEFAULT_VARIANT, 2.0, comm, n, Spread.of([2000.0 / n]), (2000.0 / n,), ())
         for comm in (5.0, 20.0) for n in (1, 2, 3)
     ]  # fmt: skip
 
@@ -196,8 +197,12 @@ def test_no_legend_entry_for_error_bars_that_are_not_drawn():
     assert not fig.axes[0].containers  # nothing to draw: no bars at all
     plots.plt.close(fig)
     # with intervals, the bars are drawn, and still no legend entry of their own
-    rows = [dict(r, n=3, ci_low=r["mean"] - 50, ci_high=r["mean"] + 50)
-            for r in _fig2_one_run_per_point()]  # fmt: skip
+    rows = [
+        Fig2Row(*DEFAULT_VARIANT, 2.0, r.comm_range, r.robots,
+                Spread(3, r.steps.mean, r.steps.mean, r.steps.mean, 1.0, r.steps.mean - 50,
+                       r.steps.mean + 50), (), ())
+        for r in _fig2_one_run_per_point()
+    ]  # fmt: skip
     fig = plots.fig2_figure(rows, 2.0, "a")
     handles, labels = fig.axes[0].get_legend_handles_labels()
     assert labels == ["range 5 m", "range 20 m"] and len(fig.axes[0].containers) == 2
@@ -205,8 +210,8 @@ def test_no_legend_entry_for_error_bars_that_are_not_drawn():
 
 
 def test_routing_panels_have_whole_team_sizes():
-    values = {f"{k}_{s}": 0.5 for k, _ in tables.ROUTING_METRICS for s in ("mean", "min", "max")}
-    rows = [{"comm_range": 5.0, "robots": n, "n": 1, **values} for n in (1, 2, 3)]
+    means = RoutingMeans(**{k: MeanRange(0.5, 0.5, 0.5) for k in tables.ROUTING_FIELDS})
+    rows = [RoutingRow(5.0, n, 1, means, (), True) for n in (1, 2, 3)]
     fig = plots.routing_figure(rows)
     for ax in fig.axes:
         ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]

@@ -281,10 +281,12 @@ def test_a_capture_linked_out_of_the_run_is_left_out(tmp_path):
 
 def test_a_nan_in_a_figures_table_is_left_empty_and_said(tmp_path, caplog):
     from testbed.analysis import tables
+    from testbed.analysis.rows import MeanRange
 
-    rows = [{"robots": 2, "comm_range": 5.0, "steps_mean": float("nan")}]
+    nan = MeanRange(float("nan"), 1.0, 2.0)
+    rows = [tables.ImpairmentRow(2, 5.0, 0.0, 0.0, 1, nan, MeanRange())]
     tables.write_table(rows, tmp_path / "fig2")
-    assert (tmp_path / "fig2.csv").read_text().splitlines()[1] == "2,5.0,"
+    assert (tmp_path / "fig2.csv").read_text().splitlines()[1] == "2,5.0,0.0,0.0,1,,1.0,2.0,,,"
     assert json.loads((tmp_path / "fig2.json").read_text())[0]["steps_mean"] is None
     assert "steps_mean" in caplog.text and "not a number" in caplog.text
 

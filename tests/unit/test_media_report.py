@@ -46,26 +46,26 @@ def sweep(tmp_path, runs=3, routing=()):
 
 def test_rows_per_medium_with_intervals_and_emulated_delay(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path))
-    rows = {r["medium"]: r for r in made["tables"]["media"]}
+    rows = {r.medium: r for r in made.tables.media}
     assert list(rows) == ["veth", "ns3-wifi"]
     v, w = rows["veth"], rows["ns3-wifi"]
-    assert v["n"] == w["n"] == 3 and v["steps"] == 410 and w["steps"] == 414
-    assert v["steps_ci_low"] < 410 < v["steps_ci_high"]
-    assert w["delay_ms"] == pytest.approx((0.5 + 0.02) * 4.0)  # wall x the time scale
-    assert v["control_pkts_per_robot_s"] == pytest.approx(2.0)
+    assert v.n == w.n == 3 and v.compared.steps.mean == 410 and w.compared.steps.mean == 414
+    assert v.compared.steps.ci_low < 410 < v.compared.steps.ci_high
+    assert w.compared.delay_ms.mean == pytest.approx((0.5 + 0.02) * 4.0)  # wall x time scale
+    assert v.compared.control_pkts_per_robot_s.mean == pytest.approx(2.0)
     # A quarter of the frames are control frames of 100 bytes (40 us each at 54 Mbit/s), the
     # mean frame has 1000 bytes (172 us): 2.5% of the bytes, but 40 / (4 x 172) of the
     # airtime, as the preamble costs every frame the same.
-    assert v["control_airtime_share"] == pytest.approx(40 / (4 * 172))
-    assert w["channel_airtime_share"] == pytest.approx(6.0 / 10.0)
-    assert v["channel_airtime_share"] is None  # veth has no channel counters
+    assert v.compared.control_airtime_share.mean == pytest.approx(40 / (4 * 172))
+    assert w.channel.channel_airtime_share == pytest.approx(6.0 / 10.0)
+    assert v.channel.channel_airtime_share is None  # veth has no channel counters
     # The paper's figures stay on one medium: veth's runs alone.
-    assert [r["steps_per_run"] for r in made["tables"]["fig2"]] == [[405, 410, 415]]
+    assert [r.steps_per_run for r in made.tables.fig2] == [(405, 410, 415)]
 
 
 def test_noise_sentences_say_where_veth_is_within_the_noise(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path))
-    text = "\n".join(media.section(made["tables"]["media"]))
+    text = "\n".join(media.section(made.tables.media))
     assert "- Exploration steps: veth is within the noise of 802.11 at 1 of 1 points (all)." in text
     assert (
         "- Median delay (emulated ms): veth is within the noise of 802.11 at 0 of 1 points; "
@@ -78,7 +78,7 @@ def test_noise_sentences_say_where_veth_is_within_the_noise(tmp_path):
 
 def test_one_run_per_medium_is_not_judged(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, runs=1))
-    text = "\n".join(media.section(made["tables"]["media"]))
+    text = "\n".join(media.section(made.tables.media))
     assert "- Exploration steps: not judged: 1 point(s) with one run on a medium" in text
     assert "| aodv | 20 | 5 | veth | 1 | 405 |" in text
 
@@ -93,19 +93,19 @@ def test_report_has_the_section_only_when_media_vary(tmp_path):
         write_run(single, run)
     path, _ = report.write_report(single, metrics_of=lambda run: None)
     assert "What perfect links" not in path.read_text()
-    assert "media" not in figures.make_all(single, metrics_of=lambda run: None)["tables"]
+    assert figures.make_all(single, metrics_of=lambda run: None).tables.media == []
 
 
 def test_protocols_are_compared_within_each_medium(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, routing=("aodv", "batman")))
-    rows = made["tables"]["protocols"]
-    assert [(r["medium"], r["routing"], r["steps"]) for r in rows] == [
+    rows = made.tables.protocols
+    assert [(r.medium, r.routing, r.steps) for r in rows] == [
         ("ns3-wifi", "aodv", 414), ("ns3-wifi", "batman", 464),
         ("veth", "aodv", 410), ("veth", "batman", 460),
     ]  # fmt: skip
     text = "\n".join(protocols.section(rows))
     assert "| empty (ns3-wifi) | 20 | 5 | aodv |" in text and "| empty | 20 | 5 | aodv |" in text
-    pairs = {(r["routing"], r["medium"]) for r in made["tables"]["media"]}
+    pairs = {(r.routing, r.medium) for r in made.tables.media}
     assert pairs == {(p, m) for p in ("aodv", "batman") for m in ("veth", "ns3-wifi")}
 
 
@@ -147,8 +147,8 @@ def test_the_channel_table_gives_the_raw_delay_of_runs_corrected_for_the_relay_l
         return m
 
     made = figures.make_all(tmp_path, metrics_of=corrected)
-    rows = {r["medium"]: r for r in made["tables"]["media"]}
-    assert rows["ns3-wifi"]["delay_lag_corrected_runs"] == 2
-    text = "\n".join(media.section(made["tables"]["media"]))
+    rows = {r.medium: r for r in made.tables.media}
+    assert rows["ns3-wifi"].delay_lag_corrected_runs == 2
+    text = "\n".join(media.section(made.tables.media))
     assert "corrected for the medium's relay lag" in text
     assert "| 1.0% | 3.10 | 2 of 3 |" in text  # runs 2 and 3: (0.5 + 0.02 + 0.25) x 4

@@ -62,44 +62,46 @@ def sweep(tmp_path, runs=2, mws=("nanomsg", "zeromq-reqrep", "dds"), stuck="zero
 
 
 def rows_by(made):
-    return {(r["robots"], r["battery_failure"], r["middleware"]): r
-            for r in made["tables"]["middlewares"]}  # fmt: skip
+    return {(r.robots, r.battery_failure, r.middleware): r
+            for r in made.tables.middlewares}  # fmt: skip
 
 
 def test_rows_per_point_and_middleware_with_intervals(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path))
     rows = rows_by(made)
     assert len(rows) == 2 * 2 * 3
-    assert [(r["robots"], r["battery_failure"], r["middleware"]) for r in
-            made["tables"]["middlewares"]][:3] == [
+    assert [(r.robots, r.battery_failure, r.middleware) for r in
+            made.tables.middlewares][:3] == [
         (2, "none", "nanomsg"), (2, "none", "zeromq-reqrep"), (2, "none", "dds")]  # fmt: skip
     plain = rows[(5, "none", "nanomsg")]
-    assert plain["n"] == 2 and plain["left_out"] == 0
+    assert plain.n == 2 and plain.left_out == 0
     # finishing steps 400 + 10 k + (0..4): mean 412 then 422 -> 417 with an interval
-    assert plain["steps"] == pytest.approx(417)
-    assert plain["steps_ci_low"] < 417 < plain["steps_ci_high"]
-    assert (plain["survivors_finished_runs"], plain["survivors_runs"]) == (2, 2)
-    assert plain["delivery"] == pytest.approx(((450 + 1) / 500 + (450 + 2) / 500) / 2)
-    assert plain["blocked_share"] == pytest.approx(0.05 / (5 * WALL_S))
-    assert plain["air_bytes_per_robot_s"] == pytest.approx(500.0)
-    assert plain["air_own_share"] == pytest.approx(0.1)
+    p = plain.means
+    assert p.steps.mean == pytest.approx(417)
+    assert p.steps.ci_low < 417 < p.steps.ci_high
+    assert (plain.survivors_finished_runs, plain.survivors_runs) == (2, 2)
+    assert p.delivery.mean == pytest.approx(((450 + 1) / 500 + (450 + 2) / 500) / 2)
+    assert p.blocked_share.mean == pytest.approx(0.05 / (5 * WALL_S))
+    assert p.air_bytes_per_robot_s.mean == pytest.approx(500.0)
+    assert p.air_own_share.mean == pytest.approx(0.1)
     # The killed robot is not in the steps; the counters are the survivors'.
     killed = rows[(5, "midrun", "nanomsg")]
-    assert killed["steps"] == pytest.approx((410 + 1.5 + 420 + 1.5) / 2)
-    assert killed["failed"] == 2 and killed["sending_runs"] == 0
+    assert killed.means.steps.mean == pytest.approx((410 + 1.5 + 420 + 1.5) / 2)
+    assert killed.means.failed.mean == 2 and killed.sending_runs == 0
     stuck = rows[(5, "midrun", "zeromq-reqrep")]
-    assert (stuck["survivors_finished_runs"], stuck["steps"]) == (0, CAP)
-    assert stuck["blocked_share"] == pytest.approx(1 / 4) and stuck["blocked_max_s"] == WALL_S
-    assert stuck["sending_runs"] == 2
-    assert rows[(5, "none", "dds")]["air_bytes_per_robot_s"] is None
+    assert (stuck.survivors_finished_runs, stuck.means.steps.mean) == (0, CAP)
+    s = stuck.means
+    assert s.blocked_share.mean == pytest.approx(1 / 4) and s.blocked_max_s.mean == WALL_S
+    assert stuck.sending_runs == 2
+    assert rows[(5, "none", "dds")].means.air_bytes_per_robot_s.mean is None
     # The paper's figures stay on the default middleware without a failure.
-    assert [r["steps_per_run"] for r in made["tables"]["fig2"] if r["robots"] == 5] == [
-        [412, 422]]  # fmt: skip
+    assert [r.steps_per_run for r in made.tables.fig2 if r.robots == 5] == [
+        (412, 422)]  # fmt: skip
 
 
 def test_the_section_table_and_the_verdict_for_a_naive_zeromq_that_stops(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path))
-    text = "\n".join(middlewares.section(made["tables"]["middlewares"]))
+    text = "\n".join(middlewares.section(made.tables.middlewares))
     assert "## Which middleware a team can rely on (the paper's Section 3)" in text
     assert "| 5 | 20 | midrun | zeromq-reqrep | 2 | 0 | 0 of 2 | 3000 [3000, 3000] |" in text
     assert "| 5 | 20 | none | dds | 2 | 0 | 2 of 2 |" in text and "not measured" in text
@@ -122,12 +124,12 @@ def test_the_report_has_the_section_only_when_the_middleware_varies(tmp_path):
         write_run(single, run, doc(run))
     path, _ = report.write_report(single, metrics_of=lambda run: None)
     assert "Which middleware" not in path.read_text()
-    assert "middlewares" not in figures.make_all(single, metrics_of=lambda run: None)["tables"]
+    assert figures.make_all(single, metrics_of=lambda run: None).tables.middlewares == []
 
 
 def test_one_run_per_point_is_too_few_to_decide(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, runs=1))
-    by, paper = middlewares.verdicts(made["tables"]["middlewares"])
+    by, paper = middlewares.verdicts(made.tables.middlewares)
     assert {v for v, _ in by.values()} == {TOO_FEW}
     assert paper[0] == TOO_FEW
     assert "fewer than 4 runs in a mode" in by["nanomsg"][1]
@@ -135,7 +137,7 @@ def test_one_run_per_point_is_too_few_to_decide(tmp_path):
 
 def test_a_bounded_middleware_that_stops_refutes_the_papers_reading(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, runs=2, stuck="nanomsg"))
-    by, paper = middlewares.verdicts(made["tables"]["middlewares"])
+    by, paper = middlewares.verdicts(made.tables.middlewares)
     assert by["nanomsg"][0] == HOLDS and by["zeromq-reqrep"][0] == FAILS
     assert paper[0] == FAILS
 

@@ -5,12 +5,16 @@ import json
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from testbed.analysis import report, sweepinfo, tables, verdicts
-from testbed.analysis.runs import load_runs
+from testbed.analysis.figures import Tables
+from testbed.analysis.rows import MeanRange, Spread
+from testbed.analysis.runs import DEFAULT_VARIANT, load_runs
+from testbed.analysis.tables import Fig2Row, PlanCauseRow, RoutingMeans, RoutingRow, RoutingRun
 from testbed.analysis.verdicts import FAILS, HOLDS, NO_DATA, PARTLY, TOO_FEW
 from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
@@ -26,10 +30,19 @@ def rows(fn, robots=(1, 2, 3, 5, 8, 10), comms=(5.0, 20.0), lasers=(2.0, 1.5), n
         for c in comms:
             for n in robots:
                 m = fn(n, c, la)
-                row = {"laser_range": la, "comm_range": c, "robots": n}
-                row.update(tables.spread([m * (1 - noise), m, m * (1 + noise)]))
-                out.append(row)
+                steps = [m * (1 - noise), m, m * (1 + noise)]
+                out.append(Fig2Row(*DEFAULT_VARIANT, la, c, n, Spread.of(steps), tuple(steps), ()))
     return out
+
+
+def one_run(row):
+    """The fig2 row as a point of a single run: no spread, no interval."""
+    return replace(row, steps=replace(row.steps, ci_low=None, ci_high=None, std=None, n=1))
+
+
+def plans(robots, timer=0, request=0, start=0):
+    """A plan-cause row of a run of `robots` with those counts."""
+    return PlanCauseRow("r", *DEFAULT_VARIANT, robots, 5.0, 2.0, start, timer, request)
 
 
 def paper(n, c, la):
@@ -76,7 +89,7 @@ def test_one_run_per_point_is_too_few_runs_to_decide_not_a_failure():
     # The short sweep's case: one run per point. Whatever the means say, the noise-aware
     # claims cannot be decided, and the report must not say they do not hold.
     for shape in (paper, lambda n, c, la: 100.0 * n):
-        fig2 = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(shape)]
+        fig2 = [one_run(r) for r in rows(shape)]
         v = verdicts.verdict_fall_then_rise(fig2)
         assert v.verdict == TOO_FEW
         assert all("so the noise is unknown -> too few runs" in e for e in v.evidence)
@@ -90,7 +103,7 @@ def test_one_run_per_point_is_too_few_runs_to_decide_not_a_failure():
 
 def test_a_group_with_one_run_points_is_left_undecided_beside_decided_ones():
     fig2 = rows(paper)
-    one = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(paper, comms=(7.0,))]
+    one = [one_run(r) for r in rows(paper, comms=(7.0,))]
     v = verdicts.verdict_fall_then_rise(fig2 + one)
     assert v.verdict == HOLDS  # decided where it can be
     assert sum("too few runs" in e for e in v.evidence) == 2  # the two lasers at 7 m
@@ -145,7 +158,7 @@ def test_a_ratio_shown_the_same_at_some_ranges_holds_and_says_where_it_is_undeci
 
 
 def test_the_same_ratio_needs_runs_to_be_decided():
-    fig2 = [dict(r, ci_low=None, ci_high=None, std=None, n=1) for r in rows(paper)]
+    fig2 = [one_run(r) for r in rows(paper)]
     v = verdicts.verdict_shorter_laser(fig2)
     assert v.verdict == TOO_FEW
     assert any("rest on one run" in e for e in v.evidence)
@@ -169,22 +182,22 @@ def test_not_enough_data():
     ):
         assert f(one_point).verdict == NO_DATA
     assert verdicts.verdict_single_robot_timer([]).verdict == NO_DATA
-    assert verdicts.verdict_requests_grow([{"robots": 3, "request": 4}]).verdict == NO_DATA
+    assert verdicts.verdict_requests_grow([plans(3, request=4)]).verdict == NO_DATA
     # two team sizes are not enough to see a fall and a rise
     assert verdicts.verdict_fall_then_rise(rows(paper, robots=(1, 5))).verdict == NO_DATA
 
 
 def test_section_5_2_verdicts():
-    alone = [{"robots": 1, "timer": 40, "request": 0, "start": 1}]
+    alone = [plans(1, timer=40, request=0, start=1)]
     assert verdicts.verdict_single_robot_timer(alone).verdict == HOLDS
-    mixed = [{"robots": 1, "timer": 10, "request": 10, "start": 1}]
+    mixed = [plans(1, timer=10, request=10, start=1)]
     v = verdicts.verdict_single_robot_timer(mixed)
     assert v.verdict == FAILS and "50%" in v.evidence[0]
-    growing = [{"robots": n, "request": 3 * n + k} for n in (1, 2, 5, 10) for k in (0, 1)]
+    growing = [plans(n, request=3 * n + k) for n in (1, 2, 5, 10) for k in (0, 1)]
     assert verdicts.verdict_requests_grow(growing).verdict == HOLDS
-    shrinking = [{"robots": n, "request": 30 - 3 * n} for n in (1, 2, 5, 10)]
+    shrinking = [plans(n, request=30 - 3 * n) for n in (1, 2, 5, 10)]
     assert verdicts.verdict_requests_grow(shrinking).verdict == FAILS
-    noisy = [{"robots": n, "request": r} for n, r in ((1, 0), (2, 5), (3, 2), (4, 6))]
+    noisy = [plans(n, request=r) for n, r in ((1, 0), (2, 5), (3, 2), (4, 6))]
     assert verdicts.verdict_requests_grow(noisy).verdict == PARTLY
 
 
@@ -275,11 +288,22 @@ def test_cli_not_a_sweep_directory(tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1 and "DIR" in r.stderr
 
 
+def routing_run(run="a", robots=1, scale=1.0, tcp=True, pdf=None, difference=None, dropped=None):
+    """A routing_runs row with the given numbers (the others empty)."""
+    return RoutingRun(
+        run=run, robots=robots, comm_range=5.0, laser_range=2.0, loss_pct=0.0, delay_ms=0.0,
+        time_scale=scale, tcp_emulated=tcp, overhead_packets=None, pdf=pdf,
+        delay_ms_median=None, throughput_bps=None, delay_ms_median_emulated=None,
+        control_tx_packets=None, tx_packets=None, daemon_tx_packets=None,
+        daemon_relative_difference=difference, capture_dropped_packets=dropped,
+    )  # fmt: skip
+
+
 def test_daemon_section_names_the_captures_kernel_drops():
     runs = [
-        {"run": "a", "daemon_relative_difference": 0.0, "capture_dropped_packets": 0},
-        {"run": "b", "daemon_relative_difference": 0.012, "capture_dropped_packets": 30},
-        {"run": "c", "daemon_relative_difference": 0.001, "capture_dropped_packets": 4},
+        routing_run("a", difference=0.0, dropped=0),
+        routing_run("b", difference=0.012, dropped=30),
+        routing_run("c", difference=0.001, dropped=4),
     ]
     first, second = report._daemon_section(runs)
     assert "2 of 3 runs agree within 1%; largest difference 1.20% (b)" in first
@@ -333,29 +357,23 @@ def test_sweep_section_gives_short_stalls_in_their_own_precision(tmp_path):
 
 def test_routing_rows_carry_their_time_scales_and_whether_tcp_kept_emulated_time():
     def run(robots, scale, tcp, pdf):
-        return {"run": f"{robots}-{scale}", "robots": robots, "comm_range": 5.0,
-                "laser_range": 2.0, "loss_pct": 0, "delay_ms": 0, "time_scale": scale,
-                "tcp_emulated": tcp, "pdf": pdf}  # fmt: skip
+        return routing_run(f"{robots}-{scale}", robots, scale, tcp, pdf)
 
     rows = tables.routing_rows([run(1, 30, True, 1.0), run(10, 6, False, 0.78),
                                 run(10, 6, True, 0.7)])  # fmt: skip
-    by = {r["robots"]: r for r in rows}
-    assert by[1]["time_scales"] == [30] and by[1]["tcp_emulated"] is True
-    assert by[10]["time_scales"] == [6] and by[10]["tcp_emulated"] is False
+    by = {r.robots: r for r in rows}
+    assert by[1].time_scales == (30,) and by[1].tcp_emulated is True
+    assert by[10].time_scales == (6,) and by[10].tcp_emulated is False
 
 
 def _routing_row(robots, scale, tcp):
-    row = {"comm_range": 5.0, "robots": robots, "n": 3, "time_scales": [scale],
-           "tcp_emulated": tcp}  # fmt: skip
-    for m in ("overhead_packets", "pdf", "delay_ms_median", "delay_ms_median_emulated",
-              "throughput_bps"):  # fmt: skip
-        row[f"{m}_mean"] = 1.0
-    return row
+    means = RoutingMeans(**{m: MeanRange(1.0) for m in tables.ROUTING_FIELDS})
+    return RoutingRow(5.0, robots, 3, means, (scale,), tcp)
 
 
 def test_the_routing_table_marks_pdf_and_delay_of_runs_whose_tcp_was_not_dilated():
     rows = [_routing_row(1, 30.0, True), _routing_row(10, 6.0, False)]
-    text = "\n".join(report._routing_section({"routing": rows, "routing_runs": []}))
+    text = "\n".join(report._routing_section(Tables(routing=rows)))
     lines = [line for line in text.splitlines() if line.startswith("| 5 |")]
     assert "†" not in lines[0] and lines[1].count("†") == 2  # PDF and emulated delay
     assert "† Ran dilated without TCP's retransmission timer dilated" in text
@@ -364,10 +382,10 @@ def test_the_routing_table_marks_pdf_and_delay_of_runs_whose_tcp_was_not_dilated
 
 def test_the_routing_table_says_tcp_was_dilated_when_it_was_at_every_scale():
     rows = [_routing_row(1, 30.0, True), _routing_row(10, 6.0, True)]
-    text = "\n".join(report._routing_section({"routing": rows, "routing_runs": []}))
+    text = "\n".join(report._routing_section(Tables(routing=rows)))
     assert "†" not in text
     assert "TCP's timers were dilated with each run's time scale" in text
     # One time scale: nothing to say about comparing across scales.
     rows = [_routing_row(1, 6.0, False), _routing_row(10, 6.0, False)]
-    text = "\n".join(report._routing_section({"routing": rows, "routing_runs": []}))
+    text = "\n".join(report._routing_section(Tables(routing=rows)))
     assert "†" not in text and "dilated" not in text

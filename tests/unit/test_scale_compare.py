@@ -8,12 +8,13 @@ from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
 
-def _row(steps, comm=20, robots=10, pdf=0.99, scale=1.0, requests=2.0):
-    return {
-        "routing": "aodv", "comm_range": comm, "robots": robots, "steps": steps,
-        "requests": requests, "pdf": pdf, "delay_ms": 0.3, "control_pkts_per_robot_s": 1.0,
-        "control_bytes_per_robot_s": 70.0, "time_scale": scale, "laser_range": 2.0,
-    }  # fmt: skip
+def _row(steps, comm=20, robots=10, pdf=0.99, scale=1.0, requests=2.0, tcp=True):
+    return sc.ScaleRun(
+        routing="aodv", laser_range=2.0, comm_range=comm, robots=robots, time_scale=scale,
+        tcp_emulated=tcp, steps=steps, requests=requests, pdf=pdf, delay_ms=0.3,
+        delay_mean_ms=None, retrans_per_flow=None, control_pkts_per_robot_s=1.0,
+        control_bytes_per_robot_s=70.0,
+    )  # fmt: skip
 
 
 def test_overlapping_intervals_agree_and_separated_ones_do_not():
@@ -46,7 +47,7 @@ def test_the_section_lists_both_sweeps_per_point_with_their_scales_and_what_was_
 
 def test_tcps_measures_across_scales_are_compared_only_where_tcp_kept_emulated_time():
     def rows(pdfs, scale, tcp):
-        return [{**_row(360, pdf=p, scale=scale), "tcp_emulated": tcp} for p in pdfs]
+        return [_row(360, pdf=p, scale=scale, tcp=tcp) for p in pdfs]
 
     real = sc.points(rows((0.67, 0.68, 0.69), 1.0, True))
     undilated = sc.points(rows((0.77, 0.78, 0.79), 6.0, False))
@@ -79,6 +80,6 @@ def test_a_runs_mean_delay_is_emulated_and_its_retransmissions_are_counted_per_f
     metrics = {"pdf": 0.9, "delay_ms_median": 0.01, "delay_ms_mean": 0.5, "tcp_flows": 4,
                "tcp_transmissions": 130, "tcp_segments_sent": 100}  # fmt: skip
     row = sc.run_row(run, metrics)
-    assert row["delay_mean_ms"] == 0.5 * 6  # wall ms x the time scale
-    assert row["retrans_per_flow"] == 30 / 4
-    assert sc.run_row(run, None)["retrans_per_flow"] is None
+    assert row.delay_mean_ms == 0.5 * 6  # wall ms x the time scale
+    assert row.retrans_per_flow == 30 / 4
+    assert sc.run_row(run, None).retrans_per_flow is None
