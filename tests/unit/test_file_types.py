@@ -16,7 +16,7 @@ import pytest
 
 from testbed.run.config import BY_NAME
 from testbed.run.resultconfig import CONFIG_KEYS, ResultConfig
-from tests.unit.test_result_file import _call_name, _scope
+from tests.unit.test_result_file import _call_name, _scope, tainted_names
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("testbed", "topology", "node", "aodv", "common")
@@ -159,27 +159,8 @@ def stats_reads(source: str) -> list[str]:
     scopes = [n for n in ast.walk(tree)
               if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda)]  # fmt: skip
     for fn in [tree, *scopes]:
-        tainted = set(STATS_MARKERS)
-        changed = True
-        while changed:  # names assigned (or looped over) from a statistics file's place
-            changed = False
-            for n in _scope(fn):
-                targets, value = [], None
-                if isinstance(n, ast.Assign):
-                    targets, value = n.targets, n.value
-                elif isinstance(n, ast.AnnAssign | ast.AugAssign | ast.NamedExpr):
-                    targets, value = [n.target], n.value
-                elif isinstance(n, ast.For | ast.comprehension):
-                    targets, value = [n.target], n.iter
-                elif isinstance(n, ast.withitem) and n.optional_vars is not None:
-                    targets, value = [n.optional_vars], n.context_expr
-                if value is None or not _reaches(value, tainted):
-                    continue
-                for t in targets:
-                    for name in ast.walk(t):
-                        if isinstance(name, ast.Name) and name.id not in tainted:
-                            tainted.add(name.id)
-                            changed = True
+        # names assigned (or looped over) from a statistics file's place
+        tainted = tainted_names(fn, STATS_MARKERS, _reaches)
         for n in _scope(fn):
             if isinstance(n, ast.Call) and _call_name(n) in RAW_READERS | {"open"}:
                 parts = [*n.args, *(k.value for k in n.keywords)]

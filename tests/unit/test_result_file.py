@@ -74,6 +74,34 @@ def _call_name(call: ast.Call) -> str | None:
     return f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else None
 
 
+def tainted_names(fn: ast.AST, seeds, reaches) -> set[str]:
+    """The names in `fn`'s own scope that are assigned (or looped over) from a value that
+    `reaches(value, names)` says comes from one of `seeds` or a name already found, until
+    no more are found."""
+    tainted = set(seeds)
+    changed = True
+    while changed:
+        changed = False
+        for n in _scope(fn):
+            targets, value = [], None
+            if isinstance(n, ast.Assign):
+                targets, value = n.targets, n.value
+            elif isinstance(n, ast.AnnAssign | ast.AugAssign | ast.NamedExpr):
+                targets, value = [n.target], n.value
+            elif isinstance(n, ast.For | ast.comprehension):
+                targets, value = [n.target], n.iter
+            elif isinstance(n, ast.withitem) and n.optional_vars is not None:
+                targets, value = [n.optional_vars], n.context_expr
+            if value is None or not reaches(value, tainted):
+                continue
+            for t in targets:
+                for name in ast.walk(t):
+                    if isinstance(name, ast.Name) and name.id not in tainted:
+                        tainted.add(name.id)
+                        changed = True
+    return tainted
+
+
 def raw_reads(source: str) -> list[str]:
     """Where `source` reads result.json by hand: `line: what`."""
     tree = ast.parse(source)
@@ -88,27 +116,8 @@ def raw_reads(source: str) -> list[str]:
         if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda)
     ]
     for fn in [tree, *scopes]:
-        tainted = set(MARKERS)
-        changed = True
-        while changed:  # names assigned (or looped over) from a path to result.json
-            changed = False
-            for n in _scope(fn):
-                targets, value = [], None
-                if isinstance(n, ast.Assign):
-                    targets, value = n.targets, n.value
-                elif isinstance(n, ast.AnnAssign | ast.AugAssign | ast.NamedExpr):
-                    targets, value = [n.target], n.value
-                elif isinstance(n, ast.For | ast.comprehension):
-                    targets, value = [n.target], n.iter
-                elif isinstance(n, ast.withitem) and n.optional_vars is not None:
-                    targets, value = [n.optional_vars], n.context_expr
-                if value is None or not _mentions(value, tainted):
-                    continue
-                for t in targets:
-                    for name in ast.walk(t):
-                        if isinstance(name, ast.Name) and name.id not in tainted:
-                            tainted.add(name.id)
-                            changed = True
+        # names assigned (or looped over) from a path to result.json
+        tainted = tainted_names(fn, MARKERS, _mentions)
         for n in _scope(fn):
             if isinstance(n, ast.Call) and _call_name(n) in READERS:
                 parts = [*n.args, *(k.value for k in n.keywords)]
