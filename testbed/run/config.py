@@ -312,6 +312,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--quiet", action="store_true", help="no progress line (default off)")
     a("--replace", action="store_true",
       help="--out holds an earlier run: delete it first (default: refuse)")  # fmt: skip
+    a("--steps-over", metavar="FILE",
+      help="create FILE when the last step is done, before the teardown: a sweep starts its "
+      "next run then (default: none)")  # fmt: skip
 
 
 def _view(text: str | None) -> str | None:

@@ -101,7 +101,8 @@ def main(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     name = args.name or "run" + secrets.token_hex(2)
     replace = getattr(args, "replace", False)
-    result = run(cfg, args.out, name, progress=not args.quiet, replace=replace)
+    result = run(cfg, args.out, name, progress=not args.quiet, replace=replace,
+                 steps_over=getattr(args, "steps_over", None))  # fmt: skip
     print(summary_line(result, args.out), flush=True)
     for line in (fidelity_warning(result), network_note(result)):
         if line:
@@ -142,13 +143,15 @@ def run(
     progress: bool = True,
     replace: bool = False,
     cpp_robots: frozenset[int] | None = None,
+    steps_over: str | None = None,
 ) -> RunResult:
     """Do one run into directory `out`; returns its RunResult (also in out/result.json).
     UsageError, before anything is made, for a run that cannot be done or a directory that
     holds a run (unless `replace`). `cpp_robots` (tests of the robots' contract): a mixed
-    team, those robots the C++ robot and the others the Python robot, whatever cfg.robot."""
+    team, those robots the C++ robot and the others the Python robot, whatever cfg.robot.
+    `steps_over`: a file created when the last step is done (`Run.execute`)."""
     prepared = prepare(cfg, out, name, replace)
-    return runresults.write(Run(prepared, progress, cpp_robots).execute())
+    return runresults.write(Run(prepared, progress, cpp_robots, steps_over).execute())
 
 
 @dataclass(frozen=True)
@@ -173,9 +176,14 @@ class Run:
     """One prepared run: `execute()` starts it, steps it and returns its record."""
 
     def __init__(
-        self, prepared: PreparedRun, progress: bool = True, cpp_robots: frozenset[int] | None = None
+        self,
+        prepared: PreparedRun,
+        progress: bool = True,
+        cpp_robots: frozenset[int] | None = None,
+        steps_over: str | None = None,
     ) -> None:
         self.prep = prepared
+        self.steps_over = steps_over
         self.cfg = prepared.cfg
         self.n = prepared.robots
         self.progress = progress
@@ -211,6 +219,7 @@ class Run:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
                 self.parts.mark("steps")
+                self._say_steps_over()
                 self._end_processes(started)
             self.parts.mark("network_down")
         except (TestbedError, ForkServerError) as e:
@@ -338,6 +347,19 @@ class Run:
         )
 
     # -- finish -------------------------------------------------------------------------------
+
+    def _say_steps_over(self) -> None:
+        """--steps-over FILE: the steps are done and what is left (the processes' exit, the
+        routing files, the network's teardown, the results) needs no deadline, so a sweep may
+        start its next run beside it (testbed.sweep.runner). A file that cannot be made only
+        costs that overlap."""
+        if self.steps_over is None:
+            return
+        try:
+            with open(self.steps_over, "x"):
+                pass
+        except OSError as e:
+            log.warning("--steps-over %s: cannot create it: %s", self.steps_over, e.strerror)
 
     def _end_processes(self, started: Started) -> None:
         """Tell everyone the run is over and give them a moment to write their logs."""

@@ -17,25 +17,30 @@ The rules, in the order they are tried (each is cited at its branch below):
    not the load, is to blame. The time scale is kept; the run is redone (at most 3
    attempts) only if it missed more than REDO_MISS in all or was not faithful, else kept
    as it is.
-3. Over the limit outside stalls while another run shared the machine, under a load limit
+3. Over the limit outside stalls while another run's tail (its teardown, after its steps:
+   testbed.sweep.runner) overlapped this run's set-up or steps: runs of this team size
+   overlap tails no more (a large team, short of CPU, may suffer from a tail that a lone
+   robot does not notice); redo (2 attempts). The overlap is the cheapest thing to give
+   up, so it goes first.
+4. Over the limit outside stalls while another run shared the machine, under a load limit
    or a cpu limit (or both): each limit falls to 80% of the most of its measure that was in
    flight while this run ran, the load limit below the load seen, the cpu limit below the
    estimated cores seen (testbed.sweep.cores); redo (2 attempts). Once the cpu limit is
    below what two runs need, the sweep runs one at a time.
-4. The same without either limit, when more than one run was allowed at its start: one run
+5. The same without either limit, when more than one run was allowed at its start: one run
    fewer at a time; redo (2 attempts).
-5. Over the limit outside stalls while alone: the machine is slower than the sweep file's
+6. Over the limit outside stalls while alone: the machine is slower than the sweep file's
    time scales assume (a shared machine varies). Later runs of this team size get their
    time scale multiplied by SLOWDOWN (down to MIN_SCALE_FACTOR of the file's), and this
    run is redone (3 attempts) if it missed more than REDO_MISS, else kept (an unfaithful
    one is redone once, at the lowest factor too). Only this team
    size: a small team is bound by the latency of a step's round trip, a large one by CPU,
    so one says little about the other; each finds its own scale.
-6. Within the limit, but not faithful (testbed.run.fidelity: plans applied late, timers
+7. Within the limit, but not faithful (testbed.run.fidelity: plans applied late, timers
    late): the load made emulated time run ahead of the work, as with missed deadlines, so
-   rules 3 to 5 apply as they would to a late run, and the run is redone once (2 attempts)
+   rules 3 to 6 apply as they would to a late run, and the run is redone once (2 attempts)
    at the backed-off scale or concurrency: its results changed with the dilation.
-7. A faithful run of a slowed-down team size that missed at most CLEAN_MISS outside stalls
+8. A faithful run of a slowed-down team size that missed at most CLEAN_MISS outside stalls
    counts as clean; after CLEAN_RUNS_TO_SPEED_UP clean runs since the last change the factor goes
    back up a notch (divided by SLOWDOWN, never past the team size's ceiling: the file's
    scale, or what calibration found). Before stalls were told apart, a ratchet that needed
@@ -62,7 +67,7 @@ MIN_SCALE_FACTOR = 0.25
 REDO_MISS = 0.05  # a run alone that missed more than this is redone (slower); less is kept
 CLEAN_MISS = 0.005  # a run this clean counts towards speeding up again
 CLEAN_RUNS_TO_SPEED_UP = 3
-LOAD_BACKOFF = 0.8  # rule 3: the new load (or cpu) limit, as a share of what the late run saw
+LOAD_BACKOFF = 0.8  # rule 4: the new load (or cpu) limit, as a share of what the late run saw
 MAX_SCALE_FACTOR = 4.0  # calibration may take a team size up to 4 times the file's scale
 
 
@@ -74,6 +79,7 @@ class Outcome:
     miss: float | None  # deadline_miss_fraction (None: the run did not say)
     miss_outside_stalls: float | None
     shared: bool = False  # another run was in flight at some time during this one
+    overlapped: bool = False  # another run's tail overlapped its set-up or steps
     load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.plan.run_load)
     cpu_seen: float = 0.0  # the most estimated cores in flight while it ran (testbed.sweep.cores)
     jobs_at_start: int = 1  # the concurrency allowed when it started
@@ -92,6 +98,7 @@ class State:
     scale_factors: dict[int, float] = field(default_factory=dict)  # robots -> factor
     clean_runs: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
     ceilings: dict[int, float] = field(default_factory=dict)  # robots -> highest factor
+    no_overlap: frozenset[int] = frozenset()  # team sizes that wait for others' tails
 
     def factor(self, robots: int) -> float:
         return self.scale_factors.get(robots, 1.0)
@@ -123,7 +130,7 @@ def _back_off(o: Outcome, state: State, change: dict, what: str, attempts: int) 
 
 
 def _lower_limits(o: Outcome, state: State) -> Decision:
-    """Rule 3: each limit the sweep has falls below what this shared run saw in flight (the
+    """Rule 4: each limit the sweep has falls below what this shared run saw in flight (the
     run could not tell which of them was too high), never up."""
     change: dict = {}
     words = []
@@ -137,20 +144,27 @@ def _lower_limits(o: Outcome, state: State) -> Decision:
 
 
 def _relieve(o: Outcome, state: State) -> Decision:
-    """Rules 3 to 5: less load (a lower load or cpu limit, fewer jobs) or, alone, a lower
-    time scale for this team size; an unfaithful run is redone at least once."""
+    """Rules 3 to 6: no overlap of tails, less load (a lower load or cpu limit, fewer jobs)
+    or, alone, a lower time scale for this team size; an unfaithful run is redone at least
+    once."""
     n, miss = o.robots, o.miss
     limited = state.load_limit is not None or state.cpu_limit is not None
+    if o.overlapped and n not in state.no_overlap:
+        # Rule 3: another run's tail overlapped it: none for its team size, this run again.
+        return _back_off(
+            o, replace(state, no_overlap=state.no_overlap | {n}), {"robots": n, "overlap": False},
+            f"teams of {n} no longer start during another run's teardown", attempts=2,
+        )  # fmt: skip
     if limited and o.shared:
-        # Rule 3: shared under a load or cpu limit: the limits fall below what this run saw.
+        # Rule 4: shared under a load or cpu limit: the limits fall below what this run saw.
         return _lower_limits(o, state)
     if not limited and o.jobs_at_start > 1:
-        # Rule 4: shared by job count: one run fewer at a time.
+        # Rule 5: shared by job count: one run fewer at a time.
         jobs = max(1, min(state.jobs, o.jobs_at_start) - 1)
         return _back_off(o, replace(state, jobs=jobs), {"jobs": jobs},
                          f"concurrency down to {jobs}", attempts=2)  # fmt: skip
     if not o.shared and state.factor(n) > MIN_SCALE_FACTOR:
-        # Rule 5: alone and still late: this team size slows down, this run again if bad.
+        # Rule 6: alone and still late: this team size slows down, this run again if bad.
         new = max(MIN_SCALE_FACTOR, state.factor(n) * SLOWDOWN)
         slower = replace(
             state,
@@ -164,7 +178,7 @@ def _relieve(o: Outcome, state: State) -> Decision:
             attempts=3 if bad else 2 if o.faithful is False else 1,
         )  # fmt: skip
     if o.faithful is False:
-        # Rule 5 at the lowest factor: nothing left to relieve, but its results changed.
+        # Rule 6 at the lowest factor: nothing left to relieve, but its results changed.
         return _back_off(o, state, {"robots": n}, "at the lowest time scale", attempts=2)
     return Decision(state)
 
@@ -183,17 +197,17 @@ def decide(o: Outcome, state: State) -> Decision:
                 d = _back_off(o, state, {"in_host_stalls": True},
                               "the host's stalls, time scale kept", attempts=3)  # fmt: skip
         else:
-            d = _relieve(o, state)  # rules 3 to 5
+            d = _relieve(o, state)  # rules 3 to 6
         d = replace(d, words=words + d.words)
     elif o.faithful is False:
-        # Rule 6: in time but not faithful: relieved as a late run would be, redone once.
+        # Rule 7: in time but not faithful: relieved as a late run would be, redone once.
         words = ", not faithful" + (f" ({o.fidelity_reason})" if o.fidelity_reason else "")
         d = _relieve(o, state)
         d = replace(d, words=words + d.words)
     s = d.state
     clean = _number(ours) and ours <= CLEAN_MISS and o.faithful is not False
     if clean and s.factor(n) < s.ceiling(n):
-        # Rule 7: a clean run of a slowed-down size; enough of them speed it up a notch.
+        # Rule 8: a clean run of a slowed-down size; enough of them speed it up a notch.
         runs = s.clean_runs.get(n, 0) + 1
         if runs < CLEAN_RUNS_TO_SPEED_UP:
             return replace(d, state=replace(s, clean_runs={**s.clean_runs, n: runs}))

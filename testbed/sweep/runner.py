@@ -30,7 +30,13 @@ and gives a large one the machine alone. With `cpu_limit` (cores), only while th
 cores of the runs in flight add up to at most that: c x load at the time scale the run will
 get, c learnt from what the sweep's finished runs measured (testbed.sweep.cores); without
 --jobs the cap is then the core count, so that the estimate alone decides. A run must fit
-every limit set, and a run always starts when none is in flight. The queue is served
+every limit set, and a run always starts when none is in flight. A run whose steps are done
+(it said so by creating the file `--steps-over` names: `DIR/logs/R.steps-over`) is in its
+tail: its processes exit, its network goes down and its results are written, none of it
+with a deadline, and it no longer counts as in flight, so the next run's set-up overlaps
+that tail instead of waiting for it (about a second a run: a quarter of a run's fixed
+cost). A run that was late while it overlapped a tail turns the overlap off for its team
+size (testbed.sweep.policy). The queue is served
 first-fit: the first waiting run that fits starts. What happens when a run misses step
 deadlines (the concurrency backs off, a team size's time scale goes down and up again, a run
 is redone) is decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only
@@ -141,6 +147,8 @@ class _Child:
     load_seen: float = 0.0  # the most load in flight while this one ran
     cores: float = 0.0  # its estimated cores when it started (testbed.sweep.cores)
     cpu_seen: float = 0.0  # the most estimated cores in flight while this one ran
+    tail: bool = False  # its steps are done (it created its --steps-over file)
+    overlapped: bool = False  # another run's tail overlapped its set-up or steps
 
 
 class Sweep:
@@ -268,23 +276,33 @@ class Sweep:
     # -- one child
 
     def _spawn(
-        self, config: RunConfig, rdir: Path, log_path: Path, title: str
+        self,
+        config: RunConfig,
+        rdir: Path,
+        log_path: Path,
+        title: str,
+        steps_over: Path | None = None,
     ) -> tuple[subprocess.Popen | Forked, BinaryIO]:
         """Start one `testbed run` of `config` into `rdir` (removed first if there): from
-        the run server, or the stand-in command with the death signal towards the sweep.
-        Returns (process, its open log file, which the caller closes)."""
+        the run server, or the stand-in command with the death signal towards the sweep;
+        with `--steps-over steps_over` when given (removed first if there). Returns
+        (process, its open log file, which the caller closes)."""
         if rdir.exists():
             shutil.rmtree(rdir)
         log_path.parent.mkdir(parents=True, exist_ok=True)
+        extra: list[str] = []
+        if steps_over is not None:
+            steps_over.unlink(missing_ok=True)
+            extra = ["--steps-over", str(steps_over)]
         flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC
         log_file = os.fdopen(os.open(log_path, flags, 0o644), "wb")  # the caller closes it
         proc: subprocess.Popen | Forked
         if self.forker is not None:
-            proc = self.forker.start(run_argv([], config, rdir), log_path, title)
+            proc = self.forker.start(run_argv([], config, rdir) + extra, log_path, title)
         else:
             assert self.command is not None  # run() starts the forker when there is none
             proc = subprocess.Popen(
-                run_argv(self.command, config, rdir),
+                run_argv(self.command, config, rdir) + extra,
                 stdin=subprocess.DEVNULL,
                 stdout=log_file,
                 stderr=subprocess.STDOUT,
@@ -309,7 +327,7 @@ class Sweep:
             self.view_owner = run.run_id
         proc, log_file = self._spawn(
             config, run_dir(self.out, run.run_id), self.out / "logs" / f"{run.run_id}.log",
-            run.run_id,
+            run.run_id, self._steps_over_file(run.run_id),
         )  # fmt: skip
         self.status[run.run_id] = {
             "status": "running",
@@ -323,9 +341,27 @@ class Sweep:
         child.load_seen, child.cpu_seen = child.load, child.cores
         return child
 
+    def _steps_over_file(self, run_id: str) -> Path:
+        """The file run `run_id` creates when its steps are done (`testbed run --steps-over`)."""
+        return self.out / "logs" / f"{run_id}.steps-over"
+
+    def _watch_tails(self, children: dict[str, _Child]) -> None:
+        """Mark the runs whose steps are done (their --steps-over file exists) as in their
+        tail; the runs still before or in their steps are then overlapped by it, unless
+        their team size waits for tails (then they shared the machine with it as they would
+        with any run started beside them)."""
+        for child in children.values():
+            if child.tail or not self._steps_over_file(child.run.run_id).exists():
+                continue
+            child.tail = True
+            for other in children.values():
+                if not other.tail and other.run.config.robots not in self.schedule.no_overlap:
+                    other.overlapped = True
+
     def _finish(self, child: _Child, queue: deque) -> str:
         """Record a child that exited; returns the event line for the progress display."""
         child.log_file.close()
+        self._steps_over_file(child.run.run_id).unlink(missing_ok=True)
         if self.view_owner == child.run.run_id:
             self.view_owner = None
         run = child.run
@@ -358,6 +394,7 @@ class Sweep:
             # Misses while the host stalled the whole machine (testbed.run.stalls) are told apart.
             miss_outside_stalls=result.deadline_miss_fraction_outside_stalls if result else None,
             shared=child.shared,
+            overlapped=child.overlapped,
             load_seen=child.load_seen,
             cpu_seen=child.cpu_seen,
             jobs_at_start=child.jobs_at_start,
@@ -461,16 +498,20 @@ class Sweep:
             self._write_state()
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
-                while queue and len(children) < self.jobs and self.stop_signal is None:
+                self._watch_tails(children)
+                while queue and self.stop_signal is None:
                     run = self.schedule.next_fitting(queue, children)
                     if run is None:
                         break
+                    flying = self.schedule.beside(run, children)
                     child = self._start(run)
+                    child.overlapped = len(flying) < len(children)
                     children[run.run_id] = child
-                    load = sum(c.load for c in children.values())
-                    cores = sum(c.cores for c in children.values())
-                    for c in children.values():
-                        c.shared = c.shared or len(children) > 1
+                    flying.append(child)
+                    load = sum(c.load for c in flying)
+                    cores = sum(c.cores for c in flying)
+                    for c in flying:
+                        c.shared = c.shared or len(flying) > 1
                         c.load_seen = max(c.load_seen, load)
                         c.cpu_seen = max(c.cpu_seen, cores)
                     self._write_state()

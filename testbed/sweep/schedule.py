@@ -48,6 +48,10 @@ class Schedule:
         self.ceilings: dict[int, float] = {}
         self.calibration: dict[int, list[tuple[float, float, bool]]] = {}
         self.backoffs: list[dict] = []
+        # The team sizes whose runs wait for other runs' tails (their teardown, after their
+        # steps) to end; the others start beside a tail. The policy adds a team size when
+        # one of its runs that overlapped a tail was late.
+        self.no_overlap: frozenset[int] = frozenset()
 
     @property
     def limited(self) -> bool:
@@ -82,28 +86,42 @@ class Schedule:
             self.measured.append(measured)
             self._rates.clear()
 
+    def beside(self, run: PlannedRun, children: dict) -> list:
+        """The runs `run` would start beside: the children (testbed.sweep.runner._Child)
+        in flight, those in their tail left out unless its team size waits for tails."""
+        if run.config.robots in self.no_overlap:
+            return list(children.values())
+        return [c for c in children.values() if not c.tail]
+
     def fits(self, run: PlannedRun, children: dict) -> bool:
-        """Whether `run` fits beside the runs in flight: their loads and its own within the
-        load limit, their estimated cores and its own within the cpu limit (each when set)."""
+        """Whether `run` fits beside the runs in flight (`beside`): always when there is
+        none; else fewer than --jobs of them, their loads and its own within the load limit,
+        their estimated cores and its own within the cpu limit (each when set)."""
+        flying = self.beside(run, children)
+        if not flying:
+            return True
+        if len(flying) >= self.jobs:
+            return False
         if self.load_limit is not None:
-            in_flight = sum(c.load for c in children.values())
+            in_flight = sum(c.load for c in flying)
             if in_flight + run_load(run) > self.load_limit + 1e-9:
                 return False
         if self.cpu_limit is not None:
-            in_flight = sum(c.cores for c in children.values())
+            in_flight = sum(c.cores for c in flying)
             if in_flight + self.estimate(run) > self.cpu_limit + 1e-9:
                 return False
         return True
 
     def next_fitting(self, queue: deque, children: dict) -> PlannedRun | None:
-        """Take the first waiting run that fits (any run, when nothing is in flight); None
-        when none fits."""
-        if not children:
-            return queue.popleft()
+        """Take the first waiting run that fits; None when none fits. A run whose team size
+        waits for tails is not overtaken while one ends (a second or so): a redone run
+        would otherwise wait for a moment without tails, the sweep's end."""
         for i, run in enumerate(queue):
             if self.fits(run, children):
                 del queue[i]
                 return run
+            if run.config.robots in self.no_overlap and any(c.tail for c in children.values()):
+                return None
         return None
 
     def policy_state(self) -> sweeppolicy.State:
@@ -114,12 +132,14 @@ class Schedule:
             scale_factors=dict(self.scale_factors),
             clean_runs=dict(self.clean_runs),
             ceilings=dict(self.ceilings),
+            no_overlap=self.no_overlap,
         )
 
     def apply(self, d: sweeppolicy.Decision, run_id: str) -> None:
         """Take up what the policy decided after run `run_id`: its state and back-offs."""
         self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
         self.cpu_limit = d.state.cpu_limit
+        self.no_overlap = d.state.no_overlap
         self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
         self.backoffs += [{"run": run_id, **record} for record in d.backoffs]
 

@@ -45,7 +45,25 @@ def test_rule2_misses_in_host_stalls_keep_the_scale_and_redo_only_a_bad_run():
     assert mild.words == ", missed 3.0% of step deadlines (2.6% in host stalls)"
 
 
-def test_rule3_a_shared_run_under_a_load_limit_lowers_it_to_80_percent_of_what_it_saw():
+def test_rule3_a_run_late_beside_a_tail_gives_up_the_overlap_first():
+    """Late while another run's tail overlapped it: its team size overlaps tails no more,
+    nothing else changes (the limits, the jobs, the time scale), and the run is redone once;
+    an unfaithful one the same. Once its team size waits for tails, the other rules act."""
+    state = State(jobs=2, cpu_limit=1.6, no_overlap=frozenset({3}))
+    for late in (outcome(0.03, overlapped=True, shared=True, jobs_at_start=2),
+                 outcome(0.0, overlapped=True, faithful=False)):  # fmt: skip
+        d = decide(late, state)
+        assert d.state == replace(state, no_overlap=frozenset({3, 5})) and d.redo
+        assert d.backoffs[0]["overlap"] is False and d.backoffs[0]["robots"] == 5
+        assert "teams of 5 no longer start during another run's teardown, redoing it" in d.words
+        assert not decide(replace(late, attempts=2), state).redo
+    off = decide(outcome(0.03, overlapped=True, shared=True, robots=3), state)
+    assert "cpu_limit" in off.backoffs[0] and "overlap" not in off.backoffs[0]
+    alone = decide(outcome(0.03), state)
+    assert alone.state.no_overlap == {3} and "time_scale_factor" in alone.backoffs[0]
+
+
+def test_rule4_a_shared_run_under_a_load_limit_lowers_it_to_80_percent_of_what_it_saw():
     d = decide(outcome(0.02, shared=True, load_seen=40.0), State(jobs=4, load_limit=50.0))
     assert d.state.load_limit == 32.0 and d.state.jobs == 4 and d.redo
     assert d.backoffs == ({"deadline_miss_fraction": 0.02, "load_limit": 32.0},)
@@ -57,7 +75,7 @@ def test_rule3_a_shared_run_under_a_load_limit_lowers_it_to_80_percent_of_what_i
                   State(jobs=4, load_limit=20.0)).state.load_limit == 20.0  # fmt: skip
 
 
-def test_rule3_a_shared_unfaithful_run_under_a_cpu_limit_lowers_it_to_80_percent_of_what_it_saw():
+def test_rule4_a_shared_unfaithful_run_under_a_cpu_limit_lowers_it_to_80_percent_of_what_it_saw():
     state = State(jobs=2, cpu_limit=1.8)
     d = decide(outcome(0.0, faithful=False, shared=True, cpu_seen=1.5, jobs_at_start=2), state)
     assert d.state.cpu_limit == 1.2 and d.state.jobs == 2 and d.redo
@@ -72,7 +90,7 @@ def test_rule3_a_shared_unfaithful_run_under_a_cpu_limit_lowers_it_to_80_percent
                   State(jobs=2, cpu_limit=0.9)).state.cpu_limit == 0.9  # fmt: skip
 
 
-def test_rule3_with_both_limits_lowers_each_below_what_the_run_saw():
+def test_rule4_with_both_limits_lowers_each_below_what_the_run_saw():
     d = decide(outcome(0.02, shared=True, load_seen=40.0, cpu_seen=1.5),
                State(jobs=2, load_limit=50.0, cpu_limit=1.8))  # fmt: skip
     assert (d.state.load_limit, d.state.cpu_limit) == (32.0, 1.2) and d.redo
@@ -80,8 +98,8 @@ def test_rule3_with_both_limits_lowers_each_below_what_the_run_saw():
 
 
 def test_a_run_alone_under_a_cpu_limit_slows_its_team_size_down_as_rule5_says():
-    """Alone, the limit is not to blame (rule 5), even when two runs were allowed at its
-    start; rule 4's one job fewer is for sweeps without limits."""
+    """Alone, the limit is not to blame (rule 6), even when two runs were allowed at its
+    start; rule 5's one job fewer is for sweeps without limits."""
     state = State(jobs=2, cpu_limit=1.8)
     d = decide(outcome(0.0, faithful=False, cpu_seen=0.9, jobs_at_start=2), state)
     assert d.state.cpu_limit == 1.8 and d.state.jobs == 2
@@ -89,7 +107,7 @@ def test_a_run_alone_under_a_cpu_limit_slows_its_team_size_down_as_rule5_says():
     assert d.backoffs == decide(outcome(0.0, faithful=False), State(jobs=1)).backoffs
 
 
-def test_rule4_without_a_load_limit_one_run_fewer_at_a_time():
+def test_rule5_without_a_load_limit_one_run_fewer_at_a_time():
     d = decide(outcome(0.02, shared=True, jobs_at_start=3), State(jobs=3))
     assert d.state.jobs == 2 and d.redo
     assert d.backoffs == ({"deadline_miss_fraction": 0.02, "jobs": 2},)
@@ -98,7 +116,7 @@ def test_rule4_without_a_load_limit_one_run_fewer_at_a_time():
     assert decide(outcome(0.02, jobs_at_start=2), State(jobs=4)).state.jobs == 1
 
 
-def test_rule5_alone_and_late_slows_its_team_size_down_and_redoes_only_a_bad_run():
+def test_rule6_alone_and_late_slows_its_team_size_down_and_redoes_only_a_bad_run():
     state = State(jobs=1, scale_factors={3: 0.5})
     d = decide(outcome(0.02, robots=5), state)
     assert d.state.scale_factors == {3: 0.5, 5: SLOWDOWN} and d.state.clean_runs == {5: 0}
@@ -112,7 +130,7 @@ def test_rule5_alone_and_late_slows_its_team_size_down_and_redoes_only_a_bad_run
     assert not decide(outcome(0.06, robots=5, attempts=3), state).redo
 
 
-def test_rule5_stops_at_the_floor():
+def test_rule6_stops_at_the_floor():
     near = State(jobs=1, scale_factors={5: 0.27})
     assert decide(outcome(0.02), near).state.scale_factors[5] == MIN_SCALE_FACTOR
     floor = State(jobs=1, scale_factors={5: MIN_SCALE_FACTOR})
@@ -120,7 +138,7 @@ def test_rule5_stops_at_the_floor():
     assert d.state == floor and not d.redo and d.backoffs == ()
 
 
-def test_rule6_clean_runs_speed_a_slowed_size_up_a_notch_never_past_the_file():
+def test_rule8_clean_runs_speed_a_slowed_size_up_a_notch_never_past_the_file():
     state = State(jobs=1, scale_factors={5: SLOWDOWN})
     for i in range(1, CLEAN_RUNS_TO_SPEED_UP):
         d = decide(outcome(0.004), state)
@@ -136,7 +154,7 @@ def test_rule6_clean_runs_speed_a_slowed_size_up_a_notch_never_past_the_file():
     assert decide(outcome(0.006), State(jobs=1, scale_factors={5: 0.5})).state.clean_runs == {}
 
 
-def test_rule6_counts_a_clean_run_after_rule2_kept_the_scale():
+def test_rule8_counts_a_clean_run_after_rule2_kept_the_scale():
     state = State(jobs=1, scale_factors={5: 0.5})
     d = decide(outcome(0.03, ours=0.001), state)  # all but 0.1% in host stalls
     assert d.state.clean_runs == {5: 1}
@@ -177,7 +195,7 @@ def test_a_calibrated_ceiling_above_the_file_lets_a_slowed_team_climb_back_to_it
     assert 1.5 < s.factor(3) <= 2.0
 
 
-def test_rule6_an_unfaithful_run_alone_slows_its_team_size_and_is_redone_once():
+def test_rule7_an_unfaithful_run_alone_slows_its_team_size_and_is_redone_once():
     state = State(jobs=1)
     o = outcome(0.002, faithful=False, fidelity_reason="30% of plans late")
     d = decide(o, state)
@@ -191,7 +209,7 @@ def test_rule6_an_unfaithful_run_alone_slows_its_team_size_and_is_redone_once():
     assert not again.redo and again.state.factor(5) == pytest.approx(SLOWDOWN**2)
 
 
-def test_rule6_an_unfaithful_shared_run_lowers_the_concurrency_or_the_load_limit():
+def test_rule7_an_unfaithful_shared_run_lowers_the_concurrency_or_the_load_limit():
     d = decide(outcome(0.0, faithful=False, shared=True, jobs_at_start=3), State(jobs=3))
     assert d.state.jobs == 2 and d.redo and d.state.scale_factors == {}
     d = decide(outcome(0.0, faithful=False, shared=True, load_seen=10.0),
@@ -211,7 +229,7 @@ def test_a_faithful_run_or_one_without_a_verdict_changes_nothing():
         assert d == Decision(State(jobs=1))
 
 
-def test_rule7_an_unfaithful_run_is_not_clean():
+def test_rule8_an_unfaithful_run_is_not_clean():
     state = State(jobs=1, scale_factors={5: 0.5})
     assert decide(outcome(0.0, faithful=True), state).state.clean_runs == {5: 1}
     assert decide(outcome(0.0, faithful=False), state).state.clean_runs == {5: 0}

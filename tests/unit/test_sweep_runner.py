@@ -29,7 +29,7 @@ for f in ("--comm-range", "--laser-range", "--time-scale", "--loss", "--delay"):
 p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
 p.add_argument("--coordination"); p.add_argument("--start")
 p.add_argument("--capture", action="store_true"); p.add_argument("--quiet", action="store_true")
-p.add_argument("--view")
+p.add_argument("--view"); p.add_argument("--steps-over")
 a = p.parse_args()
 signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 t_start = time.monotonic()
@@ -76,6 +76,11 @@ if per_load:
     cores = float(per_load) * (a.robots + 1) * a.time_scale
     res["cpu_s"] = {"robots": cores * wall, "display": 0.0, "world": 0.0, "routing": 0.0}
     res["wall_parts_s"] = {"steps": wall}
+t_steps = time.monotonic()
+tail = os.environ.get("STANDIN_TAIL")  # seconds of teardown after its steps
+if tail and a.steps_over:
+    open(a.steps_over, "x").close()
+    time.sleep(float(tail))
 tmp = os.path.join(a.out, "result.json.tmp")
 with open(tmp, "w") as f:
     json.dump(res, f)
@@ -83,7 +88,7 @@ os.replace(tmp, os.path.join(a.out, "result.json"))
 times = os.environ.get("STANDIN_TIMES")
 if times:
     with open(os.path.join(times, str(os.getpid())), "w") as f:
-        f.write(f"{t_start} {time.monotonic()} {a.robots} {a.time_scale}")
+        f.write(f"{t_start} {time.monotonic()} {a.robots} {a.time_scale} {t_steps}")
 """
 
 SWEEP = """
@@ -269,7 +274,7 @@ def test_load_limit_packs_small_teams_and_never_overloads(env):
     out = env["tmp"] / "out"
     r = run_sweep(env, out, "--jobs", "3", STANDIN_SLEEP="0.6", STANDIN_TIMES=str(times))
     assert r.returncode == 0, r.stderr
-    spans = [tuple(float(v) for v in p.read_text().split()) for p in times.iterdir()]
+    spans = [tuple(float(v) for v in p.read_text().split()[:4]) for p in times.iterdir()]
     assert sorted((int(n), ts) for _, _, n, ts in spans) == [(1, 10), (1, 10), (2, 8), (2, 8),
                                                             (3, 6), (3, 6)]  # fmt: skip
     overlapped = False
@@ -294,7 +299,7 @@ def spans_by_run(env, times: Path) -> dict[str, tuple[float, float]]:
     run a process made)."""
     out = {}
     for p in times.iterdir():
-        t0, t1, _, _ = p.read_text().split()
+        t0, t1, *_ = p.read_text().split()
         rid = Path((env["pids"] / p.name).read_text()).name
         out[rid] = (float(t0), float(t1))
     return out
@@ -365,7 +370,7 @@ def test_a_shared_run_late_under_a_cpu_limit_lowers_it_and_is_redone(env):
                                     "cpu_limit": 0.36}  # fmt: skip
     assert {e["id"]: e["attempts"] for e in state["runs"]}["n01-c5-l2-k1"] == 2
     # The redo (0.4 cores measured) does not fit beside the other run under 0.36: it ran
-    # alone, late again, and that is the team's time scale (rule 5), not the limit.
+    # alone, late again, and that is the team's time scale (rule 6), not the limit.
     assert [set(b) - {"run", "deadline_miss_fraction"} for b in state["backoffs"]] == [
         {"cpu_limit"}, {"robots", "time_scale_factor"}]  # fmt: skip
 
@@ -523,9 +528,66 @@ def test_view_goes_to_one_run_at_a_time(env, tmp_path):
                           for v in viewed)  # fmt: skip
     spans = {}
     for f in times.iterdir():
-        t0, t1, robots, _ = f.read_text().split()
+        t0, t1, robots, *_ = f.read_text().split()
         spans[f.name] = (float(t0), float(t1))
     # Runs ran two at a time, yet the view was never handed to two at once: count overlaps.
     view_starts = sorted(float((out / "runs" / v / "view.txt").read_text().split()[1])
                          for v in viewed)  # fmt: skip
     assert len(view_starts) < len(spans)  # not every run got it (the other one was running)
+
+
+def tail_spans(env, times: Path) -> list[tuple[float, float, float]]:
+    """(start, steps done, end) of every stand-in that ran to its end, by start."""
+    spans = []
+    for p in times.iterdir():
+        t0, t1, _, _, ts = p.read_text().split()
+        spans.append((float(t0), float(ts), float(t1)))
+    return sorted(spans)
+
+
+def test_the_next_run_starts_during_the_tail_of_the_last(env):
+    """One run at a time, each with 0.4 s of tail after its steps: the next run starts once
+    the last one said its steps were done, before it exits, and no two runs step at once;
+    the steps-over files are gone at the end."""
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.2", STANDIN_TAIL="0.4",
+                  STANDIN_TIMES=str(times))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    spans = tail_spans(env, times)
+    assert len(spans) == 6
+    for (_, steps_done, end), (start, next_steps_done, _) in zip(spans, spans[1:], strict=False):
+        assert steps_done <= start < end  # in the tail: overlapped
+        assert next_steps_done > steps_done
+    for i, (t0, ts, _) in enumerate(spans):  # no two runs' steps at once
+        assert all(ts <= s0 or s1 <= t0 for j, (s0, s1, _) in enumerate(spans) if j != i)
+    assert not list((out / "logs").glob("*.steps-over"))
+    state = json.loads((out / "sweep.json").read_text())
+    assert not state["backoffs"]
+
+
+def test_a_run_late_beside_a_tail_turns_the_overlap_off_for_its_team_size(env):
+    """A lone robot's run that missed deadlines while another's tail went on: lone robots
+    give up the overlap (rule 3) and the run is redone after every run before it exited,
+    while teams of 2 and 3 still start during the tail before them."""
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.2", STANDIN_TAIL="0.4",
+                  STANDIN_TIMES=str(times), STANDIN_MISS="0.05",
+                  STANDIN_MISS_IDS="n01-c20-l2-k1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "teams of 1 no longer start during another run's teardown, redoing it" in r.stderr
+    state = json.loads((out / "sweep.json").read_text())
+    assert state["backoffs"][0] == {"run": "n01-c20-l2-k1", "deadline_miss_fraction": 0.05,
+                                    "robots": 1, "overlap": False}  # fmt: skip
+    spans = tail_spans(env, times)
+    assert len(spans) == 7  # the late run twice
+    lone = sorted(p for p in times.iterdir() if p.read_text().split()[2] == "1")
+    assert len(lone) == 3
+    redo = max(float(p.read_text().split()[0]) for p in lone)  # the last lone start
+    assert all(end <= redo for t0, _, end in spans if t0 < redo)  # waited for every tail
+    later = [sp for sp in spans if sp[0] > redo]
+    assert later and any(prev[1] <= nxt[0] < prev[2] for prev, nxt in
+                         zip(spans, spans[1:], strict=False) if nxt[0] > redo)  # fmt: skip
