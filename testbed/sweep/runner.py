@@ -36,11 +36,12 @@ tail: its processes exit, its network goes down and its results are written, non
 with a deadline, and it no longer counts as in flight, so the next run's set-up overlaps
 that tail instead of waiting for it (about a second a run: a quarter of a run's fixed
 cost). A run that was late while it overlapped a tail turns the overlap off for its team
-size (testbed.sweep.policy). The queue is served
-first-fit: the first waiting run that fits starts. What happens when a run misses step
-deadlines (the concurrency backs off, a team size's time scale goes down and up again, a run
-is redone) is decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only
-applies them. The limits, the time scales and which run fits next are the sweep's schedule
+size (testbed.sweep.policy); with --view there is none (the live page's run holds its port
+to its exit), and while more than --jobs tails go on, tails count as in flight again. The
+queue is served first-fit: the first waiting run that fits starts. What happens when a run
+misses step deadlines (the concurrency backs off, a team size's time scale goes down and up
+again, a run is redone) is decided by the pure rules of testbed.sweep.policy;
+`Sweep._finish` only applies them. The limits, the time scales and which run fits next are the sweep's schedule
 (testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
@@ -175,8 +176,10 @@ class Sweep:
             jobs, getattr(spec, "load_limit", None), getattr(spec, "cpu_limit", None)
         )
         self.calibrate = calibrate  # --calibrate: find each team size's time scale first
-        # --view: the run in progress serves the live page (one run at a time holds it).
+        # --view: the run in progress serves the live page (one run at a time holds it, to
+        # its exit: no run starts during another's tail then).
         self.view = view
+        self.schedule.tails_wait = view is not None
         self.view_owner: str | None = None
         self.netem = netem
         self.sweep_file = sweep_file

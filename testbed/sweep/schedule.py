@@ -52,6 +52,9 @@ class Schedule:
         # steps) to end; the others start beside a tail. The policy adds a team size when
         # one of its runs that overlapped a tail was late.
         self.no_overlap: frozenset[int] = frozenset()
+        # No run starts beside a tail at all (the sweep's --view: the run in its tail still
+        # serves the live page on the one port).
+        self.tails_wait = False
 
     @property
     def limited(self) -> bool:
@@ -88,8 +91,10 @@ class Schedule:
 
     def beside(self, run: PlannedRun, children: dict) -> list:
         """The runs `run` would start beside: the children (testbed.sweep.runner._Child)
-        in flight, those in their tail left out unless its team size waits for tails."""
-        if run.config.robots in self.no_overlap:
+        in flight, those in their tail left out unless its team size waits for tails, or
+        more than --jobs tails go on (a teardown that hangs does not let runs pile up)."""
+        tails = sum(1 for c in children.values() if c.tail)
+        if self.tails_wait or run.config.robots in self.no_overlap or tails > self.jobs:
             return list(children.values())
         return [c for c in children.values() if not c.tail]
 

@@ -155,3 +155,25 @@ def test_the_job_cap_of_jobs_auto_is_auto_jobs_with_a_cpu_limit_too():
     runs = expand(spec)
     for cores in (2, 64):
         assert sweepplan.jobs_cap("auto", runs, 1.8, cores) == sweepplan.auto_jobs(runs, cores)
+
+
+def test_tails_do_not_count_in_flight_but_cannot_pile_up(tmp_path):
+    """A run in its tail leaves room for the next one under --jobs 1 and the cpu limit; more
+    tails than --jobs count again (a hung teardown), as do all tails for a team size that
+    waits for them and under --view."""
+    s = make_sweep(tmp_path, cpu_limit=0.5)
+    s.schedule.jobs = 1
+    one, other, two = run_of(s, 1, 5.0), run_of(s, 1, 20.0), run_of(s, 2, 5.0)
+    flying = in_flight(s, one)
+    assert s._next_fitting(deque([other]), flying) is None  # 0.8 cores > 0.5, and jobs
+    flying[one.run_id].tail = True
+    assert s._next_fitting(deque([other]), flying) == other
+    both = in_flight(s, one, two)
+    for c in both.values():
+        c.tail = True
+    assert s._next_fitting(deque([other]), both) is None  # two tails, one job
+    s.schedule.no_overlap = frozenset({1})
+    assert s._next_fitting(deque([other]), flying) is None
+    s.schedule.no_overlap = frozenset()
+    s.schedule.tails_wait = True
+    assert s._next_fitting(deque([other]), flying) is None
