@@ -565,6 +565,7 @@ def test_the_next_run_starts_during_the_tail_of_the_last(env):
     assert not list((out / "logs").glob("*.steps-over"))
     state = json.loads((out / "sweep.json").read_text())
     assert not state["backoffs"]
+    assert [e.get("overlapped", False) for e in state["runs"]] == [False] + [True] * 5
 
 
 def test_a_run_late_beside_a_tail_turns_the_overlap_off_for_its_team_size(env):
