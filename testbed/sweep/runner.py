@@ -41,8 +41,9 @@ to its exit), and while more than --jobs tails go on, tails count as in flight a
 queue is served first-fit: the first waiting run that fits starts. What happens when a run
 misses step deadlines (the concurrency backs off, a team size's time scale goes down and up
 again, a run is redone) is decided by the pure rules of testbed.sweep.policy;
-`Sweep._finish` only applies them. The limits, the time scales and which run fits next are the sweep's schedule
-(testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops the runs.
+`Sweep._finish` only applies them. The limits, the time scales and which run fits next are
+the sweep's schedule (testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops
+the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
