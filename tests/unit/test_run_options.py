@@ -19,7 +19,7 @@ from testbed.sweep.rundir import plan_dict, run_argv
 from topology.spec import ROUTINGS
 
 REPO = Path(__file__).resolve().parents[2]
-RUN_ONLY = {"out", "name", "quiet", "replace"}  # where the run goes and how it shows: not config
+RUN_ONLY = {"out", "name", "quiet", "replace", "steps_over"}  # where it goes, how it shows
 
 
 def parse_run(argv: list[str]) -> RunConfig:
