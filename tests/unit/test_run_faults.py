@@ -5,10 +5,10 @@ averages over robots leave it out; an isolated robot has no link, whatever the p
 import pytest
 
 from testbed.run import isolation
-from testbed.run.execute import final_status, over
 from testbed.run.isolation import Outage
 from testbed.run.record import RobotRecord, RunRecord
 from testbed.run.stepclock import ClockSummary
+from testbed.run.steploop import final_status, over
 from topology.network import Network
 from topology.spec import NetworkSpec
 

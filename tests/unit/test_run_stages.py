@@ -9,11 +9,11 @@ import pytest
 
 from common.errors import UsageError
 from testbed.resultfile import ResultConfig, RunResult
-from testbed.run.execute import final_status
 from testbed.run.files import RunFiles, claim_directory, holds_run, make_directory
 from testbed.run.progress import summary_line
 from testbed.run.record import RobotRecord, RunRecord
 from testbed.run.stepclock import ClockSummary
+from testbed.run.steploop import final_status
 
 
 def _old_run(d):

@@ -1,6 +1,6 @@
-"""The shape of a run's code: testbed/run/execute.py's classes set their attributes in `__init__`
-only (what changes during a run lives in the clock, the records and the files), and the
-run's modules stay small (no function over 80 lines, no module over 600)."""
+"""The shape of a run's code: execute.py's and steploop.py's classes set their attributes in
+`__init__` only (what changes during a run lives in the clock, the records and the files),
+and the run's modules stay small (no function over 80 lines, no module over 600)."""
 
 import ast
 from pathlib import Path
@@ -55,8 +55,9 @@ def test_the_check_sees_what_it_must():
     ]  # fmt: skip
 
 
-def test_run_classes_set_attributes_only_in_init():
-    assert attributes_set_outside_init((RUN / "execute.py").read_text()) == []
+@pytest.mark.parametrize("module", ["execute.py", "steploop.py"])
+def test_run_classes_set_attributes_only_in_init(module):
+    assert attributes_set_outside_init((RUN / module).read_text()) == []
 
 
 @pytest.mark.parametrize("module", RUN_MODULES)
