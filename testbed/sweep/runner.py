@@ -349,19 +349,6 @@ class Sweep:
         """The file run `run_id` creates when its steps are done (`testbed run --steps-over`)."""
         return self.out / "logs" / f"{run_id}.steps-over"
 
-    def _watch_tails(self, children: dict[str, _Child]) -> None:
-        """Mark the runs whose steps are done (their --steps-over file exists) as in their
-        tail; the runs still before or in their steps are then overlapped by it, unless
-        their team size waits for tails (then they shared the machine with it as they would
-        with any run started beside them)."""
-        for child in children.values():
-            if child.tail or not self._steps_over_file(child.run.run_id).exists():
-                continue
-            child.tail = True
-            for other in children.values():
-                if not other.tail and other.run.config.robots not in self.schedule.no_overlap:
-                    other.overlapped = True
-
     def _finish(self, child: _Child, queue: deque) -> str:
         """Record a child that exited; returns the event line for the progress display."""
         child.log_file.close()
@@ -506,7 +493,7 @@ class Sweep:
             self._write_state()
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
-                self._watch_tails(children)
+                self.schedule.mark_tails(children, self._steps_over_file)
                 while queue and self.stop_signal is None:
                     run = self.schedule.next_fitting(queue, children)
                     if run is None:

@@ -8,13 +8,17 @@ again, and what --calibrate found. A waiting run gets its team size's factor (`s
 expected to keep `estimate` cores busy (testbed.sweep.cores, learnt from what the sweep's
 finished runs measured: `learn`), and starts when it fits beside the runs in flight
 (`next_fitting`: first fit). After a run, testbed.sweep.policy decides from `policy_state`,
-and `apply` takes up its decision. Nothing here starts a process.
+and `apply` takes up its decision. Which runs are in their tail (their steps done, their
+teardown going on) it reads from the files the runs create (`mark_tails`). Nothing here
+starts a process.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 
 from testbed.resultfile import RunResult
 from testbed.run.config import RunConfig
@@ -88,6 +92,19 @@ class Schedule:
         if measured is not None:
             self.measured.append(measured)
             self._rates.clear()
+
+    def mark_tails(self, children: dict, steps_over: Callable[[str], Path]) -> None:
+        """Mark the runs whose steps are done (their --steps-over file, `steps_over(run id)`,
+        exists) as in their tail; the runs still before or in their steps are then
+        overlapped by it, unless their team size waits for tails (then they shared the
+        machine with it as they would with any run started beside them)."""
+        for child in children.values():
+            if child.tail or not steps_over(child.run.run_id).exists():
+                continue
+            child.tail = True
+            for other in children.values():
+                if not other.tail and other.run.config.robots not in self.no_overlap:
+                    other.overlapped = True
 
     def beside(self, run: PlannedRun, children: dict) -> list:
         """The runs `run` would start beside: the children (testbed.sweep.runner._Child)
