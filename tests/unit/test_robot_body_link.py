@@ -48,9 +48,13 @@ def drive(tmp_path, program: str) -> tuple[list, list, int, dict]:
     server = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     server.bind(path)
     server.listen(1)
+    # Time scale 0.25: motion control holds a frame for the last step's plan up to three
+    # quarters of a step, 300 ms here; 75 ms at 1.0 was too short for a plan on a machine
+    # loaded by two test suites and two busy loops, and one robot then answered a frame
+    # without its plan (the commands differed at frame 41).
     argv = ["--robot", "r1", "--robots", "1", "--body", path, "--events", events,
             "--iface", "lo", "--bind", "127.0.0.1", "--goal-port", str(free_port()),
-            "--flood-port", str(free_port()), "--time-scale", "1.0"]  # fmt: skip
+            "--flood-port", str(free_port()), "--time-scale", "0.25"]  # fmt: skip
     cmd = [str(TB_ROBOT), *argv] if program == "cpp" else [sys.executable, "-m", "node", *argv]
     env = dict(os.environ, TESTBED_REALTIME="0", PYTHONPATH=REPO)
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stderr=subprocess.PIPE, text=True)
