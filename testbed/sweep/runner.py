@@ -362,8 +362,6 @@ class Sweep:
         st["exit_status"] = child.proc.returncode
         if child.overlapped:  # another run's tail overlapped its set-up or steps
             st["overlapped"] = True
-        else:
-            st.pop("overlapped", None)
         st["wall_time_s"] = round(wall, 1)
         if not is_done(self.out, run.run_id):
             st["status"] = "failed"

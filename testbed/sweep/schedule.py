@@ -103,15 +103,20 @@ class Schedule:
                 continue
             child.tail = True
             for other in children.values():
-                if not other.tail and other.run.config.robots not in self.no_overlap:
+                if not other.tail and not self.waits_for_tails(other.run):
                     other.overlapped = True
+
+    def waits_for_tails(self, run: PlannedRun) -> bool:
+        """Whether `run` waits for every tail to end before it starts: under --view, or
+        when its team size gave up the overlap (testbed.sweep.policy, rule 3)."""
+        return self.tails_wait or run.config.robots in self.no_overlap
 
     def beside(self, run: PlannedRun, children: dict) -> list:
         """The runs `run` would start beside: the children (testbed.sweep.runner._Child)
         in flight, those in their tail left out unless its team size waits for tails, or
         more than --jobs tails go on (a teardown that hangs does not let runs pile up)."""
         tails = sum(1 for c in children.values() if c.tail)
-        if self.tails_wait or run.config.robots in self.no_overlap or tails > self.jobs:
+        if self.waits_for_tails(run) or tails > self.jobs:
             return list(children.values())
         return [c for c in children.values() if not c.tail]
 
@@ -142,7 +147,7 @@ class Schedule:
             if self.fits(run, children):
                 del queue[i]
                 return run
-            if run.config.robots in self.no_overlap and any(c.tail for c in children.values()):
+            if self.waits_for_tails(run) and any(c.tail for c in children.values()):
                 return None
         return None
 
