@@ -9,6 +9,8 @@ With `--maps pubsub` it is given its middleware's map topic instead of the flood
 (node.messaging.maps): it subscribes to the robots' maps and publishes its beacon there.
 Visualization renders the merged map with the robots' paths (node.render): a video
 frame every `video_every` steps and a PNG snapshot at each chosen step, plus one at the end.
+The world sends the display a frame only at the steps it acts on (node.displaysteps), and at
+the last step.
 A video frame costs some 1.4 ms to draw and encode, against well under 0.1 ms to keep what it
 shows (the ternary map and how long each path was), so the frames are kept while the robots
 run and drawn and encoded once they have stopped; only a backlog over VIDEO_BACKLOG_BYTES (a
@@ -29,6 +31,7 @@ import numpy as np
 
 from common import sched
 from node import body, render, wire
+from node.displaysteps import VIDEO_EVERY, DisplaySteps
 from node.events import EventLog
 from node.flood import Flooder
 from node.grid import FREE, OccupancyGrid
@@ -51,7 +54,7 @@ class Display:
         events: EventLog,
         out_dir: str,
         snapshots: frozenset[int],
-        video_every: int = 10,
+        video_every: int = VIDEO_EVERY,
         scale: int = 2,
         map_period: int = 10,
         time_scale: float = 1.0,
@@ -63,9 +66,7 @@ class Display:
         self.flooder = flooder
         self.events = events
         self.out_dir = out_dir
-        self.snapshots = snapshots
-        self.video_every = max(1, video_every)
-        self.map_period = max(1, map_period)
+        self.steps = DisplaySteps(map_period, video_every, snapshots)
         self.scale = scale
         self.grid = OccupancyGrid(shape, cell)
         self.paths: dict[int, list[tuple[float, float]]] = {}
@@ -126,17 +127,17 @@ class Display:
                 continue
             step = msg[1].step
             self.step = step
-            if step % self.map_period == 0:
+            if self.steps.beacon(step):
                 f = msg[1]
                 seq = self.flooder.originate(wire.KIND_BEACON, step, wire.pack_beacon(f.x, f.y))
                 self.events.write("send", step, kind="beacon", seq=seq)
-            if step in self.snapshots:
-                self._snapshot(step)
-            if step % self.video_every == 0 and not self.link.pending():
+            if self.steps.video(step) and not self.link.pending():
                 self._keep_video_frame(step)
-            if msg[1].sent > 0:
+            if msg[1].sent > 0:  # acted on the clock: a snapshot's PNG has no deadline
                 late_s = time.monotonic() - msg[1].sent
                 self.frame_lateness.add(late_s * 1000 * self.time_scale)
+            if self.steps.snapshot(step):
+                self._snapshot(step)
 
     def _frame(self, step: int, scale: int | None = None) -> np.ndarray:
         with self.lock:

@@ -18,6 +18,7 @@ from typing import Any
 
 from common.argtypes import number
 from node import coordination
+from node.displaysteps import VIDEO_EVERY
 from node.flood import MODES
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
@@ -89,7 +90,7 @@ class NodeArgs:
     out_dir: str | None = arg(None, "display: where snapshots and the video go")
     snapshots: frozenset[int] = arg(frozenset(), "display: steps, e.g. 100,500",
                                     parse=lambda t: steps(t))  # fmt: skip
-    video_every: int = arg(10, "display: steps between video frames", kind=int, above=0)
+    video_every: int = arg(VIDEO_EVERY, "display: steps between video frames", kind=int, above=0)
 
     @classmethod
     def parse(cls, argv: list[str] | None = None) -> NodeArgs:

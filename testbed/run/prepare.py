@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.errors import UsageError
+from node.displaysteps import VIDEO_EVERY, DisplaySteps
 from node.rays import Laser
 from testbed.run import configfile
 from testbed.run.config import RunConfig, network_fields
@@ -68,6 +69,11 @@ class PreparedRun:
     def snapshots(self) -> tuple[int, ...]:
         """The steps at which the display saves its map (plus one at the end)."""
         return tuple(self.config["snapshots"])
+
+    @property
+    def display_steps(self) -> DisplaySteps:
+        """The steps the display acts on (its frames; node.displaysteps)."""
+        return DisplaySteps(self.cfg.map_period, VIDEO_EVERY, frozenset(self.snapshots))
 
     def path(self, *parts: str) -> str:
         return os.path.join(self.out, *parts)

@@ -8,7 +8,8 @@ the step goes on: --isolate's windows first), stops the robots --kill names, not
 that died, casts the lasers and sends each robot its frame (step, pose, scan) and the
 display its clock. `over` says when the run is over and with what status; `final_status`
 names the first crash. What changes during a run lives in the clock, the robots' records,
-the timing counters and the files, each a class of its own module.
+the timing counters and the files, each a class of its own module. The display is sent only
+the frames of the steps it acts on (node.displaysteps) and the last step's.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ class StepLoop:
         self.scans: list[np.ndarray | None] = [self.world.scan(i) for i in range(self.n)]
         self.cpu0 = time.process_time()
         self.clock = StepClock(prep.cfg.time_scale, self.n, time.monotonic())
+        self.display_steps = prep.display_steps
 
     def run(self) -> tuple[str, str]:
         """Step 0 (the first frames go out), then every step until the run is over;
@@ -66,6 +68,8 @@ class StepLoop:
         status = None
         while status is None:
             status = self.step()
+        if not self.display_steps.wanted(self.clock.step):  # its final snapshot is named after it
+            self._send_display_frame(time.monotonic())
         self.clock.stop(time.monotonic())
         self.timing.world_cpu_s = time.process_time() - self.cpu0
         self.progress.end()
@@ -182,6 +186,12 @@ class StepLoop:
                 continue
             b = self.world.bodies[k - 1]
             self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
+        if self.display_steps.wanted(step):
+            self._send_display_frame(now)
+
+    def _send_display_frame(self, now: float) -> None:
+        """The display's frame of this step (only the steps it acts on: node.displaysteps)."""
+        step = self.clock.step
         x, y = self.prep.display_pos
         self.server.send(self.prep.display_k, body.frame(step, x, y, 0.0, None, now), True)
 

@@ -9,6 +9,10 @@ import sys
 
 import pytest
 
+from node.displaysteps import VIDEO_EVERY, DisplaySteps
+from testbed.run.config import RunConfig
+from testbed.run.prepare import DEFAULT_SNAPSHOTS
+
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FAST = ["--comm-range", "20", "--time-scale", "10", "--routing", "oracle", "--quiet"]
 
@@ -74,6 +78,10 @@ def test_a_run_says_how_it_ended_and_names_its_steps(tmp_path, tb_name):
         int(f[5:10]) for f in os.listdir(os.path.join(out, "display")) if f.startswith("step-")
     )
     assert result["display"]["snapshots"] == written and written[-1] == result["steps"]
+    # The display was sent the frames of the steps it acts on and of the last step only.
+    acts = DisplaySteps(RunConfig.map_period, VIDEO_EVERY, frozenset(DEFAULT_SNAPSHOTS))
+    sent = [k for k in range(result["steps"]) if acts.wanted(k)] + [result["steps"]]
+    assert result["fidelity"]["measures"]["display_frames"] == len(sent)
     last = r.stdout.strip().splitlines()[-1]
     assert last.startswith(f"testbed run: complete after {result['steps']} steps, coverage ")
     assert f"results in {out}" in last and f"testbed view {out}" in last
