@@ -257,6 +257,24 @@ class RunResult:
         return scale in (None, 1) or self.network_faithful is True
 
     @property
+    def time_scale_ran(self) -> float:
+        """The time scale the run kept: the achieved one, else the one asked for (1 when
+        neither is known)."""
+        return (
+            self.time_scale_achieved or self.time_scale_requested or self.config.time_scale or 1.0
+        )
+
+    def per_robot_second(
+        self, total: float | None, wall_s: float | None, robots: int
+    ) -> float | None:
+        """`total`, counted over `wall_s` seconds of wall time (the run's captures, say), per
+        robot of `robots` per second of robot time (the wall time times the time scale the run
+        kept); None when a number is missing or zero."""
+        if total is None or not wall_s or not robots:
+            return None
+        return total / (robots * wall_s * self.time_scale_ran)
+
+    @property
     def cpu_per_robot_step_ms(self) -> float | None:
         ms = self.cpu_s.get("per_robot_step_ms")
         return ms if isinstance(ms, int | float) and not isinstance(ms, bool) else None

@@ -199,12 +199,10 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
     """One run's numbers (`metrics`: its pcapmetrics, or None without captures)."""
     c = run.config
     m = metrics or {}
-    scale = run.time_scale_achieved or c.time_scale or 1.0
-    n = c.robots + 1  # the display robot transmits too
-    robot_s = m["duration_s"] * scale * n if m.get("duration_s") else None
+    scale = run.time_scale_ran
 
-    def per_robot_s(key: str) -> float | None:
-        return m[key] / robot_s if robot_s and m.get(key) is not None else None
+    def per_robot_s(key: str) -> float | None:  # the display robot transmits too
+        return run.per_robot_second(m.get(key), m.get("duration_s"), c.robots + 1)
 
     ch = run.channel
     raw = m.get("delay_raw_ms_median")

@@ -192,13 +192,11 @@ def _air(run: FinishedRun, metrics: dict | None) -> tuple[float | None, float | 
     """(bytes per robot per robot-second, own share) of the middleware's captured traffic;
     (None, None) where the captures have no class for it."""
     mw = (metrics or {}).get("middleware") or {}
-    tx, own, wall = _number(mw.get("tx_bytes")), _number(mw.get("protocol_bytes")), None
-    if metrics:
-        wall = _number(metrics.get("duration_s"))
+    tx, own = _number(mw.get("tx_bytes")), _number(mw.get("protocol_bytes"))
     if tx is None:
         return None, None
-    scale = run.time_scale_achieved or run.config.time_scale or 1.0
-    per_robot_s = tx / (run.config.robots * wall * scale) if wall else None
+    wall = _number(metrics.get("duration_s")) if metrics else None
+    per_robot_s = run.per_robot_second(tx, wall, run.config.robots)
     return per_robot_s, (own / tx if own is not None and tx else None)
 
 

@@ -226,7 +226,7 @@ def run_metrics(
             log.warning("%s; counting AODV's port, wall-clock time only", e)
     if run is not None:
         routing = run.config.routing
-        scale = run.time_scale_achieved or run.time_scale_requested or run.config.time_scale
+        scale = run.time_scale_ran
     else:
         routing, scale = network or (DEFAULT_ROUTING, None)
     lags = None

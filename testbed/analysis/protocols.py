@@ -127,15 +127,10 @@ def _discovery_ms(run_dir: Path) -> float | None:
 def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> ProtocolRun:
     """One run's numbers (`metrics`: its pcapmetrics, or None)."""
     c = run.config
-    n = c.robots + 1  # the display robot transmits too
-    robot_s = None
-    if metrics and metrics.get("duration_s"):
-        robot_s = metrics["duration_s"] * (run.time_scale_achieved or c.time_scale)
+    m = metrics or {}
 
-    def per_robot_s(key: str) -> float | None:
-        if not metrics or not robot_s or metrics.get(key) is None:
-            return None
-        return metrics[key] / n / robot_s
+    def per_robot_s(key: str) -> float | None:  # the display robot transmits too
+        return run.per_robot_second(m.get(key), m.get("duration_s"), c.robots + 1)
 
     return ProtocolRun(
         run=run.run_id,

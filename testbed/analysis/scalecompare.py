@@ -117,7 +117,7 @@ def run_row(run: FinishedRun, metrics: dict | None) -> ScaleRun:
     counted = run.counted_robots  # a robot stopped on purpose (--kill) is not averaged
     plans = [p for r in counted for p in r.plans]
     requests = sum(1 for p in plans if p.cause == "request") / len(counted) if counted else None
-    scale = run.time_scale_achieved or run.config.time_scale
+    scale = run.time_scale_ran
     m = metrics or {}
     mean = m.get("delay_ms_mean")
     flows, tx, segments = m.get("tcp_flows"), m.get("tcp_transmissions"), m.get("tcp_segments_sent")

@@ -52,7 +52,7 @@ def measure(result: RunResult) -> Measured | None:
     run achieved, when it says: a run that fell behind did fewer steps a second than it was
     asked, and its CPU measures that smaller load."""
     cores = result.cores_while_stepping
-    scale = result.time_scale_achieved or result.time_scale_requested or result.config.time_scale
+    scale = result.time_scale_ran
     if cores is None or not scale or scale <= 0:
         return None
     return Measured(result.config.robots, cores / load(result.config.robots, scale))

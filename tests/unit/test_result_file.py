@@ -14,6 +14,7 @@ cannot open the file without naming it, and naming it goes through the one const
 """
 
 import ast
+import dataclasses
 import json
 import re
 from pathlib import Path
@@ -193,6 +194,19 @@ def test_what_is_written_reads_back_the_same():
     back = RunResult.from_json(doc)
     assert back == result and back.to_json() == doc
     assert [r.name for r in back.counted_robots] == ["r1"] and back.exploration_steps == 1072
+
+
+def test_per_robot_second_is_robot_time_at_the_scale_the_run_kept():
+    """The one place a count over the captures becomes a rate per robot per second of robot
+    (emulated) time, for the media, protocol and middleware tables."""
+    base = RunResult(config=ResultConfig.from_dict(CONFIG), status="complete", steps=100)
+    assert base.time_scale_ran == base.config.time_scale
+    asked = dataclasses.replace(base, time_scale_requested=8.0)
+    kept = dataclasses.replace(asked, time_scale_achieved=6.0)
+    assert (asked.time_scale_ran, kept.time_scale_ran) == (8.0, 6.0)
+    assert kept.per_robot_second(600.0, 5.0, 4) == pytest.approx(600 / (4 * 5 * 6))
+    for total, wall, robots in ((None, 5.0, 4), (600.0, None, 4), (600.0, 0.0, 4), (1.0, 5.0, 0)):
+        assert kept.per_robot_second(total, wall, robots) is None
 
 
 def test_older_files_get_their_defaults_here(tmp_path):
