@@ -46,6 +46,12 @@ The rules, in the order they are tried (each is cited at its branch below):
    scale, or what calibration found). Before stalls were told apart, a ratchet that needed
    6 runs under 0.3% to speed up again took the paper sweep's team sizes down to 0.44-0.72
    of the file's scales (2026-11-22).
+9. A clean run (as in rule 8) of a team size that gave up the overlap counts towards taking
+   it up again: after CLEAN_RUNS_TO_SPEED_UP clean runs since rule 3 fired for it, doubled
+   for each time rule 3 fired for it before, its runs start beside tails again. Rule 3 blames
+   the overlap for any late run that had one, host noise included (on a noisy evening it
+   gave up the overlap for 7 of 10 team sizes); this way a false blame costs a few runs, and
+   a true one, tried again ever more rarely, a redo each time.
 
 Calibration (`testbed sweep --calibrate`, for a machine the file's scales were not made
 for): before a team size's first run, short runs alone at the file's scale times a factor;
@@ -99,6 +105,8 @@ class State:
     clean_runs: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
     ceilings: dict[int, float] = field(default_factory=dict)  # robots -> highest factor
     no_overlap: frozenset[int] = frozenset()  # team sizes that wait for others' tails
+    overlap_clean: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
+    overlap_strikes: dict[int, int] = field(default_factory=dict)  # robots -> rule 3 firings
 
     def factor(self, robots: int) -> float:
         return self.scale_factors.get(robots, 1.0)
@@ -151,8 +159,14 @@ def _relieve(o: Outcome, state: State) -> Decision:
     limited = state.load_limit is not None or state.cpu_limit is not None
     if o.overlapped and n not in state.no_overlap:
         # Rule 3: another run's tail overlapped it: none for its team size, this run again.
+        alone = replace(
+            state,
+            no_overlap=state.no_overlap | {n},
+            overlap_clean={**state.overlap_clean, n: 0},
+            overlap_strikes={**state.overlap_strikes, n: state.overlap_strikes.get(n, 0) + 1},
+        )
         return _back_off(
-            o, replace(state, no_overlap=state.no_overlap | {n}), {"robots": n, "overlap": False},
+            o, alone, {"robots": n, "overlap": False},
             f"teams of {n} no longer start during another run's teardown", attempts=2,
         )  # fmt: skip
     if limited and o.shared:
@@ -204,9 +218,16 @@ def decide(o: Outcome, state: State) -> Decision:
         words = ", not faithful" + (f" ({o.fidelity_reason})" if o.fidelity_reason else "")
         d = _relieve(o, state)
         d = replace(d, words=words + d.words)
-    s = d.state
     clean = _number(ours) and ours <= CLEAN_MISS and o.faithful is not False
-    if clean and s.factor(n) < s.ceiling(n):
+    if clean:
+        d = _overlap_again(n, _speed_up(n, d))
+    return d
+
+
+def _speed_up(n: int, d: Decision) -> Decision:
+    """Rule 8, after a clean run of team size n."""
+    s = d.state
+    if s.factor(n) < s.ceiling(n):
         # Rule 8: a clean run of a slowed-down size; enough of them speed it up a notch.
         runs = s.clean_runs.get(n, 0) + 1
         if runs < CLEAN_RUNS_TO_SPEED_UP:
@@ -222,6 +243,24 @@ def decide(o: Outcome, state: State) -> Decision:
             words=d.words + f"; time scales of teams of {n} up to {up:.0%}",
         )
     return d
+
+
+def _overlap_again(n: int, d: Decision) -> Decision:
+    """Rule 9, after a clean run of team size n: enough of them since rule 3 fired for it
+    (more each time it fired) and its runs start beside tails again."""
+    s = d.state
+    if n not in s.no_overlap:
+        return d
+    runs = s.overlap_clean.get(n, 0) + 1
+    if runs < CLEAN_RUNS_TO_SPEED_UP * 2 ** (s.overlap_strikes.get(n, 1) - 1):
+        return replace(d, state=replace(s, overlap_clean={**s.overlap_clean, n: runs}))
+    again = replace(s, no_overlap=s.no_overlap - {n}, overlap_clean={**s.overlap_clean, n: 0})
+    return replace(
+        d,
+        state=again,
+        backoffs=d.backoffs + ({"robots": n, "overlap": True},),
+        words=d.words + f"; teams of {n} start during another run's teardown again",
+    )
 
 
 Trial = tuple  # (factor, miss outside stalls[, faithful]): a calibration run's outcome

@@ -54,8 +54,13 @@ class Schedule:
         self.backoffs: list[dict] = []
         # The team sizes whose runs wait for other runs' tails (their teardown, after their
         # steps) to end; the others start beside a tail. The policy adds a team size when
-        # one of its runs that overlapped a tail was late.
+        # one of its runs that overlapped a tail was late, and takes it out again after
+        # enough clean runs.
         self.no_overlap: frozenset[int] = frozenset()
+        # Per team size without the overlap: its clean runs since, and how often it gave the
+        # overlap up (the policy's rule 9 takes it up again after enough clean runs).
+        self.overlap_clean: dict[int, int] = {}
+        self.overlap_strikes: dict[int, int] = {}
         # No run starts beside a tail at all (the sweep's --view: the run in its tail still
         # serves the live page on the one port).
         self.tails_wait = False
@@ -160,6 +165,8 @@ class Schedule:
             clean_runs=dict(self.clean_runs),
             ceilings=dict(self.ceilings),
             no_overlap=self.no_overlap,
+            overlap_clean=dict(self.overlap_clean),
+            overlap_strikes=dict(self.overlap_strikes),
         )
 
     def apply(self, d: sweeppolicy.Decision, run_id: str) -> None:
@@ -167,6 +174,8 @@ class Schedule:
         self.jobs, self.load_limit = d.state.jobs, d.state.load_limit
         self.cpu_limit = d.state.cpu_limit
         self.no_overlap = d.state.no_overlap
+        self.overlap_clean = dict(d.state.overlap_clean)
+        self.overlap_strikes = dict(d.state.overlap_strikes)
         self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
         self.backoffs += [{"run": run_id, **record} for record in d.backoffs]
 

@@ -53,7 +53,8 @@ def test_rule3_a_run_late_beside_a_tail_gives_up_the_overlap_first():
     for late in (outcome(0.03, overlapped=True, shared=True, jobs_at_start=2),
                  outcome(0.0, overlapped=True, faithful=False)):  # fmt: skip
         d = decide(late, state)
-        assert d.state == replace(state, no_overlap=frozenset({3, 5})) and d.redo
+        assert d.state == replace(state, no_overlap=frozenset({3, 5}), overlap_clean={5: 0},
+                                  overlap_strikes={5: 1}) and d.redo  # fmt: skip
         assert d.backoffs[0]["overlap"] is False and d.backoffs[0]["robots"] == 5
         assert "teams of 5 no longer start during another run's teardown, redoing it" in d.words
         assert not decide(replace(late, attempts=2), state).redo
@@ -61,6 +62,30 @@ def test_rule3_a_run_late_beside_a_tail_gives_up_the_overlap_first():
     assert "cpu_limit" in off.backoffs[0] and "overlap" not in off.backoffs[0]
     alone = decide(outcome(0.03), state)
     assert alone.state.no_overlap == {3} and "time_scale_factor" in alone.backoffs[0]
+
+
+def test_rule9_clean_runs_take_the_overlap_up_again_ever_more_slowly():
+    """After rule 3, CLEAN_RUNS_TO_SPEED_UP clean runs of the team size bring the overlap
+    back (recorded, said); each later firing of rule 3 doubles the clean runs it takes. A late
+    or unfaithful run, or another team size's, does not count."""
+    state = State(jobs=1)
+    for strikes in (1, 2, 3):
+        late = decide(outcome(0.03, overlapped=True), state)
+        state = late.state
+        assert state.no_overlap == {5} and state.overlap_strikes == {5: strikes}
+        needed = CLEAN_RUNS_TO_SPEED_UP * 2 ** (strikes - 1)
+        for _ in range(needed - 1):
+            state = decide(outcome(0.0, robots=4), state).state  # another team size
+            d = decide(outcome(0.0), state)
+            assert d.state.no_overlap == {5} and d.backoffs == ()
+            state = d.state
+        unfaithful = decide(outcome(0.0, faithful=False, overlapped=False), state)
+        assert unfaithful.state.overlap_clean == state.overlap_clean
+        back = decide(outcome(0.001), state)
+        assert back.state.no_overlap == frozenset() and back.state.overlap_clean == {5: 0}
+        assert back.backoffs == ({"robots": 5, "overlap": True},)
+        assert back.words == "; teams of 5 start during another run's teardown again"
+        state = back.state
 
 
 def test_rule4_a_shared_run_under_a_load_limit_lowers_it_to_80_percent_of_what_it_saw():
