@@ -224,6 +224,7 @@ def run_metrics(
             run = runs.load_run(run_dir)
         except runs.ResultError as e:
             log.warning("%s; counting AODV's port, wall-clock time only", e)
+    scale: float | None
     if run is not None:
         routing = run.config.routing
         scale = run.time_scale_ran

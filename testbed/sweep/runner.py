@@ -36,8 +36,9 @@ tail: its processes exit, its network goes down and its results are written, non
 with a deadline, and it no longer counts as in flight, so the next run's set-up overlaps
 that tail instead of waiting for it (about a second a run: a quarter of a run's fixed
 cost). A run that was late while it overlapped a tail turns the overlap off for its team
-size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 9); with --view there is none (the live page's run holds its port
-to its exit), and while more than --jobs tails go on, tails count as in flight again. The
+size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 9); with
+--view there is none (the live page's run holds its port to its exit), and while more than
+--jobs tails go on, tails count as in flight again. The
 queue is served first-fit: the first waiting run that fits starts. What happens when a run
 misses step deadlines (the concurrency backs off, a team size's time scale goes down and up
 again, a run is redone) is decided by the pure rules of testbed.sweep.policy;
