@@ -17,11 +17,12 @@ choice holds, by the rule in `CHOICE_RULE` (fixed before any sweep was run).
 from __future__ import annotations
 
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
+from testbed.analysis.rows import INLINE
 from testbed.analysis.runs import FinishedRun
 from topology.spec import ROUTINGS, VETH
 
@@ -29,10 +30,6 @@ PROACTIVE = ("babel", "batman")
 # How far the AODV control packets counted in the captures may be from the daemons' own
 # counters and still agree (here and in the report's check of every run).
 DAEMON_AGREEMENT = 0.01
-METRICS = (
-    "steps", "control_pkts_per_robot_s", "control_bytes_per_robot_s", "pdf", "delay_ms",
-    "map_delivery", "discovery_ms",
-)  # fmt: skip
 CHOICE_RULE = (
     "The paper's choice (AODV for a small robot team) holds at a point when AODV sends fewer "
     "control packets per robot per second than each proactive protocol that ran there, and "
@@ -40,6 +37,23 @@ CHOICE_RULE = (
     "below theirs or overlaps it). It fails at a point when a proactive protocol needs "
     "fewer steps beyond noise, or sends fewer control packets."
 )
+
+
+@dataclass(frozen=True)
+class ProtocolMeasures:
+    """What the comparison measures of a run, or averages over a point's runs (METRICS)."""
+
+    steps: float | None
+    control_pkts_per_robot_s: float | None
+    control_bytes_per_robot_s: float | None
+    pdf: float | None
+    delay_ms: float | None
+    map_delivery: float | None
+    discovery_ms: float | None
+
+
+# The measures, by name (the report and the rule reach them so).
+METRICS = tuple(f.name for f in fields(ProtocolMeasures))
 
 
 @dataclass(frozen=True)
@@ -52,15 +66,9 @@ class ProtocolRun:
     medium: str
     comm_range: float
     robots: int
-    steps: float | None
-    control_pkts_per_robot_s: float | None
-    control_bytes_per_robot_s: float | None
-    pdf: float | None
-    delay_ms: float | None
-    map_delivery: float | None
-    discovery_ms: float | None
+    measures: ProtocolMeasures = field(metadata=INLINE)
     # AODV: captured control packets against its daemons' own counts (pcapmetrics).
-    daemon_difference: float | None
+    daemon_difference: float | None = None
 
 
 @dataclass(frozen=True)
@@ -75,28 +83,23 @@ class ProtocolPoint:
     routing: str
     n: int
     daemon_difference_max: float | None
-    steps: float | None
-    control_pkts_per_robot_s: float | None
-    control_bytes_per_robot_s: float | None
-    pdf: float | None
-    delay_ms: float | None
-    map_delivery: float | None
-    discovery_ms: float | None
-    steps_ci_low: float | None
-    steps_ci_high: float | None
+    measures: ProtocolMeasures = field(metadata=INLINE)
+    steps_ci_low: float | None = None
+    steps_ci_high: float | None = None
 
     @property
     def steps_ci(self) -> tuple[float, float, float] | None:
         """(mean, low, high) of the steps, None without an interval."""
-        if self.steps is None or self.steps_ci_low is None or self.steps_ci_high is None:
+        steps = self.measures.steps
+        if steps is None or self.steps_ci_low is None or self.steps_ci_high is None:
             return None
-        return self.steps, self.steps_ci_low, self.steps_ci_high
+        return steps, self.steps_ci_low, self.steps_ci_high
 
     def measure(self, key: str) -> float | None:
         """One of METRICS, by name."""
         if key not in METRICS:
             raise KeyError(key)
-        value: float | None = getattr(self, key)
+        value: float | None = getattr(self.measures, key)
         return value
 
 
@@ -139,16 +142,16 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> Prot
         medium=c.medium,
         comm_range=c.comm_range,
         robots=c.robots,
-        steps=steps,
-        control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
-        control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
-        pdf=metrics.get("pdf") if metrics else None,
-        delay_ms=metrics.get("delay_ms_median") if metrics else None,
-        map_delivery=_map_delivery(run),
-        discovery_ms=_discovery_ms(run.path),
-        daemon_difference=((metrics or {}).get("daemon_comparison") or {}).get(
-            "relative_difference"
+        measures=ProtocolMeasures(
+            steps=steps,
+            control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
+            control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+            pdf=m.get("pdf"),
+            delay_ms=m.get("delay_ms_median"),
+            map_delivery=_map_delivery(run),
+            discovery_ms=_discovery_ms(run.path),
         ),
+        daemon_difference=(m.get("daemon_comparison") or {}).get("relative_difference"),
     )
 
 
@@ -165,13 +168,14 @@ def point_rows(per_run: list[ProtocolRun]) -> list[ProtocolPoint]:
         diffs = [i.daemon_difference for i in items if i.daemon_difference is not None]
         means = {}
         for m in METRICS:
-            vals = [v for i in items if (v := getattr(i, m)) is not None]
+            vals = [v for i in items if (v := getattr(i.measures, m)) is not None]
             means[m] = statistics.fmean(vals) if vals else None
-        ci = stats.mean_ci([i.steps for i in items if i.steps is not None])
+        ci = stats.mean_ci([x for i in items if (x := i.measures.steps) is not None])
         mp, medium, comm, robots, routing = key
         out.append(ProtocolPoint(
             map=mp, medium=medium, comm_range=comm, robots=robots, routing=routing,
-            n=len(items), daemon_difference_max=max(diffs) if diffs else None, **means,
+            n=len(items), daemon_difference_max=max(diffs) if diffs else None,
+            measures=ProtocolMeasures(**means),
             steps_ci_low=ci[1] if ci else None, steps_ci_high=ci[2] if ci else None,
         ))  # fmt: skip
     return out
@@ -185,7 +189,7 @@ def choice_holds(point: dict[str, ProtocolPoint]) -> tuple[bool | None, str]:
         return None, "needs AODV and a proactive protocol"
     reasons, unknown = [], False
     for r in rivals:
-        ca, cr = a.control_pkts_per_robot_s, r.control_pkts_per_robot_s
+        ca, cr = a.measures.control_pkts_per_robot_s, r.measures.control_pkts_per_robot_s
         if ca is not None and cr is not None and ca >= cr:
             reasons.append(f"{r.routing} sends fewer control packets ({cr:.2f} vs {ca:.2f})")
         ia, ir = a.steps_ci, r.steps_ci
@@ -248,7 +252,9 @@ def _control_check(rows: list[ProtocolPoint]) -> list[str]:
                 f"({'UDP 6696' if p == 'babel' else 'UDP 4305'}) at each transmitter."
             )
     oracle = [
-        x for r in rows if r.routing == "oracle" and (x := r.control_pkts_per_robot_s) is not None
+        x
+        for r in rows
+        if r.routing == "oracle" and (x := r.measures.control_pkts_per_robot_s) is not None
     ]
     if oracle:
         lines.append(
@@ -265,11 +271,12 @@ def _fmt(x, spec: str) -> str:
 
 
 def _steps(row: ProtocolPoint) -> str:
-    if row.steps is None:
+    steps = row.measures.steps
+    if steps is None:
         return "–"
     if row.steps_ci_low is None:
-        return f"{row.steps:.0f}"
-    return f"{row.steps:.0f} [{row.steps_ci_low:.0f}, {row.steps_ci_high:.0f}]"
+        return f"{steps:.0f}"
+    return f"{steps:.0f} [{row.steps_ci_low:.0f}, {row.steps_ci_high:.0f}]"
 
 
 def _vs(x, base, ratio: bool = True) -> str:
@@ -317,17 +324,18 @@ def _table_rows(points: dict[tuple, dict[str, ProtocolPoint]]) -> list[str]:
     for (mp, comm, robots), by in points.items():
         o = by.get("oracle")
         for r in by.values():
+            m = r.measures
             out.append(
                 f"| {mp} | {comm:g} | {robots} | {r.routing} | {r.n} | {_steps(r)}"
                 f"{_beside(r, o, 'steps')} | "
-                f"{_fmt(r.control_pkts_per_robot_s, '.2f')} | "
-                f"{_fmt(r.control_bytes_per_robot_s, '.0f')} | {_fmt(r.pdf, '.3f')}"
+                f"{_fmt(m.control_pkts_per_robot_s, '.2f')} | "
+                f"{_fmt(m.control_bytes_per_robot_s, '.0f')} | {_fmt(m.pdf, '.3f')}"
                 f"{_beside(r, o, 'pdf', False)} | "
-                f"{_fmt(r.delay_ms, '.2f')}"
+                f"{_fmt(m.delay_ms, '.2f')}"
                 f"{_beside(r, o, 'delay_ms')} | "
-                f"{_fmt(r.map_delivery, '.3f')}"
+                f"{_fmt(m.map_delivery, '.3f')}"
                 f"{_beside(r, o, 'map_delivery', False)} | "
-                f"{_fmt(r.discovery_ms, '.1f')} |"
+                f"{_fmt(m.discovery_ms, '.1f')} |"
             )
     return out
 

@@ -35,10 +35,10 @@ def test_protocol_rows_per_point_with_steps_intervals(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path))
     rows = {r.routing: r for r in made.tables.protocols}
     assert list(rows) == ["aodv", "babel", "batman", "oracle"]
-    assert rows["aodv"].steps == 410 and rows["aodv"].n == 3
+    assert rows["aodv"].measures.steps == 410 and rows["aodv"].n == 3
     assert rows["aodv"].steps_ci_low < 410 < rows["aodv"].steps_ci_high
-    assert abs(rows["babel"].control_pkts_per_robot_s - 90) < 1e-9
-    assert rows["oracle"].control_pkts_per_robot_s == 0
+    assert abs(rows["babel"].measures.control_pkts_per_robot_s - 90) < 1e-9
+    assert rows["oracle"].measures.control_pkts_per_robot_s == 0
     # The paper's figures are drawn for AODV alone, not pooled over protocols.
     assert [r.steps_per_run for r in made.tables.fig2] == [(405, 410, 415)]
 
@@ -48,10 +48,13 @@ def test_choice_holds_against_babel_but_batman_rule_is_applied_too(tmp_path):
     rows = made.tables.protocols
     by = {r.routing: r for r in rows}
     assert protocols.choice_holds(by) == (True, "fewer control packets, steps within noise")
-    quieter_babel = replace(by["babel"], control_pkts_per_robot_s=5.0)
+    quieter_babel = replace(
+        by["babel"], measures=replace(by["babel"].measures, control_pkts_per_robot_s=5.0)
+    )
     ok, why = protocols.choice_holds({**by, "babel": quieter_babel})
     assert not ok and "babel sends fewer control packets" in why
-    faster_batman = replace(by["batman"], steps=300, steps_ci_low=290, steps_ci_high=310)
+    faster_batman = replace(by["batman"], measures=replace(by["batman"].measures, steps=300),
+                            steps_ci_low=290, steps_ci_high=310)  # fmt: skip
     ok, why = protocols.choice_holds({**by, "batman": faster_batman})
     assert not ok and "batman needs fewer steps beyond noise" in why
     text = "\n".join(protocols.section(rows))
@@ -68,8 +71,9 @@ def test_bytes_and_delivery_are_counted_beside_the_rule(tmp_path):
         "- AODV delivers a larger share of the robots' TCP packets than each proactive "
         "protocol at 0 of 1 points.",
     ]
-    better = replace(by["aodv"], control_bytes_per_robot_s=0.001, pdf=0.95)
-    worse_than_batman = {**by, "aodv": replace(better, pdf=0.5)}
+    a = by["aodv"]
+    better = replace(a, measures=replace(a.measures, control_bytes_per_robot_s=0.001, pdf=0.95))
+    worse_than_batman = {**by, "aodv": replace(better, measures=replace(better.measures, pdf=0.5))}
     lines = protocols.beside_the_rule([{**by, "aodv": better}, worse_than_batman, {"aodv": better}])
     assert "at 2 of 2 points" in lines[0] and "at 1 of 2 points" in lines[1]
     text = "\n".join(protocols.section(made.tables.protocols))

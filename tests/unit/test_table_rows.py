@@ -123,8 +123,18 @@ def test_the_measure_records_hold_the_measures_they_are_named_by():
     assert tuple(k for k, _, _ in media.COMPARED) == media.COMPARED_KEYS
     assert tuple(k for k, _, _ in middlewares.MEANS) == middlewares.MEANS_KEYS
     assert tables.ROUTING_FIELDS[:-1] == tuple(k for k, _ in tables.ROUTING_METRICS)
-    points = {f.name for f in dataclasses.fields(protocols.ProtocolPoint)}
-    assert set(protocols.METRICS) <= points
+    point = protocols.ProtocolPoint(
+        "empty",
+        "veth",
+        5.0,
+        2,
+        "aodv",
+        1,
+        None,
+        protocols.ProtocolMeasures(*range(len(protocols.METRICS))),
+    )
+    assert [columns(point)[k] for k in protocols.METRICS] == list(range(len(protocols.METRICS)))
+    assert [point.measure(k) for k in protocols.METRICS] == list(range(len(protocols.METRICS)))
     assert {k for k, _, _ in protocols.BESIDE_THE_RULE} <= set(protocols.METRICS)
     runs = {f.name for f in dataclasses.fields(scalecompare.ScaleRun)}
     assert set(scalecompare.MEASURE_KEYS) <= runs
