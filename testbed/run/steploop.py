@@ -171,8 +171,14 @@ class StepLoop:
             log.info("r%d stopped at step %d (--kill)", k, step)
 
     def _notice_crashes(self, step: int) -> None:
-        for k, r in self.robots.items():
-            if not r.gone and r.process.poll() is not None:
+        """The robots whose process exited since the last step: one look at the fork
+        server's exit reports a step (as Forked.poll would take for each robot), then each
+        robot's exit status."""
+        live = [(k, r) for k, r in self.robots.items() if not r.gone]
+        for server in {r.process.server for _, r in live}:
+            server.collect(0.0)
+        for k, r in live:
+            if r.process.returncode is not None:
                 r.died(step, r.process.returncode)
                 self.world.bodies[k - 1].alive = False
                 log.warning("r%d exited with status %s at step %d", k, r.exit_status, step)

@@ -1,16 +1,21 @@
 """Faults a run makes on purpose, in real runs: a robot stopped mid-run (`--kill`, a battery
 failure) and a robot's radio out of everyone's range for a window of steps (`--isolate`, a
-partition). Three robots on a 10 x 10 m empty map (about 200 steps), each run a few seconds.
+partition); and one it does not: a robot killed from outside. Three robots on a 10 x 10 m
+empty map (about 200 steps), each run a few seconds.
 
 Checked: the stopped robot is no crash (the run completes when the others finish) and is
 left out of mean_finish_step; the isolated robot's links are down in the topology record
 for exactly its window, nobody hears it or is heard by it then (the robots' own receipts),
-and the team still finishes.
+and the team still finishes; the robot killed from outside is a crash, at its step.
 """
 
+import contextlib
 import csv
 import json
+import os
+import signal
 import statistics
+import threading
 import uuid
 
 import pytest
@@ -104,3 +109,47 @@ def test_an_isolated_robot_is_cut_off_for_its_window_and_the_team_finishes(
     assert min(to3) < window.start and max(to3) >= window.end
     checked, bad = runcheck.causality_violations(out)
     assert checked > 0 and not bad
+
+
+def _kill_when_running(robot: int, marks: tuple[str, ...], stop: threading.Event) -> None:
+    """SIGKILL robot `robot`'s process (its comm is "rK robot", its command line names the
+    run) half a second after it appears: a crash the run did not ask for."""
+    while not stop.wait(0.05):
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            try:
+                with open(f"/proc/{pid}/comm") as f:
+                    comm = f.read().strip()
+                with open(f"/proc/{pid}/cmdline", "rb") as f:
+                    cmdline = f.read().decode(errors="replace")
+            except OSError:
+                continue
+            if comm == f"r{robot} robot" and any(m in cmdline for m in marks):
+                stop.wait(0.5)
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(int(pid), signal.SIGKILL)
+                return
+
+
+def test_a_robot_that_dies_unasked_is_a_crash_noticed_at_its_step(tmp_path, fal_name, small_map):
+    """The step loop looks for exited robots once a step (one look at the fork server's exit
+    reports for all of them): a robot killed from outside is recorded as crashed, at the
+    step it was noticed, and the run says so; the others still finish."""
+    stop = threading.Event()
+    killer = threading.Thread(
+        target=_kill_when_running, args=(2, (fal_name, str(tmp_path)), stop), daemon=True
+    )
+    killer.start()
+    try:
+        out, result = small_run(tmp_path, fal_name, small_map)
+    finally:
+        stop.set()
+        killer.join()
+    assert result["status"] == "robot_crashed", result["status_detail"]
+    r = result["robots"]
+    assert r["r2"]["crashed"] and r["r2"]["exit_status"] == -9
+    with open(f"{out}/robots/r2.json") as f:
+        step = json.load(f)["crash_step"]
+    assert result["status_detail"] == f"r2 exited with status -9 at step {step}"
+    assert 0 < step < result["steps"]
+    for k in ("r1", "r3"):
+        assert not r[k]["crashed"] and r[k]["finish_step"] is not None
