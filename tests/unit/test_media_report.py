@@ -99,7 +99,7 @@ def test_report_has_the_section_only_when_media_vary(tmp_path):
 def test_protocols_are_compared_within_each_medium(tmp_path):
     made = figures.make_all(tmp_path, metrics_of=sweep(tmp_path, routing=("aodv", "batman")))
     rows = made.tables.protocols
-    assert [(r.medium, r.routing, r.steps) for r in rows] == [
+    assert [(r.medium, r.routing, r.measures.steps) for r in rows] == [
         ("ns3-wifi", "aodv", 414), ("ns3-wifi", "batman", 464),
         ("veth", "aodv", 410), ("veth", "batman", 460),
     ]  # fmt: skip
