@@ -2,11 +2,12 @@
 
 The display (node.display) has no body and no deadline of its own: a frame tells it the step,
 and it acts on a few of them. It floods a beacon every `map_period` steps, keeps a video
-frame every `video_every` steps and saves a snapshot at each chosen step. Waking a Python
-process for every other step cost a lone robot's run a fifth of its CPU while stepping (0.19
-ms a step), so the world (testbed.run.steploop) sends the display only the frames of the
-steps `wanted` names, plus the last step's (the final snapshot is named after it). Both sides
-read this one description, so they cannot disagree on which steps those are.
+frame every `video_every` steps and saves a snapshot at each chosen step. Waking its Python
+process for every other step too cost a lone robot's run 0.08 ms a step (a quarter of the
+display's CPU while stepping; docs/measurements.md), so the world (testbed.run.steploop)
+sends the display only the frames of the steps `wanted` names, plus the last step's (the
+final snapshot is named after it). Both sides read this one description, so they cannot
+disagree on which steps those are. The display's events carry the step of its last frame.
 """
 
 from __future__ import annotations

@@ -38,11 +38,10 @@ that tail instead of waiting for it (about a second a run: a quarter of a run's 
 cost). A run that was late while it overlapped a tail turns the overlap off for its team
 size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 9); with
 --view there is none (the live page's run holds its port to its exit), and while more than
---jobs tails go on, tails count as in flight again. The
-queue is served first-fit: the first waiting run that fits starts. What happens when a run
-misses step deadlines (the concurrency backs off, a team size's time scale goes down and up
-again, a run is redone) is decided by the pure rules of testbed.sweep.policy;
-`Sweep._finish` only applies them. The limits, the time scales and which run fits next are
+--jobs tails go on, tails count as in flight again. The queue is served first-fit: the
+first waiting run that fits starts. What happens when a run misses step deadlines (the
+concurrency backs off, a team size's time scale goes down and up again, a run is redone) is
+decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only applies them. The limits, the time scales and which run fits next are
 the sweep's schedule (testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops
 the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
