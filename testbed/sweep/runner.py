@@ -41,9 +41,9 @@ size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 
 --jobs tails go on, tails count as in flight again. The queue is served first-fit: the
 first waiting run that fits starts. What happens when a run misses step deadlines (the
 concurrency backs off, a team size's time scale goes down and up again, a run is redone) is
-decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only applies them. The limits, the time scales and which run fits next are
-the sweep's schedule (testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops
-the runs.
+decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only applies them. The
+limits, the time scales and which run fits next are the sweep's schedule
+(testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
