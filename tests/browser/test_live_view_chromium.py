@@ -85,15 +85,19 @@ def body(driver, attr: str):
 
 
 def check_drawn_page(driver) -> None:
-    """What the header says matches what is drawn; every robot is whole on the canvas."""
-    header = driver.find_element("id", "counters").text
-    assert "?" not in header and "null" not in header and "undefined" not in header, header
+    """What the header says matches what is drawn; every robot is whole on the canvas. The
+    header and the drawing are read in one script: a live page may take its next step between
+    two reads (a loaded machine showed "2 links" in the header read first and 1 link drawn at
+    the step after)."""
     drawn = driver.execute_script(
         "const s = Number(slider.value), pos = run.positions[s];"
         "const pts = [];"
         "for (let r = 0; r < run.robots; r++) pts.push(toCanvas(pos[2 * r], pos[2 * r + 1]));"
-        "return {pts: pts, links: drawnLinks(s).length, w: canvas.width, h: canvas.height};"
+        "return {pts: pts, links: drawnLinks(s).length, w: canvas.width, h: canvas.height,"
+        "        header: document.getElementById('counters').textContent};"
     )
+    header = drawn["header"]
+    assert "?" not in header and "null" not in header and "undefined" not in header, header
     n = drawn["links"]
     assert f"{n} link{'' if n == 1 else 's'}," in header, (header, n)
     for x, y in drawn["pts"]:  # a robot's dot is 6 px round: all of it inside
