@@ -89,6 +89,13 @@ build/asan/tb-robot: $(TB_ROBOT_DEPS)
 	g++ -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined \
 		$(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) $(TB_ROBOT_ZMQ)
 
+# The step core as the world and the Python robot load it, with AddressSanitizer and
+# UndefinedBehaviorSanitizer (tests/integration/test_stepcore_sanitizers.py runs its tests on it).
+build/asan/libstepcore.so: native/stepcore/stepcore.cc native/stepcore/stepcore.h
+	@mkdir -p $(@D)
+	g++ -std=c++17 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined \
+		-fno-sanitize-recover=undefined -fPIC -shared -ffp-contract=off -o $@ $<
+
 build/tsan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
 	@mkdir -p $(@D)

@@ -17,6 +17,7 @@ a run records it.
 from __future__ import annotations
 
 import ctypes
+import os
 from pathlib import Path
 
 import numpy as np
@@ -25,8 +26,11 @@ from common import envswitch
 from common.paths import PROJECT_ROOT
 from node.rays import _BUCKETS, _FRAC
 
-LIBRARY = Path(PROJECT_ROOT) / "build" / "libstepcore.so"
-VERSION = 1  # sc_version() of the source this wrapper was written for
+# TESTBED_STEPCORE_LIBRARY: another build of it (the sanitized one its test loads).
+LIBRARY = Path(
+    os.environ.get("TESTBED_STEPCORE_LIBRARY") or Path(PROJECT_ROOT) / "build" / "libstepcore.so"
+)
+VERSION = 2  # sc_version() of the source this wrapper was written for
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int
@@ -38,6 +42,11 @@ _SIGNATURES = {
     "sc_version": (_I, []),
     "sc_window_marks": (_I, [_P, _P, _P, _I, _I, _I, _F, _F, _I, _I, _P, _P, _P]),
     "sc_cast_window": (_I, [_P, _P, _P, _I, _I, _D, _F, _F, _I, _I, _P, _P, _L, _I, _P, _P]),
+    "sc_world_cast": (
+        _L,
+        [_I, _P, _P, _D, _D, _I, _I, _I, _P, _P, _P, _I, _I, _D, _I, _I, _I, _P, _P, _P, _P]
+        + [_P, _P, _P, _L, _L, _P, _P, _L, _L, _P, _P, _P],
+    ),  # fmt: skip
     "sc_scan_into": (
         None,
         [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P]
@@ -221,7 +230,12 @@ def _table(laser, fx: np.float32, fy: np.float32, bias: int):
     if not bias <= min(cb, rb) - laser.pad - 1 < max(cb, rb) + laser.pad + 1 < 2 * bias:
         return None
     size = _FRAC // _BUCKETS
-    key = (int((float(fx) - cb) * _FRAC) // size, int((float(fy) - rb) * _FRAC) // size)
+    return _class_table(laser, (int((float(fx) - cb) * _FRAC) // size,
+                                int((float(fy) - rb) * _FRAC) // size))  # fmt: skip
+
+
+def _class_table(laser, key: tuple[int, int]):
+    """The table of pose-fraction class `key` (bx, by) as addresses (see `_table`)."""
     cache = laser.__dict__.setdefault("_native_marks", {})
     t = cache.get(key)
     if t is None:
@@ -277,3 +291,46 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
                              roff, coff, address(occ) + at, address(seen) + at, occ.shape[1],
                              min(s0, laser.n_samples), ranges.ctypes.data, idx)  # fmt: skip
     return ranges, bool(hit)
+
+
+class WorldCast:
+    """testbed.world's casts of one step, every robot's in one compiled call
+    (sc_world_cast): the world's grids and the laser's tables, as addresses, for the run.
+    `cast(xy, want)` casts from the robots' positions (an n x 2 float64 array) where `want`
+    (n bytes) says so; it returns (ranges, hit, fresh): ranges row i holds robot i's ranges
+    where hit[i] is 1 (some ray hit), hit[i] is 0 where none did and -1 where the call did
+    nothing for it (World.scan's own path takes that robot); fresh counts the cells of
+    `free` seen for the first time."""
+
+    def __init__(self, laser, n: int, map_cell: float, bias: int, occ: np.ndarray,
+                 seen: np.ndarray, free: np.ndarray, open_space: np.ndarray,
+                 skip: np.ndarray) -> None:  # fmt: skip
+        assert lib is not None  # callers check NATIVE
+        assert occ.shape == seen.shape == free.shape and occ.dtype == seen.dtype == np.uint8
+        self.laser = laser
+        self._grids = (occ, seen, np.ascontiguousarray(free, dtype=np.uint8),
+                       np.ascontiguousarray(open_space, dtype=np.uint8),
+                       np.ascontiguousarray(skip, dtype=np.int32))  # fmt: skip
+        self.ranges = np.empty((n, laser.n_rays), dtype=np.float32)
+        self.hit = np.empty(n, dtype=np.int8)
+        _, (dx, dy, mark, _free, _occ, idx) = _laser_tables(laser)
+        keys = [(bx, by) for bx in range(_BUCKETS) for by in range(_BUCKETS)]
+        tables = [_class_table(laser, key) for key in keys] if laser.tabled else []
+        self._keep = [
+            (ctypes.c_void_p * len(tables))(*(t[i] for t in tables)) for i in range(3)
+        ]  # fmt: skip
+        self._n_open = np.array([t[3] for t in tables] or [0], dtype=np.int32)
+        occ, seen, free, open_space, skip = self._grids
+        self._head = (dx, dy, mark, laser.n_rays, laser.n_samples, laser.step,
+                      1 if laser.tabled else 0, _FRAC, _BUCKETS,
+                      *(ctypes.addressof(a) for a in self._keep), ptr(self._n_open),
+                      ptr(occ), ptr(seen), ptr(free), occ.shape[0], occ.shape[1], ptr(open_space),
+                      ptr(skip), open_space.shape[0], open_space.shape[1], ptr(self.ranges),
+                      ptr(self.hit), idx)  # fmt: skip
+        self._geometry = (map_cell, laser.cell, bias, laser.pad, laser.window)
+
+    def cast(self, xy: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        assert lib is not None and xy.dtype == np.float64 and xy.flags.c_contiguous
+        n = len(want)
+        fresh = lib.sc_world_cast(n, ptr(xy), ptr(want), *self._geometry, *self._head)
+        return self.ranges, self.hit, int(fresh)

@@ -34,7 +34,7 @@ inline int32_t hit_index(float range, float step, int n_samples) {
 
 extern "C" {
 
-int sc_version(void) { return 1; }
+int sc_version(void) { return 2; }
 
 // Laser.window_marks: the window cells (w x w, row-major) of the marked samples before each
 // ray's hit, and each hit sample's cell. idx: per-ray hit sample (n_samples: none) or null for
@@ -138,6 +138,111 @@ int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_
         }
     }
     return any ? 1 : 0;
+}
+
+// testbed.world's casts of one step in one call: World.scan for each robot i with want[i]
+// (xy: its x, y; metres), as sc_mark_table and sc_cast_window do them, on the padded obstacle
+// grid `occ` (ph x pw) and the cells seen so far `seen` (same shape). The map's cell (r, c)
+// under the robot says, through `open_space` and `skip` (mh x mw), which samples can hit.
+// tables: per pose-fraction class (buckets x buckets, row bx), the laser's table of a scan
+// without hits (sure mask, open dx, open dy, how many open), or tabled = 0 for none.
+// Out: ranges_out row i (n_rays) and hit_out[i]: 1 some ray hit (the row holds the ranges),
+// 0 none did (the row is not written), -1 nothing done (the window does not fit, or the robot
+// is off the map): World.scan's own path takes that robot. Returns how many cells of
+// `free_pad` (same shape as `occ`) were seen for the first time, for the coverage count.
+int64_t sc_world_cast(int n, const double* xy, const uint8_t* want, double map_cell,
+                      double laser_cell, int bias, int pad, int w, const float* dx,
+                      const float* dy, const uint8_t* mark, int n_rays, int n_samples,
+                      double step, int tabled, int frac, int buckets,
+                      const uint8_t* const* sures, const float* const* odxs,
+                      const float* const* odys, const int32_t* n_opens, const uint8_t* occ,
+                      uint8_t* seen, const uint8_t* free_pad, int64_t ph, int64_t pw,
+                      const uint8_t* open_space, const int32_t* skip, int64_t mh, int64_t mw,
+                      float* ranges_out, int8_t* hit_out, int32_t* idx_tmp) {
+    int64_t fresh = 0;
+    const int size = frac / buckets;
+    for (int i = 0; i < n; ++i) {
+        hit_out[i] = -1;
+        if (!want[i]) continue;
+        const double x = xy[2 * i], y = xy[2 * i + 1];
+        const double mr = y / map_cell, mc = x / map_cell;
+        if (!(mr >= 0 && mc >= 0 && mr < (double)mh && mc < (double)mw)) continue;
+        const int64_t cell = (int64_t)mr * mw + (int64_t)mc;
+        const int s0 = open_space[cell] ? n_samples : std::min(skip[cell], n_samples);
+        const float fx = (float)(x / laser_cell + bias), fy = (float)(y / laser_cell + bias);
+        const int cb = (int)fx, rb = (int)fy;
+        const int64_t r0 = rb - bias, c0 = cb - bias;
+        if (r0 < 0 || c0 < 0 || r0 + w > ph || c0 + w > pw) continue;
+        const int roff = pad - rb, coff = pad - cb;
+        const int64_t at = r0 * pw + c0;
+        uint8_t* sn = seen + at;
+        const uint8_t* fp = free_pad + at;
+        auto see_at = [&](int64_t r, int64_t c) {  // branch-free: new cells are few
+            const int64_t k = r * pw + c;
+            fresh += (sn[k] ^ 1) & fp[k];
+            sn[k] = 1;
+        };
+        if (s0 >= n_samples && tabled && bias <= std::min(cb, rb) - pad - 1 &&
+            std::max(cb, rb) + pad + 1 < 2 * bias) {
+            const int key = ((int)(((double)fx - cb) * frac) / size) * buckets +
+                            (int)(((double)fy - rb) * frac) / size;
+            const uint8_t* sure = sures[key];
+            for (int r = 0; r < w; ++r) {
+                uint8_t* d = sn + r * pw;
+                const uint8_t* f = fp + r * pw;
+                const uint8_t* m = sure + (size_t)r * w;
+                uint32_t row = 0;  // vectorises: no branch, a byte sum per row
+                for (int c = 0; c < w; ++c) {
+                    row += (uint8_t)(m[c] & (d[c] ^ 1) & f[c]);
+                    d[c] |= m[c];
+                }
+                fresh += row;
+            }
+            const float* odx = odxs[key];
+            const float* ody = odys[key];
+            for (int j = 0; j < n_opens[key]; ++j)
+                see_at((int32_t)(ody[j] + fy) + roff, (int32_t)(odx[j] + fx) + coff);
+            hit_out[i] = 0;
+            continue;
+        }
+        const uint8_t* oc = occ + at;
+        bool any = false;
+        float* ranges = ranges_out + (size_t)i * n_rays;
+        for (int k = 0; k < n_rays; ++k) {
+            int first = n_samples;
+            const float* rx = dx + (size_t)k * n_samples;
+            const float* ry = dy + (size_t)k * n_samples;
+            for (int s = s0; s < n_samples; ++s) {
+                int64_t r = (int32_t)(ry[s] + fy) + roff;
+                int64_t c = (int32_t)(rx[s] + fx) + coff;
+                if (oc[r * pw + c]) {
+                    first = s;
+                    break;
+                }
+            }
+            idx_tmp[k] = first;
+            if (first < n_samples) {
+                any = true;
+                ranges[k] = (float)((double)(first + 1) * step);  // float64, as numpy
+            } else {
+                ranges[k] = INFINITY;
+            }
+        }
+        for (int k = 0; k < n_rays; ++k) {
+            int lim = any ? idx_tmp[k] : n_samples;
+            const float* rx = dx + (size_t)k * n_samples;
+            const float* ry = dy + (size_t)k * n_samples;
+            const uint8_t* mk = mark + (size_t)k * n_samples;
+            for (int s = 0; s < lim; ++s)
+                if (mk[s]) see_at((int32_t)(ry[s] + fy) + roff, (int32_t)(rx[s] + fx) + coff);
+            if (any && lim < n_samples) {
+                size_t a = (size_t)k * n_samples + lim;
+                see_at((int64_t)(dy[a] + fy) + roff, (int64_t)(dx[a] + fx) + coff);
+            }
+        }
+        hit_out[i] = any ? 1 : 0;
+    }
+    return fresh;
 }
 
 // Robot._put_scan with Laser.scan_window and OccupancyGrid.update_window: one scan into the

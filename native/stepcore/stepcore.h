@@ -15,6 +15,15 @@ int sc_window_marks(const float* dx, const float* dy, const uint8_t* mark, int n
 void sc_mark_table(const uint8_t* sure, int w, const float* odx, const float* ody, int n_open,
                    float fx, float fy, int roff, int coff, uint8_t* dst, int64_t stride,
                    int or_into);
+int64_t sc_world_cast(int n, const double* xy, const uint8_t* want, double map_cell,
+                      double laser_cell, int bias, int pad, int w, const float* dx,
+                      const float* dy, const uint8_t* mark, int n_rays, int n_samples,
+                      double step, int tabled, int frac, int buckets,
+                      const uint8_t* const* sures, const float* const* odxs,
+                      const float* const* odys, const int32_t* n_opens, const uint8_t* occ,
+                      uint8_t* seen, const uint8_t* free_pad, int64_t ph, int64_t pw,
+                      const uint8_t* open_space, const int32_t* skip, int64_t mh, int64_t mw,
+                      float* ranges_out, int8_t* hit_out, int32_t* idx_tmp);
 void sc_scan_into(const float* dx, const float* dy, const uint8_t* mark, int n_rays,
                   int n_samples, float step, int w, float fx, float fy, int roff, int coff,
                   const float* ranges, float* lp, uint8_t* own, int64_t stride, int64_t r0,

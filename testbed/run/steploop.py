@@ -54,7 +54,7 @@ class StepLoop:
         self.timing = StepTiming()
         self.progress = ProgressLine(progress, prep.cfg.max_steps, self.n)
         self.positions: list = []  # the robots' positions at the last step
-        self.scans: list[np.ndarray | None] = [self.world.scan(i) for i in range(self.n)]
+        self.scans: list[np.ndarray | None] = self.world.scan_all([True] * self.n)
         self.cpu0 = time.process_time()
         self.clock = StepClock(prep.cfg.time_scale, self.n, time.monotonic())
         self.display_steps = prep.display_steps
@@ -86,9 +86,7 @@ class StepLoop:
         self._inject_kills(step)
         self._notice_crashes(step)
         ts = time.monotonic()
-        self.scans[:] = [
-            world.scan(i) if not self.robots[i + 1].gone else None for i in range(self.n)
-        ]
+        self.scans[:] = world.scan_all([not self.robots[k].gone for k in range(1, self.n + 1)])
         cov = world.coverage()
         self.files.coverage(step, cov)
         if self.live is not None:
@@ -144,6 +142,8 @@ class StepLoop:
     def _isolate(self, step: int) -> None:
         """--isolate: the robots whose radio is out at this step, to the topology controller
         (links off, or back as the positions want) when that changed; events.jsonl says so."""
+        if not self.prep.cfg.isolate:
+            return
         out = isolation.isolated_at(self.prep.cfg.isolate, step)
         was = self.net.isolated
         if out == was:

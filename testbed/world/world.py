@@ -97,6 +97,15 @@ class World:
         laser.prepare_tables()  # before the run's clock starts
         # Cells where a robot's centre may be: obstacles grown by the robot's radius.
         self.blocked = truth.inflated(radius)
+        # Free cells seen so far (None: to be counted again), kept up by the compiled casts.
+        self._seen_free_count: int | None = 0
+        self._cast = None
+        if stepcore.NATIVE:
+            self._cast = stepcore.WorldCast(laser, len(self.bodies), truth.cell, _BIAS,
+                                            self._occ_u8, self._seen_u8, self._seen_free[1],
+                                            self.open_space, self._skip)  # fmt: skip
+            self._xy = np.zeros((len(self.bodies), 2), dtype=np.float64)
+            self._want = np.zeros(len(self.bodies), dtype=np.uint8)
 
     @property
     def n(self) -> int:
@@ -146,12 +155,48 @@ class World:
             self.paths[i].append((nx, ny))
         self.step_no += 1
 
+    def scan_all(self, live: list[bool]) -> list[np.ndarray | None]:
+        """Every live robot's scan (None for the others), as `scan` casts each: those that
+        moved in one compiled call where it runs (a call per robot cost more than its cast),
+        which also counts the free cells seen for the first time."""
+        if self._cast is None:
+            return [self.scan(i) if alive else None for i, alive in enumerate(live)]
+        out: list[np.ndarray | None] = [None] * len(live)
+        want, xy = self._want, self._xy
+        want[:] = 0
+        for i, alive in enumerate(live):
+            if not alive:
+                continue
+            b = self.bodies[i]
+            cached = self._last_scan[i]
+            if cached is not None and cached[0] == (b.x, b.y):
+                out[i] = cached[1]  # it did not move: same scan, nothing new seen
+                continue
+            want[i] = 1
+            xy[i] = b.x, b.y
+        if not want.any():
+            return out
+        ranges, hit, fresh = self._cast.cast(xy, want)
+        if self._seen_free_count is not None:
+            self._seen_free_count += fresh
+        for i in np.flatnonzero(want).tolist():
+            h = hit[i]
+            if h < 0:  # the laser's window sticks out of the map: scan's own path
+                out[i] = self.scan(i)
+                continue
+            r = ranges[i].copy() if h else self._no_returns
+            b = self.bodies[i]
+            self._last_scan[i] = ((b.x, b.y), r)
+            out[i] = r
+        return out
+
     def scan(self, k: int) -> np.ndarray:
         """Cast robot k's laser (0-based) and add what it saw to the team's seen cells."""
         b = self.bodies[k]
         cached = self._last_scan[k]
         if cached is not None and cached[0] == (b.x, b.y):
             return cached[1]  # it did not move: same scan, nothing new seen
+        self._seen_free_count = None  # counted again by coverage()
         r, c = int(b.y / self.truth.cell), int(b.x / self.truth.cell)
         if stepcore.NATIVE:
             s0 = self.laser.n_samples if self.open_space[r, c] else int(self._skip[r, c])
@@ -240,7 +285,11 @@ class World:
         return ranges
 
     def coverage(self) -> float:
-        """Fraction of the free space the team's lasers have seen."""
-        if stepcore.NATIVE:
-            return stepcore.count_and(self._seen_free[0], self._seen_free[1]) / self.free_total
-        return float(np.count_nonzero(self.seen & self.free_space)) / self.free_total
+        """Fraction of the free space the team's lasers have seen (the count scan_all keeps,
+        or counted again after a scan)."""
+        if self._seen_free_count is None:
+            if stepcore.NATIVE:
+                self._seen_free_count = stepcore.count_and(*self._seen_free)
+            else:
+                self._seen_free_count = int(np.count_nonzero(self.seen & self.free_space))
+        return self._seen_free_count / self.free_total

@@ -154,3 +154,45 @@ def test_world_scan_and_seen_equal_the_reference_on_random_poses(max_range):
         rays = np.flatnonzero(n < laser.n_samples)
         expect[flat[rays, n[rays]]] = True
         assert np.array_equal(w.seen_padded.reshape(-1), expect)
+
+
+@pytest.mark.parametrize("max_range", [2.0, 1.5, 30.0])
+def test_all_scans_in_one_call_equal_one_scan_each(max_range):
+    """World.scan_all (a step's casts in one compiled call, with the coverage count it
+    keeps) gives each robot World.scan's ranges and marks the same seen cells, on a cluttered
+    map, with robots that stay where they were (cached) and dead ones (None); lasers with
+    the tables of scans without hits and one too long for them."""
+    t = empty_terrain(12, 12)
+    occ = t.occupied.copy()
+    rng = np.random.default_rng(11)
+    for _ in range(12):
+        r, c = rng.integers(10, 220, 2)
+        occ[r : r + rng.integers(1, 30), c : c + rng.integers(1, 4)] = True
+    n = 6
+
+    def world() -> World:
+        starts = [(6.0, 6.0)] * n
+        return World(GroundTruth(occ), starts, Laser(max_range, 180), ~occ, 0.1, 0.15)
+
+    batch, one = world(), world()
+    for step in range(40):
+        live = [bool(v) for v in rng.random(n) > 0.15]
+        for i in range(n):
+            if rng.random() < 0.3 and step:
+                continue  # stays where it is: its scan is the cached one
+            while True:
+                x, y = (float(v) for v in rng.uniform(0.05, 11.95, 2))
+                if not occ[int(y / 0.05), int(x / 0.05)]:
+                    break
+            for w in (batch, one):
+                w.bodies[i].x, w.bodies[i].y = x, y
+        got = batch.scan_all(live)
+        for i in range(n):
+            if not live[i]:
+                assert got[i] is None
+                continue
+            assert np.array_equal(got[i], one.scan(i))
+        assert np.array_equal(batch.seen_padded, one.seen_padded)
+        assert batch.coverage() == one.coverage()
+        truth = float(np.count_nonzero(batch.seen & ~occ)) / batch.free_total
+        assert batch.coverage() == truth

@@ -263,6 +263,8 @@ class VethMedium:
     def create_pairs(self, pairs: list[tuple[int, int]]) -> None:
         """Create the veth pairs of links met for the first time: both ends up, in their
         bridges and isolated. set_links() waits until the bridges forward through them."""
+        if not pairs:
+            return
         new = [p for p in pairs if p not in self.pairs]
         reqs = []
         for i, j in new:
@@ -318,6 +320,8 @@ class VethMedium:
         costs ~15 ms (the kernel waits for an RCU grace period), and taking an end down is
         asynchronous (carrier changes go through linkwatch); both would also drop the link's
         qdiscs and loss rules, to be rebuilt when the robots meet again."""
+        if not (add or remove or self._pending):
+            return  # most world steps: nothing to switch, nothing to wait for
         missing = [p for p in add if p not in self.pairs]
         if missing:
             raise ValueError(f"links {missing} have no veth pair yet")
