@@ -218,14 +218,16 @@ class Daemon:
     def _on_dump(self, *_a) -> None:
         self._dump = True
 
-    def _write_stats(self) -> None:
+    def _write_stats(self, compact: bool = False) -> None:
+        """The statistics file; `compact` (one line) for the rewrites while the daemon
+        runs, indented as it stops."""
         if self.stats_path:
             if self.core is not None:  # None when start-up failed
                 self.stats.routes = {
                     d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
                 }
                 self.stats.protocol_dropped = self.core.dropped
-            self.stats.write(self.stats_path)
+            self.stats.write(self.stats_path, compact=compact)
 
     # -- the loop ------------------------------------------------------------------------
     def _loop(self) -> None:
@@ -265,7 +267,7 @@ class Daemon:
             if self._dump or now >= next_stats:
                 self._dump = False
                 next_stats = now + STATS_PERIOD
-                self._write_stats()
+                self._write_stats(compact=True)
             for key, _ in sel.select(max(0.0, min(deadline, next_poll, next_stats) - now)):
                 key.data()
 

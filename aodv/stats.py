@@ -115,8 +115,8 @@ class Stats:
             cpu_s=round(time.process_time(), 3),
         )
 
-    def write(self, path: str) -> None:
-        self.snapshot().write(path)
+    def write(self, path: str, *, compact: bool = False) -> None:
+        self.snapshot().write(path, compact=compact)
 
 
 def read_fresh(path: str, proc, timeout: float = 3.0) -> DaemonStats:

@@ -102,6 +102,21 @@ def test_what_the_daemon_writes_is_the_old_bytes_and_reads_back_the_same(tmp_pat
     assert read.to_json() == WRITTEN
 
 
+def test_the_rewrites_while_the_daemon_runs_are_one_line_of_the_same_content(tmp_path, monkeypatch):
+    """The daemon's rewrites every STATS_PERIOD go through json's compiled encoder (one line);
+    what they hold is what the indented file holds, from the daemon's snapshot and from a
+    file read back (read-only mappings)."""
+    stats = _stats(monkeypatch)
+    path = tmp_path / "r1.aodv.json"
+    stats.write(str(path), compact=True)
+    text = path.read_text()
+    assert text.count("\n") == 1 and text.endswith("\n")
+    assert json.loads(text) == WRITTEN
+    assert DaemonStats.read(path) == stats.snapshot()
+    DaemonStats.read(path).write(path, compact=True)
+    assert path.read_text() == text
+
+
 def test_the_fields_readers_use():
     s = DaemonStats.from_json(WRITTEN)
     assert s.sent_total == 13 and s.messages_not_transmitted == {"RREP": 1}
