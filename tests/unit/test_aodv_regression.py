@@ -81,3 +81,30 @@ def test_warm_up_leaves_nothing_in_the_robots_log(caplog):
         warm_up(Params(time_scale=4.0))  # a run's scale: its chains' links time out
         logging.getLogger("aodv.core").info("after the warm-up")
     assert [r.getMessage() for r in caplog.records] == ["after the warm-up"]
+
+
+def test_the_warm_up_is_the_same_events_at_every_time_scale(monkeypatch):
+    """The daemon's warm-up runs its chains for 2 s of the run's clock: at a high time scale
+    it does the protocol events it does at 1, not K times as many (it did: 125 ms of each
+    daemon's start at 30, against 17 ms at 1)."""
+    from aodv import core
+    from aodv.sim import warm_up
+
+    def events(scale: float) -> int:
+        seen = [0]
+        for name in ("on_timer", "on_control"):
+            real = getattr(core.AodvCore, name)
+
+            def counted(self, *a, _real=real, **kw):
+                seen[0] += 1
+                return _real(self, *a, **kw)
+
+            monkeypatch.setattr(core.AodvCore, name, counted)
+        warm_up(Params(time_scale=scale))
+        monkeypatch.undo()
+        return seen[0]
+
+    at_one = events(1.0)
+    assert at_one > 100  # discoveries and HELLOs ran
+    for scale in (7.0, 30.0):
+        assert at_one * 0.8 <= events(scale) <= at_one * 1.25
