@@ -17,7 +17,6 @@ a run records it.
 from __future__ import annotations
 
 import ctypes
-import os
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +25,9 @@ from common import envswitch
 from common.paths import PROJECT_ROOT
 from node.rays import _BUCKETS, _FRAC
 
-# TESTBED_STEPCORE_LIBRARY: another build of it (the sanitized one its test loads).
-LIBRARY = Path(
-    os.environ.get("TESTBED_STEPCORE_LIBRARY") or Path(PROJECT_ROOT) / "build" / "libstepcore.so"
+# TESTBED_STEPCORE_LIBRARY: another build of it in build/ (the sanitized one its test loads).
+LIBRARY = envswitch.library("TESTBED_STEPCORE_LIBRARY") or (
+    Path(PROJECT_ROOT) / "build" / "libstepcore.so"
 )
 VERSION = 2  # sc_version() of the source this wrapper was written for
 

@@ -9,12 +9,14 @@ import os
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from aiohttp.test_utils import TestServer
 
 from common import envswitch
 from common.errors import UsageError
+from common.paths import PROJECT_ROOT
 from testbed import console
 from testbed.net import movers
 from testbed.view import replay, server
@@ -76,6 +78,24 @@ def test_a_robot_started_by_hand_refuses_an_unknown_switch_in_one_line():
     assert r.returncode == 2, r.stderr
     (line,) = r.stderr.strip().splitlines()
     assert line == "node: TESTBED_STEPCORE='nmupy' is not one of compiled, numpy"
+
+
+@pytest.mark.parametrize("value", ["/tmp/libstepcore.so", "build/../../libstepcore.so"])
+def test_a_step_core_library_outside_build_is_refused_in_one_line(value):
+    """TESTBED_STEPCORE_LIBRARY (the sanitized build its test loads) names a library every
+    process of a run loads, root's included: only a file in the project's build/ is taken;
+    another is refused by `testbed` and by a robot started by hand, one line, exit 2."""
+    env = {**os.environ, "TESTBED_STEPCORE_LIBRARY": value}
+    for argv in (
+        ["-m", "testbed", "view", "/nonexistent"],
+        ["-m", "node", "--robot", "r1", "--robots", "1", "--body", "/nonexistent"],
+    ):
+        r = subprocess.run([sys.executable, *argv], capture_output=True, text=True, env=env,
+                           timeout=60)  # fmt: skip
+        assert r.returncode == 2, r.stderr
+        (line,) = r.stderr.strip().splitlines()
+        assert line.endswith(f"TESTBED_STEPCORE_LIBRARY='{value}' is not a file in "
+                             f"{Path(PROJECT_ROOT, 'build').resolve()}"), line  # fmt: skip
 
 
 @pytest.mark.parametrize(("name", "value", "got"), [("TESTBED_REALTIME", "0", "0"),
