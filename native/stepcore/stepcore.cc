@@ -30,6 +30,55 @@ inline int32_t hit_index(float range, float step, int n_samples) {
     return std::min(std::max(i, 0), n_samples);
 }
 
+// World._cast_window's rays: each ray's first sample from s0 on that falls in an obstacle cell
+// of the window at `occ` (rows of `stride`), in idx[k] (n_samples: none), and its range in
+// ranges[k] (+inf: none; float64 arithmetic, as numpy). True when some ray hit.
+bool first_hits(const float* dx, const float* dy, int n_rays, int n_samples, double step,
+                float fx, float fy, int roff, int coff, const uint8_t* occ, int64_t stride,
+                int s0, float* ranges, int32_t* idx) {
+    bool any = false;
+    for (int k = 0; k < n_rays; ++k) {
+        int first = n_samples;
+        const float* rx = dx + (size_t)k * n_samples;
+        const float* ry = dy + (size_t)k * n_samples;
+        for (int s = s0; s < n_samples; ++s) {
+            int64_t r = (int32_t)(ry[s] + fy) + roff;
+            int64_t c = (int32_t)(rx[s] + fx) + coff;
+            if (occ[r * stride + c]) {
+                first = s;
+                break;
+            }
+        }
+        idx[k] = first;
+        if (first < n_samples) {
+            any = true;
+            ranges[k] = (float)((double)(first + 1) * step);
+        } else {
+            ranges[k] = INFINITY;
+        }
+    }
+    return any;
+}
+
+// What a cast saw (window_marks): the marked samples before each ray's hit (every marked
+// sample when no ray hit) and each hit sample; see(r, c) for each, in window cells.
+template <class See>
+void each_seen(const float* dx, const float* dy, const uint8_t* mark, int n_rays, int n_samples,
+               float fx, float fy, int roff, int coff, bool any, const int32_t* idx, See see) {
+    for (int k = 0; k < n_rays; ++k) {
+        int lim = any ? idx[k] : n_samples;
+        const float* rx = dx + (size_t)k * n_samples;
+        const float* ry = dy + (size_t)k * n_samples;
+        const uint8_t* mk = mark + (size_t)k * n_samples;
+        for (int s = 0; s < lim; ++s)
+            if (mk[s]) see((int32_t)(ry[s] + fy) + roff, (int32_t)(rx[s] + fx) + coff);
+        if (any && lim < n_samples) {
+            size_t a = (size_t)k * n_samples + lim;
+            see((int64_t)(dy[a] + fy) + roff, (int64_t)(dx[a] + fx) + coff);
+        }
+    }
+}
+
 }  // namespace
 
 extern "C" {
@@ -100,43 +149,10 @@ int sc_cast_window(const float* dx, const float* dy, const uint8_t* mark, int n_
                    int n_samples, double step, float fx, float fy, int roff, int coff,
                    const uint8_t* occ, uint8_t* seen, int64_t stride, int s0,
                    float* ranges_out, int32_t* idx_tmp) {
-    bool any = false;
-    for (int k = 0; k < n_rays; ++k) {
-        int first = n_samples;
-        const float* rx = dx + (size_t)k * n_samples;
-        const float* ry = dy + (size_t)k * n_samples;
-        for (int s = s0; s < n_samples; ++s) {
-            int64_t r = (int32_t)(ry[s] + fy) + roff;
-            int64_t c = (int32_t)(rx[s] + fx) + coff;
-            if (occ[r * stride + c]) {
-                first = s;
-                break;
-            }
-        }
-        idx_tmp[k] = first;
-        if (first < n_samples) {
-            any = true;
-            ranges_out[k] = (float)((double)(first + 1) * step);  // float64, as numpy
-        } else {
-            ranges_out[k] = INFINITY;
-        }
-    }
-    for (int k = 0; k < n_rays; ++k) {
-        int lim = any ? idx_tmp[k] : n_samples;
-        const float* rx = dx + (size_t)k * n_samples;
-        const float* ry = dy + (size_t)k * n_samples;
-        const uint8_t* mk = mark + (size_t)k * n_samples;
-        for (int s = 0; s < lim; ++s) {
-            if (!mk[s]) continue;
-            int64_t r = (int32_t)(ry[s] + fy) + roff;
-            seen[r * stride + (int32_t)(rx[s] + fx) + coff] = 1;
-        }
-        if (any && lim < n_samples) {
-            size_t at = (size_t)k * n_samples + lim;
-            int64_t r = (int64_t)(dy[at] + fy) + roff;
-            seen[r * stride + (int64_t)(dx[at] + fx) + coff] = 1;
-        }
-    }
+    bool any = first_hits(dx, dy, n_rays, n_samples, step, fx, fy, roff, coff, occ, stride, s0,
+                          ranges_out, idx_tmp);
+    each_seen(dx, dy, mark, n_rays, n_samples, fx, fy, roff, coff, any, idx_tmp,
+              [&](int64_t r, int64_t c) { seen[r * stride + c] = 1; });
     return any ? 1 : 0;
 }
 
@@ -205,41 +221,9 @@ int64_t sc_world_cast(int n, const double* xy, const uint8_t* want, double map_c
             hit_out[i] = 0;
             continue;
         }
-        const uint8_t* oc = occ + at;
-        bool any = false;
-        float* ranges = ranges_out + (size_t)i * n_rays;
-        for (int k = 0; k < n_rays; ++k) {
-            int first = n_samples;
-            const float* rx = dx + (size_t)k * n_samples;
-            const float* ry = dy + (size_t)k * n_samples;
-            for (int s = s0; s < n_samples; ++s) {
-                int64_t r = (int32_t)(ry[s] + fy) + roff;
-                int64_t c = (int32_t)(rx[s] + fx) + coff;
-                if (oc[r * pw + c]) {
-                    first = s;
-                    break;
-                }
-            }
-            idx_tmp[k] = first;
-            if (first < n_samples) {
-                any = true;
-                ranges[k] = (float)((double)(first + 1) * step);  // float64, as numpy
-            } else {
-                ranges[k] = INFINITY;
-            }
-        }
-        for (int k = 0; k < n_rays; ++k) {
-            int lim = any ? idx_tmp[k] : n_samples;
-            const float* rx = dx + (size_t)k * n_samples;
-            const float* ry = dy + (size_t)k * n_samples;
-            const uint8_t* mk = mark + (size_t)k * n_samples;
-            for (int s = 0; s < lim; ++s)
-                if (mk[s]) see_at((int32_t)(ry[s] + fy) + roff, (int32_t)(rx[s] + fx) + coff);
-            if (any && lim < n_samples) {
-                size_t a = (size_t)k * n_samples + lim;
-                see_at((int64_t)(dy[a] + fy) + roff, (int64_t)(dx[a] + fx) + coff);
-            }
-        }
+        const bool any = first_hits(dx, dy, n_rays, n_samples, step, fx, fy, roff, coff,
+                                    occ + at, pw, s0, ranges_out + (size_t)i * n_rays, idx_tmp);
+        each_seen(dx, dy, mark, n_rays, n_samples, fx, fy, roff, coff, any, idx_tmp, see_at);
         hit_out[i] = any ? 1 : 0;
     }
     return fresh;
