@@ -142,8 +142,8 @@ class StepLoop:
     def _isolate(self, step: int) -> None:
         """--isolate: the robots whose radio is out at this step, to the topology controller
         (links off, or back as the positions want) when that changed; events.jsonl says so."""
-        if not self.prep.cfg.isolate:
-            return
+        if not self.prep.cfg.isolate and not self.net.isolated:
+            return  # most runs: no window, nobody out
         out = isolation.isolated_at(self.prep.cfg.isolate, step)
         was = self.net.isolated
         if out == was:
