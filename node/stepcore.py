@@ -295,8 +295,9 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
 class WorldCast:
     """testbed.world's casts of one step, every robot's in one compiled call
     (sc_world_cast): the world's grids and the laser's tables, as addresses, for the run.
-    `cast(xy, want)` casts from the robots' positions (an n x 2 float64 array) where `want`
-    (n bytes) says so; it returns (ranges, hit, fresh): ranges row i holds robot i's ranges
+    `cast()` casts from the robots' positions in `xy` (n x 2, float64) where `want` (n bytes)
+    says so, both filled by the caller and alive for the run; it returns (ranges, hit,
+    fresh): ranges row i holds robot i's ranges
     where hit[i] is 1 (some ray hit), hit[i] is 0 where none did and -1 where the call did
     nothing for it (World.scan's own path takes that robot); fresh counts the cells of
     `free` seen for the first time."""
@@ -312,6 +313,8 @@ class WorldCast:
                        np.ascontiguousarray(skip, dtype=np.int32))  # fmt: skip
         self.ranges = np.empty((n, laser.n_rays), dtype=np.float32)
         self.hit = np.empty(n, dtype=np.int8)
+        self.xy = np.zeros((n, 2), dtype=np.float64)
+        self.want = np.zeros(n, dtype=np.uint8)
         _, (dx, dy, mark, _free, _occ, idx) = _laser_tables(laser)
         keys = [(bx, by) for bx in range(_BUCKETS) for by in range(_BUCKETS)]
         tables = [_class_table(laser, key) for key in keys] if laser.tabled else []
@@ -326,10 +329,10 @@ class WorldCast:
                       ptr(occ), ptr(seen), ptr(free), occ.shape[0], occ.shape[1], ptr(open_space),
                       ptr(skip), open_space.shape[0], open_space.shape[1], ptr(self.ranges),
                       ptr(self.hit), idx)  # fmt: skip
-        self._geometry = (map_cell, laser.cell, bias, laser.pad, laser.window)
+        self._args = (n, ptr(self.xy), ptr(self.want), map_cell, laser.cell, bias, laser.pad,
+                      laser.window, *self._head)  # fmt: skip
 
-    def cast(self, xy: np.ndarray, want: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-        assert lib is not None and xy.dtype == np.float64 and xy.flags.c_contiguous
-        n = len(want)
-        fresh = lib.sc_world_cast(n, ptr(xy), ptr(want), *self._geometry, *self._head)
+    def cast(self) -> tuple[np.ndarray, np.ndarray, int]:
+        assert lib is not None
+        fresh = lib.sc_world_cast(*self._args)
         return self.ranges, self.hit, int(fresh)

@@ -104,8 +104,6 @@ class World:
             self._cast = stepcore.WorldCast(laser, len(self.bodies), truth.cell, _BIAS,
                                             self._occ_u8, self._seen_u8, self._seen_free[1],
                                             self.open_space, self._skip)  # fmt: skip
-            self._xy = np.zeros((len(self.bodies), 2), dtype=np.float64)
-            self._want = np.zeros(len(self.bodies), dtype=np.uint8)
 
     @property
     def n(self) -> int:
@@ -162,7 +160,7 @@ class World:
         if self._cast is None:
             return [self.scan(i) if alive else None for i, alive in enumerate(live)]
         out: list[np.ndarray | None] = [None] * len(live)
-        want, xy = self._want, self._xy
+        want, xy = self._cast.want, self._cast.xy
         want[:] = 0
         for i, alive in enumerate(live):
             if not alive:
@@ -176,7 +174,7 @@ class World:
             xy[i] = b.x, b.y
         if not want.any():
             return out
-        ranges, hit, fresh = self._cast.cast(xy, want)
+        ranges, hit, fresh = self._cast.cast()
         if self._seen_free_count is not None:
             self._seen_free_count += fresh
         for i in np.flatnonzero(want).tolist():
