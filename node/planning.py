@@ -62,6 +62,8 @@ class Planning(RobotCore):
             self.plan_ms.append(ms)
             if delay > 0:
                 time.sleep(delay)
+            if p.status == "done":  # before the plan is installed: motion control answers no
+                self.link.send(body.done(step))  # later frame before the world has it
             with self.lock:
                 s.plan, s.wp = p, 0
                 s.plan_fresh = s.plan_asked
@@ -81,7 +83,6 @@ class Planning(RobotCore):
                 step, cause, p.status, goal, p.cost, ms,
             )  # fmt: skip
             if p.status == "done":
-                self.link.send(body.done(step))
                 self.events.write("finish", step)
                 log.info("finished at step %d: no reachable frontier left", step)
                 continue

@@ -81,6 +81,9 @@ void Robot::planning() {
         count(busy_, "plan", ms / 1000);
         plan_ms_.push_back(ms);
         if (delay > 0) std::this_thread::sleep_for(std::chrono::duration<double>(delay));
+        // "done" goes out before the plan is installed: motion control answers no later frame
+        // before it, so the world has it by the deadline the robot's answers meet.
+        if (p.status == "done") link_.send(body_done((uint32_t)step));
         {
             std::lock_guard<std::mutex> g(lock_);
             plan_ = p;
@@ -101,7 +104,6 @@ void Robot::planning() {
                  (long long)step, cause.c_str(), p.status.c_str(),
                  p.has_goal ? goal.c_str() : "None", p.cost, ms);
         if (p.status == "done") {
-            link_.send(body_done((uint32_t)step));
             events_.write("finish", step);
             LOG_INFO("node.robot", "finished at step %lld: no reachable frontier left",
                      (long long)step);

@@ -55,6 +55,11 @@ The verdict: a run is faithful when, over all its robots and daemons,
   HELLO breaks a link that exists only when it comes one HELLO_INTERVAL (1 s) late; the
   limit is half that. An expiry timer that fires late detects a true break, or drops a dead
   route, that much later (against 2-3 s): its limit is a quarter of HELLO_INTERVAL;
+- no robot's "done" reached the world after the deadline of the step it was decided at. The
+  world ends the run at the step after the last robot's "done" arrives, so one that comes a
+  step late makes the run a step longer than the robots' own finish (which is taken from the
+  message: testbed.run.record). The robots send it before they answer any later frame, so
+  it is late only when the planner's "done" itself came after that deadline;
 - the display handled at most DISPLAY_LATE_LIMIT of its frames more than two steps late
   (its beacons, which tell robots it is back in reach, follow its frames);
 - on ns3-wifi, the channel relayed frames at most CHANNEL_LAG_LIMIT_MS late on average
@@ -103,6 +108,7 @@ class Thresholds:
     deadline_miss_fraction: float = DEADLINE_MISS_LIMIT
     late_plan_fraction: float = LATE_PLAN_LIMIT
     late_timer_fraction: float = LATE_PLAN_LIMIT
+    late_dones: int = 0
     hello_late_max_ms: float = HELLO_LATE_LIMIT_MS
     expiry_late_max_ms: float = EXPIRY_LATE_LIMIT_MS
     display_late_fraction: float = DISPLAY_LATE_LIMIT
@@ -121,6 +127,8 @@ class Measures:
     timers: int = 0  # plan timer firings
     late_timers: int = 0
     timer_late_max_steps: float = 0
+    late_dones: int = 0  # robots whose "done" reached the world after its step's deadline
+    done_late_max_steps: int = 0
     hello_late_max_ms: float | None = None
     expiry_late_max_ms: float | None = None
     display_frames: int = 0
@@ -177,11 +185,14 @@ def measures(
     daemons: Iterable[Mapping[str, Any] | None] = (),
     channel: dict | None = None,
     stepping: tuple[float, float] | None = None,
+    done_late: Iterable[int] = (),
 ) -> Measures:
     """Fold the records into Measures: `robots` are the robots' `lateness` dicts (None: the
     robot left none), `display` the display's, `daemons` the AODV daemons'
     `timer_lateness_ms` dicts (judged within `stepping`, `_late_within`), `channel` the
-    ns3-wifi channel's `relay_lag` (medium.json)."""
+    ns3-wifi channel's `relay_lag` (medium.json), `done_late` each robot's steps between
+    deciding it was done and the world having it (testbed.run.record)."""
+    dones = [d for d in done_late if d > 0]
     plans = late_plans = timers = late_timers = 0
     age_max = timer_max = 0.0
     for r in robots:
@@ -211,7 +222,9 @@ def measures(
     return Measures(
         deadline_miss_fraction=miss_fraction, plans=plans, late_plans=late_plans,
         plan_age_max_steps=age_max, timers=timers, late_timers=late_timers,
-        timer_late_max_steps=timer_max, hello_late_max_ms=hello, expiry_late_max_ms=expiry,
+        timer_late_max_steps=timer_max, late_dones=len(dones),
+        done_late_max_steps=max(dones, default=0), hello_late_max_ms=hello,
+        expiry_late_max_ms=expiry,
         display_frames=frames, display_late_frames=late_frames,
         channel_frames=relayed, channel_lag_mean_ms=lag,
     )  # fmt: skip
@@ -225,6 +238,9 @@ def verdict(m: Measures, th: Thresholds = Thresholds()) -> dict:
          (m.late_plans, m.plans)),
         ("late_timer_fraction", m.late_timer_fraction, "plan timers fired late",
          (m.late_timers, m.timers)),
+        ("late_dones", m.late_dones,
+         "robot(s) whose \"done\" reached the world a step or more late, so the run went on "
+         "longer", None),
         ("hello_late_max_ms", m.hello_late_max_ms, "ms: an AODV HELLO timer fired that late",
          None),
         ("expiry_late_max_ms", m.expiry_late_max_ms, "ms: an AODV expiry timer fired that late",

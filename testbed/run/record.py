@@ -35,6 +35,7 @@ class RobotRecord:
     proc: Forked | None = None  # from the run's fork server, once spawned
     last_cmd: int = -1  # the latest step whose frame it answered
     finish_step: int | None = None
+    done_late: int = 0  # steps its "done" reached the world after the step it was decided at
     crashed: bool = False
     crash_step: int | None = None
     exit_status: int | None = None
@@ -56,10 +57,18 @@ class RobotRecord:
     def answered(self, step: int) -> None:
         self.last_cmd = max(self.last_cmd, step)
 
-    def finished(self, step: int) -> None:
-        """The robot said it is done while the world's last step was `step`."""
-        if self.finish_step is None:
-            self.finish_step = step
+    def finished(self, step: int, decided: int | None = None) -> None:
+        """The robot said it is done, having decided it at step `decided` (its message's;
+        None: at `step`), while the world's last step was `step`. Its finish is the step it
+        decided at; a "done" that came after that step's deadline is counted in `done_late`
+        (the run went on that many steps longer: the fidelity verdict says so). A step
+        past the world's is no step it could have decided at: the world's is taken."""
+        if self.finish_step is not None:
+            return
+        if decided is None or decided > step:
+            decided = step
+        self.finish_step = decided
+        self.done_late = step - decided
 
     def missed_deadline(self, step: int) -> bool:
         """Whether a live robot had not answered `step`'s frame by the deadline (counted)."""
@@ -83,6 +92,7 @@ class RobotRecord:
             k=self.k, finish_step=self.finish_step, crashed=self.crashed,
             crash_step=self.crash_step, exit_status=self.exit_status, missed=self.missed,
             missed_steps=tuple(self.missed_steps), stopped_step=self.stopped_step,
+            done_late=self.done_late,
         )  # fmt: skip
 
 
@@ -98,6 +108,7 @@ class RobotOutcome:
     missed: int
     missed_steps: tuple
     stopped_step: int | None  # killed on purpose at this step (--kill); None: it was not
+    done_late: int = 0  # steps its "done" reached the world late (RobotRecord.finished)
 
     @property
     def counted(self) -> bool:

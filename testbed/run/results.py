@@ -70,7 +70,7 @@ def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
     )  # fmt: skip
     detail = out.to_dict()
     detail.update(
-        crash_step=r.crash_step, deadlines_missed=r.missed,
+        crash_step=r.crash_step, done_late_steps=r.done_late, deadlines_missed=r.missed,
         deadlines_missed_steps=list(r.missed_steps),
         collisions=b.collisions, final_pose=[round(b.x, 3), round(b.y, 3)],
         plan_details=[{k: e.get(k) for k in PLAN_DETAIL_KEYS} for e in ev if e.e == "plan"],
@@ -110,6 +110,7 @@ def contents(rec: RunRecord) -> RunResult:
             [d.timer_lateness_ms for d in daemons],
             channel_relay_lag(rec.out),
             clock.stepping,
+            [r.done_late for r in rec.robots],
         )
     )
     # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).

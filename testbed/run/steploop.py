@@ -121,7 +121,7 @@ class StepLoop:
                 r.answered(msg[1])
                 self.world.command(k - 1, msg[2])
             elif msg[0] == "done":
-                r.finished(step)
+                r.finished(step, msg[1])
         for r in self.robots.values():
             if r.missed_deadline(step):
                 clock.robots_missed(1)

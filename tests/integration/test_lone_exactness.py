@@ -4,11 +4,11 @@ took before the per-step work was compiled and the timer woken only for work (se
 
 A run's answer is only exact when no plan came late and no plan timer fired late (a lone run
 is deterministic, and one late plan may move its path: testbed.run.fidelity, "Decided"); the
-fidelity verdict tolerates one plan in a hundred, so a faithful run is not enough. Nor does
-the verdict see a "done" the world takes a step late (the planner decided it at step s, a
-loaded machine delivered it after that step's deadline: the run ends a step later on the
-same path). A run with a late plan, timer or "done" is redone, up to three runs; at least
-one must be clean, and every clean run must be exact.
+fidelity verdict tolerates one plan in a hundred, so a faithful run is not enough. A "done"
+that reached the world after its step's deadline (the run then ends a step later on the same
+path) makes the verdict say not faithful. A run with a late plan or timer, or not faithful,
+is redone, up to three runs; at least one must be clean, and every clean run must be exact.
+Every run's finish is the step its robot decided it at (its events.jsonl's `finish`).
 
 Both robot programs are held to it (`--robot python`, the reference, and `--robot cpp`, the
 C++ robot of native/robot, which calls the same step core): one answer, two implementations.
@@ -47,11 +47,10 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
         finally:
             destroy(name)
         assert result["robot"] == robot, result["robot_reason"]
+        assert result["robots"]["r1"]["finish_step"] == _finish_decided(out)
         m = result["fidelity"]["measures"]
         if not result["fidelity"]["ok"] or m["late_plans"] or m["late_timers"]:
             continue
-        if result["robots"]["r1"]["finish_step"] != _finish_decided(out):
-            continue  # its "done" reached the world a step late
         clean += 1
         assert result["steps"] == STEPS[seed], m
         with open(os.path.join(out, "positions.csv")) as f:

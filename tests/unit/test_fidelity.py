@@ -70,6 +70,7 @@ def test_each_measure_over_its_threshold_is_a_reason():
         "HELLO": Measures(hello_late_max_ms=th.hello_late_max_ms + 1),
         "expiry": Measures(expiry_late_max_ms=th.expiry_late_max_ms + 1),
         "50 of 100 display frames": Measures(display_frames=100, display_late_frames=50),
+        '1 robot(s) whose "done" reached the world a step or more late': Measures(late_dones=1),
         "2.0% of step deadlines missed (limit 1.0%)": Measures(deadline_miss_fraction=0.02),
     }
     for words, m in cases.items():
@@ -258,3 +259,11 @@ def test_which_results_ran_tcp_in_emulated_time():
     assert result(6).tcp_in_emulated_time is False  # made before TCP was dilated
     assert _result({"config": dict(CONFIG, time_scale=1)}).tcp_in_emulated_time is True
     assert _result({}).tcp_in_emulated_time is True  # no time scale said: the wall clock's
+
+
+def test_a_done_that_reached_the_world_late_is_counted_by_robot():
+    m = measures(0.0, [], None, [], done_late=[0, 2, 1, 0])
+    assert (m.late_dones, m.done_late_max_steps) == (2, 2)
+    assert verdict(m)["ok"] is False
+    on_time = measures(0.0, [], None, [], done_late=[0, 0])
+    assert (on_time.late_dones, verdict(on_time)["ok"]) == (0, True)

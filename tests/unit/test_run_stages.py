@@ -87,6 +87,18 @@ def _record(finish_steps, steps):
                      0.0)  # fmt: skip
 
 
+def test_a_robots_finish_is_the_step_it_decided_at_and_a_late_done_is_counted():
+    on_time, late, claims_ahead = RobotRecord(1), RobotRecord(2), RobotRecord(3)
+    on_time.finished(700, 700)
+    late.finished(701, 699)  # decided at 699, the world had it two steps later
+    late.finished(705, 705)  # only the first "done" counts
+    claims_ahead.finished(300, 9999)  # no step it could have decided at: the world's
+    assert (on_time.finish_step, on_time.done_late) == (700, 0)
+    assert (late.finish_step, late.done_late) == (699, 2)
+    assert (claims_ahead.finish_step, claims_ahead.done_late) == (300, 0)
+    assert late.outcome().done_late == 2
+
+
 def test_last_and_mean_finishing_steps_are_told_apart():
     rec = _record([817, 823, 811], steps=824)
     assert rec.last_finish_step == 823 and rec.steps == 824
