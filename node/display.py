@@ -30,11 +30,11 @@ import cv2
 import numpy as np
 
 from common import sched
-from node import body, render, wire
+from node import body, displayreplay, render, wire
 from node.displaysteps import VIDEO_EVERY, DisplaySteps
 from node.events import EventLog
 from node.flood import Flooder
-from node.grid import FREE, OccupancyGrid
+from node.grid import OccupancyGrid
 from node.lateness import MS_BOUNDS, Lateness
 
 log = logging.getLogger(__name__)
@@ -105,16 +105,15 @@ class Display:
                 self._draw_video_frame()
             self.video.close()
             with self.lock:
-                known = int(np.count_nonzero(self.grid.ternary() == FREE))
-            np.save(os.path.join(self.out_dir, "map.npy"), self.grid.ternary())
-            self.events.write(
-                "summary", self.step, received={f"r{k}": v for k, v in self.received.items()},
-                known_free_cells=known, video=os.path.basename(self.video.path),
-                video_frames=self.video.frames, malformed=self.malformed,
-                flood=dict(self.flooder.counts), maps=self.flooder.stats.as_dict(),
-                lateness={"frame_done_ms": self.frame_lateness.as_dict()},
-                cpu_s=round(time.process_time(), 3),
-            )  # fmt: skip
+                seen = self.grid.ternary()
+            counts = {
+                "received": {f"r{k}": v for k, v in self.received.items()},
+                "malformed": self.malformed, "flood": dict(self.flooder.counts),
+                "maps": self.flooder.stats.as_dict(),
+                "lateness": {"frame_done_ms": self.frame_lateness.as_dict()},
+                "cpu_s": round(time.process_time(), 3),
+            }  # fmt: skip
+            displayreplay.save_end(self.out_dir, self.events, self.step, seen, self.video, counts)
 
     def _visualization(self) -> None:
         while not self.stopping.is_set():
@@ -146,8 +145,7 @@ class Display:
         return self._picture(step, t, paths, scale or self.scale)
 
     def _picture(self, step: int, t: np.ndarray, paths, scale: int) -> np.ndarray:
-        img = render.draw_paths(render.map_image(t, scale), paths, self.cell, scale)
-        return render.caption(img, f"step {step}")
+        return render.picture(step, t, paths, self.cell, scale)
 
     def _keep_video_frame(self, step: int) -> None:
         with self.lock:
@@ -168,7 +166,7 @@ class Display:
     def _snapshot(self, step: int, final: bool = False) -> None:
         if step < 0:
             return
-        name = f"step-{step:05d}.png"
+        name = displayreplay.snapshot_name(step)
         cv2.imwrite(os.path.join(self.out_dir, name), self._frame(step))
         self.events.write("snapshot", step, file=name, final=final)
 

@@ -60,6 +60,12 @@ def caption(img: np.ndarray, text: str) -> np.ndarray:
     return img
 
 
+def picture(step: int, t: np.ndarray, paths: dict, cell: float, scale: int) -> np.ndarray:
+    """The display's picture of a step: the ternary map `t`, each robot's path so far
+    (metres, from its maps), captioned with the step."""
+    return caption(draw_paths(map_image(t, scale), paths, cell, scale), f"step {step}")
+
+
 class Video:
     """An MP4 (mpeg4) video, or MJPG AVI where this OpenCV cannot write MP4."""
 

@@ -107,8 +107,9 @@ BodyClient::~BodyClient() {
     if (fd_ >= 0) close(fd_);
 }
 
-bool BodyClient::open(const std::string& path, int robot, std::string& err) {
+bool BodyClient::open(const std::string& path, int robot, std::string& err, int role) {
     robot_ = robot;
+    role_ = role;
     fd_ = socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
     if (fd_ < 0) {
         err = std::string("body link: ") + strerror(errno);
@@ -128,7 +129,7 @@ bool BodyClient::open(const std::string& path, int robot, std::string& err) {
     return true;
 }
 
-void BodyClient::ready() { send(body_hello(robot_, 0)); }
+void BodyClient::ready() { send(body_hello(robot_, role_)); }
 
 int BodyClient::recv(double timeout_s, BodyMsg& out, std::string& err) {
     pollfd p{fd_, POLLIN, 0};

@@ -39,7 +39,8 @@ public:
     ~BodyClient();
     BodyClient(const BodyClient&) = delete;
     BodyClient& operator=(const BodyClient&) = delete;
-    bool open(const std::string& path, int robot, std::string& err);
+    // `role`: 0 a robot, 1 the display (node.body.ROLE_ROBOT, ROLE_DISPLAY).
+    bool open(const std::string& path, int robot, std::string& err, int role = 0);
     void ready();  // HELLO: every part is running
     // 1: a message in `out`; 0: timeout; -1: malformed (why in err). The world hanging up
     // comes as kind "end".
@@ -49,7 +50,7 @@ public:
 
 private:
     int fd_ = -1;
-    int robot_ = 0;
+    int robot_ = 0, role_ = 0;
     std::vector<uint8_t> buf_ = std::vector<uint8_t>(65536);
 };
 

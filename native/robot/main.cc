@@ -1,8 +1,10 @@
 // tb-robot: the paper's robot in C++, started by `testbed run` inside the robot's network
 // namespace with the Python robot's command line (node/launch.py's NodeArgs). It carries
 // nanomsg (the default middleware) and, where built with libzmq, ZeroMQ, with flooded maps;
-// for anything else, and for the display, it refuses in one line (exit 2) and the runner
-// starts the Python robot instead. `tb-robot --middlewares` prints what this build carries.
+// for anything else it refuses in one line (exit 2) and the runner starts the Python robot
+// instead. `tb-robot --middlewares` prints what this build carries. `--role display` runs the
+// display's part that keeps step with the robots (display.cc), with flooded maps; node.native
+// starts it and draws what it kept once it stopped.
 //
 // Exit statuses as the Python robot's: 0 the run ended, 1 cannot start (a socket), 2 bad
 // arguments or a middleware it does not carry, 3 a part failed.
@@ -10,16 +12,20 @@
 // `tb-robot --decode KIND` and `--encode KIND` are the contract's self-test (selftest.cc).
 #include <csignal>
 #include <sys/prctl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <cstdio>
 #include <cstring>
 #include <exception>
 #include <memory>
 #include <new>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "args.h"
 #include "body.h"
+#include "display.h"
 #include "events.h"
 #include "flood.h"
 #include "laser.h"
@@ -34,14 +40,80 @@ int selftest_main(const std::vector<std::string>& argv);
 namespace {
 
 tb::Robot* g_robot = nullptr;
+tb::Display* g_display = nullptr;
 
 void on_term(int) {
-    if (g_robot) g_robot->stopping = true;  // std::atomic<bool>: lock-free, signal-safe
+    // std::atomic<bool>: lock-free, signal-safe
+    if (g_robot) g_robot->stopping = true;
+    if (g_display) g_display->stopping = true;
 }
 
 int fail(const std::string& line, int status) {
     fprintf(stderr, "node: %s\n", line.c_str());
     return status;
+}
+
+// The names node/displayreplay.py reads (REPLAY_FILE, STEPPING_FILE) in the display's --out-dir.
+const char* const REPLAY_FILE = "replay.bin";
+const char* const STEPPING_FILE = "stepping.json";
+
+bool write_file(const std::string& path, const std::string& text) {
+    std::string tmp = path + ".part";
+    FILE* f = fopen(tmp.c_str(), "we");
+    if (!f) return false;
+    bool ok = fwrite(text.data(), 1, text.size(), f) == text.size();
+    ok = fclose(f) == 0 && ok;
+    return ok && rename(tmp.c_str(), path.c_str()) == 0;
+}
+
+int display_main(const tb::Args& a, const char* program) {
+    std::string me = "r" + std::to_string(a.robot);
+    if (a.out_dir.empty()) return fail("the display needs --out-dir", 2);
+    if (a.maps != "flood")
+        return fail("--maps " + a.maps + ": the C++ display takes flooded maps only; the " +
+                        "Python display runs this",
+                    2);
+    std::set<int64_t> snapshots;
+    if (!tb::parse_steps(a.snapshots, snapshots))
+        return fail("argument --snapshots: '" + a.snapshots + "' is not a list of steps", 2);
+    // It is started by node.native, which draws what it kept: it must not outlive it.
+    prctl(PR_SET_PDEATHSIG, SIGKILL, 0, 0, 0);
+    tb::log_init(a.robot);
+    std::string title = me + " display";
+    prctl(PR_SET_NAME, title.c_str(), 0, 0, 0);
+    if (mkdir(a.out_dir.c_str(), 0755) != 0 && errno != EEXIST)
+        return fail(me + ": cannot start: " + a.out_dir + ": " + strerror(errno), 1);
+    tb::RobotTimings timing;
+    timing.time_scale = a.time_scale;
+    timing.map_period = a.map_period;
+    tb::EventLog events;
+    tb::BodyClient link;
+    tb::Flooder flooder(a.robot, a.flood_port, a.iface, a.flood, timing.neighbour_hold_s());
+    tb::ReplayWriter replay;
+    std::string err;
+    bool opened = events.open(a.events);
+    if (!opened)
+        err = a.events + ": " + strerror(errno);
+    else
+        opened = link.open(a.body, a.robot, err, 1) && flooder.open(err) &&
+                 replay.open(a.out_dir + "/" + REPLAY_FILE, err);
+    if (!opened) return fail(me + ": cannot start: " + err, 1);
+    tb::Display display(a, link, flooder, events, replay, snapshots);
+    g_display = &display;
+    struct sigaction sa {};
+    sa.sa_handler = on_term;
+    sigaction(SIGTERM, &sa, nullptr);
+    signal(SIGPIPE, SIG_IGN);
+    LOG_INFO("node", "display up (C++, %s): maps by %s", program, a.maps.c_str());
+    display.run();
+    g_display = nullptr;
+    bool kept = replay.close();
+    if (!kept || !write_file(a.out_dir + "/" + STEPPING_FILE, display.stepping_json()))
+        return fail(me + ": cannot keep what the display saw in " + a.out_dir + ": " +
+                        strerror(errno),
+                    3);
+    events.close();
+    return 0;
 }
 
 }  // namespace
@@ -62,7 +134,7 @@ int main(int argc, char** argv) {
     tb::Args a;
     std::string err;
     if (!tb::parse_args(args, a, err)) return fail(err, 2);
-    if (a.role != "robot") return fail("the C++ robot is not the display: run python -m node", 2);
+    if (a.role == "display") return display_main(a, argv[0]);
     if (a.laser_range > tb::MAX_RANGE_M || a.laser_range / a.cell > 10000)
         return fail("--laser-range " + std::to_string(a.laser_range) +
                         ": longer than a run's lasers (at most 30 m, node.rays.MAX_RANGE_M)",

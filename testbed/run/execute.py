@@ -187,7 +187,8 @@ class Run:
         self.progress = progress
         self.robots = {k: RobotRecord(k) for k in range(1, self.n + 1)}
         self.parts = WallParts(time.monotonic())  # wall seconds of each stage
-        # Which robot program runs and why (testbed.run.robotchoice); the display is Python.
+        # Which robot program runs and why (testbed.run.robotchoice); the display runs the
+        # robots' program (the C++ one with C++ robots: node.native), Python in a mixed team.
         try:
             self.robot_impl, self.robot_reason = robotchoice.choose(
                 self.cfg.robot, self.cfg.middleware, self.cfg.maps
@@ -261,8 +262,10 @@ class Run:
             with open(log_path, "w"):
                 pass  # the child appends: the log starts empty
             title = f"r{k} {role}"
-            # node.native replaces the forked child with build/tb-robot, the same argv.
-            module = "node.native" if role == "robot" and k in self.cpp else None
+            # node.native replaces the forked child with build/tb-robot, the same argv (the
+            # display: runs it as a child, then draws what it kept).
+            native = k in self.cpp if role == "robot" else self.robot_impl == "cpp"
+            module = "node.native" if native else None
             proc = forks.spawn(net.robot_ns(k), module or "node.__main__", args.to_argv(),
                                log_path, title=title)  # fmt: skip
             net.adopt(k, proc, role)  # recorded with the testbed: teardown stops it

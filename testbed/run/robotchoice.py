@@ -5,7 +5,8 @@ Python robot (`python -m node`), and why (result.json's `robot` and `robot_reaso
 options: its middlewares (`tb-robot --middlewares`: nanomsg, and ZeroMQ where make setup
 found libzmq3-dev) with flooded maps. Elsewhere the Python robot runs and the reason says what
 was missing. `--robot cpp` insists (a run it cannot carry is refused before it starts);
-`--robot python` asks for the reference. The display is always Python.
+`--robot python` asks for the reference. The display runs the robots' program (a mixed
+team's, a test's, has the Python display).
 """
 
 from __future__ import annotations

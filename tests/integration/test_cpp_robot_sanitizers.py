@@ -2,8 +2,9 @@
 and UndefinedBehavior sanitizers) and `make build/tsan/tb-robot` (ThreadSanitizer), each run
 as the whole team of a short run (three robots, 20 m radio, AODV, 400 steps at time scale 2:
 floods relayed, goals sent and conflicts settled, the inbox, the planner and the timer all
-busy). Clean means: no sanitizer report in any robot's log, every robot exited by itself
-with status 0 (tb-robot's summary written) and its frames answered. Skipped where the C++
+busy; the display runs the same build). Clean means: no sanitizer report in any robot's log
+or the display's, every robot exited by itself with status 0 (tb-robot's summary written)
+and its frames answered, and the display's summary was written. Skipped where the C++
 robot cannot be built (no g++ or libnng-dev)."""
 
 import json
@@ -61,6 +62,13 @@ def test_a_team_of_sanitized_cpp_robots_runs_clean(tmp_path, monkeypatch, build,
         r = result["robots"][f"r{k}"]
         assert r["exit_status"] == 0, (k, r.get("exit_status"), log[-2000:])
     assert result["steps"] > 100
+    # The display ran the same build (its part while the robots stepped) and ended in order.
+    log = (Path(out) / "display" / "display.log").read_text()
+    found = [line for line in log.splitlines() if any(r in line for r in REPORTS)]
+    assert not found, f"the display under {build}:\n" + "\n".join(found[:20])
+    assert f"display up (C++, {REPO / target})" in log
+    events = (Path(out) / "display" / "events.jsonl").read_text().splitlines()
+    assert json.loads(events[-1])["e"] == "summary", log[-2000:]
     for k in (1, 2, 3):  # each robot's own account of what carried its goals
         summary = json.loads((Path(out) / "robots" / f"r{k}.json").read_text())
         assert summary["middleware"] == middleware and summary["messenger"]["sent"] > 0, k

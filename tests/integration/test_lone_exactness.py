@@ -12,12 +12,17 @@ Every run's finish is the step its robot decided it at (its events.jsonl's `fini
 
 Both robot programs are held to it (`--robot python`, the reference, and `--robot cpp`, the
 C++ robot of native/robot, which calls the same step core): one answer, two implementations.
-The C++ case is skipped where build/tb-robot was not built (no g++ or libnng-dev)."""
+Each runs its own display (the C++ one draws after the run what it kept: node.displayreplay),
+and the display's merged map must be the one the Python display made of that path (its
+map.npy's SHA-256, DISPLAY_MAPS). The C++ case is skipped where build/tb-robot was not built
+(no g++ or libnng-dev)."""
 
+import hashlib
 import json
 import os
 import uuid
 
+import numpy as np
 import pytest
 
 from node.native import unbuilt_reason
@@ -26,6 +31,8 @@ from topology.network import destroy
 
 DATA = os.path.join(os.path.dirname(__file__), "..", "data", "lone-k5")
 STEPS = {1: 1901, 2: 1989, 3: 1964}
+# The first 16 hex digits of the SHA-256 of display/map.npy's cells (the Python display's).
+DISPLAY_MAPS = {1: "c542ebcdf164e5c5", 2: "d2142dcf0cc60cf1", 3: "26feac37e716b833"}
 
 
 @pytest.mark.slow
@@ -55,6 +62,8 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
         assert result["steps"] == STEPS[seed], m
         with open(os.path.join(out, "positions.csv")) as f:
             assert f.read() == expected, "the path differs"
+        cells = np.load(os.path.join(out, "display", "map.npy")).tobytes()
+        assert hashlib.sha256(cells).hexdigest()[:16] == DISPLAY_MAPS[seed], "the display's map"
         break
     assert clean, "no run of three was without late plans at time scale 5"
 

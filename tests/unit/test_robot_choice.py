@@ -5,6 +5,7 @@ accepted by both, bad arguments refused by both in one line with exit status 2."
 import dataclasses
 import os
 import subprocess
+import sys
 
 import pytest
 
@@ -93,11 +94,24 @@ def test_bad_arguments_are_refused_by_both_in_one_line(argv):
 
 
 @needs_binary
-@pytest.mark.parametrize("extra", [["--role", "display"], ["--middleware", "zenoh"],
-                                   ["--middleware", "dds", "--maps", "pubsub"]])  # fmt: skip
+@pytest.mark.parametrize("extra", [["--middleware", "zenoh"],
+                                   ["--middleware", "dds", "--maps", "pubsub"],
+                                   ["--role", "display", "--out-dir", "/nonexistent/d",
+                                    "--middleware", "zenoh", "--maps", "pubsub"]])  # fmt: skip
 def test_the_cpp_robot_refuses_what_only_python_runs(extra):
     p = tb_robot(["--robot", "r1", "--robots", "2", "--body", "x", *extra])
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "python" in p.stderr.lower()
+
+
+@needs_binary
+@pytest.mark.parametrize("extra", [[], ["--out-dir", "/nonexistent/d", "--snapshots", "1,x"]])
+def test_a_display_without_its_directory_or_with_bad_steps_is_refused_by_both(extra):
+    argv = ["--robot", "r3", "--robots", "2", "--body", "x", "--role", "display", *extra]
+    p = tb_robot(argv)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and p.stderr.startswith("node: ")
+    py = subprocess.run([sys.executable, "-m", "node", *argv], capture_output=True, text=True,
+                        timeout=60)  # fmt: skip
+    assert py.returncode == 2 and py.stderr.count("\n") == 1, py.stderr
 
 
 @needs_binary
