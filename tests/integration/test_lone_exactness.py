@@ -4,11 +4,12 @@ took before the per-step work was compiled and the timer woken only for work (se
 
 A run's answer is only exact when no plan came late and no plan timer fired late (a lone run
 is deterministic, and one late plan may move its path: testbed.run.fidelity, "Decided"); the
-fidelity verdict tolerates one plan in a hundred, so a faithful run is not enough. A "done"
-that reached the world after its step's deadline (the run then ends a step later on the same
-path) makes the verdict say not faithful. A run with a late plan or timer, or not faithful,
-is redone, up to three runs; at least one must be clean, and every clean run must be exact.
-Every run's finish is the step its robot decided it at (its events.jsonl's `finish`).
+fidelity verdict tolerates one plan in a hundred, so a faithful run is not enough. Nor does
+it judge a "done" that reached the world after its step's deadline (the robot's finish is
+its message's step; the world ran a step longer on the same path): `late_dones`. A run with
+a late plan, timer or "done" is redone, up to three runs; at least one must be clean, and
+every clean run must be exact. Every run's finish is the step its robot decided it at (its
+events.jsonl's `finish`).
 
 Both robot programs are held to it (`--robot python`, the reference, and `--robot cpp`, the
 C++ robot of native/robot, which calls the same step core): one answer, two implementations.
@@ -56,7 +57,7 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
         assert result["robot"] == robot, result["robot_reason"]
         assert result["robots"]["r1"]["finish_step"] == _finish_decided(out)
         m = result["fidelity"]["measures"]
-        if not result["fidelity"]["ok"] or m["late_plans"] or m["late_timers"]:
+        if not result["fidelity"]["ok"] or m["late_plans"] or m["late_timers"] or m["late_dones"]:
             continue
         clean += 1
         assert result["steps"] == STEPS[seed], m
