@@ -52,10 +52,6 @@ def main(argv: list[str] | None = None) -> int:
     return 0  # not reached
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
-
 def _role(argv: list[str]) -> str:
     """The --role an argv asks for (node.launch.NodeArgs': "robot" unless it says)."""
     role = "robot"
@@ -93,3 +89,7 @@ def _display(binary: str, argv: list[str]) -> int:
     finally:
         events.close()
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -61,7 +61,7 @@ class RobotRecord:
         """The robot said it is done, having decided it at step `decided` (its message's;
         None: at `step`), while the world's last step was `step`. Its finish is the step it
         decided at; a "done" that came after that step's deadline is counted in `done_late`
-        (the run went on that many steps longer: the fidelity verdict says so). A step
+        (the run went on that many steps longer: the fidelity verdict's measures count it). A step
         past the world's is no step it could have decided at: the world's is taken."""
         if self.finish_step is not None:
             return
