@@ -108,6 +108,28 @@ Setter choice(std::string Args::*field, const char* flag, std::set<std::string> 
     };
 }
 
+// node.launch.steps: comma-separated whole numbers as Python's int() reads them, blank
+// parts skipped.
+bool steps_list(const std::string& t, Args& a, std::string& err) {
+    std::set<int64_t> out;
+    for (size_t at = 0; at <= t.size();) {
+        size_t end = std::min(t.find(',', at), t.size());
+        std::string part = t.substr(at, end - at), digits;
+        at = end + 1;
+        if (part.find_first_not_of(" \t") == std::string::npos) continue;
+        bool whole = int_text(part, digits);
+        errno = 0;
+        long long v = whole ? strtoll(digits.c_str(), nullptr, 10) : 0;
+        if (!whole || errno) {
+            err = "argument --snapshots: " + quoted(t) + " is not a list of steps";
+            return false;
+        }
+        out.insert(v);
+    }
+    a.snapshots = std::move(out);
+    return true;
+}
+
 const std::map<std::string, Setter>& table() {
     static const std::map<std::string, Setter> t = {
         {"--robot",
@@ -156,7 +178,7 @@ const std::map<std::string, Setter>& table() {
         {"--maps", choice(&Args::maps, "--maps", {"flood", "pubsub"})},
         {"--bind", text(&Args::bind)},
         {"--out-dir", text(&Args::out_dir)},
-        {"--snapshots", text(&Args::snapshots)},
+        {"--snapshots", steps_list},
         {"--video-every", number_int(&Args::video_every, "--video-every", ">", 0)},
     };
     return t;

@@ -2,6 +2,8 @@
 // so that the runner starts either robot with the same argv. Bad arguments: one line, exit 2.
 #pragma once
 
+#include <cstdint>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -21,7 +23,8 @@ struct Args {
     int flood_port = 5100;
     std::string flood = "pruned", coordination = "ours";
     int goal_port = 5101;
-    std::string middleware = "nanomsg", maps = "flood", bind, out_dir, snapshots;
+    std::string middleware = "nanomsg", maps = "flood", bind, out_dir;
+    std::set<int64_t> snapshots;  // node.launch.steps: "100,500"
     int video_every = 10;
 };
 

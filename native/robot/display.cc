@@ -23,26 +23,6 @@ void put_le(FILE* f, uint64_t v, int bytes) {
 
 }  // namespace
 
-bool parse_steps(const std::string& text, std::set<int64_t>& out) {
-    size_t at = 0;
-    while (at <= text.size()) {
-        size_t end = text.find(',', at);
-        if (end == std::string::npos) end = text.size();
-        std::string part = text.substr(at, end - at);
-        size_t a = part.find_first_not_of(" \t"), b = part.find_last_not_of(" \t");
-        if (a != std::string::npos) {
-            part = part.substr(a, b - a + 1);
-            size_t i = part[0] == '-' || part[0] == '+' ? 1 : 0;
-            if (i == part.size() || part.size() > 12) return false;
-            for (size_t j = i; j < part.size(); ++j)
-                if (part[j] < '0' || part[j] > '9') return false;
-            out.insert(std::stoll(part));
-        }
-        at = end + 1;
-    }
-    return true;
-}
-
 ReplayWriter::~ReplayWriter() {
     if (f_) fclose(f_);
 }
@@ -80,9 +60,9 @@ bool ReplayWriter::close() {
 }
 
 Display::Display(const Args& a, BodyClient& link, Flooder& flooder, EventLog& events,
-                 ReplayWriter& replay, std::set<int64_t> snapshots)
+                 ReplayWriter& replay)
     : a_(a), link_(link), flooder_(flooder), events_(events), replay_(replay),
-      snapshots_(std::move(snapshots)), map_period_(std::max(1, a.map_period)),
+      map_period_(std::max(1, a.map_period)),
       video_every_(std::max(1, a.video_every)) {}
 
 void Display::run() {
@@ -122,7 +102,7 @@ void Display::visualization() {
         }
         if (step % video_every_ == 0 && !link_.pending()) replay_.mark('V', (uint32_t)step);
         if (f.sent > 0) frame_lateness_.add((monotonic_s() - f.sent) * 1000 * a_.time_scale);
-        if (snapshots_.count(step)) {
+        if (a_.snapshots.count(step)) {
             replay_.mark('S', (uint32_t)step);
             char name[32];
             snprintf(name, sizeof name, "step-%05lld.png", (long long)step);

@@ -11,7 +11,6 @@
 #include <cstdint>
 #include <cstdio>
 #include <mutex>
-#include <set>
 #include <string>
 
 #include "args.h"
@@ -42,7 +41,7 @@ private:
 class Display {
 public:
     Display(const Args& a, BodyClient& link, Flooder& flooder, EventLog& events,
-            ReplayWriter& replay, std::set<int64_t> snapshots);
+            ReplayWriter& replay);
     void run();  // until the world ends the run (or `stopping`)
     // The part of the summary event this process knows (node.displayreplay adds the rest).
     std::string stepping_json();
@@ -58,7 +57,6 @@ private:
     Flooder& flooder_;
     EventLog& events_;
     ReplayWriter& replay_;
-    std::set<int64_t> snapshots_;
     int map_period_, video_every_;
     std::atomic<int64_t> step_{-1};
     int wake_r_ = -1, wake_w_ = -1;
@@ -67,8 +65,5 @@ private:
     int64_t malformed_ = 0;
     Lateness frame_lateness_{MS_BOUNDS};  // visualization's alone
 };
-
-// "100,500" (node.launch.steps); false on anything else.
-bool parse_steps(const std::string& text, std::set<int64_t>& out);
 
 }  // namespace tb

@@ -19,7 +19,6 @@
 #include <exception>
 #include <memory>
 #include <new>
-#include <set>
 #include <string>
 #include <vector>
 
@@ -73,9 +72,6 @@ int display_main(const tb::Args& a, const char* program) {
         return fail("--maps " + a.maps + ": the C++ display takes flooded maps only; the " +
                         "Python display runs this",
                     2);
-    std::set<int64_t> snapshots;
-    if (!tb::parse_steps(a.snapshots, snapshots))
-        return fail("argument --snapshots: '" + a.snapshots + "' is not a list of steps", 2);
     // It is started by node.native, which draws what it kept: it must not outlive it.
     prctl(PR_SET_PDEATHSIG, SIGKILL, 0, 0, 0);
     tb::log_init(a.robot);
@@ -98,7 +94,7 @@ int display_main(const tb::Args& a, const char* program) {
         opened = link.open(a.body, a.robot, err, 1) && flooder.open(err) &&
                  replay.open(a.out_dir + "/" + REPLAY_FILE, err);
     if (!opened) return fail(me + ": cannot start: " + err, 1);
-    tb::Display display(a, link, flooder, events, replay, snapshots);
+    tb::Display display(a, link, flooder, events, replay);
     g_display = &display;
     struct sigaction sa {};
     sa.sa_handler = on_term;

@@ -80,6 +80,8 @@ BAD = [
     ["--robot", "r1", "--robots", "2", "--body", "x", "--flood", "storm"],
     ["--robot", "r1", "--robots", "2", "--body", "x", "--no-such-flag", "1"],
     ["--robot", "r1", "--robots", "2", "--body", "x", "--laser-rays", "3"],
+    ["--robot", "r1", "--robots", "2", "--body", "x", "--snapshots", "1,x"],
+    ["--robot", "r1", "--robots", "2", "--body", "x", "--snapshots", "1__0"],
 ]
 
 
