@@ -7,10 +7,10 @@ drawn only after the run (node.display keeps its video frames for then too). The
 (native/robot/display.cc, `tb-robot --role display`) does the first part and writes a replay
 in the display's directory: every map it took, as it came and in the order it merged them,
 and the steps at which it kept a video frame or a snapshot; and, when it stops, what it
-counted (`stepping.json`). node.native starts it and, once it has exited, `finish` replays the
-maps into the same grid node.display merges into and draws the same pictures at the same
-places in the sequence, then writes map.npy, the final snapshot and the summary event, as
-node.display does. The replay's records (little-endian): b"M" u16 origin, u32 length, the
+counted (`stepping.json`). node.nativedisplay starts it and, once it has exited, `finish`
+replays the maps into the same grid node.display merges into and draws the same pictures at
+the same places in the sequence, then writes map.npy, the final snapshot and the summary
+event, as node.display does. The replay's records (little-endian): b"M" u16 origin, u32 length, the
 map payload; b"V" u32 step; b"S" u32 step; b"E" once the display stopped in order.
 """
 

@@ -3,7 +3,7 @@
 // nanomsg (the default middleware) and, where built with libzmq, ZeroMQ, with flooded maps;
 // for anything else it refuses in one line (exit 2) and the runner starts the Python robot
 // instead. `tb-robot --middlewares` prints what this build carries. `--role display` runs the
-// display's part that keeps step with the robots (display.cc), with flooded maps; node.native
+// display's part that keeps step with the robots (display.cc), with flooded maps; node.nativedisplay
 // starts it and draws what it kept once it stopped.
 //
 // Exit statuses as the Python robot's: 0 the run ended, 1 cannot start (a socket), 2 bad
@@ -72,7 +72,7 @@ int display_main(const tb::Args& a, const char* program) {
         return fail("--maps " + a.maps + ": the C++ display takes flooded maps only; the " +
                         "Python display runs this",
                     2);
-    // It is started by node.native, which draws what it kept: it must not outlive it.
+    // It is started by node.nativedisplay, which draws what it kept: it must not outlive it.
     prctl(PR_SET_PDEATHSIG, SIGKILL, 0, 0, 0);
     tb::log_init(a.robot);
     std::string title = me + " display";

@@ -84,7 +84,14 @@ log = logging.getLogger(__name__)
 
 # What the fork server imports once for every robot and the display (topology.kernel.forkserver);
 # the run's middleware module (node.messaging) is added to it.
-NODE_PRELOAD = ["node.__main__", "node.robot", "node.display", "node.native", "topology.names"]
+NODE_PRELOAD = [
+    "node.__main__",
+    "node.robot",
+    "node.display",
+    "node.native",
+    "node.nativedisplay",
+    "topology.names",
+]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
 END_GRACE_S = 15.0  # for the processes to write their logs after END
 __all__ = [
@@ -262,11 +269,14 @@ class Run:
             with open(log_path, "w"):
                 pass  # the child appends: the log starts empty
             title = f"r{k} {role}"
-            # node.native replaces the forked child with build/tb-robot, the same argv (the
-            # display: runs it as a child, then draws what it kept).
-            native = k in self.cpp if role == "robot" else self.robot_impl == "cpp"
-            module = "node.native" if native else None
-            proc = forks.spawn(net.robot_ns(k), module or "node.__main__", args.to_argv(),
+            # node.native replaces the forked child with build/tb-robot, the same argv;
+            # node.nativedisplay runs it as a child, then draws what it kept.
+            module = "node.__main__"
+            if role == "robot" and k in self.cpp:
+                module = "node.native"
+            elif role == "display" and self.robot_impl == "cpp":
+                module = "node.nativedisplay"
+            proc = forks.spawn(net.robot_ns(k), module, args.to_argv(),
                                log_path, title=title)  # fmt: skip
             net.adopt(k, proc, role)  # recorded with the testbed: teardown stops it
             return proc

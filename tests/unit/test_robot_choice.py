@@ -111,7 +111,7 @@ def test_a_display_without_its_directory_or_with_bad_steps_is_refused_by_both(ex
     argv = ["--robot", "r3", "--robots", "2", "--body", "x", "--role", "display", *extra]
     p = tb_robot(argv)
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and p.stderr.startswith("node: ")
-    for module in ("node", "node.native"):  # the Python display; the C++ one's starter
+    for module in ("node", "node.nativedisplay"):  # the Python display; the C++ one's starter
         py = subprocess.run([sys.executable, "-m", module, *argv], capture_output=True,
                             text=True, timeout=60)  # fmt: skip
         assert py.returncode == 2 and py.stderr.count("\n") == 1, (module, py.stderr)
