@@ -121,9 +121,11 @@ def finish(
         with open(stepping_path) as f:
             stepping = json.load(f)
         with open(replay_path, "rb") as f:
-            records, _ = parse(f.read())
+            records, ended = parse(f.read())
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"what the display kept is unreadable: {e}") from None
+    if not ended:
+        raise ValueError(f"{REPLAY_FILE} does not end in order: the display stopped in it")
     if not isinstance(stepping, dict) or any(k not in stepping for k in STEPPING_KEYS):
         raise ValueError(f"{STEPPING_FILE} lacks one of {', '.join(STEPPING_KEYS)}")
     grid = OccupancyGrid(shape, cell)

@@ -134,6 +134,10 @@ def test_what_the_display_kept_must_be_whole(tmp_path):
     (tmp_path / displayreplay.STEPPING_FILE).write_text('{"step": 3}')
     with pytest.raises(ValueError, match="lacks"):
         displayreplay.finish(str(tmp_path), SHAPE, CELL, EventLog(None))
+    (tmp_path / displayreplay.STEPPING_FILE).write_text(json.dumps(STEPPING))
+    (tmp_path / displayreplay.REPLAY_FILE).write_bytes(b"V\x01\x00\x00\x00")
+    with pytest.raises(ValueError, match="does not end in order"):
+        displayreplay.finish(str(tmp_path), SHAPE, CELL, EventLog(None))
     os.unlink(tmp_path / displayreplay.STEPPING_FILE)
     with pytest.raises(ValueError, match="unreadable"):
         displayreplay.finish(str(tmp_path), SHAPE, CELL, EventLog(None))
