@@ -65,11 +65,13 @@ setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT)
 # The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
 # float rounds as in numpy and the two agree cell for cell.
-$(STEPCORE): native/stepcore/stepcore.cc
+# bodylink.cc is the world's alone: its body links' commands in and frames out, each step.
+STEPCORE_SRC := native/stepcore/stepcore.cc native/stepcore/bodylink.cc
+$(STEPCORE): $(STEPCORE_SRC) native/stepcore/stepcore.h
 	@if ! command -v g++ >/dev/null; then echo "g++ not found: the per-step work runs in numpy" \
 		"(slower); install g++ and run make setup"; else mkdir -p $(@D) && \
-		echo "g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<" && \
-		g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $<; fi
+		echo "g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $(STEPCORE_SRC)" && \
+		g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $(STEPCORE_SRC); fi
 
 # Where it cannot be built, setup says so in one line, keeps that line in TB_ROBOT_UNBUILT (the
 # tests that need the C++ robot skip with it; `--robot auto` runs the Python robot) and goes on.
@@ -91,10 +93,10 @@ build/asan/tb-robot: $(TB_ROBOT_DEPS)
 
 # The step core as the world and the Python robot load it, with AddressSanitizer and
 # UndefinedBehaviorSanitizer (tests/integration/test_stepcore_sanitizers.py runs its tests on it).
-build/asan/libstepcore.so: native/stepcore/stepcore.cc native/stepcore/stepcore.h
+build/asan/libstepcore.so: $(STEPCORE_SRC) native/stepcore/stepcore.h
 	@mkdir -p $(@D)
 	g++ -std=c++17 -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined \
-		-fno-sanitize-recover=undefined -fPIC -shared -ffp-contract=off -o $@ $<
+		-fno-sanitize-recover=undefined -fPIC -shared -ffp-contract=off -o $@ $(STEPCORE_SRC)
 
 build/tsan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }

@@ -2,7 +2,8 @@
 
 Theory of operation: native/stepcore/stepcore.cc holds compiled twins of the functions that run
 every step or every plan (the world's laser cast, a scan into the robot's maps, classifying
-and merging maps, and the planner). `make setup` builds it with g++ into
+and merging maps, and the planner); native/stepcore/bodylink.cc the world's share of its body
+links each step (testbed.world.bodylink calls it). `make setup` builds it with g++ into
 build/libstepcore.so; this module loads it with ctypes (a plain C ABI: no Python headers, no
 binding library, no compiler at run time) and wraps each function so that it takes and
 returns what its numpy twin does. The numpy functions stay the reference: the unit tests
@@ -29,7 +30,7 @@ from node.rays import _BUCKETS, _FRAC
 LIBRARY = envswitch.library("TESTBED_STEPCORE_LIBRARY") or (
     Path(PROJECT_ROOT) / "build" / "libstepcore.so"
 )
-VERSION = 2  # sc_version() of the source this wrapper was written for
+VERSION = 3  # sc_version() of the source this wrapper was written for
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int
@@ -60,6 +61,8 @@ _SIGNATURES = {
     "sc_frontier_goals": (None, [_P, _P, _I, _I, _P]),
     "sc_wavefront": (_I, [_P, _P, _P, _I, _I, _I, _I, _P, _P]),
     "sc_plan": (_I, [_P, _I, _I, _I, _I, _D, _D, _D, _P, _I, _D, _I, _P, _P, _I]),
+    "sc_body_take": (_L, [_I, _P, _P, _P, _P, _P, _P, _P, _L]),  # testbed.world.bodylink's
+    "sc_body_frames": (_I, [_I, _P, _L, _P, _D, _P, _P, _I]),
 }
 
 

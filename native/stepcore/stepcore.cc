@@ -83,7 +83,7 @@ void each_seen(const float* dx, const float* dy, const uint8_t* mark, int n_rays
 
 extern "C" {
 
-int sc_version(void) { return 2; }
+int sc_version(void) { return 3; }
 
 // Laser.window_marks: the window cells (w x w, row-major) of the marked samples before each
 // ray's hit, and each hit sample's cell. idx: per-ray hit sample (n_samples: none) or null for

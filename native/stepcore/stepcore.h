@@ -1,6 +1,7 @@
 // The step core's C ABI (stepcore.cc): the per-step work both robots run. The Python robot
 // loads build/libstepcore.so with ctypes (node/stepcore.py declares the same signatures); the
 // C++ robot (native/robot) links stepcore.cc in. One laser, one map update, one planner.
+// bodylink.cc, in the library only, is the world's: its body links' per-step input and output.
 // Arrays are C-contiguous; booleans are one byte, 0 or 1.
 #pragma once
 
@@ -36,5 +37,12 @@ int64_t sc_merge_ternary(float* l, int64_t stride, const uint8_t* t, int h, int 
 int sc_plan(const uint8_t* t, int th, int tw, int factor, int inflate, double px, double py,
             double plan_cell, const double* goals, int n_goals, double radius, int fallback_ok,
             int* status_out, int* path_out, int max_n);
+
+// The world's side of the body links (bodylink.cc): a step's commands in, its frames out.
+int64_t sc_body_take(int n, const int32_t* fds, int32_t* taken, int64_t* step_out,
+                     uint8_t* go_out, double* xy_out, uint8_t* hung, uint8_t* others,
+                     int64_t others_cap);
+int sc_body_frames(int n, const int32_t* fds, int64_t step, const double* xyt, double sent,
+                   const float* ranges, const int8_t* has_ranges, int n_rays);
 
 }  // extern "C"

@@ -21,6 +21,8 @@ import signal
 import time
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from node import body
 from testbed.run import isolation
 from testbed.run.progress import ProgressLine
@@ -28,8 +30,6 @@ from testbed.run.record import RobotRecord
 from testbed.run.stepclock import StepClock, StepTiming
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from testbed.run.execute import Started
     from testbed.run.prepare import PreparedRun
 
@@ -54,7 +54,9 @@ class StepLoop:
         self.timing = StepTiming()
         self.progress = ProgressLine(progress, prep.cfg.max_steps, self.n)
         self.positions: list = []  # the robots' positions at the last step
-        self.scans: list[np.ndarray | None] = self.world.scan_all([True] * self.n)
+        # Robot k's process is in the run (not crashed, not stopped) where live_robots[k - 1].
+        self.live_robots = np.array([not robots[k].gone for k in range(1, self.n + 1)], bool)
+        self.world.cast_live(self.live_robots)
         self.cpu0 = time.process_time()
         self.clock = StepClock(prep.cfg.time_scale, self.n, time.monotonic())
         self.display_steps = prep.display_steps
@@ -86,7 +88,7 @@ class StepLoop:
         self._inject_kills(step)
         self._notice_crashes(step)
         ts = time.monotonic()
-        self.scans[:] = world.scan_all([not self.robots[k].gone for k in range(1, self.n + 1)])
+        world.cast_live(self.live_robots)
         cov = world.coverage()
         self.files.coverage(step, cov)
         if self.live is not None:
@@ -113,7 +115,7 @@ class StepLoop:
         if left > 0:
             time.sleep(left)
         clock.woke(time.monotonic())
-        for k, msg in self.server.poll(0.0):
+        for k, msg in self.server.take(self.n):
             if not 1 <= k <= self.n:
                 continue
             r = self.robots[k]
@@ -166,6 +168,7 @@ class StepLoop:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(r.process.pid, signal.SIGKILL)
             r.stop(step)
+            self.live_robots[k - 1] = False
             self.world.bodies[k - 1].alive = False
             self.files.event(step, "stopped", k)
             log.info("r%d stopped at step %d (--kill)", k, step)
@@ -180,18 +183,16 @@ class StepLoop:
         for k, r in live:
             if r.process.returncode is not None:
                 r.died(step, r.process.returncode)
+                self.live_robots[k - 1] = False
                 self.world.bodies[k - 1].alive = False
                 log.warning("r%d exited with status %s at step %d", k, r.exit_status, step)
 
     def _send_frames(self) -> None:
         now = time.monotonic()
         self.files.frames_out(now)
-        step = self.clock.step
-        for k, r in self.robots.items():
-            if r.gone:
-                continue
-            b = self.world.bodies[k - 1]
-            self.server.send(k, body.frame(step, b.x, b.y, b.theta, self.scans[k - 1], now))
+        step, w = self.clock.step, self.world
+        self.server.send_frames(step, now, w.frame_xyt, w.frame_ranges, w.frame_has,
+                                self.live_robots)  # fmt: skip
         if self.display_steps.wanted(step):
             self._send_display_frame(now)
 

@@ -100,10 +100,18 @@ class World:
         # Free cells seen so far (None: to be counted again), kept up by the compiled casts.
         self._seen_free_count: int | None = 0
         self._cast = None
+        n = len(self.bodies)
+        # What the robots' frames carry, kept up by cast_live (the body link sends them).
+        self.frame_xyt = np.zeros((n, 3), dtype=np.float64)
+        self.frame_ranges = np.full((n, laser.n_rays), np.inf, dtype=np.float32)
+        self.frame_has = np.ones(n, dtype=np.int8)
         if stepcore.NATIVE:
-            self._cast = stepcore.WorldCast(laser, len(self.bodies), truth.cell, _BIAS,
-                                            self._occ_u8, self._seen_u8, self._seen_free[1],
-                                            self.open_space, self._skip)  # fmt: skip
+            self._cast = stepcore.WorldCast(laser, n, truth.cell, _BIAS, self._occ_u8,
+                                            self._seen_u8, self._seen_free[1], self.open_space,
+                                            self._skip)  # fmt: skip
+            self.frame_ranges = self._cast.ranges  # the compiled casts write their rows
+            self.frame_ranges[:] = np.inf
+            self._cast.xy[:] = np.nan  # no robot cast yet
 
     @property
     def n(self) -> int:
@@ -153,40 +161,35 @@ class World:
             self.paths[i].append((nx, ny))
         self.step_no += 1
 
-    def scan_all(self, live: list[bool]) -> list[np.ndarray | None]:
-        """Every live robot's scan (None for the others), as `scan` casts each: those that
-        moved in one compiled call where it runs (a call per robot cost more than its cast),
-        which also counts the free cells seen for the first time."""
-        if self._cast is None:
-            return [self.scan(i) if alive else None for i, alive in enumerate(live)]
-        out: list[np.ndarray | None] = [None] * len(live)
-        want, xy = self._cast.want, self._cast.xy
-        want[:] = 0
-        for i, alive in enumerate(live):
-            if not alive:
-                continue
-            b = self.bodies[i]
-            cached = self._last_scan[i]
-            if cached is not None and cached[0] == (b.x, b.y):
-                out[i] = cached[1]  # it did not move: same scan, nothing new seen
-                continue
-            want[i] = 1
-            xy[i] = b.x, b.y
-        if not want.any():
-            return out
-        ranges, hit, fresh = self._cast.cast()
+    def cast_live(self, live: np.ndarray) -> None:
+        """Every live robot's laser (`live`: one bool a robot) from where it stands, for its
+        frame: afterwards `frame_xyt` row i holds robot i's pose (x, y, theta) and
+        `frame_ranges` row i its scan where `frame_has[i]` is 1 (0: no ray returned, every
+        range +inf). A robot that has not moved since its last cast keeps that cast (and saw
+        nothing new). Where the step core runs, the robots that moved are cast in one
+        compiled call (a call per robot cost more than its cast), which also counts the free
+        cells seen for the first time; each robot is cast as `scan` casts it."""
+        xyt = self.frame_xyt
+        for i, b in enumerate(self.bodies):
+            xyt[i] = b.x, b.y, b.theta
+        cast = self._cast
+        if cast is None:
+            for i in np.flatnonzero(live).tolist():
+                self.frame_ranges[i] = self.scan(i)
+            return
+        moved = live & (xyt[:, :2] != cast.xy).any(axis=1)
+        if not moved.any():
+            return
+        cast.want[:] = moved
+        cast.xy[moved] = xyt[moved, :2]
+        _, hit, fresh = cast.cast()
         if self._seen_free_count is not None:
             self._seen_free_count += fresh
-        for i in np.flatnonzero(want).tolist():
-            h = hit[i]
-            if h < 0:  # the laser's window sticks out of the map: scan's own path
-                out[i] = self.scan(i)
-                continue
-            r = ranges[i].copy() if h else self._no_returns
-            b = self.bodies[i]
-            self._last_scan[i] = ((b.x, b.y), r)
-            out[i] = r
-        return out
+        self.frame_has[moved] = hit[moved]
+        for i in np.flatnonzero(moved & (hit < 0)).tolist():
+            # The laser's window sticks out of the map: scan's own path.
+            self.frame_ranges[i] = self.scan(i)
+            self.frame_has[i] = 1
 
     def scan(self, k: int) -> np.ndarray:
         """Cast robot k's laser (0-based) and add what it saw to the team's seen cells."""
@@ -283,7 +286,7 @@ class World:
         return ranges
 
     def coverage(self) -> float:
-        """Fraction of the free space the team's lasers have seen (the count scan_all keeps,
+        """Fraction of the free space the team's lasers have seen (the count cast_live keeps,
         or counted again after a scan)."""
         if self._seen_free_count is None:
             if stepcore.NATIVE:

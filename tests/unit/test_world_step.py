@@ -158,10 +158,11 @@ def test_world_scan_and_seen_equal_the_reference_on_random_poses(max_range):
 
 @pytest.mark.parametrize("max_range", [2.0, 1.5, 30.0])
 def test_all_scans_in_one_call_equal_one_scan_each(max_range):
-    """World.scan_all (a step's casts in one compiled call, with the coverage count it
-    keeps) gives each robot World.scan's ranges and marks the same seen cells, on a cluttered
-    map, with robots that stay where they were (cached) and dead ones (None); lasers with
-    the tables of scans without hits and one too long for them."""
+    """World.cast_live (a step's casts in one compiled call, with the coverage count it
+    keeps) gives each robot's frame World.scan's ranges and pose and marks the same seen
+    cells, on a cluttered map, with robots that stay where they were (cached) and dead ones
+    (their frames kept as they were); lasers with the tables of scans without hits and one
+    too long for them."""
     t = empty_terrain(12, 12)
     occ = t.occupied.copy()
     rng = np.random.default_rng(11)
@@ -186,12 +187,16 @@ def test_all_scans_in_one_call_equal_one_scan_each(max_range):
                     break
             for w in (batch, one):
                 w.bodies[i].x, w.bodies[i].y = x, y
-        got = batch.scan_all(live)
+        before = batch.frame_ranges.copy(), batch.frame_has.copy()
+        batch.cast_live(np.array(live))
         for i in range(n):
+            assert batch.frame_xyt[i].tolist() == [batch.bodies[i].x, batch.bodies[i].y, 0.0]
             if not live[i]:
-                assert got[i] is None
+                assert np.array_equal(batch.frame_ranges[i], before[0][i])
+                assert batch.frame_has[i] == before[1][i]
                 continue
-            assert np.array_equal(got[i], one.scan(i))
+            got = batch.frame_ranges[i] if batch.frame_has[i] == 1 else np.full(180, np.inf)
+            assert np.array_equal(got, one.scan(i))
         assert np.array_equal(batch.seen_padded, one.seen_padded)
         assert batch.coverage() == one.coverage()
         truth = float(np.count_nonzero(batch.seen & ~occ)) / batch.free_total
