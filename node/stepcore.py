@@ -47,6 +47,11 @@ _SIGNATURES = {
         [_I, _P, _P, _D, _D, _I, _I, _I, _P, _P, _P, _I, _I, _D, _I, _I, _I, _P, _P, _P, _P]
         + [_P, _P, _P, _L, _L, _P, _P, _L, _L, _P, _P, _P],
     ),  # fmt: skip
+    "sc_world_cast_moved": (
+        _L,
+        [_P, _P, _P, _P, _I, _P, _P, _D, _D, _I, _I, _I, _P, _P, _P, _I, _I, _D, _I, _I, _I, _P]
+        + [_P, _P, _P, _P, _P, _P, _L, _L, _P, _P, _L, _L, _P, _P, _P],
+    ),  # fmt: skip
     "sc_scan_into": (
         None,
         [_P, _P, _P, _I, _I, _F, _I, _F, _F, _I, _I, _P, _P, _P, _L, _L, _L, _F, _F, _F, _P, _P]
@@ -61,8 +66,8 @@ _SIGNATURES = {
     "sc_frontier_goals": (None, [_P, _P, _I, _I, _P]),
     "sc_wavefront": (_I, [_P, _P, _P, _I, _I, _I, _I, _P, _P]),
     "sc_plan": (_I, [_P, _I, _I, _I, _I, _D, _D, _D, _P, _I, _D, _I, _P, _P, _I]),
-    "sc_body_take": (_L, [_I, _P, _P, _P, _P, _P, _P, _P, _L]),  # testbed.world.bodylink's
-    "sc_body_frames": (_I, [_I, _P, _L, _P, _D, _P, _P, _I]),
+    "sc_body_take": (_L, [_I, _P, _P, _P, _P, _P, _P, _P, _L, _P]),  # testbed.world.bodylink's
+    "sc_body_frames": (_I, [_I, _P, _P, _L, _P, _D, _P, _P, _I]),
 }
 
 
@@ -297,13 +302,13 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
 
 class WorldCast:
     """testbed.world's casts of one step, every robot's in one compiled call
-    (sc_world_cast): the world's grids and the laser's tables, as addresses, for the run.
-    `cast()` casts from the robots' positions in `xy` (n x 2, float64) where `want` (n bytes)
-    says so, both filled by the caller and alive for the run; it returns (ranges, hit,
-    fresh): ranges row i holds robot i's ranges
-    where hit[i] is 1 (some ray hit), hit[i] is 0 where none did and -1 where the call did
-    nothing for it (World.scan's own path takes that robot); fresh counts the cells of
-    `free` seen for the first time."""
+    (sc_world_cast_moved): the world's grids and the laser's tables, as addresses, for the
+    run. The caller writes each robot's pose in `xyt` (n x 3: x, y, theta); `cast_moved(live)`
+    casts each robot that is live and stands elsewhere than at its last cast (`xy`, n x 2)
+    and returns (fresh, fallbacks): the cells of `free` seen for the first time, and how many
+    robots it did nothing for. After it, `has[i]` says what robot i's last cast gave: 1 its
+    ranges are row i of `ranges`, 0 no ray returned, -1 the call did nothing for it (its
+    window sticks out of the map: World.scan's own path takes it)."""
 
     def __init__(self, laser, n: int, map_cell: float, bias: int, occ: np.ndarray,
                  seen: np.ndarray, free: np.ndarray, open_space: np.ndarray,
@@ -314,10 +319,13 @@ class WorldCast:
         self._grids = (occ, seen, np.ascontiguousarray(free, dtype=np.uint8),
                        np.ascontiguousarray(open_space, dtype=np.uint8),
                        np.ascontiguousarray(skip, dtype=np.int32))  # fmt: skip
-        self.ranges = np.empty((n, laser.n_rays), dtype=np.float32)
+        self.ranges = np.full((n, laser.n_rays), np.inf, dtype=np.float32)
         self.hit = np.empty(n, dtype=np.int8)
-        self.xy = np.zeros((n, 2), dtype=np.float64)
+        self.xy = np.full((n, 2), np.nan, dtype=np.float64)  # no robot cast yet
         self.want = np.zeros(n, dtype=np.uint8)
+        self.xyt = np.zeros((n, 3), dtype=np.float64)
+        self.has = np.zeros(n, dtype=np.int8)
+        self._fallbacks = np.zeros(1, dtype=np.int32)
         _, (dx, dy, mark, _free, _occ, idx) = _laser_tables(laser)
         keys = [(bx, by) for bx in range(_BUCKETS) for by in range(_BUCKETS)]
         tables = [_class_table(laser, key) for key in keys] if laser.tabled else []
@@ -335,7 +343,10 @@ class WorldCast:
         self._args = (n, ptr(self.xy), ptr(self.want), map_cell, laser.cell, bias, laser.pad,
                       laser.window, *self._head)  # fmt: skip
 
-    def cast(self) -> tuple[np.ndarray, np.ndarray, int]:
-        assert lib is not None
-        fresh = lib.sc_world_cast(*self._args)
-        return self.ranges, self.hit, int(fresh)
+        self._moved_head = (ptr(self.xyt), None, ptr(self.has), ptr(self._fallbacks))
+
+    def cast_moved(self, live: np.ndarray) -> tuple[int, int]:
+        assert lib is not None and live.dtype == np.bool_ and live.shape == self.want.shape
+        xyt, _, has, fallbacks = self._moved_head
+        fresh = lib.sc_world_cast_moved(xyt, address(live), has, fallbacks, *self._args)
+        return fresh, int(self._fallbacks[0])

@@ -66,16 +66,19 @@ extern "C" {
 // index and its length (u32 each, host order), for the Python side to parse. hung[i] is 1 when
 // socket i's peer hung up or the socket failed (it is read no further). The call stops reading
 // when `others` could not take one more datagram of the largest size: what it leaves stays in
-// the sockets for the next call. Returns the bytes written to `others`, or -1 - that count
-// when it stopped early.
+// the sockets for the next call. counts_out gets how many sockets had commands and how many
+// hung up. Returns the bytes written to `others`, or -1 - that count when it stopped early.
 int64_t sc_body_take(int n, const int32_t* fds, int32_t* taken, int64_t* step_out,
                      uint8_t* go_out, double* xy_out, uint8_t* hung, uint8_t* others,
-                     int64_t others_cap) {
+                     int64_t others_cap, int32_t* counts_out) {
     static thread_local uint8_t buf[MAX_DATAGRAM];
     int64_t used = 0;
+    counts_out[0] = counts_out[1] = 0;
     for (int i = 0; i < n; ++i) {
         taken[i] = 0;
         hung[i] = 0;
+    }
+    for (int i = 0; i < n; ++i) {
         if (fds[i] < 0) continue;
         for (;;) {
             if (others_cap - used < (int64_t)(OTHER_HEAD + MAX_DATAGRAM)) return -1 - used;
@@ -84,11 +87,13 @@ int64_t sc_body_take(int n, const int32_t* fds, int32_t* taken, int64_t* step_ou
             if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
             if (got <= 0) {  // an orderly hang-up, or the socket failed
                 hung[i] = 1;
+                ++counts_out[1];
                 break;
             }
             if ((size_t)got == CMD_SIZE && buf[0] == 'C') {
                 const int64_t step = get_u32(buf + 1);
                 if (taken[i] == 0 || step > step_out[i]) step_out[i] = step;
+                if (taken[i] == 0) ++counts_out[0];
                 go_out[i] = buf[5] != 0;
                 xy_out[2 * i] = buf[5] ? (double)get_f32(buf + 6) : 0.0;
                 xy_out[2 * i + 1] = buf[5] ? (double)get_f32(buf + 10) : 0.0;
@@ -106,19 +111,20 @@ int64_t sc_body_take(int n, const int32_t* fds, int32_t* taken, int64_t* step_ou
     return used;
 }
 
-// Send robot i (fds[i] >= 0) its frame of `step` (node.body.frame, byte for byte): pose from
-// xyt (x, y, theta; metres and radians, rounded to float32 as struct's "f" rounds them), `sent`
+// Send robot i (live[i], fds[i] >= 0) its frame of `step` (node.body.frame, byte for byte): pose
+// from xyt (x, y, theta; metres and radians, rounded to float32 as struct's "f" rounds them), `sent`
 // (CLOCK_MONOTONIC seconds), and its n_rays ranges: row i of `ranges` where has_ranges[i] is
 // 1, else every ray +inf (a scan without returns). Without blocking. Returns how many frames
 // were not sent (a socket full or failed), as BodyServer.send's False.
-int sc_body_frames(int n, const int32_t* fds, int64_t step, const double* xyt, double sent,
-                   const float* ranges, const int8_t* has_ranges, int n_rays) {
+int sc_body_frames(int n, const int32_t* fds, const uint8_t* live, int64_t step,
+                   const double* xyt, double sent, const float* ranges, const int8_t* has_ranges,
+                   int n_rays) {
     static thread_local uint8_t buf[MAX_DATAGRAM];
     if (n_rays < 0 || FRAME_HEAD + 4 * (size_t)n_rays > sizeof buf) return n;
     const size_t size = FRAME_HEAD + 4 * (size_t)n_rays;
     int failed = 0;
     for (int i = 0; i < n; ++i) {
-        if (fds[i] < 0) continue;
+        if (!live[i] || fds[i] < 0) continue;
         buf[0] = 'F';
         put_u32(buf + 1, (uint32_t)step);
         put_f32(buf + 5, (float)xyt[3 * i]);

@@ -229,6 +229,45 @@ int64_t sc_world_cast(int n, const double* xy, const uint8_t* want, double map_c
     return fresh;
 }
 
+// World.cast_live's step: sc_world_cast (its arguments from n on) for each robot i that is
+// live[i] and stands elsewhere than at its last cast (xy row i, which takes its new position),
+// from its pose xyt row i (x, y, theta). has_out[i] then says what its frame carries: 1 the
+// ranges row, 0 no returns, -1 nothing done (World.scan's own path casts it: *fallbacks_out
+// counts those). Returns the free cells seen for the first time, as sc_world_cast.
+int64_t sc_world_cast_moved(const double* xyt, const uint8_t* live, int8_t* has_out,
+                            int32_t* fallbacks_out, int n, double* xy, uint8_t* want,
+                            double map_cell, double laser_cell, int bias, int pad, int w,
+                            const float* dx, const float* dy, const uint8_t* mark, int n_rays,
+                            int n_samples, double step, int tabled, int frac, int buckets,
+                            const uint8_t* const* sures, const float* const* odxs,
+                            const float* const* odys, const int32_t* n_opens,
+                            const uint8_t* occ, uint8_t* seen, const uint8_t* free_pad,
+                            int64_t ph, int64_t pw, const uint8_t* open_space,
+                            const int32_t* skip, int64_t mh, int64_t mw, float* ranges_out,
+                            int8_t* hit_out, int32_t* idx_tmp) {
+    bool any = false;
+    for (int i = 0; i < n; ++i) {
+        const double x = xyt[3 * i], y = xyt[3 * i + 1];
+        want[i] = live[i] && !(x == xy[2 * i] && y == xy[2 * i + 1]);
+        if (!want[i]) continue;
+        xy[2 * i] = x;
+        xy[2 * i + 1] = y;
+        any = true;
+    }
+    *fallbacks_out = 0;
+    if (!any) return 0;
+    const int64_t fresh = sc_world_cast(n, xy, want, map_cell, laser_cell, bias, pad, w, dx, dy,
+                                        mark, n_rays, n_samples, step, tabled, frac, buckets,
+                                        sures, odxs, odys, n_opens, occ, seen, free_pad, ph, pw,
+                                        open_space, skip, mh, mw, ranges_out, hit_out, idx_tmp);
+    for (int i = 0; i < n; ++i) {
+        if (!want[i]) continue;
+        has_out[i] = hit_out[i];
+        if (hit_out[i] < 0) ++*fallbacks_out;
+    }
+    return fresh;
+}
+
 // Robot._put_scan with Laser.scan_window and OccupancyGrid.update_window: one scan into the
 // log-odds map `lp` and the ternary local map `own` (both padded, row length `stride`), on
 // the window whose top-left cell is (r0, c0). Free cells first (each once), then the hit

@@ -24,7 +24,7 @@ from typing import cast
 import numpy as np
 
 from node import body, stepcore
-from node.stepcore import ptr
+from node.stepcore import address, ptr
 
 log = logging.getLogger(__name__)
 
@@ -105,10 +105,13 @@ class BodyServer:
         used = stepcore.lib.sc_body_take(len(s.fds), s.fds_p, *s.take_args)
         if used != 0:
             self._others(s, used if used >= 0 else -1 - used, out)
-        for i in np.flatnonzero(s.taken).tolist():
-            x, y = s.xy[i].tolist()
-            out.append((s.keys[i], ("cmd", int(s.steps[i]), (x, y) if s.go[i] else None)))
-        if s.hung.any():
+        with_cmds, hung = s.counts.tolist()
+        if with_cmds:
+            taken, steps, go, xy = s.taken.tolist(), s.steps.tolist(), s.go.tolist(), s.xy.tolist()
+            for i, t in enumerate(taken):
+                if t:
+                    out.append((s.keys[i], ("cmd", steps[i], tuple(xy[i]) if go[i] else None)))
+        if hung:
             for i in np.flatnonzero(s.hung).tolist():
                 conn = s.conn(i)
                 self._drop(conn, self._meta(conn))
@@ -140,11 +143,11 @@ class BodyServer:
                 r = ranges[i] if has[i] == 1 else np.full(ranges.shape[1], np.inf, np.float32)
                 self.send(i + 1, body.frame(step, x, y, theta, r, now))
             return
+        assert xyt.dtype == np.float64 and ranges.dtype == np.float32 and has.dtype == np.int8
+        assert live.dtype == np.bool_ and xyt.shape == (n, 3) and ranges.shape[0] == has.size == n
         s = self._step_sockets(n)
-        np.copyto(s.send_fds, s.fds[:n])
-        s.send_fds[~live] = -1
-        stepcore.lib.sc_body_frames(n, ptr(s.send_fds), step, ptr(xyt), now, ptr(ranges),
-                                    ptr(has), ranges.shape[1])  # fmt: skip
+        stepcore.lib.sc_body_frames(n, s.fds_p, address(live), step, address(xyt), now,
+                                    address(ranges), address(has), ranges.shape[1])  # fmt: skip
 
     def _step_sockets(self, n: int) -> _Sockets:
         s = self._sockets
@@ -212,15 +215,16 @@ class _Sockets:
         m = len(conns)
         self.fds = np.array([-1 if c is None else c.fileno() for c in conns], dtype=np.int32)
         self.fds_p = ptr(self.fds)
-        self.send_fds = np.empty(n, dtype=np.int32)
         self.taken = np.zeros(m, dtype=np.int32)
         self.steps = np.zeros(m, dtype=np.int64)
         self.go = np.zeros(m, dtype=np.uint8)
         self.xy = np.zeros((m, 2), dtype=np.float64)
         self.hung = np.zeros(m, dtype=np.uint8)
         self.others = np.zeros(OTHERS_BYTES, dtype=np.uint8)
+        self.counts = np.zeros(2, dtype=np.int32)  # sockets with commands, sockets hung up
         self.take_args = (ptr(self.taken), ptr(self.steps), ptr(self.go), ptr(self.xy),
-                          ptr(self.hung), ptr(self.others), OTHERS_BYTES)  # fmt: skip
+                          ptr(self.hung), ptr(self.others), OTHERS_BYTES,
+                          ptr(self.counts))  # fmt: skip
 
     def conn(self, i: int) -> socket.socket:
         """Socket i, one the compiled calls read (they read none where there is none)."""

@@ -109,9 +109,9 @@ class World:
             self._cast = stepcore.WorldCast(laser, n, truth.cell, _BIAS, self._occ_u8,
                                             self._seen_u8, self._seen_free[1], self.open_space,
                                             self._skip)  # fmt: skip
-            self.frame_ranges = self._cast.ranges  # the compiled casts write their rows
-            self.frame_ranges[:] = np.inf
-            self._cast.xy[:] = np.nan  # no robot cast yet
+            # The compiled casts write the frames' rows in place.
+            self.frame_xyt, self.frame_ranges = self._cast.xyt, self._cast.ranges
+            self.frame_has = self._cast.has
 
     @property
     def n(self) -> int:
@@ -169,27 +169,19 @@ class World:
         nothing new). Where the step core runs, the robots that moved are cast in one
         compiled call (a call per robot cost more than its cast), which also counts the free
         cells seen for the first time; each robot is cast as `scan` casts it."""
-        xyt = self.frame_xyt
-        for i, b in enumerate(self.bodies):
-            xyt[i] = b.x, b.y, b.theta
+        self.frame_xyt[:] = [(b.x, b.y, b.theta) for b in self.bodies]
         cast = self._cast
         if cast is None:
             for i in np.flatnonzero(live).tolist():
                 self.frame_ranges[i] = self.scan(i)
             return
-        moved = live & (xyt[:, :2] != cast.xy).any(axis=1)
-        if not moved.any():
-            return
-        cast.want[:] = moved
-        cast.xy[moved] = xyt[moved, :2]
-        _, hit, fresh = cast.cast()
+        fresh, fallbacks = cast.cast_moved(live)
         if self._seen_free_count is not None:
             self._seen_free_count += fresh
-        self.frame_has[moved] = hit[moved]
-        for i in np.flatnonzero(moved & (hit < 0)).tolist():
-            # The laser's window sticks out of the map: scan's own path.
-            self.frame_ranges[i] = self.scan(i)
-            self.frame_has[i] = 1
+        if fallbacks:  # the laser's window sticks out of the map: scan's own path
+            for i in np.flatnonzero(self.frame_has < 0).tolist():
+                self.frame_ranges[i] = self.scan(i)
+                self.frame_has[i] = 1
 
     def scan(self, k: int) -> np.ndarray:
         """Cast robot k's laser (0-based) and add what it saw to the team's seen cells."""
