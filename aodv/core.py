@@ -12,7 +12,7 @@ monotonic clock), and executes the actions it returns, in order:
     on_route_used(now, addr)                 DeleteRoute(dest)
     on_link_lost(now, neighbor)              ReleasePackets(dest, packets)
     on_timer(now)                            DropPackets(dest, packets)  (ICMP unreachable)
-                                             DiscoveryDone(dest, ok, latency, round_latency)
+    on_routes_used(now, addrs)               DiscoveryDone(dest, ok, latency, round_latency)
 
 After every call `next_deadline()` says when `on_timer` must run next. Route actions are
 a diff of the valid routing-table entries against what was already installed. Every
@@ -74,6 +74,7 @@ the module of its section. The main ones, for a reader in a hurry:
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Iterable
 from typing import Any, Generic, TypeVar
 
 from aodv.actions import (
@@ -215,7 +216,14 @@ class AodvCore:
 
     def on_route_used(self, now: float, addr: str) -> list[Action]:
         """Data to or from `addr` crossed this node recently (RFC 6.2)."""
-        self.datapath.used(now, addr)
+        return self.on_routes_used(now, (addr,))
+
+    def on_routes_used(self, now: float, addrs: Iterable[str]) -> list[Action]:
+        """Data to or from each of `addrs` crossed this node recently (RFC 6.2): one poll of
+        the route uses, in one event. It ends as `on_route_used` of each in turn ends, with
+        the route actions of all of them in one diff."""
+        for addr in addrs:
+            self.datapath.used(now, addr)
         return self._finish(now, [])
 
     def on_link_lost(self, now: float, neighbor: str) -> list[Action]:

@@ -12,7 +12,7 @@ core's actions to `Actuator` (aodv.actuator), which carries them out:
 
     UDP 654 datagram  -> decode -> core.on_control(src, ttl)   Unicast/Broadcast -> sendto
     TUN packet        -> core.on_no_route(src, dst)            Install/DeleteRoute -> netlink
-    nft "used" set    -> core.on_route_used(addr)               ReleasePackets -> raw socket
+    nft "used" set    -> core.on_routes_used(addrs)            ReleasePackets -> raw socket
     deadline reached  -> core.on_timer()                        DropPackets -> ICMP via TUN
 
 The control socket and its TTLs are aodv.control's (`ControlChannel`); the ICMP written
@@ -304,10 +304,11 @@ class Daemon:
             return
         if used is None:
             return
-        now = time.monotonic()
-        for addr in used:
-            self.stats.route_uses += 1
-            self._actuator.execute(self._core.on_route_used(self._poll_started, addr), now)
+        if not used:
+            return
+        self.stats.route_uses += len(used)
+        actions = self._core.on_routes_used(self._poll_started, used)
+        self._actuator.execute(actions, time.monotonic())
 
     def _on_udp(self) -> None:
         for src, ttl, data in self.control.receive():

@@ -340,7 +340,7 @@ class SetReader:
                             raise KernelError(f"nftables set read: {os.strerror(code)}")
                     return self._found
                 if mtype == nl.NFT_MSG_NEWSETELEM:
-                    self._found += nl.set_element_addresses(data[start:end])
+                    self._found += nl.set_element_addresses(data, start, end)
 
     def close(self) -> None:
         self.sock.close()

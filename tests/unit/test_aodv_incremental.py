@@ -9,6 +9,7 @@ incremental core's next deadline must be the minimum a full scan finds."""
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from aodv.actions import DeleteRoute, InstallRoute
 from aodv.core import AodvCore
 from aodv.packet import Rerr, Rrep, RrepAck, Rreq
 from aodv.params import profile
@@ -108,3 +109,40 @@ def test_incremental_bookkeeping_acts_as_the_full_pass(steps, prof):
         assert apply(fast, now, ev) == apply(full, now, ev), ev
         assert fast.routes() == full.routes()
         assert fast.next_deadline() == full_scan_deadline(fast) == full.next_deadline()
+
+
+def kernel_after(actions: list, kernel: dict) -> dict:
+    """The kernel routes (dest: (next hop, hops)) once `actions` are carried out."""
+    for a in actions:
+        if isinstance(a, InstallRoute):
+            kernel[a.dest] = (a.next_hop, a.hops)
+        elif isinstance(a, DeleteRoute):
+            kernel.pop(a.dest, None)
+    return kernel
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(step, max_size=60), st.lists(addr, min_size=1, max_size=8),
+       st.lists(step, max_size=20))  # fmt: skip
+def test_route_uses_in_one_event_end_as_one_event_each(before, uses, after):
+    """The daemon hands a poll's route uses to the core in one event (on_routes_used): the
+    routing table, the kernel's routes and the next deadline end as with one on_route_used
+    each, and the two cores go on alike."""
+    p = profile("rfc")
+    now = 100.0
+    one, each = AodvCore(ME, p, now), AodvCore(ME, p, now)
+    k_one: dict = {}
+    k_each: dict = {}
+    for dt, ev in before:
+        now += dt
+        k_one = kernel_after(apply(one, now, ev), k_one)
+        k_each = kernel_after(apply(each, now, ev), k_each)
+    kernel_after(one.on_routes_used(now, uses), k_one)
+    for a in uses:
+        kernel_after(each.on_route_used(now, a), k_each)
+    assert k_one == k_each
+    assert one.routes() == each.routes()
+    assert one.next_deadline() == each.next_deadline()
+    for dt, ev in after:
+        now += dt
+        assert apply(one, now, ev) == apply(each, now, ev), ev

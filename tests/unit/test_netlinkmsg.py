@@ -149,3 +149,8 @@ def test_set_elements_dump_and_answer():
     elements = nl.attr(3 | nl.NLA_F_NESTED, elem("10.0.0.4") + elem("10.0.0.7"))
     payload = nl.NFGENMSG.pack(socket.AF_INET, 0, 0) + nl.string_attr(1, "aodv") + elements
     assert nl.set_element_addresses(payload) == ["10.0.0.4", "10.0.0.7"]
+    # In place, within a datagram: nothing before `start` or from `end` on is read.
+    blob = elem("10.0.0.9") + payload + elem("10.0.0.8")
+    at = len(elem("10.0.0.9"))
+    assert nl.set_element_addresses(blob, at, at + len(payload)) == ["10.0.0.4", "10.0.0.7"]
+    assert nl.set_element_addresses(blob, at, at + len(payload) - 1) == ["10.0.0.4"]

@@ -259,19 +259,20 @@ def set_elements_dump(table: str, set_name: str, seq: int) -> bytes:
     return message(NFT_MSG_GETSETELEM, NLM_F_REQUEST | NLM_F_DUMP, body, seq)
 
 
-def set_element_addresses(payload: bytes) -> list[str]:
-    """The IPv4 keys of the set elements in one NFT_MSG_NEWSETELEM payload."""
+def set_element_addresses(data: bytes, start: int = 0, end: int | None = None) -> list[str]:
+    """The IPv4 keys of the set elements in one NFT_MSG_NEWSETELEM payload, data[start:end]
+    (read in place, by offsets: a poll's answer is parsed by every daemon every period)."""
     found = []
-    for kind, body in attr_values(payload[NFGENMSG.size :]):
+    for kind, s, e in attrs(data, start + NFGENMSG.size, end):
         if kind != _NFTA_SET_ELEM_LIST_ELEMENTS:
             continue
-        for ekind, elem in attr_values(body):
+        for ekind, es, ee in attrs(data, s, e):
             if ekind != _NFTA_LIST_ELEM:
                 continue
-            for k, key in attr_values(elem):
+            for k, ks, ke in attrs(data, es, ee):
                 if k != _NFTA_SET_ELEM_KEY:
                     continue
-                for dk, value in attr_values(key):
-                    if dk == _NFTA_DATA_VALUE and len(value) == 4:
-                        found.append(socket.inet_ntoa(value))
+                for dk, vs, ve in attrs(data, ks, ke):
+                    if dk == _NFTA_DATA_VALUE and ve - vs == 4:
+                        found.append(socket.inet_ntoa(data[vs:ve]))
     return found
