@@ -2,7 +2,8 @@
 ctypes), checked for memory errors and undefined behaviour: `make build/asan/libstepcore.so`
 builds it with AddressSanitizer and UndefinedBehaviorSanitizer, and its unit tests (every
 compiled function held equal to its numpy twin on random maps, poses and scans; the world's
-casts of a step in one call) run on that build, in a Python with the ASan runtime preloaded.
+casts of a step in one call; its body links' commands and frames over real sockets) run on
+that build, in a Python with the ASan runtime preloaded.
 Clean means they pass and no sanitizer reported (a report stops the process). The C++ robot,
 which links the same source in, has its own sanitizer runs (test_cpp_robot_sanitizers)."""
 
@@ -35,7 +36,8 @@ def test_the_step_core_runs_clean_under_asan_and_ubsan():
         cwd=REPO, env=env, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert loaded.stdout.split() == ["True", str(LIBRARY)], loaded.stdout + loaded.stderr
-    tests = ["tests/unit/test_stepcore.py", "tests/unit/test_world_step.py"]
+    tests = ["tests/unit/test_stepcore.py", "tests/unit/test_world_step.py",
+             "tests/unit/test_body_fast.py"]  # fmt: skip
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests],
         cwd=REPO, env=env, capture_output=True, text=True, timeout=900,
