@@ -44,6 +44,7 @@ from topology.linkchanges import Links, Pair
 from topology.oracle import OracleRouter
 from topology.radio.los import Walls
 from topology.radio.ns3wifi import Ns3Medium, medium_for
+from topology.radio.slack import Slack
 from topology.radio.veth import WLAN_INDEX
 from topology.spec import (
     VETH,
@@ -73,6 +74,8 @@ class Network:
         self._deferred: list[state.ProcessRecord] | None = None  # see _recording
         self._state_mtime: int | None = None  # of the state file we last read or wrote
         self.linkset = Links(spec, Links.walls_of(spec))  # the links up now, what changes them
+        # How far set_positions' moves may go before a link can change (topology.radio.slack).
+        self._slack = Slack(spec.comm_range)
 
     # -- names ------------------------------------------------------------------------------
 
@@ -107,6 +110,7 @@ class Network:
 
     @current.setter
     def current(self, links: dict[Pair, Impairment]) -> None:
+        self._slack.reset()
         self.linkset.current = links
 
     @property
@@ -116,6 +120,7 @@ class Network:
 
     @link_impairments.setter
     def link_impairments(self, by_hand: dict[Pair, Impairment]) -> None:
+        self._slack.reset()
         self.linkset.by_hand = by_hand
 
     @property
@@ -125,6 +130,7 @@ class Network:
 
     @isolated.setter
     def isolated(self, robots: frozenset[int]) -> None:
+        self._slack.reset()
         self.linkset.isolated = robots
 
     @property
@@ -347,7 +353,10 @@ class Network:
         return self._moved(set(moves), save=save)
 
     def set_positions(self, positions: list[Position]) -> tuple[list[Pair], list[Pair]]:
-        """Move every robot at once (one world step). Returns (added, removed) links."""
+        """Move every robot at once (one world step). Returns (added, removed) links.
+        Under the disc model on veth links, moves that cannot have changed a link (they
+        stayed within the slack of the last full decision: topology.radio.slack) leave the
+        links as they are without asking the range model."""
         if len(positions) != self.spec.robots:
             raise ValueError(f"{len(positions)} positions for {self.spec.robots} robots")
         try:
@@ -356,11 +365,19 @@ class Network:
             ]
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        return self._moved()
+        slack = (self.spec.range_model == "disc" and self.spec.medium == VETH
+                 and not self.linkset.isolated and not self.persistent)  # fmt: skip
+        if slack and self._slack.holds(self.positions):
+            return [], []
+        diff = self._moved()
+        if slack:
+            self._slack.measure(self.positions)
+        return diff
 
     def _moved(
         self, moved: set[int] | None = None, save: bool = True
     ) -> tuple[list[Pair], list[Pair]]:
+        self._slack.reset()  # whatever moved, set_positions decides in full next time
         diff = self._apply_positions(moved)
         if self.persistent and save:
             self._save()
@@ -377,6 +394,7 @@ class Network:
         if st is None:
             return
         self._state_mtime = mtime
+        self._slack.reset()
         self.positions = [(x, y) for x, y in st.positions]
         by_hand = {_pair(key): Impairment(**fields) for key, fields in st.link_impairments.items()}
         self.linkset.retake(self.positions, by_hand)
