@@ -74,8 +74,7 @@ class Network:
         self._deferred: list[state.ProcessRecord] | None = None  # see _recording
         self._state_mtime: int | None = None  # of the state file we last read or wrote
         self.linkset = Links(spec, Links.walls_of(spec))  # the links up now, what changes them
-        # How far set_positions' moves may go before a link can change (topology.radio.slack).
-        self._slack = Slack(spec.comm_range)
+        self._slack = Slack(spec)  # how far set_positions' moves may go with the links as they are
 
     # -- names ------------------------------------------------------------------------------
 
@@ -110,7 +109,6 @@ class Network:
 
     @current.setter
     def current(self, links: dict[Pair, Impairment]) -> None:
-        self._slack.reset()
         self.linkset.current = links
 
     @property
@@ -120,7 +118,6 @@ class Network:
 
     @link_impairments.setter
     def link_impairments(self, by_hand: dict[Pair, Impairment]) -> None:
-        self._slack.reset()
         self.linkset.by_hand = by_hand
 
     @property
@@ -130,7 +127,6 @@ class Network:
 
     @isolated.setter
     def isolated(self, robots: frozenset[int]) -> None:
-        self._slack.reset()
         self.linkset.isolated = robots
 
     @property
@@ -353,10 +349,7 @@ class Network:
         return self._moved(set(moves), save=save)
 
     def set_positions(self, positions: list[Position]) -> tuple[list[Pair], list[Pair]]:
-        """Move every robot at once (one world step). Returns (added, removed) links.
-        Under the disc model on veth links, moves that cannot have changed a link (they
-        stayed within the slack of the last full decision: topology.radio.slack) leave the
-        links as they are without asking the range model."""
+        """Move every robot at once (one world step). Returns (added, removed) links."""
         if len(positions) != self.spec.robots:
             raise ValueError(f"{len(positions)} positions for {self.spec.robots} robots")
         try:
@@ -365,19 +358,13 @@ class Network:
             ]
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-        slack = (self.spec.range_model == "disc" and self.spec.medium == VETH
-                 and not self.linkset.isolated and not self.persistent)  # fmt: skip
-        if slack and self._slack.holds(self.positions):
-            return [], []
-        diff = self._moved()
-        if slack:
-            self._slack.measure(self.positions)
-        return diff
+        if self._slack.holds(self.positions, bool(self.linkset.isolated) or self.persistent):
+            return [], []  # no link can have changed: the range model is not asked
+        return self._slack.measured(self.positions, self._moved())
 
     def _moved(
         self, moved: set[int] | None = None, save: bool = True
     ) -> tuple[list[Pair], list[Pair]]:
-        self._slack.reset()  # whatever moved, set_positions decides in full next time
         diff = self._apply_positions(moved)
         if self.persistent and save:
             self._save()
@@ -394,7 +381,6 @@ class Network:
         if st is None:
             return
         self._state_mtime = mtime
-        self._slack.reset()
         self.positions = [(x, y) for x, y in st.positions]
         by_hand = {_pair(key): Impairment(**fields) for key, fields in st.link_impairments.items()}
         self.linkset.retake(self.positions, by_hand)
