@@ -99,16 +99,21 @@ def _hex_int(s: str, top: int = 0xFFFF) -> int | None:
     return v
 
 
+# A capture's clock: seconds since 1970. Up to the year 33658: far past any real capture, and
+# small enough that no difference, sum or millisecond of two such times overflows a float.
+MAX_TIME_S = 1e12
+
+
 def _time(s: str) -> float:
     t = float(s)
-    if not (math.isfinite(t) and t >= 0):
+    if not (math.isfinite(t) and 0 <= t <= MAX_TIME_S):
         raise ValueError(f"time {s[:20]!r}")
     return t
 
 
 def parse_fields(text: str) -> list[Frame]:
     """Frames from tshark's tab-separated `-e` output in `_FIELDS` order. A line whose
-    fields are not what tshark writes (a time that is not a finite number >= 0, a number out
+    fields are not what tshark writes (a time that is not a number in 0..MAX_TIME_S, a number out
     of its field's range: lengths, ports and sequence numbers are unsigned of their size)
     is skipped with a warning, so that no NaN or absurd count reaches the metrics."""
     frames = []

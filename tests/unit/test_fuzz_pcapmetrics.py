@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from testbed.analysis import pcapmetrics
 from testbed.analysis.pcapmetrics import _FIELDS, compute, parse_fields
+from testbed.analysis.pcapread import MAX_TIME_S
 
 BASE = settings(deadline=2000, suppress_health_check=[HealthCheck.too_slow], database=None)
 
@@ -96,7 +97,7 @@ def check(captures_text: dict[int, str]) -> None:
         frames = parse_fields(text)
         assert len(frames) <= len(text.splitlines())
         for f in frames:
-            assert math.isfinite(f.time) and f.time >= 0 and 0 <= f.length <= 0xFFFFFFFF
+            assert 0 <= f.time <= MAX_TIME_S and 0 <= f.length <= 0xFFFFFFFF
             for port in (f.udp_sport, f.udp_dport, f.tcp_sport, f.tcp_dport):
                 assert port is None or 0 <= port <= 0xFFFF
         captures[k] = frames
@@ -132,3 +133,15 @@ def test_a_line_out_of_its_fields_range_is_skipped_not_counted():
     assert parse_fields(good.replace("\t100\t", "\t-100\t", 1)) == []
     assert parse_fields(good.replace("\t100\t", "\t" + "9" * 5000 + "\t", 1)) == []
     assert pcapmetrics._int("65535") == 65535 and pcapmetrics._int("") is None
+
+
+def test_a_time_past_any_capture_is_skipped():
+    """Found by the fuzzer: a frame stamped 1e308 s made the run last 1e308 s, and a delay in
+    milliseconds of it infinite. Such a line is not what tshark writes: it is skipped."""
+    row = "\t100\t02:00:00:00:00:01\t02:00:00:00:00:02\t10.0.0.1\t10.0.0.2\t6\t64\t\t\t\t40000"
+    row += "\t5555\t1000\t1448\t\t\t0\t\t"
+    assert parse_fields("1e308" + row) == []
+    assert len(parse_fields("1700000000.0" + row)) == 1
+    m = compute({1: parse_fields("1700000000.0" + row), 2: parse_fields("1e308" + row)},
+                {1: ADDRS[1], 2: ADDRS[2]})  # fmt: skip
+    assert all(math.isfinite(x) for x in numbers(m)) and m["duration_s"] == 0.0
