@@ -35,11 +35,6 @@ def team(tmp_path, n: int, display: bool = True):
         server.close()
 
 
-def python_way(monkeypatch):
-    """Run the body link's Python twins (as where the step core is not built)."""
-    monkeypatch.setattr(bodylink.stepcore, "lib", None)
-
-
 finite = st.floats(-500.0, 500.0, width=32)
 ranges_f = st.one_of(st.floats(0.0, 40.0, width=32), st.just(float("inf")))
 
