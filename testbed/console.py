@@ -4,23 +4,32 @@ It holds nothing but a guard around importing the command (testbed.cli), which t
 half a second (numpy, OpenCV, pyroute2): a Ctrl-C in that time is one line and exit status
 130, like a Ctrl-C at any later moment (testbed.cli.main handles those), instead of a
 traceback of whichever import it interrupted. Nothing exists yet to be cleaned up then.
+
+The guard starts when `main` is called. Before that the interpreter starts and runs the
+console script's own imports (about 20 ms on a quiet machine, longer on a loaded one); a
+Ctrl-C in that time is Python's: it ends the process by SIGINT, with a traceback if Python's
+handler was installed by then. A launcher that blocks SIGINT while it starts the command
+(`env --block-signal=INT testbed ...`) closes that window: `main` unblocks it first, inside
+the guard, so a Ctrl-C that came during the start is taken there.
 """
 
+import signal
 import sys
 
 EXIT_INTERRUPTED = 130
 
 
 def main() -> int:
-    from common import envswitch
-    from common.errors import UsageError
-
-    try:  # before the imports: node.stepcore reads TESTBED_STEPCORE as it is imported
-        envswitch.check()
-    except UsageError as e:
-        sys.stderr.write(f"testbed: error: {e}\n")
-        return e.exit_status
     try:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        from common import envswitch
+        from common.errors import UsageError
+
+        try:  # before the imports: node.stepcore reads TESTBED_STEPCORE as it is imported
+            envswitch.check()
+        except UsageError as e:
+            sys.stderr.write(f"testbed: error: {e}\n")
+            return e.exit_status
         from testbed.cli import main as cli_main
 
         return cli_main()

@@ -48,13 +48,15 @@ def drive(tmp_path, program: str) -> tuple[list, list, int, dict]:
     server = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     server.bind(path)
     server.listen(1)
-    # Time scale 0.25: motion control holds a frame for the last step's plan up to three
-    # quarters of a step, 300 ms here; 75 ms at 1.0 was too short for a plan on a machine
-    # loaded by two test suites and two busy loops, and one robot then answered a frame
-    # without its plan (the commands differed at frame 41).
+    # Time scale 0.02: motion control holds a frame for the last step's plan up to three
+    # quarters of a step, 3.75 s here. A robot that gives up waiting answers without its plan
+    # (by design: it keeps the world's deadline), and the two robots' commands then differ;
+    # 75 ms at 1.0 and 300 ms at 0.25 were both too short for a plan on a machine loaded by
+    # two test suites and two busy loops (the commands differed at frame 41). The test does
+    # not wait the hold out: each plan ends it in milliseconds.
     argv = ["--robot", "r1", "--robots", "1", "--body", path, "--events", events,
             "--iface", "lo", "--bind", "127.0.0.1", "--goal-port", str(free_port()),
-            "--flood-port", str(free_port()), "--time-scale", "0.25"]  # fmt: skip
+            "--flood-port", str(free_port()), "--time-scale", "0.02"]  # fmt: skip
     cmd = [str(TB_ROBOT), *argv] if program == "cpp" else [sys.executable, "-m", "node", *argv]
     env = dict(os.environ, TESTBED_REALTIME="0", PYTHONPATH=REPO)
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stderr=subprocess.PIPE, text=True)
