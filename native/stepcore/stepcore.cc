@@ -479,82 +479,69 @@ static void closest(const std::vector<int64_t>& flat, int64_t W, int sr, int sc,
     cell[1] = (int)(best % W - 1);
 }
 
-// node.planner.wavefront: rings from (sr, sc) alternating 4- and 8-neighbour growth, in the
-// numpy version's order (ring-major candidates, each index kept at its last occurrence), so
-// that ties go the same way. dist_out (h x w) gets ring numbers, -1 unreached; cell_out the
-// goal cell. Returns 1 "ok", 2 "fallback", 0 "done".
-int sc_wavefront(const uint8_t* passable, const uint8_t* wanted, const uint8_t* fallback,
-                 int h, int w, int sr, int sc, int32_t* dist_out, int* cell_out) {
-    const int64_t W = w + 2, N = (int64_t)(h + 2) * W;
-    std::vector<uint8_t> open(N, 0), want(N, 0), fall(N, 0);
-    for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c) {
-            int64_t i = (int64_t)(r + 1) * W + c + 1, j = (int64_t)r * w + c;
-            open[i] = passable[j];
-            want[i] = wanted[j];
-            fall[i] = fallback[j];
-        }
-    std::vector<int32_t> dist(N, -1);
-    // last[q]: the position of q's last occurrence among the kept candidates; written for
-    // every kept candidate before it is read, so it needs no initial value.
-    std::unique_ptr<int64_t[]> last(new int64_t[N]);
-    int64_t s = (int64_t)(sr + 1) * W + sc + 1;
+// The wavefront's grid: one byte per cell of the (h + 2) x (w + 2) grid padded by a border
+// that is never open, so that a neighbour needs no bounds check. dist is written only where
+// REACHED is set.
+enum : uint8_t { WF_OPEN = 1, WF_WANT = 2, WF_FALL = 4, WF_REACHED = 8 };
+
+// node.planner.wavefront on the padded grid `f` (see sc_wavefront for the rule). The numpy
+// version keeps each ring's candidates in order, each at its last occurrence; here the
+// candidates are walked backwards and a cell is taken (closed, given its ring) at its first
+// occurrence, which is its last one forwards, so the ring is the same cells in the reverse
+// order, and is turned round. Returns 1 "ok", 2 "fallback", 0 "done"; cell_out the goal.
+static int wave(uint8_t* f, int32_t* dist, int64_t W, int sr, int sc, int* cell_out) {
+    const int64_t s = (int64_t)(sr + 1) * W + sc + 1;
     dist[s] = 0;
-    open[s] = 0;
-    auto finish = [&](int kind) {
-        for (int r = 0; r < h; ++r)
-            std::memcpy(dist_out + (size_t)r * w, dist.data() + (r + 1) * W + 1, sizeof(int32_t) * w);
-        return kind;
-    };
-    if (want[s]) {
+    f[s] = (uint8_t)((f[s] & ~WF_OPEN) | WF_REACHED);
+    if (f[s] & WF_WANT) {
         cell_out[0] = sr;
         cell_out[1] = sc;
-        return finish(1);
+        return 1;
     }
-    bool have_fb = fall[s];
+    bool have_fb = f[s] & WF_FALL;
     int fb_cell[2] = {sr, sc};
     const int64_t cross[4] = {-W, W, -1, 1};
     const int64_t diag[4] = {-W - 1, -W + 1, W - 1, W + 1};
-    std::vector<int64_t> ring{s}, prev, cand, kept, hit;
-    for (int k = 1;; ++k) {
-        cand.clear();
-        if (k % 2) {
-            for (int64_t q : ring)
-                for (int64_t o : cross) cand.push_back(q + o);
-        } else {
-            for (int64_t q : ring) {
-                for (int64_t o : cross) cand.push_back(q + o);
-                for (int64_t o : diag) cand.push_back(q + o);
+    std::vector<int64_t> ring{s}, prev, rev, hit;
+    ring.reserve(4096);
+    prev.reserve(4096);
+    rev.reserve(4096);
+    for (int32_t k = 1;; ++k) {
+        rev.clear();
+        auto take = [&](int64_t q) {
+            if (f[q] & WF_OPEN) {
+                f[q] = (uint8_t)((f[q] & ~WF_OPEN) | WF_REACHED);
+                dist[q] = k;
+                rev.push_back(q);
             }
-            for (int64_t q : prev)
-                for (int64_t o : diag) cand.push_back(q + o);
+        };
+        if (k % 2) {  // forwards: each ring cell's cross neighbours
+            for (size_t i = ring.size(); i-- > 0;)
+                for (int o = 3; o >= 0; --o) take(ring[i] + cross[o]);
+        } else {  // forwards: each ring cell's cross then diagonal ones, then the last ring's diagonal
+            for (size_t i = prev.size(); i-- > 0;)
+                for (int o = 3; o >= 0; --o) take(prev[i] + diag[o]);
+            for (size_t i = ring.size(); i-- > 0;) {
+                for (int o = 3; o >= 0; --o) take(ring[i] + diag[o]);
+                for (int o = 3; o >= 0; --o) take(ring[i] + cross[o]);
+            }
         }
-        kept.clear();
-        for (int64_t q : cand)
-            if (open[q]) kept.push_back(q);
-        for (size_t i = 0; i < kept.size(); ++i) last[kept[i]] = (int64_t)i;
-        cand.clear();
-        for (size_t i = 0; i < kept.size(); ++i)
-            if (last[kept[i]] == (int64_t)i) cand.push_back(kept[i]);
         std::swap(prev, ring);
-        std::swap(ring, cand);
+        ring.assign(rev.rbegin(), rev.rend());
         if (ring.empty()) {
             if (k % 2 && !prev.empty()) continue;
             break;
         }
         hit.clear();
-        for (int64_t q : ring) {
-            open[q] = 0;
-            dist[q] = k;
-            if (want[q]) hit.push_back(q);
-        }
+        for (int64_t q : ring)
+            if (f[q] & WF_WANT) hit.push_back(q);
         if (!hit.empty()) {
             closest(hit, W, sr, sc, cell_out);
-            return finish(1);
+            return 1;
         }
         if (!have_fb) {
             for (int64_t q : ring)
-                if (fall[q]) hit.push_back(q);
+                if (f[q] & WF_FALL) hit.push_back(q);
             if (!hit.empty()) {
                 closest(hit, W, sr, sc, fb_cell);
                 have_fb = true;
@@ -564,45 +551,67 @@ int sc_wavefront(const uint8_t* passable, const uint8_t* wanted, const uint8_t* 
     if (have_fb) {
         cell_out[0] = fb_cell[0];
         cell_out[1] = fb_cell[1];
-        return finish(2);
+        return 2;
     }
-    return finish(0);
+    return 0;
 }
 
-// node.planner.trace_back: from the goal, to the neighbour nearest the start, until dist 0.
-// path_out gets (row, col) pairs from the start to the goal; returns how many.
-int sc_trace_back(const int32_t* dist, int h, int w, int gr, int gc, int* path_out, int max_n) {
-    static const int nb[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1},
-                                 {-1, -1}, {-1, 1}, {1, -1}, {1, 1}};
-    std::vector<int> p{gr, gc};
-    int r = gr, c = gc, d = dist[(size_t)r * w + c];
+// node.planner.wavefront: rings from (sr, sc) alternating 4- and 8-neighbour growth, in the
+// numpy version's order (ring-major candidates, each index kept at its last occurrence), so
+// that ties go the same way. dist_out (h x w) gets ring numbers, -1 unreached; cell_out the
+// goal cell. Returns 1 "ok", 2 "fallback", 0 "done".
+int sc_wavefront(const uint8_t* passable, const uint8_t* wanted, const uint8_t* fallback,
+                 int h, int w, int sr, int sc, int32_t* dist_out, int* cell_out) {
+    const int64_t W = w + 2, N = (int64_t)(h + 2) * W;
+    std::vector<uint8_t> f(N, 0);
+    for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c) {
+            int64_t j = (int64_t)r * w + c;
+            f[(r + 1) * W + c + 1] = (uint8_t)((passable[j] ? WF_OPEN : 0) |
+                                               (wanted[j] ? WF_WANT : 0) |
+                                               (fallback[j] ? WF_FALL : 0));
+        }
+    std::unique_ptr<int32_t[]> dist(new int32_t[N]);
+    int kind = wave(f.data(), dist.get(), W, sr, sc, cell_out);
+    for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c) {
+            int64_t i = (int64_t)(r + 1) * W + c + 1;
+            dist_out[(int64_t)r * w + c] = f[i] & WF_REACHED ? dist[i] : -1;
+        }
+    return kind;
+}
+
+// node.planner.trace_back on the padded grid: from the goal to the neighbour nearest the
+// start (the first of the least, in the order below), until ring 0. Returns the (row, col)
+// pairs from the start to the goal.
+static std::vector<int> trace(const uint8_t* f, const int32_t* dist, int64_t W, int gr, int gc) {
+    const int64_t nb[8] = {-W, W, -1, 1, -W - 1, -W + 1, W - 1, W + 1};
+    int64_t q = (int64_t)(gr + 1) * W + gc + 1;
+    int32_t d = dist[q];
+    std::vector<int64_t> back{q};
+    back.reserve((size_t)d + 1);  // each move lowers the ring number
     while (d > 0) {
-        int br = -1, bc = -1, bd = d;
-        for (const auto& o : nb) {
-            int rr = r + o[0], cc = c + o[1];
-            if (rr >= 0 && rr < h && cc >= 0 && cc < w) {
-                int v = dist[(size_t)rr * w + cc];
-                if (v >= 0 && v < bd) {
-                    br = rr;
-                    bc = cc;
-                    bd = v;
-                }
+        int64_t best = -1;
+        int32_t bd = d;
+        for (int64_t o : nb) {
+            int64_t qq = q + o;
+            if ((f[qq] & WF_REACHED) && dist[qq] < bd) {
+                best = qq;
+                bd = dist[qq];
             }
         }
-        if (br < 0) break;
-        r = br;
-        c = bc;
+        if (best < 0) break;
+        q = best;
         d = bd;
-        p.push_back(r);
-        p.push_back(c);
+        back.push_back(q);
     }
-    int n = (int)p.size() / 2;
-    if (n > max_n) return -n;
-    for (int i = 0; i < n; ++i) {
-        path_out[2 * i] = p[2 * (n - 1 - i)];
-        path_out[2 * i + 1] = p[2 * (n - 1 - i) + 1];
+    std::vector<int> path(2 * back.size());
+    for (size_t i = 0; i < back.size(); ++i) {
+        int64_t b = back[back.size() - 1 - i];
+        path[2 * i] = (int)(b / W - 1);
+        path[2 * i + 1] = (int)(b % W - 1);
     }
-    return n;
+    return path;
 }
 
 // node.planner.line_clear: np.linspace's float64 samples (i * step + start, the last one
@@ -674,7 +683,7 @@ int sc_plan(const uint8_t* t, int th, int tw, int factor, int inflate, double px
             int* status_out, int* path_out, int max_n) {
     int h = th / factor, w = tw / factor;
     size_t n = (size_t)h * w;
-    std::vector<uint8_t> p(n), trav(n), pass, goalm(n), excl(n, 0), wanted(n);
+    std::vector<uint8_t> p(n), trav(n), pass, goalm(n), excl(n, 0);
     sc_pool(t, th, tw, factor, p.data());
     int sr = std::min(std::max((int)(py / plan_cell), 0), h - 1);
     int sc = std::min(std::max((int)(px / plan_cell), 0), w - 1);
@@ -694,18 +703,27 @@ int sc_plan(const uint8_t* t, int th, int tw, int factor, int inflate, double px
     *status_out = 0;
     if (!any) return 0;
     sc_exclusion(h, w, plan_cell, goals, n_goals, radius, excl.data());
-    for (size_t i = 0; i < n; ++i) wanted[i] = goalm[i] && !excl[i];
-    std::vector<int32_t> dist(n);
+    const int64_t W = w + 2, N = (int64_t)(h + 2) * W;
+    std::vector<uint8_t> f(N, 0);
+    for (int r = 0; r < h; ++r) {
+        const size_t j0 = (size_t)r * w;
+        uint8_t* fr = f.data() + (r + 1) * W + 1;
+        for (int c = 0; c < w; ++c) {
+            const size_t j = j0 + c;
+            fr[c] = (uint8_t)(pass[j] | (goalm[j] & (uint8_t)!excl[j]) << 1 | goalm[j] << 2);
+        }
+    }
+    std::unique_ptr<int32_t[]> dist(new int32_t[N]);
     int cell[2];
-    int kind = sc_wavefront(pass.data(), wanted.data(), goalm.data(), h, w, sr, sc, dist.data(), cell);
+    int kind = wave(f.data(), dist.get(), W, sr, sc, cell);
     if (kind == 0) return 0;
     if (kind == 2 && !fallback_ok) {
         *status_out = 3;
         return 0;
     }
     *status_out = kind;
-    std::vector<int> raw(2 * (size_t)n);
-    int m = sc_trace_back(dist.data(), h, w, cell[0], cell[1], raw.data(), (int)n);
+    std::vector<int> raw = trace(f.data(), dist.get(), W, cell[0], cell[1]);
+    int m = (int)raw.size() / 2;
     std::vector<int> sm(2 * (size_t)m);
     int k = sc_smooth(raw.data(), m, pass.data(), w, sm.data());
     if (k > max_n) return -k;
