@@ -501,7 +501,7 @@ def test_jobs_auto_is_one_at_a_time_on_two_cores_and_more_on_big_machines():
 
     runs = sweepfile.expand(sweepfile.load(REPO / "testbed" / "experiments" / "paper.toml"))
     assert sweepplan.auto_jobs(runs, cores=2) == 1
-    assert sweepplan.auto_jobs(runs, cores=64) >= 12
+    assert sweepplan.auto_jobs(runs, cores=64) >= 8  # ten robots at K = 20: 6 CPUs a run
 
 
 def test_report_says_which_scales_each_team_ran_at(env, tmp_path):
