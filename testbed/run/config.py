@@ -42,6 +42,10 @@ from topology.spec import (
 
 # Bounds of the options that have no natural one (docs/guide.md's option list and `--help`):
 MAX_STEPS = 10_000_000  # 11 days of emulated time at a step of 0.1 s
+# The largest team `testbed run` takes: the largest that ran faithful at K = 1 on the 2-core
+# development machine with the C++ robot, with margin (60 robots twice, 70 once; 75 missed
+# 1.4% of its deadlines: docs/measurements.md, "Time scales with the faster planner").
+MAX_TEAM = 60
 MAX_LASER_RAYS = 10_000  # a ray every 0.036 degrees; the paper's robots have 360
 MAX_SNAPSHOTS = 100
 
@@ -108,7 +112,7 @@ class RunConfig:
     """One run's description. Fields made with `option(...)` are the run options (see
     testbed.run.options): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
 
-    robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=50, metavar="N",
+    robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=MAX_TEAM, metavar="N",
                          sweep={GRID}, in_result=True,
                          grid=GridDim(0, lambda n: f"n{n:02d}", seeded=True))  # fmt: skip
     comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
