@@ -112,8 +112,8 @@ class RunConfig:
     """One run's description. Fields made with `option(...)` are the run options (see
     testbed.run.options): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
 
-    robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=MAX_TEAM, metavar="N",
-                         sweep={GRID}, in_result=True,
+    robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=MAX_TEAM,
+                         metavar="N", sweep={GRID}, in_result=True,
                          grid=GridDim(0, lambda n: f"n{n:02d}", seeded=True))  # fmt: skip
     comm_range: float = option(float, "radio range", unit="metres", above=0, metavar="M",
                                maximum=MAX_COORD_M,
