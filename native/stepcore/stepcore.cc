@@ -518,7 +518,8 @@ static int wave(uint8_t* f, int32_t* dist, int64_t W, int sr, int sc, int* cell_
         if (k % 2) {  // forwards: each ring cell's cross neighbours
             for (size_t i = ring.size(); i-- > 0;)
                 for (int o = 3; o >= 0; --o) take(ring[i] + cross[o]);
-        } else {  // forwards: each ring cell's cross then diagonal ones, then the last ring's diagonal
+        } else {  // forwards: each ring cell's cross then diagonal ones, then the last ring's
+                  // diagonal ones
             for (size_t i = prev.size(); i-- > 0;)
                 for (int o = 3; o >= 0; --o) take(prev[i] + diag[o]);
             for (size_t i = ring.size(); i-- > 0;) {
