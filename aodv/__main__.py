@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import logging
+import logging.handlers
 import os
+import queue
 import sys
 from dataclasses import fields, replace
 from typing import NoReturn
@@ -128,9 +130,27 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         print(f"aodv: error: {e}", file=sys.stderr)
         return EXIT_USAGE
+    listener = _start_logging(args.robot, args.log_level)
+    try:
+        return _serve(args, params)
+    finally:
+        listener.stop()
+
+
+def _start_logging(robot: str, level: str) -> logging.handlers.QueueListener:
+    """Log lines go through a queue to a thread that writes them: the daemon's loop never
+    waits on its log file (a write can wait on the file system's journal behind a disk
+    that is busy with someone else's data)."""
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(RobotFormatter(args.robot))
-    logging.basicConfig(level=args.log_level.upper(), handlers=[handler])
+    handler.setFormatter(RobotFormatter(robot))
+    lines: queue.SimpleQueue[logging.LogRecord] = queue.SimpleQueue()
+    logging.basicConfig(level=level.upper(), handlers=[logging.handlers.QueueHandler(lines)])
+    listener = logging.handlers.QueueListener(lines, handler)
+    listener.start()
+    return listener
+
+
+def _serve(args: argparse.Namespace, params: Params) -> int:
     if os.geteuid() != 0:
         print("aodv: error: needs root (CAP_NET_ADMIN) in the robot's namespace", file=sys.stderr)
         return EXIT_USAGE

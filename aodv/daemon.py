@@ -16,8 +16,9 @@ core's actions to `Actuator` (aodv.actuator), which carries them out:
     deadline reached  -> core.on_timer()                        DropPackets -> ICMP via TUN
 
 The control socket and its TTLs are aodv.control's (`ControlChannel`); the ICMP written
-and read, aodv.icmp's; the statistics, aodv.stats' (written every STATS_PERIOD and on
-SIGUSR1).
+and read, aodv.icmp's; the statistics, aodv.stats' (handed every STATS_PERIOD and on
+SIGUSR1 to aodv.statswriter's thread, which writes the file: a file written on the loop held
+its HELLO timers back behind the disk).
 
 Routes of the daemon carry protocol number RTPROT_AODV; they are flushed at start and at
 exit. A start is a restart (RFC 6.13 reboot rule: DELETE_PERIOD without originating
@@ -60,6 +61,7 @@ from aodv.params import Params
 from aodv.persist import CounterStore
 from aodv.sim import warm_up
 from aodv.stats import Stats
+from aodv.statswriter import StatsWriter
 from common.sched import DEADLINE_PRIORITY, deadline_priority
 
 log = logging.getLogger(__name__)
@@ -119,6 +121,7 @@ class Daemon:
         self._wake_r: socket.socket  # signal wake-up (set_wakeup_fd)
         self._wake_w: socket.socket
         self.core: AodvCore | None = None  # None until the end of start-up
+        self._writer: StatsWriter | None = None  # the loop's rewrites, on a thread of its own
         self._actuator: Actuator  # carries out the core's actions (made with the core)
 
     @property
@@ -147,6 +150,8 @@ class Daemon:
         self.addr = self.routes.address()
         self.stats = Stats(self.robot, self.addr)
         undo.callback(_quietly, "write statistics", self._write_stats)
+        if self.stats_path:  # made here, at the start's priority, not the loop's
+            self._writer = StatsWriter(self.stats_path)
         stale = self.routes.ours()
         resumed = self.store.load() if self.store else None
         rebooted = bool(stale) or resumed is not None
@@ -218,16 +223,28 @@ class Daemon:
     def _on_dump(self, *_a) -> None:
         self._dump = True
 
-    def _write_stats(self, compact: bool = False) -> None:
-        """The statistics file; `compact` (one line) for the rewrites while the daemon
-        runs, indented as it stops."""
+    def _write_stats(self) -> None:
+        """The statistics file as the daemon stops, indented, after the last rewrite the
+        loop handed on."""
+        if self._writer is not None:
+            self._writer.close()
         if self.stats_path:
-            if self.core is not None:  # None when start-up failed
-                self.stats.routes = {
-                    d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
-                }
-                self.stats.protocol_dropped = self.core.dropped
-            self.stats.write(self.stats_path, compact=compact)
+            self._update_stats()
+            self.stats.write(self.stats_path)
+
+    def _rewrite_stats(self) -> None:
+        """Hand the statistics to the writer's thread (the loop never waits on the file)."""
+        if self.stats_path:
+            assert self._writer is not None
+            self._update_stats()
+            self._writer.submit(self.stats.snapshot().compact_text())
+
+    def _update_stats(self) -> None:
+        if self.core is not None:  # None when start-up failed
+            self.stats.routes = {
+                d: {"next_hop": nh, "hops": h} for d, (nh, h) in self.core.routes().items()
+            }
+            self.stats.protocol_dropped = self.core.dropped
 
     # -- the loop ------------------------------------------------------------------------
     def _loop(self) -> None:
@@ -267,7 +284,7 @@ class Daemon:
             if self._dump or now >= next_stats:
                 self._dump = False
                 next_stats = now + STATS_PERIOD
-                self._write_stats(compact=True)
+                self._rewrite_stats()
             for key, _ in sel.select(max(0.0, min(deadline, next_poll, next_stats) - now)):
                 key.data()
 

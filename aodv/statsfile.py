@@ -225,9 +225,12 @@ class DaemonStats:
         if not compact:
             write_json_atomic(path, self.to_json(), sort_keys=True)
             return
+        write_atomic(path, self.compact_text())
+
+    def compact_text(self) -> str:
+        """The file's contents on one line (keys sorted), as `write(compact=True)` writes it."""
         doc = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        text = json.dumps(doc, sort_keys=True, separators=(",", ":"), default=_json_value)
-        write_atomic(path, text + "\n")
+        return json.dumps(doc, sort_keys=True, separators=(",", ":"), default=_json_value) + "\n"
 
     @classmethod
     def from_json(cls, doc: Any) -> DaemonStats:
