@@ -34,13 +34,19 @@ asking its robot to re-plan would not help, so nobody does. "n" numbers the send
 can tell a duplicate the middleware delivered twice (node.messaging.arrivals); a message
 without it (older senders, nanocat) is valid.
 
-Every parser raises ValueError on malformed input; callers count and drop it.
+A message is decoded as docs/robot-contract.md (section 3) says, by both robots alike: the
+bytes must be UTF-8 (no byte-order mark, no encoded surrogates), one JSON value nesting at
+most MAX_DEPTH objects and arrays, its integer literals within the signed 64-bit range.
+
+Every parser raises ValueError on malformed input, whatever the bytes; callers count and
+drop it.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 from dataclasses import dataclass
 
@@ -179,12 +185,51 @@ def replan_msg(sender: int, step: int, goal: tuple[float, float], n: int | None 
     return json.dumps(m).encode()
 
 
-def parse_msg(data: bytes, n_robots: int) -> dict:
-    """Validate a goal or replan message; returns the dict with goal as a tuple."""
+MAX_DEPTH = 64  # objects and arrays one inside another in a message, at most
+_INT64_DIGITS = 20  # "-9223372036854775808": a longer literal is out of range
+_STRING = re.compile(r'"(?:[^"\\]++|\\.)*+"?', re.DOTALL)  # to its end, or the text's
+_NOT_BRACKET = re.compile(r"[^\[\]{}]+")
+
+
+def _int64(literal: str) -> int:
+    """json's parse_int: an integer literal, refused outside the signed 64-bit range (its
+    length is looked at first, so a literal of any length costs nothing)."""
+    if len(literal) > _INT64_DIGITS or not -(2**63) <= (v := int(literal)) < 2**63:
+        raise ValueError(f"integer out of range: {literal[:24]}")
+    return v
+
+
+_DECODER = json.JSONDecoder(parse_int=_int64)
+
+
+def _check_depth(text: str) -> None:
+    """ValueError when `text` opens more than MAX_DEPTH objects and arrays one inside
+    another, strings skipped; before json recurses into them. On a valid text this is the
+    nesting; on an invalid one it is at least the depth json reaches before it gives up
+    (both skip strings alike up to the first error), so the verdict is json's otherwise."""
+    if text.count("[") + text.count("{") <= MAX_DEPTH:
+        return
+    brackets = np.frombuffer(_NOT_BRACKET.sub("", _STRING.sub("", text)).encode(), np.uint8)
+    steps = np.where((brackets == ord("[")) | (brackets == ord("{")), 1, -1)
+    if steps.size and int(np.cumsum(steps).max()) > MAX_DEPTH:
+        raise ValueError(f"nested deeper than {MAX_DEPTH}")
+
+
+def _json(data: bytes):
+    """The JSON value of a message's bytes; ValueError for anything else, whatever the
+    bytes (the contract's text: strict UTF-8, bounded nesting and integers)."""
     try:
-        m = json.loads(data)
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        text = bytes(data).decode("utf-8")
+        _check_depth(text)
+        return _DECODER.decode(text)
+    except ValueError as e:  # UnicodeDecodeError and json.JSONDecodeError are ValueErrors
         raise ValueError(f"message is not JSON: {e}") from None
+
+
+def parse_msg(data: bytes, n_robots: int) -> dict:
+    """Validate a goal or replan message; returns the dict with goal as a tuple. ValueError
+    for anything else, whatever the bytes."""
+    m = _json(data)
     if not isinstance(m, dict) or m.get("k") not in ("goal", "replan"):
         raise ValueError("message has no known kind")
     sender, step, goal = m.get("from"), m.get("step"), m.get("goal")

@@ -17,6 +17,8 @@ const Json* Json::get(const std::string& key) const {
 
 namespace {
 
+// Objects and arrays one inside another, at most (node.wire.MAX_DEPTH): a text nesting
+// deeper is refused where its 65th opens, before any recursion past it.
 constexpr int MAX_DEPTH = 64;
 
 struct Reader {
@@ -175,11 +177,12 @@ struct Reader {
         if (r.ec != std::errc()) return fail("integer out of range");
         return true;
     }
+    // One value; `depth` counts the objects and arrays around it.
     bool value(Json& v, int depth) {
-        if (depth > MAX_DEPTH) return fail("nested too deep");
         ws();
         if (p >= t.size()) return fail("expected a value");
         char c = t[p];
+        if ((c == '{' || c == '[') && depth >= MAX_DEPTH) return fail("nested too deep");
         if (c == '{') {
             v.kind = Json::OBJ;
             ++p;

@@ -1,9 +1,11 @@
 // A small strict JSON reader and writer: the goal and re-plan messages (node.wire) and the
-// event log's lines (node.events). The reader takes what Python's json.loads takes from a
-// UTF-8 text (RFC 8259, plus NaN, Infinity and -Infinity, which a validator then refuses
-// where a number must be finite), with one limit: an integer outside int64 is refused. The
-// writer writes what json.dumps(separators=(",", ":")) writes: floats as Python's repr
-// (shortest round trip), non-ASCII escaped.
+// event log's lines (node.events). The reader takes what node.wire's decoder takes
+// (docs/robot-contract.md, section 3): Python's json.loads of a strict UTF-8 text (RFC 8259,
+// plus NaN, Infinity and -Infinity, which a validator then refuses where a number must be
+// finite), with two limits: an integer outside int64 is refused, and so is a text nesting
+// more than 64 objects and arrays one inside another. The writer writes what
+// json.dumps(separators=(",", ":")) writes: floats as Python's repr (shortest round trip),
+// non-ASCII escaped.
 #pragma once
 
 #include <cstdint>
