@@ -81,7 +81,8 @@ class DdsMapTopic(MapTopic):
             raise
 
     def _on_data(self, reader: DataReader | None) -> None:
-        for s in samples(reader, MapSample, TAKE_BATCH):
+        # Bytes that are no MapSample: one empty map message, counted malformed.
+        for s in samples(reader, MapSample, TAKE_BATCH, lambda: self._arrived(b"")):
             self._arrived(bytes(s.payload))
 
     def _publish(self, data: bytes) -> bool:
