@@ -252,10 +252,16 @@ class Laser:
         return ranges
 
     def hit_index(self, ranges: np.ndarray) -> np.ndarray:
-        """Index of the hit sample on each ray, or n_samples when the ray returned nothing."""
+        """Index of the hit sample on each ray, or n_samples when the ray returned nothing.
+
+        Any float is a range (docs/robot-contract.md): a range that is not finite hit nothing;
+        a finite one is clamped to [-1, n_samples + 1] sample spacings before it becomes an
+        integer (1e30 would not fit one), so a negative range hits at the first sample and one
+        beyond the laser's reach hits nothing: the step core's hit_index, index for index."""
         idx = np.full(ranges.shape, self.n_samples, dtype=np.int32)
         finite = np.isfinite(ranges)
-        idx[finite] = np.rint(ranges[finite] / self.step).astype(np.int32) - 1
+        r = np.clip(ranges[finite], -self.step, (self.n_samples + 1) * self.step)
+        idx[finite] = np.rint(r / self.step).astype(np.int32) - 1
         np.maximum(idx, 0, out=idx)  # np.clip's Python wrapper costs more than the work
         np.minimum(idx, self.n_samples, out=idx)
         return idx

@@ -220,11 +220,14 @@ def _laser_tables(laser) -> tuple:
     return t
 
 
-def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float32, int, int]:
+def _window(laser, x: float, y: float, bias: int) -> tuple[np.float32, np.float32, int, int] | None:
     """(fx, fy, r0, c0) of a laser at (x, y): node.rays' float32 cell coordinates and the
-    top-left cell in the padded grid of the laser's window."""
-    fx = np.float32(x / laser.cell + bias)
-    fy = np.float32(y / laser.cell + bias)
+    top-left cell in the padded grid of the laser's window; None where a coordinate is not
+    finite (no window fits it: the callers do nothing, as for one off the map)."""
+    qx, qy = x / laser.cell + bias, y / laser.cell + bias
+    if not (abs(qx) < 1e38 and abs(qy) < 1e38):  # not finite, or not as a float32
+        return None
+    fx, fy = np.float32(qx), np.float32(qy)
     return fx, fy, int(fy) - bias, int(fx) - bias
 
 
@@ -260,7 +263,10 @@ def scan_into(laser, x, y, ranges, lp: np.ndarray, own: np.ndarray, lo, bias: in
     padded, contiguous, one shape, alive for the run). False (nothing done) where the window
     does not fit."""
     assert lib is not None  # callers check NATIVE
-    fx, fy, r0, c0 = _window(laser, x, y, bias)
+    window = _window(laser, x, y, bias)
+    if window is None:
+        return False
+    fx, fy, r0, c0 = window
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > lp.shape[0] or c0 + w > lp.shape[1]:
         return False
@@ -280,7 +286,10 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
     marking what it saw in `seen` (same shape; both alive for the run): (ranges, any ray
     hit), or None where the window does not fit."""
     assert lib is not None  # callers check NATIVE
-    fx, fy, r0, c0 = _window(laser, x, y, bias)
+    window = _window(laser, x, y, bias)
+    if window is None:
+        return None
+    fx, fy, r0, c0 = window
     w = laser.window
     if r0 < 0 or c0 < 0 or r0 + w > occ.shape[0] or c0 + w > occ.shape[1]:
         return None

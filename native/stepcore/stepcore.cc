@@ -24,10 +24,24 @@ namespace {
 constexpr uint8_t UNKNOWN = 0, FREE = 1, OCC = 2;
 
 // node.rays: per-ray hit sample from a scan's ranges (Laser.hit_index); float32 arithmetic.
+// A range is any float: not finite, nothing hit; else range / step, clamped to [-1, n_samples
+// + 1] before it is converted (a range of 1e30 would not fit an int), rounded half to even,
+// minus one, clamped to [0, n_samples]. The clamp changes nothing a laser can measure.
 inline int32_t hit_index(float range, float step, int n_samples) {
     if (!std::isfinite(range)) return n_samples;
-    int32_t i = (int32_t)std::nearbyintf(range / step) - 1;
+    const float lim = (float)(n_samples + 1);
+    float q = range / step;
+    q = q < -1.0f ? -1.0f : (q > lim ? lim : q);  // q / step may be inf; never NaN here
+    int32_t i = (int32_t)std::nearbyintf(q) - 1;
     return std::min(std::max(i, 0), n_samples);
+}
+
+// A float64 as an int in [lo, hi] (lo <= hi): below lo (or NaN) lo, above hi hi, else
+// truncated toward zero as C++ and Python's int() do; never converts a value out of range.
+inline int clamp_int(double v, int lo, int hi) {
+    if (!(v > (double)lo)) return lo;
+    if (v >= (double)hi) return hi;
+    return (int)v;
 }
 
 // World._cast_window's rays: each ray's first sample from s0 on that falls in an obstacle cell
@@ -455,8 +469,10 @@ void sc_exclusion(int h, int w, double plan_cell, const double* goals, int n_goa
     double r = radius / plan_cell;
     for (int g = 0; g < n_goals; ++g) {
         double gc = goals[2 * g] / plan_cell - 0.5, gr = goals[2 * g + 1] / plan_cell - 0.5;
-        int r0 = std::max(0, (int)std::floor(gr - r)), r1 = std::min(h, (int)std::ceil(gr + r) + 1);
-        int c0 = std::max(0, (int)std::floor(gc - r)), c1 = std::min(w, (int)std::ceil(gc + r) + 1);
+        // Python's max(0, int(floor(..))) and min(h, int(ceil(..)) + 1), clamped before the
+        // conversion (a teammate's goal may be any finite number): an empty range stays empty.
+        int r0 = clamp_int(std::floor(gr - r), 0, h), r1 = clamp_int(std::ceil(gr + r) + 1, 0, h);
+        int c0 = clamp_int(std::floor(gc - r), 0, w), c1 = clamp_int(std::ceil(gc + r) + 1, 0, w);
         for (int y = r0; y < r1; ++y)
             for (int x = c0; x < c1; ++x) {
                 double a = (double)y - gr, b = (double)x - gc;
@@ -686,8 +702,8 @@ int sc_plan(const uint8_t* t, int th, int tw, int factor, int inflate, double px
     size_t n = (size_t)h * w;
     std::vector<uint8_t> p(n), trav(n), pass, goalm(n), excl(n, 0);
     sc_pool(t, th, tw, factor, p.data());
-    int sr = std::min(std::max((int)(py / plan_cell), 0), h - 1);
-    int sc = std::min(std::max((int)(px / plan_cell), 0), w - 1);
+    int sr = clamp_int(py / plan_cell, 0, h - 1);  // min(max(int(..), 0), h - 1), defined
+    int sc = clamp_int(px / plan_cell, 0, w - 1);
     sc_traversable(p.data(), h, w, inflate, trav.data());
     pass = trav;
     int rr = inflate + 1;
