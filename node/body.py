@@ -15,10 +15,15 @@ without crossing the emulated network. Messages (one datagram each, network byte
 
 A robot answers every frame it acts on with one CMD carrying that frame's step: the world
 counts a frame not answered before the next one as a missed step deadline.
+
+A FRAME whose x, y, theta or sent is not finite is malformed (`parse`); so is, for a robot
+(`BodyClient.expect`), one whose position is off its map or whose ray count is not its laser's
+(`check_frame`). The robot counts it and drops it (docs/robot-contract.md, section 1).
 """
 
 from __future__ import annotations
 
+import math
 import select
 import socket
 import struct
@@ -84,6 +89,8 @@ def parse(data: bytes):
             body = data[_FRAME.size :]
             if len(body) != 4 * n:
                 raise ValueError("frame length does not match its ray count")
+            if not all(map(math.isfinite, (x, y, theta, sent))):
+                raise ValueError("frame with a position, heading or time that is not finite")
             ranges = np.frombuffer(body, dtype=">f4").astype(np.float32)
             return ("frame", Frame(step, x, y, theta, ranges, sent))
         if t == b"E":
@@ -99,6 +106,17 @@ def parse(data: bytes):
     raise ValueError(f"unknown body message type {t!r}")
 
 
+def check_frame(f: Frame, width_m: float, height_m: float, n_rays: int) -> None:
+    """Raise ValueError unless frame `f` is one a robot on a map `width_m` x `height_m`
+    (metres) with a laser of `n_rays` rays can have: its position on the map (0 <= x < width,
+    0 <= y < height; the world never puts a robot elsewhere, and the robot's maps have no
+    cells there) and one range per ray."""
+    if not (0.0 <= f.x < width_m and 0.0 <= f.y < height_m):
+        raise ValueError(f"frame position ({f.x:g}, {f.y:g}) is off the map")
+    if len(f.ranges) != n_rays:
+        raise ValueError(f"frame has {len(f.ranges)} ranges, the laser {n_rays}")
+
+
 class BodyClient:
     """The robot side of the link (blocking socket; one reader thread, any writer)."""
 
@@ -106,6 +124,11 @@ class BodyClient:
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self.sock.connect(path)
         self.robot, self.role = robot, role
+        self.frame_bounds: tuple[float, float, int] | None = None
+
+    def expect(self, width_m: float, height_m: float, n_rays: int) -> None:
+        """From now on `recv` refuses (ValueError) a frame `check_frame` refuses."""
+        self.frame_bounds = (width_m, height_m, n_rays)
 
     def ready(self) -> None:
         """Say HELLO: the world starts its clock once every robot has, so a robot says it
@@ -122,7 +145,10 @@ class BodyClient:
             return ("end",)
         if not data:
             return ("end",)
-        return parse(data)
+        msg = parse(data)
+        if self.frame_bounds is not None and msg[0] == "frame":
+            check_frame(msg[1], *self.frame_bounds)
+        return msg
 
     def pending(self) -> bool:
         """True when another message is already waiting."""

@@ -7,6 +7,15 @@ it with the TTL lowered by one; a flood seen before, or one of its own, is dropp
 duplicate cache keeps, per origin, the highest sequence number and the recent ones below it
 (floods overtake each other on different paths), so memory stays bounded.
 
+Sequence numbers are believed only within a window, as RFC 3561 (section 6.1) compares its
+own: the difference of two numbers is taken as a signed 32-bit number, so they may wrap
+around, and every origin starts from 0 (its floods are numbered 1, 2, ...). A number more than
+SEQ_WINDOW ahead of (or behind) the highest one believed from its origin is not believed: the
+flood is counted (`forged`, and in `malformed`), dropped, and changes nothing, so that one
+forged flood (origin 2, sequence 2^32 - 1) cannot make origin 2's real floods look old. A
+number within the window is believed: floods carry no signature, so a forger that stays
+within it is not told apart (docs/robot-contract.md, section 2).
+
 Whether a robot rebroadcasts is the flooding *mode*:
 
 - "blind": every robot relays every new flood once (simple flooding). In a dense team each
@@ -42,30 +51,48 @@ from node.mapstats import MapStats
 log = logging.getLogger(__name__)
 
 WINDOW = 256  # sequence numbers remembered per origin below its highest
+# How far from the highest sequence number believed from an origin (0 before any) another is
+# believed (docs/robot-contract.md, section 2): more than any run can send (an origin floods
+# at most once a step, a run has at most 10,000,000 steps), far less than half the number
+# space, so that wrap-around comparison stays meaningful.
+SEQ_WINDOW = 1 << 24
 MODES = ("pruned", "blind")
+NEW, DUPLICATE, FORGED = "new", "duplicate", "forged"
+
+
+def seq_diff(a: int, b: int) -> int:
+    """a - b as a signed 32-bit number (RFC 3561, 6.1): > 0 when a is the newer."""
+    d = (a - b) & 0xFFFFFFFF
+    return d - (1 << 32) if d & 0x80000000 else d
 
 
 class DuplicateCache:
+    """Per origin, the highest sequence number believed and those seen within WINDOW below."""
+
     def __init__(self) -> None:
         self.high: dict[int, int] = {}
         self.recent: dict[int, set[int]] = {}
 
-    def seen(self, origin: int, seq: int) -> bool:
-        """True if (origin, seq) was seen before; records it otherwise."""
-        hi = self.high.get(origin)
-        if hi is None:
-            self.high[origin] = seq
-            self.recent[origin] = {seq}
-            return False
-        rec = self.recent[origin]
-        if seq <= hi - WINDOW or seq in rec:
-            return True
+    def check(self, origin: int, seq: int) -> str:
+        """NEW (recorded), DUPLICATE (seen, or older than the remembered ones) or FORGED (more
+        than SEQ_WINDOW from the highest believed: nothing recorded). `seq`: 0 .. 2^32 - 1."""
+        hi = self.high.get(origin, 0)
+        d = seq_diff(seq, hi)
+        if d > SEQ_WINDOW or d < -SEQ_WINDOW:
+            return FORGED
+        rec = self.recent.setdefault(origin, set())
+        if d <= -WINDOW or seq in rec:
+            return DUPLICATE
         rec.add(seq)
-        if seq > hi:
+        if d > 0:
             self.high[origin] = seq
             if len(rec) > 2 * WINDOW:
-                self.recent[origin] = {s for s in rec if s > seq - WINDOW}
-        return False
+                self.recent[origin] = {s for s in rec if seq_diff(s, seq) > -WINDOW}
+        return NEW
+
+    def seen(self, origin: int, seq: int) -> bool:
+        """True if (origin, seq) is not a new flood (seen before, or not believed)."""
+        return self.check(origin, seq) != NEW
 
 
 class Flooder:
@@ -154,7 +181,7 @@ class Flooder:
         A copy of a flood already seen costs a header read and a dictionary update (its
         sender is a neighbour); nothing else is built for it."""
         out: list[bytes] = []
-        recvfrom, seen, me, heard = self.sock.recvfrom, self.cache.seen, self.me, self.heard
+        recvfrom, check, me, heard = self.sock.recvfrom, self.cache.check, self.me, self.heard
         now = self.clock()
         while True:
             try:
@@ -171,7 +198,14 @@ class Flooder:
             if sender != me:
                 heard[sender] = now
             with self.cache_lock:
-                if origin == me or seen(origin, seq):
+                verdict = DUPLICATE if origin == me else check(origin, seq)
+                if verdict == FORGED:
+                    self.counts["forged"] += 1
+                    self.counts["malformed"] += 1
+                    log.debug("dropped a flood of %d with a sequence number not believed: %d",
+                              origin, seq)  # fmt: skip
+                    continue
+                if verdict == DUPLICATE:
                     self.counts["duplicate"] += 1
                     continue
                 relay = ttl > 1 and self.must_relay(sender, origin, covered, now)

@@ -48,6 +48,9 @@ class MotionControl(RobotCore):
         PRIORITY["motion"] = sched.raise_priority(*sched.DEADLINE_PRIORITY)
         started = False
         last_xy = None
+        # A frame off the map or of another ray count is refused as malformed (node.body).
+        h, w = self.cfg.shape
+        self.link.expect(w * self.cfg.cell, h * self.cfg.cell, self.laser.n_rays)
         while not self.stopping.is_set():
             try:
                 msg = self.link.recv(timeout=0.5)

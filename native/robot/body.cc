@@ -1,11 +1,15 @@
 #include "body.h"
 
 #include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "json.h"
 #include "wirebytes.h"
 
 namespace tb {
@@ -41,6 +45,11 @@ bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
                 err = "frame length does not match its ray count";
                 return false;
             }
+            if (!std::isfinite(f.x) || !std::isfinite(f.y) || !std::isfinite(f.theta) ||
+                !std::isfinite(f.sent)) {
+                err = "frame with a position, heading or time that is not finite";
+                return false;
+            }
             f.ranges.resize(rays);
             for (size_t k = 0; k < rays; ++k) f.ranges[k] = rdf32(d + FRAME + 4 * k);
             return true;
@@ -67,6 +76,45 @@ bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
     }
     err = "malformed body message: wrong length";
     return false;
+}
+
+bool body_check_frame(const Frame& f, double width_m, double height_m, int n_rays,
+                      std::string& err) {
+    if (!(f.x >= 0.0 && f.x < width_m && f.y >= 0.0 && f.y < height_m)) {
+        err = "frame position (" + py_float(f.x) + ", " + py_float(f.y) + ") is off the map";
+        return false;
+    }
+    if ((int64_t)f.ranges.size() != n_rays) {
+        err = "frame has " + std::to_string(f.ranges.size()) + " ranges, the laser " +
+              std::to_string(n_rays);
+        return false;
+    }
+    return true;
+}
+
+int body_frame_selftest(const std::vector<std::string>& argv, const std::string& in) {
+    double w = 0, h = 0;
+    char* end = nullptr;
+    long rays = argv.size() == 4 ? strtol(argv[3].c_str(), &end, 10) : -1;
+    if (argv.size() != 4 || sscanf(argv[2].c_str(), "%lfx%lf", &w, &h) != 2 || *end ||
+        rays < 0 || rays > 65535) {
+        fprintf(stderr, "node: --decode frame WIDTHxHEIGHT RAYS (metres, a count)\n");
+        return 2;
+    }
+    BodyMsg m;
+    std::string err;
+    bool ok = body_parse((const uint8_t*)in.data(), in.size(), m, err);
+    if (ok && m.kind != "frame") {
+        ok = false;
+        err = "not a frame";
+    }
+    if (ok) ok = body_check_frame(m.frame, w, h, (int)rays, err);
+    if (ok) {
+        printf("ok\n");
+        return 0;
+    }
+    printf("refused: %s\n", err.c_str());
+    return 1;
 }
 
 std::string body_hello(int robot, int role) {
@@ -131,6 +179,13 @@ bool BodyClient::open(const std::string& path, int robot, std::string& err, int 
 
 void BodyClient::ready() { send(body_hello(robot_, role_)); }
 
+void BodyClient::expect(double width_m, double height_m, int n_rays) {
+    bounded_ = true;
+    width_m_ = width_m;
+    height_m_ = height_m;
+    n_rays_ = n_rays;
+}
+
 int BodyClient::recv(double timeout_s, BodyMsg& out, std::string& err) {
     pollfd p{fd_, POLLIN, 0};
     int r = poll(&p, 1, (int)(timeout_s * 1000));
@@ -141,7 +196,11 @@ int BodyClient::recv(double timeout_s, BodyMsg& out, std::string& err) {
         out.kind = "end";
         return 1;
     }
-    return body_parse(buf_.data(), (size_t)n, out, err) ? 1 : -1;
+    if (!body_parse(buf_.data(), (size_t)n, out, err)) return -1;
+    if (bounded_ && out.kind == "frame" &&
+        !body_check_frame(out.frame, width_m_, height_m_, n_rays_, err))
+        return -1;
+    return 1;
 }
 
 bool BodyClient::pending() {

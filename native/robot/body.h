@@ -25,8 +25,16 @@ struct BodyMsg {
     double tx = 0, ty = 0;       // cmd target
 };
 
-// Decodes one datagram as node.body.parse does; false (and why) when it is malformed.
+// Decodes one datagram as node.body.parse does; false (and why) when it is malformed (a FRAME
+// whose x, y, theta or sent is not finite is).
 bool body_parse(const uint8_t* data, size_t n, BodyMsg& out, std::string& err);
+// node.body.check_frame: false (and why) unless the frame's position is on a map of width_m x
+// height_m metres (0 <= x < width, 0 <= y < height) and it has n_rays ranges.
+bool body_check_frame(const Frame& f, double width_m, double height_m, int n_rays,
+                      std::string& err);
+// tb-robot --decode frame WIDTHxHEIGHT RAYS (selftest.cc): body_parse, then body_check_frame,
+// of the bytes `in`; prints "ok" or "refused: <why>" (status 0 or 1).
+int body_frame_selftest(const std::vector<std::string>& argv, const std::string& in);
 std::string body_hello(int robot, int role);
 std::string body_cmd(uint32_t step, bool go, double x, double y);
 std::string body_done(uint32_t step);
@@ -42,6 +50,8 @@ public:
     // `role`: 0 a robot, 1 the display (node.body.ROLE_ROBOT, ROLE_DISPLAY).
     bool open(const std::string& path, int robot, std::string& err, int role = 0);
     void ready();  // HELLO: every part is running
+    // From now on recv refuses (-1) a frame body_check_frame refuses (node.body's expect).
+    void expect(double width_m, double height_m, int n_rays);
     // 1: a message in `out`; 0: timeout; -1: malformed (why in err). The world hanging up
     // comes as kind "end".
     int recv(double timeout_s, BodyMsg& out, std::string& err);
@@ -51,6 +61,9 @@ public:
 private:
     int fd_ = -1;
     int robot_ = 0, role_ = 0;
+    bool bounded_ = false;  // expect() was called
+    double width_m_ = 0, height_m_ = 0;
+    int n_rays_ = 0;
     std::vector<uint8_t> buf_ = std::vector<uint8_t>(65536);
 };
 

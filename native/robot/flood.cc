@@ -2,7 +2,9 @@
 
 #include <arpa/inet.h>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
+#include <iterator>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -15,22 +17,38 @@ namespace {
 constexpr int64_t WINDOW = 256;
 }
 
-bool DuplicateCache::seen(int origin, uint32_t seq_u) {
-    int64_t seq = seq_u;
+DuplicateCache::Verdict DuplicateCache::check(int origin, uint32_t seq) {
     auto hi = high_.find(origin);
-    if (hi == high_.end()) {
-        high_[origin] = seq;
-        recent_[origin] = {seq};
-        return false;
-    }
+    uint32_t high = hi == high_.end() ? 0 : hi->second;
+    int64_t d = seq_diff(seq, high);
+    if (d > SEQ_WINDOW || d < -SEQ_WINDOW) return FORGED;
     auto& rec = recent_[origin];
-    if (seq <= hi->second - WINDOW || rec.count(seq)) return true;
+    if (d <= -WINDOW || rec.count(seq)) return DUPLICATE;
     rec.insert(seq);
-    if (seq > hi->second) {
-        hi->second = seq;
-        if ((int64_t)rec.size() > 2 * WINDOW) rec.erase(rec.begin(), rec.upper_bound(seq - WINDOW));
+    if (d > 0) {
+        high_[origin] = seq;
+        if ((int64_t)rec.size() > 2 * WINDOW)
+            for (auto it = rec.begin(); it != rec.end();)
+                it = seq_diff(*it, seq) > -WINDOW ? std::next(it) : rec.erase(it);
     }
-    return false;
+    return NEW;
+}
+
+int flood_seq_selftest(const std::string& in) {
+    DuplicateCache cache;
+    static const char* const names[] = {"new", "duplicate", "forged"};
+    const char* p = in.c_str();
+    long long origin = 0, seq = 0;
+    int used = 0;
+    while (sscanf(p, "%lld %lld%n", &origin, &seq, &used) == 2) {
+        if (origin < 0 || origin > 65535 || seq < 0 || seq > 0xFFFFFFFFLL) {
+            fprintf(stderr, "node: --decode floodseq: origin 0..65535, seq 0..2^32-1\n");
+            return 2;
+        }
+        printf("%s\n", names[cache.check((int)origin, (uint32_t)seq)]);
+        p += used;
+    }
+    return 0;
 }
 
 Flooder::Flooder(int me, int port, std::string iface, std::string mode, double hold_s)
@@ -149,7 +167,14 @@ std::vector<std::string> Flooder::receive_raw() {
         {
             std::lock_guard<std::mutex> g(cache_lock_);
             if (h.sender != me_) heard_[h.sender] = now;
-            if (h.origin == me_ || cache_.seen(h.origin, h.seq)) {
+            auto verdict = h.origin == me_ ? DuplicateCache::DUPLICATE
+                                           : cache_.check(h.origin, h.seq);
+            if (verdict == DuplicateCache::FORGED) {
+                note("forged");
+                note("malformed");
+                continue;
+            }
+            if (verdict == DuplicateCache::DUPLICATE) {
                 note("duplicate");
                 continue;
             }

@@ -1,7 +1,9 @@
 // Flooding over UDP broadcast (node/flood.py): a new flood is delivered and, while its TTL
 // allows and the mode says so (self-pruning by default, or blind), relayed once; floods seen
 // before (by origin and sequence number, a window of 256 below the highest per origin) and
-// our own are dropped. Never blocks on send: a full buffer drops the datagram.
+// our own are dropped, and so is one whose sequence number is not believed (more than
+// SEQ_WINDOW from the highest believed, compared with wrap-around; counted as forged and
+// malformed). Never blocks on send: a full buffer drops the datagram.
 #pragma once
 
 #include <cstdint>
@@ -16,14 +18,31 @@
 
 namespace tb {
 
+// node.flood.SEQ_WINDOW: how far from the highest sequence number believed from an origin (0
+// before any) another is believed.
+constexpr int64_t SEQ_WINDOW = int64_t(1) << 24;
+
+// a - b as a signed 32-bit number (RFC 3561, 6.1): > 0 when a is the newer.
+inline int64_t seq_diff(uint32_t a, uint32_t b) { return (int64_t)(int32_t)(a - b); }
+
+// node.flood.DuplicateCache: per origin, the highest sequence number believed and those seen
+// within 256 below it.
 class DuplicateCache {
 public:
-    bool seen(int origin, uint32_t seq);  // true if seen before; records it otherwise
+    enum Verdict { NEW, DUPLICATE, FORGED };
+    // NEW (recorded), DUPLICATE (seen, or older than the remembered ones) or FORGED (more
+    // than SEQ_WINDOW from the highest believed: nothing recorded).
+    Verdict check(int origin, uint32_t seq);
+    bool seen(int origin, uint32_t seq) { return check(origin, seq) != NEW; }
 
 private:
-    std::map<int, int64_t> high_;
-    std::map<int, std::set<int64_t>> recent_;
+    std::map<int, uint32_t> high_;
+    std::map<int, std::set<uint32_t>> recent_;
 };
+
+// tb-robot --decode floodseq (selftest.cc): lines "origin seq" on `in`, one verdict a line
+// out (new, duplicate, forged), from one DuplicateCache, as node.flood's.
+int flood_seq_selftest(const std::string& in);
 
 class Flooder {
 public:

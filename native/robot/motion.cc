@@ -34,6 +34,8 @@ void Robot::motion() {
     std::optional<std::pair<double, double>> last_xy;
     BodyMsg msg;
     std::string err;
+    // A frame off the map or of another ray count is refused as malformed (body.cc).
+    link_.expect(a_.cols * a_.cell, a_.rows * a_.cell, laser_.n_rays);
     while (!stopping) {
         int got = link_.recv(0.5, msg, err);
         if (got < 0) {
@@ -49,13 +51,6 @@ void Robot::motion() {
         }
         if (msg.kind != "frame") continue;
         const Frame& f = msg.frame;
-        if (!std::isfinite(f.x) || !std::isfinite(f.y) || std::fabs(f.x) > 1e6 ||
-            std::fabs(f.y) > 1e6) {
-            // No pose to scan from (the Python robot's part would fail on it): dropped.
-            ++malformed_;
-            LOG_WARN("node.robot", "dropped a frame without a finite position (step %u)", f.step);
-            continue;
-        }
         ++frames_;
         keep_step_order(f);
         double t_frame = thread_cpu_s();
@@ -134,8 +129,8 @@ void Robot::put_scan(const Frame& f) {
     float fy = (float)(f.y / L.cell + BIAS);
     int r0 = (int)fy - BIAS, c0 = (int)fx - BIAS, w = L.window;
     int height = a_.rows + 2 * L.pad;
-    // A scan of another ray count (the world's laser is the robot's, so never in a run) is
-    // cut or padded with "nothing hit" rather than read past its end.
+    // A scan of another ray count is refused before (BodyClient::expect); were one to come
+    // here, it is cut or padded with "nothing hit" rather than read past its end.
     static thread_local std::vector<float> padded;
     const std::vector<float>* rp = &f.ranges;
     if ((int)f.ranges.size() != L.n_rays) {

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "body.h"
+#include "flood.h"
 #include "json.h"
 #include "laser.h"
 #include "wire.h"
@@ -210,6 +211,10 @@ int selftest_main(const std::vector<std::string>& argv) {
         fprintf(stderr, "node: %s KIND\n", argv[0].c_str());
         return 2;
     }
+    // body.cc's and flood.cc's own self-tests: a frame as a robot's body link takes it, and
+    // the flood filter's verdicts on a sequence of (origin, seq).
+    if (argv[0] == "--decode" && argv[1] == "frame") return body_frame_selftest(argv, read_stdin());
+    if (argv[0] == "--decode" && argv[1] == "floodseq") return flood_seq_selftest(read_stdin());
     int robots = 10, rows = 400, cols = 400;
     for (size_t i = 2; i + 1 < argv.size(); i += 2) {
         if (argv[i] == "--robots") robots = atoi(argv[i + 1].c_str());
