@@ -13,7 +13,9 @@ nested dicts (tests/unit/test_result_file.py holds this).
   result written from a `RunResult` is what the run wrote before the type existed.
 - `from_json` checks what it reads: a key the readers cannot do without (the status, the
   team size and both ranges) missing, or any key of the wrong type, is a `ResultError`, one
-  line naming the file and the key.
+  line naming the file and the key; so is a `format` other than RESULT_FORMAT (a file
+  without one is format 1, the only one so far): a later format's keys may mean other
+  things, and are not read as this one's.
 - Keys that files written by older versions lack get their defaults here and only here
   (the config's in its type, testbed.run.resultconfig): `routing` aodv, `map` none (the
   empty terrain), `loss_pct` and `delay_ms` 0, `coordination` ours and `start` corner
@@ -398,8 +400,11 @@ class RunResult:
         get_value(network, "ok", (bool,))
         get_value(network, "reason", (str,))
         timers = doc.get("network_timers")
+        fmt = get_value(doc, "format", (int,), RESULT_FORMAT)
+        if fmt != RESULT_FORMAT:  # another format's keys may mean other things: not guessed
+            raise ResultError(f"format {fmt}, but this testbed reads format {RESULT_FORMAT}")
         return cls(
-            format=get_value(doc, "format", (int,), RESULT_FORMAT),
+            format=fmt,
             config=ResultConfig.from_dict(c),
             status=get_value(doc, "status", (str,), required=True),
             status_detail=get_value(doc, "status_detail", (str,), ""),

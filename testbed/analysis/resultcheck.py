@@ -28,7 +28,8 @@ MAX_SECONDS = 1e9  # about 30 years
 
 
 def _bounded(name: str, value, low: float, high: float, *, whole: bool = False):
-    """`value` (None passes) within [low, high], whole where asked; ValueError otherwise."""
+    """`value` (None passes) within [low, high], whole where asked; ValueError otherwise.
+    -0.0 comes back as 0.0 (a report would show "-0.0%")."""
     if value is None:
         return None
     if not math.isfinite(value):
@@ -37,7 +38,7 @@ def _bounded(name: str, value, low: float, high: float, *, whole: bool = False):
         raise ValueError(f"{name!r} is {value:g}, not a whole number")
     if not low <= value <= high:
         raise ValueError(f"{name!r} is {value:g}, outside {low:g}..{high:g}")
-    return int(value) if whole else value
+    return int(value) if whole else value + 0  # -0.0 + 0 is 0.0; an int stays an int
 
 
 def _config(c) -> None:
@@ -65,37 +66,39 @@ def _robots(r, last: int | None) -> tuple:
         name = f"robots.{robot.name}"
         finish = _bounded(f"{name}.finish_step", robot.finish_step, 0, top)
         _bounded(f"{name}.stopped_step", robot.stopped_step, 0, top, whole=True)
-        _bounded(f"{name}.path_length_m", robot.path_length_m, 0, 1e12)
+        path = _bounded(f"{name}.path_length_m", robot.path_length_m, 0, 1e12)
         for p in robot.plans:
             _bounded(f"{name}.plans.step", p.step, 0, top, whole=True)
         for kind, counts in (("sent", robot.sent), ("received", robot.received)):
             for k, n in counts.items():
                 if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= 10**15:
                     raise ValueError(f"'{name}.messages.{kind}.{k}' is not a count")
-        out.append(dataclasses.replace(robot, finish_step=finish))
+        out.append(dataclasses.replace(robot, finish_step=finish, path_length_m=path))
     return tuple(out)
 
 
 def check(r: RunResult) -> RunResult:
-    """`r` (a RunResult) with its whole numbers as ints, or ValueError naming the first
-    value out of its range (see the module's docstring)."""
+    """`r` (a RunResult) with its whole numbers as ints and its -0.0s as 0.0, or ValueError
+    naming the first value out of its range (see the module's docstring)."""
     _config(r.config)
     if len(r.robots) > MAX_ROBOTS + 1:  # the team and the display robot
         raise ValueError(f"'robots' lists {len(r.robots)}, more than {MAX_ROBOTS + 1}")
     steps = _bounded("steps", r.steps, 0, MAX_STEPS, whole=True)
     top = MAX_STEPS if steps is None else steps + 1
     _bounded("last_finish_step", r.last_finish_step, 0, top)
-    _bounded("mean_finish_step", r.mean_finish_step, 0, top)
+    mean = _bounded("mean_finish_step", r.mean_finish_step, 0, top)
     _bounded("mean_finish_step_robots", r.mean_finish_step_robots, 0, r.config.robots + 1)
-    _bounded("coverage_final", r.coverage_final, 0, 1 + 1e-9)
+    coverage = _bounded("coverage_final", r.coverage_final, 0, 1 + 1e-9)
     requested = r.time_scale_requested
     if requested is not None and not (math.isfinite(requested) and requested > 0):
         raise ValueError(f"'time_scale_requested' is {requested}, not a positive number")
-    _bounded("time_scale_achieved", r.time_scale_achieved, 0, 1e6)  # 0: it never stepped
+    achieved = _bounded("time_scale_achieved", r.time_scale_achieved, 0, 1e6)  # 0: no step
     missed = _bounded("deadlines_missed", r.deadlines_missed, 0, MAX_STEPS * 1001, whole=True)
     _bounded("deadlines_missed_world", r.deadlines_missed_world, 0, top, whole=True)
-    _bounded("deadline_miss_fraction", r.deadline_miss_fraction, 0, 1)
-    _bounded("deadline_miss_fraction_outside_stalls", r.deadline_miss_fraction_outside_stalls, 0, 1)
+    miss = _bounded("deadline_miss_fraction", r.deadline_miss_fraction, 0, 1)
+    outside = _bounded(
+        "deadline_miss_fraction_outside_stalls", r.deadline_miss_fraction_outside_stalls, 0, 1
+    )
     hs = r.host_stalls
     _bounded("host_stalls.events", hs.events, 0, MAX_STEPS, whole=True)
     _bounded("host_stalls.stalled_s", hs.stalled_s, 0, MAX_SECONDS)
@@ -105,4 +108,8 @@ def check(r: RunResult) -> RunResult:
     for i in r.isolated:
         _bounded("isolated.from_step", i.from_step, 0, top, whole=True)
         _bounded("isolated.back_step", i.back_step, 0, top, whole=True)
-    return dataclasses.replace(r, steps=steps, robots=_robots(r, steps))
+    return dataclasses.replace(
+        r, steps=steps, robots=_robots(r, steps), mean_finish_step=mean, coverage_final=coverage,
+        time_scale_achieved=achieved, deadline_miss_fraction=miss,
+        deadline_miss_fraction_outside_stalls=outside,
+    )  # fmt: skip

@@ -59,7 +59,16 @@ def _kill(text: str) -> tuple[int, int]:
     return int(m[1]), int(m[2])
 
 
-_isolate = checked(Outage.parse)
+def _outage(text: str) -> Outage:
+    """An --isolate window (testbed.run.isolation), its steps within MAX_STEPS like every
+    step of the options; ValueError saying what is wrong."""
+    o = Outage.parse(text)
+    if o.start > MAX_STEPS or o.steps > MAX_STEPS:
+        raise ValueError(f"--isolate {text[:40]!r}: STEP and STEPS are at most {MAX_STEPS:,}")
+    return o
+
+
+_isolate = checked(_outage)
 
 
 def _point(text: str) -> tuple[float, float]:
@@ -284,7 +293,7 @@ class RunConfig:
         if "kill" in kw:
             kw["kill"] = tuple(_kill(k) for k in kw["kill"])
         if "isolate" in kw:
-            kw["isolate"] = tuple(Outage.parse(o) for o in kw["isolate"])
+            kw["isolate"] = tuple(_outage(o) for o in kw["isolate"])
         return cls(**kw)
 
 
@@ -333,30 +342,50 @@ def _view(text: str | None) -> str | None:
     return text
 
 
-def config_from_args(args: argparse.Namespace) -> RunConfig:
-    """The RunConfig of parsed `testbed run` arguments, with the checks that join options."""
-    cfg = RunConfig(**runoptions.config_kwargs(args, OPTIONS))
+def refusal(cfg: RunConfig, program: bool = True) -> tuple[str, str] | None:
+    """The first check joining options that `cfg` fails, as (the option it names, why in one
+    line), or None: the one rule of `testbed run` (config_from_args), of a sweep file's runs
+    (testbed.sweep.file) and of a plan in sweep.json (testbed.sweep.state). `program`: also
+    whether the robot program asked for can carry the run (testbed.run.robotchoice: it asks
+    the C++ robot built on this machine)."""
+    cell = cfg.map_cell if cfg.map else CELL_M  # the empty terrain's cells are CELL_M
+    if cfg.laser_range < cell:
+        return "laser_range", (
+            f"a laser range of {cfg.laser_range:g} m is shorter than a map cell "
+            f"({cell:g} m): the robots would see nothing"
+        )
     if cfg.wall_loss_pct is not None and cfg.range_model not in LOS_MODELS:
-        raise UsageError("--wall-loss is for the los range models: add --range-model los")
+        return "wall_loss_pct", "--wall-loss is for the los range models: add --range-model los"
     for k, _ in cfg.kill:
         if not 1 <= k <= cfg.robots:
-            raise UsageError(f"--kill names robot {k}, but the team is r1..r{cfg.robots}")
+            return "kill", f"--kill names robot {k}, but the team is r1..r{cfg.robots}"
     why = failures.refusal(cfg.battery_failure, cfg.robots)
     if why:
-        raise UsageError(why)
+        return "battery_failure", why
     for o in cfg.isolate:
         if not 1 <= o.robot <= cfg.robots:
-            raise UsageError(f"--isolate names robot {o.robot}, but the team is r1..r{cfg.robots}")
+            return "isolate", f"--isolate names robot {o.robot}, but the team is r1..r{cfg.robots}"
     if cfg.isolate and cfg.medium != VETH:
-        raise UsageError("--isolate needs the veth medium: on ns3-wifi the channel decides "
-                         "who hears whom")  # fmt: skip
+        return "isolate", ("--isolate needs the veth medium: on ns3-wifi the channel decides "
+                           "who hears whom")  # fmt: skip
     why = maps_refusal(cfg.maps, cfg.middleware)
     if why:
-        raise UsageError(why)
-    try:
-        robotchoice.choose(cfg.robot, cfg.middleware, cfg.maps)
-    except ValueError as e:
-        raise UsageError(str(e)) from None
+        return "maps", why
+    if program:
+        try:
+            robotchoice.choose(cfg.robot, cfg.middleware, cfg.maps)
+        except ValueError as e:
+            return "robot", str(e)
+    return None
+
+
+def config_from_args(args: argparse.Namespace) -> RunConfig:
+    """The RunConfig of parsed `testbed run` arguments, with the checks that join options
+    (`refusal`)."""
+    cfg = RunConfig(**runoptions.config_kwargs(args, OPTIONS))
+    why = refusal(cfg)
+    if why:
+        raise UsageError(why[1])
     _view(cfg.view)
     return cfg
 

@@ -52,9 +52,13 @@ for every run of the sweep::
 
 The keys are the run options marked for sweeps (testbed.run.config: `sweep={GRID}` may be
 varied, `sweep={RUN}` fixed), and each value is checked by its option's own rules (type,
-bounds, choices), the same as `testbed run` checks the flag. Validation is strict: an
-unknown key, a value of the wrong type or an empty grid list is a `UsageError` whose
-one-line message names the key (`grid.robots`, `run.time_scale`, ...).
+bounds, choices), the same as `testbed run` checks the flag; each point of the grid then by
+the rule that joins options (testbed.run.config.refusal: a laser shorter than a map cell,
+`robot = "cpp"` with a middleware the C++ robot built here does not carry, ...), the same as
+`testbed run` checks its options together. Two values of a dimension that a run's id shows
+alike (5 and 5.0000001, both `c5`) are refused: they would be two runs of one id.
+Validation is strict: an unknown key, a value of the wrong type or an empty grid list is a
+`UsageError` whose one-line message names the key (`grid.robots`, `run.time_scale`, ...).
 
 Size: a sweep has at most MAX_RUNS runs, checked from the lengths of the grid's lists and
 `runs` before any run is expanded. Why 10,000: `DIR/sweep.json` holds about 380 bytes a run
@@ -89,8 +93,9 @@ from common import boundedfile
 from common.errors import UsageError
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 from node.messaging.maps import refusal as maps_refusal
+from node.native import TB_ROBOT
 from testbed.run import failures
-from testbed.run.config import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
+from testbed.run.config import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt, refusal
 from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
 from topology.spec import LOS_MODELS
 
@@ -286,6 +291,19 @@ def _check_size(path, grid: dict) -> None:
         )  # fmt: skip
 
 
+def _distinct_ids(path, opt: Option, values: tuple) -> None:
+    """Two values of a grid dimension that a run's id shows alike (5 and 5.0000001 are both
+    `c5`, maps/office.png and old/office.png both `moffice`) would make two runs of one id,
+    the second taken for done when the first is: refused, naming both."""
+    seen: dict[str, Any] = {}
+    for v in values:
+        label = opt.grid_dim.label(v)
+        if label in seen:
+            raise _fail(path, f"grid.{opt.name}", f"{seen[label]!r} and {v!r} are both "
+                        f"{label!r} in a run's id: one's runs would be the other's")  # fmt: skip
+        seen[label] = v
+
+
 def _grid(path, grid: dict, run: dict) -> dict:
     """[grid]'s dimensions (field: values) and `runs`."""
     _check_size(path, grid)
@@ -301,6 +319,7 @@ def _grid(path, grid: dict, run: dict) -> dict:
         values = _grid_list(path, opt, grid[opt.name])
         if opt.name == "map":
             values = tuple(None if m == EMPTY_MAP else _map_path(path, m) for m in values)
+        _distinct_ids(path, opt, values)
         kw[opt.name] = values
     if "runs" in grid:
         runs = grid["runs"]
@@ -362,7 +381,24 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
         if why:
             where = "grid" if spec.varies("battery_failure") else "run"
             raise _fail(path, f"{where}.battery_failure", why.replace("--battery-failure ", ""))
+    _check_points(path, spec)
     return spec
+
+
+def _check_points(path, spec: SweepSpec) -> None:
+    """Each point of the grid by the rule `testbed run` checks its options with
+    (testbed.run.config.refusal: a laser shorter than a map cell, a robot program that
+    cannot carry the run, ...), so that no run of the sweep is refused when its turn comes.
+    The robot program is checked where the C++ robot is built (as the run asks it); where it
+    is not, every run that asks for it is refused at its start, as a lone run is."""
+    built = TB_ROBOT.is_file()
+    names = [name for name, _ in spec.grid]
+    for values in itertools.product(*(v for _, v in spec.grid)):
+        config = replace(spec.base, **dict(zip(names, values, strict=True)))
+        why = refusal(config, program=built)
+        if why:
+            option, line = why
+            raise _fail(path, f"{'grid' if spec.varies(option) else 'run'}.{option}", line)
 
 
 def _map_path(path, m: str) -> str:

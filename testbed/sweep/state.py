@@ -7,11 +7,15 @@ with `write`, from a `SweepState`). `read(out)` reads it through the one bounded
 (common.boundedfile: a FIFO is refused, not waited on; strict JSON, no NaN or 1e400) and
 checks the shape every reader relies on:
 
-- the document is an object; `runs` a list of objects, each with an `id` that is a run
-  directory's name (letters, digits, `.`, `_`, `-`, at most 100) and, where present, a
+- the document is an object of `format` STATE_FORMAT (a file without one is older, and of
+  that format: another format's keys may mean other things, and are not read as this
+  one's); `runs` a list of objects, each with an `id` that is a run directory's name
+  (letters, digits, `.`, `_`, `-`, at most 100; no two runs of one id) and, where present, a
   string `status` and `reason`, whole numbers `index` and `pid`, and a `config` whose every
   key is a run option with a value its table allows (testbed.run.options.check_value; the
-  Slurm tasks build a run's command line from it);
+  Slurm tasks build a run's command line from it) and which passes the rule joining options
+  that `testbed run` applies (testbed.run.config.refusal: a laser shorter than a map cell is
+  no run);
 - `format`, `jobs_requested` and `jobs` whole numbers, the load and cpu limits (as asked
   and as they are now) positive numbers, `netem` true or false, `updated` a string;
 - `spec` an object whose `grid` and `run` are objects and `time_scale_by_robots` maps team
@@ -219,7 +223,7 @@ def _run(i: int, e) -> dict:
 def _config(where: str, config: dict) -> None:
     """ValueError unless every key of a run's plan is a run option with a valid value, and
     the plan makes a RunConfig (the structured options: display_pos, snapshots, kill, ...)."""
-    from testbed.run.config import BY_NAME, RunConfig
+    from testbed.run.config import BY_NAME, RunConfig, refusal
     from testbed.run.options import check_value
 
     for key, value in config.items():
@@ -232,9 +236,12 @@ def _config(where: str, config: dict) -> None:
         if why:
             raise ValueError(f"{where}.config.{key}: {one_line(why, 120)}")
     try:
-        RunConfig.from_dict(config)
+        run = RunConfig.from_dict(config)
     except (TypeError, ValueError, ArgumentTypeError) as e:
         raise ValueError(f"{where}.config: {one_line(str(e), 120)}") from None
+    joint = refusal(run, program=False)  # the run's own rule (not this machine's robot build)
+    if joint:
+        raise ValueError(f"{where}.config.{joint[0]}: {one_line(joint[1], 160)}")
 
 
 def _scalars(doc: dict) -> None:
@@ -259,11 +266,21 @@ def check(doc) -> dict:
     if not isinstance(doc, dict):
         raise ValueError("not a JSON object")
     _scalars(doc)
+    fmt = doc.get("format")
+    if fmt is not None and fmt != STATE_FORMAT:  # another format's keys: not guessed at
+        raise ValueError(f"format {fmt}, but this testbed reads format {STATE_FORMAT}")
     runs = doc.get("runs", [])
     if not isinstance(runs, list):
         raise ValueError("runs is not a list")
     out = dict(doc)
-    out["runs"] = [_run(i, e) for i, e in enumerate(runs)]
+    out["runs"] = []
+    first: dict[str, int] = {}  # run id: where the plan has it
+    for i, e in enumerate(runs):
+        run = _run(i, e)
+        if first.setdefault(run["id"], i) != i:
+            raise ValueError(f"runs[{i}] names run {run['id']} twice (runs[{first[run['id']]}] "
+                             "too): a plan's runs are distinct")  # fmt: skip
+        out["runs"].append(run)
     spec = doc.get("spec")
     spec = {} if spec is None else spec
     if not isinstance(spec, dict):
