@@ -86,13 +86,10 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     out = os.path.abspath(out)
     check_middleware(cfg.middleware)
     check_maps(cfg.maps, cfg.middleware)
-    truth = load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
+    truth = ground_truth(cfg)
     check_laser(cfg.laser_range, truth.size_m)
-    rng = np.random.default_rng(cfg.seed)
-    starts = start_positions(truth, cfg.robots, rng, cfg.radius, cfg.start)
-    phases = tuple(int(v) for v in rng.integers(0, cfg.plan_period, size=cfg.robots))
-    laser = Laser(cfg.laser_range, cfg.laser_rays, truth.cell)
-    world = World(truth, starts, laser, free_space(truth, starts), cfg.speed, cfg.radius)
+    starts, phases = seeded_placement(cfg, truth)
+    world = make_world(cfg, truth, starts)
     w_m, h_m = truth.size_m
     x, y = cfg.display_pos or (w_m / 2, h_m / 2)
     display_pos = (x, y)
@@ -118,6 +115,29 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
     except OSError as e:
         raise UsageError(f"--out {out}: cannot write there: {e.strerror}") from None
     return prepared
+
+
+def ground_truth(cfg: RunConfig) -> GroundTruth:
+    """The run's map: --map's PNG, or the paper's empty terrain."""
+    return load_png(cfg.map, cfg.map_cell) if cfg.map else empty_terrain()
+
+
+def seeded_placement(
+    cfg: RunConfig, truth: GroundTruth
+) -> tuple[list[tuple[float, float]], tuple[int, ...]]:
+    """The robots' start positions and timer phases, both drawn from one generator seeded
+    with `cfg.seed` (in that order): what makes a lone robot's run repeatable."""
+    rng = np.random.default_rng(cfg.seed)
+    starts = start_positions(truth, cfg.robots, rng, cfg.radius, cfg.start)
+    phases = tuple(int(v) for v in rng.integers(0, cfg.plan_period, size=cfg.robots))
+    return starts, phases
+
+
+def make_world(cfg: RunConfig, truth: GroundTruth, starts: list[tuple[float, float]]) -> World:
+    """The world of a run of `cfg` on `truth`, its robots at `starts` (also the in-process
+    twin's, testbed.run.twin)."""
+    laser = Laser(cfg.laser_range, cfg.laser_rays, truth.cell)
+    return World(truth, starts, laser, free_space(truth, starts), cfg.speed, cfg.radius)
 
 
 def check_middleware(name: str) -> None:

@@ -1,0 +1,114 @@
+"""The in-process twin of a lone robot's run (testbed.run.twin) is exact: it writes, byte for
+byte, the positions.csv the runs at time scale 5 wrote (tests/data/lone-k5, seeds 1-3: 1901,
+1989 and 1964 steps; tests/integration/test_lone_exactness.py holds both robot programs to
+the same files), and its comparison finds where a run's path left it."""
+
+import csv
+import io
+import json
+import os
+import time
+
+import pytest
+
+from testbed.run import twin
+from testbed.run.config import RunConfig
+from testbed.run.isolation import Outage
+
+DATA = os.path.join(os.path.dirname(__file__), "..", "data", "lone-k5")
+STEPS = {1: 1901, 2: 1989, 3: 1964}
+
+
+def _expected(seed: int) -> str:
+    with open(os.path.join(DATA, f"seed{seed}.positions.csv"), newline="") as f:
+        return f.read()
+
+
+def _cfg(seed: int, **kw) -> RunConfig:
+    args: dict = dict(robots=1, comm_range=20.0, laser_range=2.0, seed=seed, time_scale=5.0)
+    return RunConfig(**{**args, **kw})
+
+
+@pytest.mark.parametrize("seed", sorted(STEPS))
+def test_the_twin_takes_the_runs_steps_and_path(seed):
+    t0 = time.perf_counter()
+    t = twin.twin(_cfg(seed))
+    assert time.perf_counter() - t0 < 5.0  # well under a second with the step core
+    assert (t.status, t.steps, t.finish_step) == ("complete", STEPS[seed], STEPS[seed] - 1)
+    assert t.csv_text() == _expected(seed)
+
+
+def test_the_time_scale_and_the_network_change_nothing():
+    a = twin.twin(_cfg(1))
+    b = twin.twin(_cfg(1, time_scale=100.0, routing="olsr", loss_pct=10.0))
+    assert a.rows == b.rows
+
+
+def test_the_step_cap_ends_the_twin():
+    t = twin.twin(_cfg(2, max_steps=300))
+    assert (t.status, t.steps, t.finish_step) == ("step_cap", 300, None)
+    assert t.csv_text() == "".join(_expected(2).splitlines(keepends=True)[:302])
+
+
+def _rows(text: str) -> list[list[str]]:
+    return list(csv.reader(io.StringIO(text)))
+
+
+def test_first_difference():
+    t = twin.twin(_cfg(3, max_steps=50))
+    rows = _rows(t.csv_text())
+    assert twin.first_difference(iter(rows), t.rows) is None
+    moved = [r[:] for r in rows]
+    moved[31][1] = "9.999"  # step 30
+    assert twin.first_difference(iter(moved), t.rows) == 30
+    assert twin.first_difference(iter(rows[:20]), t.rows) == 19  # ended before its twin
+    # A late "done": the world ran on while the robot stood where its twin ended.
+    still = [*rows, [str(len(rows) - 1), *rows[-1][1:]], [str(len(rows)), *rows[-1][1:]]]
+    assert twin.first_difference(iter(still), t.rows) is None
+    went_on = [*rows, [str(len(rows) - 1), "1.000", "1.000"]]
+    assert twin.first_difference(iter(went_on), t.rows) == len(rows) - 1
+    assert twin.first_difference(iter([["step", "x2", "y2"], *rows[1:]]), t.rows) == 0
+
+
+def test_what_the_twin_does_not_cover():
+    assert "team of 2" in str(twin.not_covered(_cfg(1, robots=2)))
+    assert twin.not_covered(_cfg(1, kill=((1, 50),))) == "--kill stops the robot"
+    assert "isolate" in str(twin.not_covered(_cfg(1, isolate=(Outage(1, 10, 10),))))
+    assert "robot_crashed" in str(twin.not_covered(_cfg(1), "robot_crashed"))
+    assert twin.not_covered(_cfg(1), "step_cap") is None
+    with pytest.raises(ValueError, match="no twin"):
+        twin.twin(_cfg(1, robots=2))
+
+
+def _run_dir(tmp_path, seed: int, positions: str, **kw) -> tuple[str, dict]:
+    cfg = _cfg(seed, **kw)
+    config = cfg.to_dict()
+    config.update(name="t", display=2)  # preparing adds these (and starts, timer_phases)
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    (tmp_path / "positions.csv").write_text(positions, newline="")
+    return str(tmp_path), config
+
+
+def test_check_a_run(tmp_path):
+    out, config = _run_dir(tmp_path, 2, _expected(2))
+    got = twin.check(out, config, "complete")
+    assert isinstance(got, dict)
+    assert got["ok"] is True and got["steps"] == STEPS[2] and "differs_from_step" not in got
+    rows = _rows(_expected(2))
+    rows[101][2] = "0.000"  # step 100
+    buf = io.StringIO(newline="")
+    csv.writer(buf).writerows(rows)
+    (tmp_path / "positions.csv").write_text(buf.getvalue(), newline="")
+    got = twin.check(out, config, "complete")
+    assert isinstance(got, dict)
+    assert got["ok"] is False and got["differs_from_step"] == 100
+    assert twin.check(out, config, "interrupted") == (
+        "not applicable: the run ended interrupted, not by itself"
+    )
+
+
+def test_check_uses_the_runs_own_starts_and_phases(tmp_path):
+    out, config = _run_dir(tmp_path, 1, _expected(1))
+    config.update(starts=[[1.0, 1.0]], timer_phases=[3])  # not what seed 1 gives
+    got = twin.check(out, config, "complete")
+    assert isinstance(got, dict) and got["ok"] is False and got["differs_from_step"] == 0
