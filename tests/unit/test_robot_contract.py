@@ -278,15 +278,8 @@ def test_messages_are_accepted_and_refused_alike(msg):
 @FUZZ
 @given(data=st.data())
 def test_malformed_messages_are_refused_alike(data):
-    raw = data.draw(mutated("msg"))
-    try:
-        raw.decode("utf-8")
-        ascii_ok = raw.isascii()
-    except UnicodeDecodeError:
-        ascii_ok = False
-    c = cpp_decode("msg", raw)
-    if ascii_ok:  # the documented differences are about encodings (docs/robot-contract.md)
-        assert same(c, py_decode("msg", raw))
+    raw = data.draw(mutated("msg"))  # one contract, whatever the bytes (issue 55)
+    assert same(cpp_decode("msg", raw), py_decode("msg", raw))
 
 
 def test_a_map_window_with_a_bad_cell_is_refused_by_both():
