@@ -24,6 +24,7 @@ Theory of operation (after m-explore's frontier_search, but on a grid with numpy
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -131,6 +132,8 @@ def exclusion_mask(
     r = radius / plan_cell
     for gx, gy in goals:
         gc, gr = gx / plan_cell - 0.5, gy / plan_cell - 0.5
+        if not (math.isfinite(gc) and math.isfinite(gr)):
+            continue  # a teammate's goal of 1e308 m: in cells not finite, far off the map
         r0, r1 = max(0, int(np.floor(gr - r))), min(shape[0], int(np.ceil(gr + r)) + 1)
         c0, c1 = max(0, int(np.floor(gc - r))), min(shape[1], int(np.ceil(gc + r)) + 1)
         if r0 >= r1 or c0 >= c1:
@@ -309,6 +312,11 @@ def plan(
     return Plan(status, waypoints[-1], waypoints, path_length(cells, pc))
 
 
+def _start_index(v: float, n: int) -> int:
+    """min(max(int(v), 0), n - 1), also for v = ±inf (1e308 m in cells), as the step core."""
+    return 0 if not v > 0 else n - 1 if v >= n - 1 else int(v)
+
+
 def plan_reference(
     t: np.ndarray,
     pose: tuple[float, float],
@@ -322,8 +330,8 @@ def plan_reference(
     p = pool(t, prm.factor)
     h, w = p.shape
     pc = prm.plan_cell
-    sr = min(max(int(pose[1] / pc), 0), h - 1)
-    sc = min(max(int(pose[0] / pc), 0), w - 1)
+    sr = _start_index(pose[1] / pc, h)
+    sc = _start_index(pose[0] / pc, w)
     trav = traversable(p, prm.inflate_cells)
     # Let the robot leave a start cell inside the inflation zone (e.g. pushed near a wall).
     passable = trav.copy()

@@ -2,8 +2,10 @@
 ctypes), checked for memory errors and undefined behaviour: `make build/asan/libstepcore.so`
 builds it with AddressSanitizer and UndefinedBehaviorSanitizer, and its unit tests (every
 compiled function held equal to its numpy twin on random maps, poses and scans; the world's
-casts of a step in one call; its body links' commands and frames over real sockets) run on
-that build, in a Python with the ASan runtime preloaded.
+casts of a step in one call; its body links' commands and frames over real sockets; the
+most extreme ranges, poses and goals its callers can pass, test_stepcore_extremes) run on
+that build, in a Python with the ASan runtime preloaded. The build checks float-to-integer
+conversions too (float-cast-overflow, which -fsanitize=undefined leaves out).
 Clean means they pass and no sanitizer reported (a report stops the process). The C++ robot,
 which links the same source in, has its own sanitizer runs (test_cpp_robot_sanitizers)."""
 
@@ -36,8 +38,12 @@ def test_the_step_core_runs_clean_under_asan_and_ubsan():
         cwd=REPO, env=env, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert loaded.stdout.split() == ["True", str(LIBRARY)], loaded.stdout + loaded.stderr
-    tests = ["tests/unit/test_stepcore.py", "tests/unit/test_world_step.py",
-             "tests/unit/test_body_fast.py"]  # fmt: skip
+    tests = [
+        "tests/unit/test_stepcore.py",
+        "tests/unit/test_world_step.py",
+        "tests/unit/test_body_fast.py",
+        "tests/unit/test_stepcore_extremes.py",
+    ]  # the last: any range, pose and goal a caller can pass (issue 55)
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests],
         cwd=REPO, env=env, capture_output=True, text=True, timeout=900,
