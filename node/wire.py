@@ -243,6 +243,7 @@ def parse_msg(data: bytes, n_robots: int) -> dict:
         or not all(isinstance(v, int | float) and math.isfinite(v) for v in goal)
     ):
         raise ValueError("message goal is not a point")
+    m["from"], m["step"] = int(sender), int(step)  # true is 1, as the C++ robot reads it
     m["goal"] = (float(goal[0]), float(goal[1]))
     n = m.get("n")
     if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):

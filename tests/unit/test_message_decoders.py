@@ -2,8 +2,9 @@
 Hypothesis writes hostile goal and re-plan messages and each goes to node.wire.parse_msg and
 to the C++ robot's (`tb-robot --decode msg`, native/robot/selftest.cc). Both must give the
 same verdict, accept or refuse, and the same decoded value when they accept (floats to the
-bit, the sign of zero included); Python may raise nothing but ValueError, and tb-robot
-nothing but its two statuses.
+bit, the sign of zero included; `true` is the integer 1, not a boolean, where an integer is
+asked for); Python may raise nothing but ValueError, and tb-robot nothing but its two
+statuses.
 
 The messages: valid ones with fields of any JSON (integers of any length, around the 64-bit
 bounds, NaN and the infinities, strings with escapes and lone surrogates, nesting around the
@@ -50,7 +51,7 @@ def py_decode(data: bytes) -> dict | None:
         m = wire.parse_msg(data, ROBOTS)
     except ValueError:
         return None
-    out = {"k": m["k"], "from": int(m["from"]), "step": int(m["step"]), "goal": list(m["goal"])}
+    out = {"k": m["k"], "from": m["from"], "step": m["step"], "goal": list(m["goal"])}
     if m["k"] == "goal":
         out.update(cost=m["cost"], fallback=m["fallback"])
     out["n"] = m["n"]
