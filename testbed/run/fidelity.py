@@ -274,6 +274,24 @@ def verdict(m: Measures, th: Thresholds = Thresholds()) -> dict:
     return out
 
 
+def with_twin(verdict: dict, twin: dict | str) -> dict:
+    """`verdict` with its run's twin check (testbed.run.twin.check) under `twin`: a lone
+    robot's path that differs from its in-process twin makes the run not faithful, whatever
+    its share of late work, with the step it left the twin at in the reason; a path equal to
+    it, or a run the twin does not cover ("not applicable: ..."), leaves `ok` as it was."""
+    reasons = [verdict["reason"]] if verdict.get("reason") else []
+    differs = isinstance(twin, dict) and twin.get("ok") is False
+    if isinstance(twin, dict) and differs:
+        step = twin.get("differs_from_step")
+        reasons.append(f"the path differs from its in-process twin from step {step}")
+    out: dict = {"ok": bool(verdict.get("ok")) and not differs}
+    if reasons:
+        out["reason"] = "; ".join(reasons)
+    out.update((k, v) for k, v in verdict.items() if k not in ("ok", "reason"))
+    out["twin"] = twin
+    return out
+
+
 def network_verdict(timers: dict | None, time_scale: float) -> dict:
     """result.json's `fidelity.network` from its `network_timers` (topology.kernel.nettimers'
     record): {ok, reason (when not ok)}. At time scale 1 the network is in emulated time by

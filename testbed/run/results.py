@@ -23,7 +23,7 @@ from aodv.statsfile import DaemonStats, StatsError, run_stats_path
 from common.jsonfile import read_json
 from node import events, render, stepcore
 from testbed.resultfile import HostStalls, Plan, RobotResult, RunResult
-from testbed.run import fidelity, isolation, robotfile
+from testbed.run import fidelity, isolation, robotfile, twin
 from testbed.world.world import World
 
 if TYPE_CHECKING:
@@ -113,6 +113,9 @@ def contents(rec: RunRecord) -> RunResult:
             [r.done_late for r in rec.robots],
         )
     )
+    # A lone robot's path against its in-process twin (testbed.run.twin): a changed path is
+    # not faithful, however few steps were late.
+    verdict = fidelity.with_twin(verdict, twin.check(rec.out, rec.config.to_dict(), rec.status))
     # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).
     verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
     config = rec.config.result_config()

@@ -282,11 +282,14 @@ def check(out: str, config: Mapping[str, Any], status: str) -> dict | str:
     why = not_covered(cfg, status)
     if why:
         return f"not applicable: {why}"
+    path = os.path.join(out, POSITIONS_NAME)
+    if not os.path.isfile(path):
+        return f"not applicable: the run wrote no {POSITIONS_NAME}"
     starts = [tuple(p) for p in config.get("starts") or []] or None
     phases = tuple(config.get("timer_phases") or ()) or None
     try:
         t = twin(cfg, cast(Any, starts), phases)
-        with open(os.path.join(out, POSITIONS_NAME), newline="") as f:
+        with open(path, newline="") as f:
             at = first_difference(csv.reader(f), t.rows)
     except (OSError, ValueError) as e:
         log.warning("the run's twin: %s", e)

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from testbed.run import twin
+from testbed.run import fidelity, twin
 from testbed.run.config import RunConfig
 from testbed.run.isolation import Outage
 
@@ -112,3 +112,27 @@ def test_check_uses_the_runs_own_starts_and_phases(tmp_path):
     config.update(starts=[[1.0, 1.0]], timer_phases=[3])  # not what seed 1 gives
     got = twin.check(out, config, "complete")
     assert isinstance(got, dict) and got["ok"] is False and got["differs_from_step"] == 0
+
+
+def _verdict(**kw) -> dict:
+    return fidelity.verdict(fidelity.measures(0.0, [{}], **kw))
+
+
+def test_a_path_off_its_twin_is_not_faithful_whatever_else():
+    v = fidelity.with_twin(_verdict(), {"ok": False, "steps": 1901, "differs_from_step": 57})
+    assert v["ok"] is False
+    assert v["reason"] == "the path differs from its in-process twin from step 57"
+    assert v["twin"]["differs_from_step"] == 57 and "measures" in v
+    late = fidelity.verdict(fidelity.measures(0.05, [{}]))  # late steps already: both said
+    v = fidelity.with_twin(late, {"ok": False, "steps": 1901, "differs_from_step": 3})
+    assert v["reason"].startswith("5.0% of step deadlines missed") and "from step 3" in v["reason"]
+
+
+def test_a_path_equal_to_its_twin_or_no_twin_leaves_the_verdict():
+    for t in ({"ok": True, "steps": 1901, "wall_s": 0.4}, "not applicable: a team of 3: ..."):
+        v = fidelity.with_twin(_verdict(), t)
+        assert v["ok"] is True and "reason" not in v and v["twin"] == t
+    late = fidelity.verdict(fidelity.measures(0.05, [{}]))
+    v = fidelity.with_twin(late, {"ok": True, "steps": 1901, "wall_s": 0.4})
+    assert v["ok"] is False and v["reason"] == late["reason"]
+    assert list(v)[:2] == ["ok", "reason"]
