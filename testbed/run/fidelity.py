@@ -282,8 +282,9 @@ def with_twin(verdict: dict, twin: dict | str) -> dict:
     reasons = [verdict["reason"]] if verdict.get("reason") else []
     differs = isinstance(twin, dict) and twin.get("ok") is False
     if isinstance(twin, dict) and differs:
-        step = twin.get("differs_from_step")
-        reasons.append(f"the path differs from its in-process twin from step {step}")
+        step, n = twin.get("differs_from_step"), twin.get("steps_differing")
+        why = f"the path differs from its in-process twin from step {step}"
+        reasons.append(why + (f" ({n} steps differ)" if n else ""))
     out: dict = {"ok": bool(verdict.get("ok")) and not differs}
     if reasons:
         out["reason"] = "; ".join(reasons)

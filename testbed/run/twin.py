@@ -56,7 +56,7 @@ import io
 import logging
 import os
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -253,28 +253,36 @@ def run_config(config: Mapping[str, Any], out: str | None = None) -> RunConfig:
     return cfg
 
 
-def first_difference(run_rows: Iterator[list[str]], twin_rows: tuple[tuple[str, ...], ...]
-                     ) -> int | None:  # fmt: skip
-    """The first step at which a run's positions.csv rows (`run_rows`, the header first)
-    differ from its twin's, None when they do not. Rows the run has past the twin's last
-    step count as the same while the robot stands where the twin ended (a "done" that
-    reached the world late: the world ran on, the robot stood still); a run that ends
-    before its twin differs from its first missing step."""
-    last, n = twin_rows[-1], 0
+def differences(run_rows: Iterable[list[str]], twin_rows: tuple[tuple[str, ...], ...]
+                ) -> tuple[int | None, int]:  # fmt: skip
+    """Where a run's positions.csv rows (`run_rows`, the header first) differ from its twin's:
+    the first step that differs (None: none does) and how many steps differ. Rows the run
+    has past the twin's last step are the same while the robot stands where the twin ended
+    (a "done" that reached the world late: the world ran on, the robot stood still); a step
+    the run lacks (it ended before its twin) differs. A header that is not the twin's is a
+    difference at step 0."""
+    last, n, first, count = twin_rows[-1], 0, None, 0
     for i, row in enumerate(run_rows):
         n = i + 1
         if i < len(twin_rows):
-            if tuple(row) != twin_rows[i]:
-                return max(0, i - 1)  # row i is step i - 1 (the header is row 0)
-        elif tuple(row[1:]) != last[1:] or row[0] != str(i - 1):
-            return i - 1
-    return None if n >= len(twin_rows) else max(0, n - 1)
+            same = tuple(row) == twin_rows[i]
+        else:
+            same = tuple(row[1:]) == last[1:] and row[0] == str(i - 1)
+        if not same:
+            count += 1
+            if first is None:
+                first = max(0, i - 1)  # row i is step i - 1 (the header is row 0)
+    if n < len(twin_rows):
+        count += len(twin_rows) - n
+        if first is None:
+            first = max(0, n - 1)
+    return first, count
 
 
 def check(out: str, config: Mapping[str, Any], status: str) -> dict | str:
     """result.json's `fidelity.twin` for the run in `out` (its config.json's contents
     `config`, its `status`): "not applicable: <why>", or {ok, steps (the twin's), wall_s,
-    and, when not ok, differs_from_step}."""
+    and, when not ok, differs_from_step and steps_differing}."""
     try:
         cfg = run_config(config, out)
     except (TypeError, ValueError) as e:
@@ -290,11 +298,11 @@ def check(out: str, config: Mapping[str, Any], status: str) -> dict | str:
     try:
         t = twin(cfg, cast(Any, starts), phases)
         with open(path, newline="") as f:
-            at = first_difference(csv.reader(f), t.rows)
+            at, count = differences(csv.reader(f), t.rows)
     except (OSError, ValueError) as e:
         log.warning("the run's twin: %s", e)
         return f"not applicable: the twin could not be made ({e})"
     result: dict[str, Any] = {"ok": at is None, "steps": t.steps, "wall_s": t.wall_s}
     if at is not None:
-        result["differs_from_step"] = at
+        result.update(differs_from_step=at, steps_differing=count)
     return result

@@ -54,20 +54,21 @@ def _rows(text: str) -> list[list[str]]:
     return list(csv.reader(io.StringIO(text)))
 
 
-def test_first_difference():
+def test_differences():
     t = twin.twin(_cfg(3, max_steps=50))
     rows = _rows(t.csv_text())
-    assert twin.first_difference(iter(rows), t.rows) is None
+    assert twin.differences(rows, t.rows) == (None, 0)
     moved = [r[:] for r in rows]
-    moved[31][1] = "9.999"  # step 30
-    assert twin.first_difference(iter(moved), t.rows) == 30
-    assert twin.first_difference(iter(rows[:20]), t.rows) == 19  # ended before its twin
+    moved[31][1] = moved[33][2] = "9.999"  # steps 30 and 32
+    assert twin.differences(moved, t.rows) == (30, 2)
+    assert twin.differences(rows[:20], t.rows) == (19, 32)  # ended before its twin: 19-50
     # A late "done": the world ran on while the robot stood where its twin ended.
     still = [*rows, [str(len(rows) - 1), *rows[-1][1:]], [str(len(rows)), *rows[-1][1:]]]
-    assert twin.first_difference(iter(still), t.rows) is None
-    went_on = [*rows, [str(len(rows) - 1), "1.000", "1.000"]]
-    assert twin.first_difference(iter(went_on), t.rows) == len(rows) - 1
-    assert twin.first_difference(iter([["step", "x2", "y2"], *rows[1:]]), t.rows) == 0
+    assert twin.differences(still, t.rows) == (None, 0)
+    went_on = [*still, [str(len(rows) + 1), "1.000", "1.000"]]
+    assert twin.differences(went_on, t.rows) == (len(rows) + 1, 1)
+    assert twin.differences([["step", "x2", "y2"], *rows[1:]], t.rows) == (0, 1)
+    assert twin.differences([], t.rows) == (0, 52)
 
 
 def test_what_the_twin_does_not_cover():
@@ -101,7 +102,7 @@ def test_check_a_run(tmp_path):
     (tmp_path / "positions.csv").write_text(buf.getvalue(), newline="")
     got = twin.check(out, config, "complete")
     assert isinstance(got, dict)
-    assert got["ok"] is False and got["differs_from_step"] == 100
+    assert got["ok"] is False and got["differs_from_step"] == 100 and got["steps_differing"] == 1
     assert twin.check(out, config, "interrupted") == (
         "not applicable: the run ended interrupted, not by itself"
     )
@@ -119,9 +120,10 @@ def _verdict(**kw) -> dict:
 
 
 def test_a_path_off_its_twin_is_not_faithful_whatever_else():
-    v = fidelity.with_twin(_verdict(), {"ok": False, "steps": 1901, "differs_from_step": 57})
+    t = {"ok": False, "steps": 1901, "differs_from_step": 57, "steps_differing": 20}
+    v = fidelity.with_twin(_verdict(), t)
     assert v["ok"] is False
-    assert v["reason"] == "the path differs from its in-process twin from step 57"
+    assert v["reason"] == "the path differs from its in-process twin from step 57 (20 steps differ)"
     assert v["twin"]["differs_from_step"] == 57 and "measures" in v
     late = fidelity.verdict(fidelity.measures(0.05, [{}]))  # late steps already: both said
     v = fidelity.with_twin(late, {"ok": False, "steps": 1901, "differs_from_step": 3})
