@@ -54,13 +54,23 @@ TB_ROBOT_CAN = command -v g++ >/dev/null && [ -e /usr/include/nng/nng.h ] && [ -
 # --middlewares` says what a build carries, and `--robot auto` asks it.
 TB_ROBOT_ZMQ = $$([ -e /usr/include/zmq.h ] && echo "-DTB_WITH_ZMQ -lzmq")
 
+# The AODV protocol core in C++ (native/aodv, docs/aodv.md "Two cores, held equal"): the
+# compiled twin of aodv/core.py and its event driver, which tests/unit/test_aodv_differential.py
+# holds equal to the Python core. Optional: where g++ is missing or fails, setup says so in one
+# line, keeps it in TB_AODV_CORE_UNBUILT (the differential test skips with it) and goes on.
+TB_AODV_CORE := build/tb-aodv-core
+TB_AODV_CORE_SRC := $(wildcard native/aodv/*.cc)
+TB_AODV_CORE_DEPS := $(TB_AODV_CORE_SRC) $(wildcard native/aodv/*.h)
+TB_AODV_CORE_UNBUILT := build/tb-aodv-core.unbuilt
+TB_AODV_CORE_FLAGS := -std=c++17 -Wall -Wextra
+
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
 .PHONY: setup apt venv test unit integration experiment experiment-short experiment-ablation \
 	experiment-protocols experiment-media experiment-media-rise experiment-middleware \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test distro-test clean
 
-setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT)
+setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT) $(TB_AODV_CORE)
 
 # The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
@@ -106,6 +116,24 @@ build/tsan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }
 	@mkdir -p $(@D)
 	g++ -O1 -g -fsanitize=thread $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) $(TB_ROBOT_ZMQ)
+
+$(TB_AODV_CORE): $(TB_AODV_CORE_DEPS)
+	@mkdir -p $(@D); rm -f $(TB_AODV_CORE_UNBUILT); \
+	if ! command -v g++ >/dev/null; then \
+		echo "C++ AODV core not built: needs g++; the Python AODV core runs" \
+			| tee $(TB_AODV_CORE_UNBUILT); \
+	else echo "g++ -O2 ... -o $@ (native/aodv)" && \
+		g++ -O2 $(TB_AODV_CORE_FLAGS) -o $@ $(TB_AODV_CORE_SRC) || { rm -f $@; \
+		echo "C++ AODV core not built: g++ failed on native/aodv (above); the Python core runs" \
+			| tee $(TB_AODV_CORE_UNBUILT); }; fi
+
+# The same with AddressSanitizer and UndefinedBehaviorSanitizer (float-to-integer conversions
+# too): test_aodv_differential.py's test_sanitized_core_agrees runs the corpus through it.
+build/asan/tb-aodv-core: $(TB_AODV_CORE_DEPS)
+	@command -v g++ >/dev/null || { echo "C++ AODV core not built: needs g++"; exit 2; }
+	@mkdir -p $(@D)
+	g++ -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,float-cast-overflow \
+		-fno-sanitize-recover=all $(TB_AODV_CORE_FLAGS) -o $@ $(TB_AODV_CORE_SRC)
 
 $(NS3_MEDIUM): native/ns3wifi/wifi-medium.cc | apt
 	@mkdir -p $(@D); rm -f $(NS3_MEDIUM_UNBUILT)
