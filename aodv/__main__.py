@@ -144,7 +144,9 @@ def _start_logging(robot: str, level: str) -> logging.handlers.QueueListener:
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(RobotFormatter(robot))
     lines: queue.SimpleQueue[logging.LogRecord] = queue.SimpleQueue()
-    logging.basicConfig(level=level.upper(), handlers=[logging.handlers.QueueHandler(lines)])
+    queued = logging.handlers.QueueHandler(lines)
+    queued.setFormatter(logging.Formatter("%(message)s"))  # the listener's handler adds the rest
+    logging.basicConfig(level=level.upper(), handlers=[queued])
     listener = logging.handlers.QueueListener(lines, handler)
     listener.start()
     return listener
