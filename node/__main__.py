@@ -73,7 +73,12 @@ def main(argv: list[str] | None = None) -> int:
     pubsub = args.maps == "pubsub"
     # With pubsub the display (robot N+1) is a peer of every robot's session: it subscribes.
     team = tuple(range(1, args.robots + (2 if pubsub else 1)))
-    events = EventLog(args.events)
+    try:
+        events = EventLog(args.events)
+    except OSError as e:  # a directory that is not there, /proc/self/mem, ...
+        sys.stderr.write(f"node: r{me}: cannot open --events {args.events!r}: "
+                         f"{e.strerror or e}\n")  # fmt: skip
+        return 2
     stop: dict[str, Display | Robot | None] = {"robot": None}
 
     def on_term(signum, frame):

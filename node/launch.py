@@ -24,6 +24,7 @@ from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from node.messaging.maps import DEFAULT as DEFAULT_MAPS
 from node.messaging.maps import MAPS
+from topology.names import MAX_ROBOTS
 from topology.spec import CELL_M
 
 USAGE = "python -m node --robot r3 --robots 5 --body PATH ..."
@@ -57,7 +58,7 @@ class NodeArgs:
 
     robot: int = arg(help="this robot, e.g. r3", parse=lambda t: robot_number(t))
     robots: int = arg(help="team size (exploring; the display is robots + 1)", kind=int,
-                      above=0)  # fmt: skip
+                      above=0, maximum=MAX_ROBOTS)  # fmt: skip
     body: str = arg(help="Unix socket of the world's body link")
     role: str = arg("robot", "robot, or the display", choices=("robot", "display"))
     events: str | None = arg(None, "JSON-lines event log to append to")

@@ -9,6 +9,14 @@ Theory of operation. A results directory may come from elsewhere, so:
   MAX_CAPTURE_BYTES that starts with a pcap or pcapng header. Any other is left out and
   named (`Captures.left_out`), so no robot's frames are credited to another (mergecap skips
   an empty file, which shifts every later capture's interface id onto the wrong robot);
+- before tshark reads them (`checked`, when routing.json's cache does not answer), each
+  capture's records are walked: a record claiming more than MAX_RECORD_BYTES (a length of
+  2^32-1), a pcapng block that is not one, or more than MAX_CAPTURE_FRAMES frames (a sparse
+  file of empty records) leaves it out, named; so do two captures or more that are one
+  file (a hard link: the same device and inode) or the same bytes (a copy), every one of
+  them, since whose frames they are cannot be told (read as two robots', a copy made a
+  delivery of 1.06 and delays of 0 ms). A last record cut short (a run killed mid-write) is
+  not a fault: what comes before it is read;
 - the daemons' counters are read through their type (aodv.statsfile), tcpdump's logs
   through the one bounded reader (common.boundedfile): a FIFO is refused, not waited on; a
   count that is not a whole number from 0 to its MAX_COUNT leaves that robot's counters
@@ -23,7 +31,8 @@ import hashlib
 import logging
 import os
 import re
-from collections import Counter
+import struct
+from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +43,13 @@ log = logging.getLogger(__name__)
 
 MAX_ROBOTS = 1000  # topology.names.MAX_ROBOTS (the analysis reads results without topology)
 MAX_CAPTURE_BYTES = 512 << 20  # a 10-robot run of 5000 steps captures about 20 MB a robot
+# Frames of one capture: ten times what a robot of such a run captures (some 150,000), and
+# what tshark reads in about 15 s. A sparse 300 MiB file holds 19.6 million empty records,
+# which kept tshark busy past two minutes.
+MAX_CAPTURE_FRAMES = 2_000_000
+MAX_RECORD_BYTES = 262_144  # libpcap's largest snap length: no record of a capture is longer
+MAX_BLOCK_BYTES = 1 << 20  # a pcapng block: a record and its options, or a header
+_CHUNK = 1 << 20
 MAX_LOG_BYTES = 1 << 20
 PCAP_MAGICS = (b"\xd4\xc3\xb2\xa1", b"\xa1\xb2\xc3\xd4", b"\x4d\x3c\xb2\xa1", b"\xa1\xb2\x3c\x4d")
 PCAPNG_MAGIC = b"\x0a\x0d\x0d\x0a"
@@ -106,6 +122,122 @@ def find(run_dir: Path) -> Captures:
                 out.left_out[f"r{k}.pcap"] = "missing"
     for name, why in out.left_out.items():
         log.warning("%s: capture %s left out: %s", run_dir, name, why)
+    return out
+
+
+class _Bad(Exception):
+    """A capture whose records are not a capture's (str(): why, one line)."""
+
+
+def _pcap_frames(f, size: int, head: bytes) -> int:
+    """The frames of a pcap capture (f after its 24-byte header); _Bad when a record claims
+    more than MAX_RECORD_BYTES or the capture holds more than MAX_CAPTURE_FRAMES. A last
+    record cut short (a run killed mid-write) ends the count: tshark reads up to it."""
+    rec = struct.Struct("<I" if head[:4] in (PCAP_MAGICS[0], PCAP_MAGICS[2]) else ">I")
+    data, base, off, frames = b"", 24, 24, 0
+    while off + 16 <= size:
+        at = off - base
+        if at + 16 > len(data):
+            f.seek(off)
+            data, base, at = f.read(_CHUNK), off, 0
+            if len(data) < 16:
+                break
+        length = rec.unpack_from(data, at + 8)[0]
+        if length > MAX_RECORD_BYTES:
+            left = size - off - 16
+            raise _Bad(f"record {frames + 1} claims {length} bytes, more than any capture's "
+                       f"record ({MAX_RECORD_BYTES}); the file has {left} left")  # fmt: skip
+        frames += 1
+        if frames > MAX_CAPTURE_FRAMES:
+            raise _Bad(f"more than {MAX_CAPTURE_FRAMES:,} frames (docs/security.md)")
+        off += 16 + length
+    return frames
+
+
+_PCAPNG_FRAMES = (2, 3, 6)  # packet, simple packet and enhanced packet blocks
+
+
+def _pcapng_frames(f, size: int) -> int:
+    """The frames of a pcapng capture, as _pcap_frames: each block at most MAX_BLOCK_BYTES,
+    a whole number of 32-bit words of at least 12 bytes."""
+    off, frames, order = 0, 0, "<"
+    while off + 12 <= size:
+        f.seek(off)
+        block = f.read(12)
+        if len(block) < 12:
+            break
+        if block[:4] == PCAPNG_MAGIC:  # a section header: its byte order from here on
+            order = {b"\x4d\x3c\x2b\x1a": "<", b"\x1a\x2b\x3c\x4d": ">"}.get(block[8:12], "")
+            if not order:
+                raise _Bad(f"a section header at byte {off} of no known byte order")
+        kind, length = struct.unpack(order + "II", block[:8])
+        if length < 12 or length % 4 or length > MAX_BLOCK_BYTES:
+            raise _Bad(f"a block of {length} bytes at byte {off} (12..{MAX_BLOCK_BYTES}, in "
+                       f"words); the file has {size - off} left")  # fmt: skip
+        if kind in _PCAPNG_FRAMES:
+            frames += 1
+            if frames > MAX_CAPTURE_FRAMES:
+                raise _Bad(f"more than {MAX_CAPTURE_FRAMES:,} frames (docs/security.md)")
+        off += length
+    return frames
+
+
+def count_frames(p: Path) -> int:
+    """The frames capture `p` holds (find() took it: a regular file with a capture's
+    header); _Bad when its records are not a capture's (see _pcap_frames)."""
+    fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    with os.fdopen(fd, "rb") as f:
+        size = os.fstat(fd).st_size
+        head = f.read(24)
+        if head[:4] == PCAPNG_MAGIC:
+            return _pcapng_frames(f, size)
+        return _pcap_frames(f, size, head)
+
+
+def _digest(p: Path) -> str:
+    return content_stamp([p])[p.name]
+
+
+def _alike(out: Captures, groups, what: str) -> None:
+    """Leave out every capture of each group of more than one, naming the others."""
+    for ks in groups:
+        for k in ks if len(ks) > 1 else ():
+            others = ", ".join(f"r{j}.pcap" for j in ks if j != k)
+            out.left_out[out.paths[k].name] = f"the same {what} as {others}: whose is unknown"
+
+
+def checked(found: Captures) -> Captures:
+    """The captures of `found` that may be given to tshark, the rest left out and named
+    too: a capture whose records are not a capture's (a record longer than any, more than
+    MAX_CAPTURE_FRAMES frames), and captures that are one file (the same device and inode:
+    a hard link) or hold the same frames byte for byte: every one of them, since whose it is
+    cannot be told, and read as several robots' it makes a delivery above 1 and delays of 0.
+    Captures with no frame may be alike (robots that sent and heard nothing)."""
+    out = Captures(dict(found.paths), dict(found.left_out))
+    frames: dict[int, int] = {}
+    for k, p in sorted(found.paths.items()):
+        try:
+            frames[k] = count_frames(p)
+        except (_Bad, OSError) as e:
+            out.left_out[p.name] = str(e)[:200]
+            del out.paths[k]
+    inodes: defaultdict[tuple[int, int], list[int]] = defaultdict(list)
+    for k, p in out.paths.items():
+        st = os.stat(p)
+        inodes[st.st_dev, st.st_ino].append(k)
+    _alike(out, inodes.values(), "file")
+    sizes: defaultdict[int, list[int]] = defaultdict(list)
+    for k, p in out.paths.items():
+        if frames[k] and p.name not in out.left_out:
+            sizes[p.stat().st_size].append(k)
+    digests: defaultdict[str, list[int]] = defaultdict(list)
+    for ks in sizes.values():
+        for k in ks if len(ks) > 1 else ():
+            digests[_digest(out.paths[k])].append(k)
+    _alike(out, digests.values(), "bytes")
+    for name in set(out.left_out) - set(found.left_out):
+        log.warning("capture %s left out: %s", name, out.left_out[name])
+    out.paths = {k: p for k, p in out.paths.items() if p.name not in out.left_out}
     return out
 
 

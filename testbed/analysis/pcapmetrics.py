@@ -219,6 +219,10 @@ def run_metrics(
                 log.warning("%s: not taken (%s): computed again", cache, why)
         except (boundedfile.Refused, AttributeError):
             pass
+    found = capturefiles.checked(found)  # what tshark is given: whose each is, bounded
+    pcaps = found.paths
+    if not pcaps:
+        return None
     if run is None and network is None:
         try:
             run = runs.load_run(run_dir)

@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from common.jsonfile import write_atomic
-from testbed.analysis import pcapmetrics
+from testbed.analysis import capturefiles, pcapmetrics
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
 from testbed.run.resultvalues import one_line
@@ -144,8 +144,14 @@ def left_out_text(left_out: dict) -> str:
     return ", ".join(shown[:10]) + (f" and {len(shown) - 10} more" if len(shown) > 10 else "")
 
 
-def _routing(m: dict | None) -> list[str]:
+def _routing(m: dict | None, run_dir: Path | None = None) -> list[str]:
     if not m:
+        left_out = {}
+        if run_dir is not None:  # captures there, but none that could be read
+            left_out = capturefiles.checked(capturefiles.find(run_dir)).left_out
+        if left_out:
+            return [f"No capture could be read, so no routing metrics: "
+                    f"{left_out_text(left_out)}."]  # fmt: skip
         return ["No packet captures in this run (`testbed run --capture`): no routing metrics."]
     out = _routing_table(m)
     left_out = m.get("captures_left_out") or {}
@@ -205,7 +211,7 @@ def summary(run: FinishedRun, metrics: dict | None) -> str:
     out = [f"# Run {run.run_id}", ""]
     for line in _outcome(run) + _timing(run):
         out += [line, ""]
-    out += ["## Routing (from the captures)", ""] + _routing(metrics)
+    out += ["## Routing (from the captures)", ""] + _routing(metrics, run.path)
     if run.channel:
         out += [""] + _channel(run, metrics)
     return "\n".join(out) + "\n"

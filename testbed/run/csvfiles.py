@@ -7,8 +7,10 @@ never a robot to itself; coverage.csv is `step,coverage`, the share 0..1. Each f
 with its header.
 
 The files may come from anyone (docs/security.md): `rows(path, parse)` opens one through
-common.boundedfile (a regular file, checked on the descriptor it opened) and gives each row
-after the header to a row parser of this module, which checks every value (numbers finite
+common.boundedfile (a regular file, checked on the descriptor it opened), checks the header
+where asked (positions.csv's must name each robot of the team once, in order: a header
+x1,y1,x1,y1 is not read as robots 1 and 2) and gives each row after it to a row parser of
+this module, which checks every value (numbers finite
 and within bounds, counts that agree) and raises ValueError saying why; a bad row is a
 CsvError naming its line. `read_links` is the link timeline whole.
 """
@@ -52,8 +54,27 @@ def position_columns(header: list[str]) -> list[int]:
             raise ValueError(f"columns {x[:20]!r}, {y[:20]!r} are not xK, yK")
         if int(mx[2]) > MAX_ROBOTS + 1:
             raise ValueError(f"robot {mx[2]} is more than {MAX_ROBOTS + 1}")
+        if int(mx[2]) in robots:  # two columns of one robot: whose is the second?
+            raise ValueError(f"columns x{mx[2]}, y{mx[2]} name robot {mx[2]} twice")
         robots.append(int(mx[2]))
     return robots
+
+
+def position_header(robots: int) -> Callable[[list[str]], None]:
+    """A check of positions.csv's header for a team of `robots`: step,x1,y1,...,xN,yN, each
+    robot once and in order (a reader that takes the columns by place must know whose they
+    are); ValueError saying what is wrong."""
+
+    def check(header: list[str]) -> None:
+        if len(header) != 1 + 2 * robots:  # as position_rows says it of a row
+            raise ValueError(
+                f"{len(header)} columns, not {1 + 2 * robots} (step, x and y of {robots})"
+            )
+        if header != positions_header(robots):
+            position_columns(header)  # the reason, where it is one of these
+            raise ValueError(f"the header is not step,x1,y1,...,x{robots},y{robots}")
+
+    return check
 
 
 def coordinate(text: str) -> float:
@@ -132,14 +153,21 @@ def coverage_row(row: list[str]) -> float:
     return finite(row[1], 0.0, 1.0)
 
 
-def rows(path: str | os.PathLike[str], parse: Callable[[list[str]], T]) -> list[T]:
-    """The rows after the header of the CSV file at `path`, each through `parse`;
-    boundedfile.Refused when it is not a regular file, CsvError for a bad row."""
+def rows(
+    path: str | os.PathLike[str],
+    parse: Callable[[list[str]], T],
+    header: Callable[[list[str]], object] | None = None,
+) -> list[T]:
+    """The rows after the header of the CSV file at `path`, each through `parse` (and the
+    header through `header`, when given); boundedfile.Refused when it is not a regular
+    file, CsvError for a bad row (line 1: the header)."""
     f = boundedfile.open_text(path)  # checked on the descriptor: no FIFO swapped in
     with f:
         reader = csv.reader(f)
         try:
-            next(reader, None)
+            first = next(reader, None)
+            if header is not None:
+                header(first or [])
             return [parse(row) for row in reader]
         except (ValueError, csv.Error) as e:  # UnicodeDecodeError is a ValueError
             why = (str(e).splitlines() or ["unreadable"])[0][:200]

@@ -50,16 +50,16 @@ def read_config(d: Path) -> dict:
         raise NotARun(f"{d}/{CONFIG_NAME}: {e}") from None
 
 
-def _rows(d: Path, name: str, parse, required: bool = False) -> list:
+def _rows(d: Path, name: str, parse, required: bool = False, header=None) -> list:
     """The rows after the header of the run's CSV file `name`, each through `parse(row)`
-    (which raises ValueError for a bad one)."""
+    (which raises ValueError for a bad one), the header through `header` when given."""
     path = in_run(d, name)
     if path is None:
         if required:
             raise NotARun(f"{d}: not a run directory with {name} (runs made since 2026-11-24)")
         return []
     try:
-        return csvfiles.rows(path, parse)
+        return csvfiles.rows(path, parse, header)
     except boundedfile.Refused as r:
         raise NotARun(f"{d}/{name}: {boundedfile.describe(r)}") from None
     except csvfiles.CsvError as e:
@@ -76,7 +76,8 @@ def load(run_dir: str | Path) -> dict:
         status = "unknown"
     n = config["robots"]
 
-    positions = _rows(d, POSITIONS_NAME, csvfiles.position_rows(n), required=True)
+    positions = _rows(d, POSITIONS_NAME, csvfiles.position_rows(n), required=True,
+                      header=csvfiles.position_header(n))  # fmt: skip
     last = len(positions) - 1
     links = [list(c) for c in _rows(d, LINKS_NAME, csvfiles.link_rows(n, last))]
 
