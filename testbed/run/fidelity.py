@@ -70,6 +70,19 @@ the world only ran that much longer (`steps`, and positions.csv's rows after the
 stopped). The robots send it before answering any later frame, so it comes late only when
 the planner itself decided after that deadline. The exactness test reads only runs without.
 
+Where the path can be known it is checked, not estimated: a lone robot's run is held against
+its in-process twin (testbed.run.twin: the same world, robot code, seed and phase stepped in
+one thread as a run where nothing is late steps them, exact to the K = 5 runs of seeds 1-3),
+and a run whose positions differ from the twin's is not faithful, whatever its share of late
+work, with the step it left the twin at ("the path differs from its in-process twin from
+step N"). This supersedes the 1% tolerance above for lone robots: whether a late plan (or
+a late answer to a frame, which no measure above counts as late work) changed the path is
+no longer a guess. `with_twin` adds the check to a verdict; result.json's `fidelity.twin`
+records it, or why the twin does not apply (a team, --kill, --isolate, a run that did not
+end by itself). Measured at K = 100 (2026-12): seeds 2-4 answered frames 0 and 1 late
+(the first plan, cold), stood still a step, ran a step behind for about 20 steps and then
+in step again, with the K = 5 step counts: the old verdict called them faithful.
+
 `measures(...)` folds the per-process records (node.lateness dicts, the AODV daemons'
 `timer_lateness_ms`) into one `Measures`; `verdict(...)` judges them; both are pure.
 
