@@ -128,8 +128,9 @@ class RunConfig:
                                maximum=MAX_COORD_M,
                                sweep={GRID}, net=True, in_result=True,
                                grid=GridDim(1, lambda r: f"c{fmt(r)}", seeded=True))  # fmt: skip
-    laser_range: float = option(float, f"laser range, at most {MAX_LASER_RANGE_M:g} m and the "
-                                "map's diagonal", **robot("laser_range"), unit="metres",
+    laser_range: float = option(float, "laser range, at least a map cell and at most "
+                                f"{MAX_LASER_RANGE_M:g} m and the map's diagonal",
+                                **robot("laser_range"), unit="metres",
                                 maximum=MAX_LASER_RANGE_M, metavar="M", sweep={GRID},
                                 in_result=True,
                                 grid=GridDim(2, lambda r: f"l{fmt(r)}", seeded=True))  # fmt: skip
