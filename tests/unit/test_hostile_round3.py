@@ -244,6 +244,18 @@ def test_a_sweep_file_is_checked_by_the_runs_rule(change, key, says):
     assert says in str(e.value) and "\n" not in str(e.value)
 
 
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [(("comm_range = [5]", "comm_range = [5, 5.0000001]"), "grid.comm_range"),
+     (("[run]", 'map = ["a/office.png", "b/office.png"]\n[run]'), "grid.map")],
+)  # fmt: skip
+def test_grid_values_that_one_run_id_names_are_refused(change, key):
+    """They made two runs of one id: the second was taken for done when the first was."""
+    with pytest.raises(UsageError) as e:
+        sweepfile.parse(tomllib.loads(GOOD.replace(*change)), "s.toml")
+    assert str(e.value).startswith(f"sweep file s.toml: {key}:") and "run's id" in str(e.value)
+
+
 def test_a_sweep_json_plan_the_run_would_refuse_is_one_line(tmp_path, capsys):
     sweep = hd.sweep_dir(tmp_path / "sweep")
     config = {"robots": 2, "comm_range": 5.0, "laser_range": 1e-300}
