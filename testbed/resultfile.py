@@ -148,6 +148,7 @@ class HostStalls:
     events: int = 0
     stalled_s: float = 0.0
     deadlines_missed: int = 0
+    granted_s: float = 0.0  # wall seconds the world gave back to the robots after stalls
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -158,6 +159,7 @@ class HostStalls:
             events=get_value(d, "events", (int,), 0),
             stalled_s=get_value(d, "stalled_s", NUM, 0.0),
             deadlines_missed=get_value(d, "deadlines_missed", (int,), 0),
+            granted_s=get_value(d, "granted_s", NUM, 0.0),
         )
 
 

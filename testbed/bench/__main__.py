@@ -23,6 +23,7 @@ BENCHMARKS = (
     "scale",
     "fidelity",
     "cost",
+    "neighbours",
 )
 
 

@@ -11,7 +11,16 @@ have saved it: a stall of 30 ms eats 30 ms at any scale.
 
 `StallTracker` follows the step loop: `late(step, s)` reports the world's lateness for a
 step, `covers(step)` says whether a miss at that step falls in a stall (the steps the stall
-spanned, plus one). Every miss is still counted in the run's `deadline_miss_fraction`; the
+spanned, plus one).
+
+Time stops in a stall. Everything in the machine stood still in it, the robots too, so the
+step it fell in left them less than a period of wall time for their work. The world gives
+that time back: having woken late by L for a step's deadline, it waits `grace(L)` (L, at
+most one period) before it takes the step's commands, and the clock's schedule moves on by
+as much, so the steps after the stall are not squeezed either. A plan that a stall held back
+then lands in the step it would have landed in had the machine not stopped, and the robot's
+path stays what it is without stalls (docs/architecture.md, "Host stalls"). What was given
+back is counted (`granted_s`): the achieved time scale shows it. Every miss is still counted in the run's `deadline_miss_fraction`; the
 ones in stalls are also counted apart, so that the sweep (testbed.sweep.command) slows a team size
 down only for the misses a slower clock would have avoided.
 """
@@ -30,6 +39,18 @@ class StallTracker:
         self.events = 0
         self.stalled_s = 0.0
         self.missed = 0  # misses (world's and robots') in stalls
+        self.granted_s = 0.0  # wall seconds given back to the robots after stalls
+
+    def grace(self, seconds: float) -> float:
+        """Seconds the world waits after waking `seconds` late for a deadline: the time a
+        stall took from the robots in that step (at most one period; none when the world
+        woke within STALL_S)."""
+        if seconds <= STALL_S:
+            return 0.0
+        return min(seconds, self.period)
+
+    def granted(self, seconds: float) -> None:
+        self.granted_s += seconds
 
     def late(self, step: int, seconds: float) -> None:
         """The world was `seconds` late for `step`'s deadline (or with `step`'s frames)."""
@@ -52,4 +73,5 @@ class StallTracker:
             "events": self.events,
             "stalled_s": round(self.stalled_s, 3),
             "deadlines_missed": self.missed,
+            "granted_s": round(self.granted_s, 3),
         }

@@ -25,7 +25,7 @@ from node.timing import STEP_S
 from testbed.run.stalls import StallTracker
 
 MAX_MISSED_STEPS_KEPT = 1000  # per robot, and for the world: which steps were missed
-NO_STALLS = {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0}
+NO_STALLS = {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0, "granted_s": 0.0}
 
 
 @dataclass(frozen=True)
@@ -91,10 +91,18 @@ class StepClock:
         """Seconds past the current step's deadline at `now` (negative: early)."""
         return now - self.deadline()
 
-    def woke(self, now: float) -> None:
+    def woke(self, now: float) -> float:
         """The world woke at `now` for the current step's deadline; waking late is a host
-        stall when it is over the stall threshold."""
-        self.stalls.late(self.step, self.late(now))
+        stall when it is over the stall threshold. Returns the seconds the world waits
+        before it takes the step's commands (testbed.run.stalls, "Time stops in a stall"):
+        the schedule moves by as much, and the deadline is then `now` plus that."""
+        late = self.late(now)
+        self.stalls.late(self.step, late)
+        grace = self.stalls.grace(late)
+        if grace > 0:
+            self.stalls.granted(grace)
+            self.anchor += late + grace
+        return grace
 
     def robots_missed(self, misses: int) -> None:
         """`misses` robots had not answered the current step's frame by its deadline."""

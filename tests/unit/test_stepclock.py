@@ -49,7 +49,8 @@ def test_misses_fractions_and_host_stalls_are_computed_once_in_the_summary():
     assert s.steps == 9 and s.loop_wall_s == pytest.approx(1.25)
     assert s.time_scale_achieved == pytest.approx(9 * 0.1 / 1.25)
     assert (s.missed_robots, s.missed_world, s.deadlines_missed) == (3, 0, 3)
-    assert s.stalls == {"events": 1, "stalled_s": 0.03, "deadlines_missed": 2}
+    assert s.stalls == {"events": 1, "stalled_s": 0.03, "deadlines_missed": 2,
+                        "granted_s": 0.03}  # fmt: skip
     assert s.miss_fraction == round(3 / (9 * 4), 5)
     # Host stalls excluded: only the miss no slower clock would have helped is left.
     assert s.miss_fraction_outside_stalls == round(1 / (9 * 4), 5)
@@ -63,7 +64,25 @@ def test_a_loop_that_did_not_end_has_no_wall_time_and_no_scale():
     assert (s.steps, s.loop_wall_s, s.time_scale_achieved) == (1, 0.0, 0.0)
     empty = no_clock(4)
     assert (empty.steps, empty.deadlines_missed, empty.miss_fraction) == (0, 0, 0.0)
-    assert empty.stalls == {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0}
+    assert empty.stalls == {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0,
+                            "granted_s": 0.0}  # fmt: skip
+
+
+def test_a_stall_gives_the_robots_back_their_time_and_moves_the_schedule():
+    """Woken 30 ms late (period 100 ms), the world waits 30 ms more before it takes the
+    step's commands, and every later deadline moves by the 60 ms; a stall longer than a
+    period gives back one period; an ordinary late wake-up gives back nothing."""
+    c = StepClock(time_scale=1.0, robots=1, now=T0)
+    assert c.woke(T0 + 0.1 + STALL_S / 2) == 0.0
+    assert c.deadline() == pytest.approx(T0 + 0.1)
+    c.advance()
+    assert c.woke(T0 + 0.2 + 0.03) == pytest.approx(0.03)
+    assert c.deadline() == pytest.approx(T0 + 0.26)  # the commands are taken then
+    c.advance()
+    assert c.deadline() == pytest.approx(T0 + 0.36)  # a full period for the next step
+    assert c.woke(T0 + 0.36 + 0.5) == pytest.approx(0.1)
+    assert c.deadline() == pytest.approx(T0 + 0.36 + 0.5 + 0.1)
+    assert c.summary().stalls["granted_s"] == pytest.approx(0.13)
 
 
 def test_the_world_missed_steps_kept_are_capped():
