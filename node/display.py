@@ -117,7 +117,12 @@ class Display:
 
     def _visualization(self) -> None:
         while not self.stopping.is_set():
-            msg = self.link.recv(timeout=0.5)
+            try:
+                msg = self.link.recv(timeout=0.5)
+            except ValueError as e:  # as the robot's motion control: counted, dropped
+                self.malformed += 1
+                log.warning("dropped a malformed body message: %s", e)
+                continue
             if msg is None:
                 continue
             if msg[0] == "end":

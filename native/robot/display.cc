@@ -90,7 +90,15 @@ void Display::visualization() {
     std::string err;
     while (!stopping) {
         int got = link_.recv(0.5, msg, err);
-        if (got <= 0) continue;
+        if (got < 0) {  // as node/display.py: counted, dropped
+            {
+                std::lock_guard<std::mutex> g(counts_lock_);
+                ++malformed_;
+            }
+            LOG_WARN("node.display", "dropped a malformed body message: %s", err.c_str());
+            continue;
+        }
+        if (got == 0) continue;
         if (msg.kind == "end") return;
         if (msg.kind != "frame") continue;
         const Frame& f = msg.frame;
