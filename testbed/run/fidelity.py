@@ -82,9 +82,9 @@ records it, or why the twin does not apply (a team, --kill, --isolate, a run tha
 end by itself). Measured (2026-11-29, 2 cores, load 2-3.5): at K = 100, seeds 2-4 answered
 frames 0 and 1 after their deadlines (2 of ~2000, no plan late), stood still a step, ran a
 step behind their twins for 20 steps, then in step again, with the K = 5 step counts;
-at K = 5, seed 1 under host stalls missed 6 deadlines (1 outside the stalls, no plan late)
-and left its twin at step 1523 for the rest of its run. The old verdict called all of them
-faithful.
+at K = 5, seed 1 beside host stalls missed 9 deadlines (4 outside the stalls, 0.1%; no plan
+late) and left its twin at step 1523 for the rest of its run (the same 1901 steps). The
+old verdict called all of them faithful.
 
 `measures(...)` folds the per-process records (node.lateness dicts, the AODV daemons'
 `timer_lateness_ms`) into one `Measures`; `verdict(...)` judges them; both are pure.
