@@ -79,12 +79,13 @@ step N"). This supersedes the 1% tolerance above for lone robots: whether a late
 a late answer to a frame, which no measure above counts as late work) changed the path is
 no longer a guess. `with_twin` adds the check to a verdict; result.json's `fidelity.twin`
 records it, or why the twin does not apply (a team, --kill, --isolate, a run that did not
-end by itself). Measured (2026-11-29, 2 cores, load 2-3.5): at K = 100, seeds 2-4 answered
-frames 0 and 1 after their deadlines (2 of ~2000, no plan late), stood still a step, ran a
-step behind their twins for 20 steps, then in step again, with the K = 5 step counts;
-at K = 5, seed 1 beside host stalls missed 9 deadlines (4 outside the stalls, 0.1%; no plan
-late) and left its twin at step 1523 for the rest of its run (the same 1901 steps). The
-old verdict called all of them faithful.
+end by itself). Measured (2026-11-29, 2 cores, load 2-3.5): at K = 100, seeds 2, 3 and 4
+each stood still at step 2 (seed 2 answered frames 0 and 1 after their deadlines: 2 of
+1989, no plan late), ran a step behind their twins for 20 steps, then in step again, with
+the K = 5 step counts, and seeds 2 and 4 were judged faithful without the twin; at K = 5,
+seed 1 beside host stalls missed 9 deadlines (4 outside the stalls, 0.1%; no plan late)
+and left its twin at step 1523 for the rest of its run (the same 1901 steps), judged
+faithful without the twin.
 
 `measures(...)` folds the per-process records (node.lateness dicts, the AODV daemons'
 `timer_lateness_ms`) into one `Measures`; `verdict(...)` judges them; both are pure.
