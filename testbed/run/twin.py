@@ -45,7 +45,8 @@ robot), --isolate (a window the twin does not play), and a run that did not end 
 `check(out, ...)`: a finished run's positions.csv held against its twin, row for row (the
 robot's finish and its standing still afterwards included: a "done" that reached the world
 late only adds rows where the robot stands where the twin ended), for the fidelity verdict
-(testbed.run.fidelity.with_twin).
+(testbed.run.fidelity.with_twin). `python -m testbed.run.twin RUN_DIR...` checks finished runs
+after the fact (runs written before the check, a sweep's lone runs), one line each.
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
+import json
 import logging
 import os
 import time
@@ -306,3 +308,33 @@ def check(out: str, config: Mapping[str, Any], status: str) -> dict | str:
     if at is not None:
         result.update(differs_from_step=at, steps_differing=count)
     return result
+
+
+def main(argv: list[str]) -> int:
+    """`python -m testbed.run.twin RUN_DIR...`: each finished run held against its twin
+    (one line each: its fidelity.twin as the results would record it); 1 when a path differs."""
+    from common.boundedfile import Refused
+    from testbed.resultfile import RunResult
+    from testbed.run import configfile
+
+    differs = False
+    for out in argv:
+        result = RunResult.read(out)
+        try:
+            config = configfile.read(configfile.config_path(out)).to_dict()
+        except (Refused, ValueError) as e:
+            config = None
+            outcome: dict | str = f"not applicable: config.json: {e}"
+        if result is None:
+            outcome = "not applicable: no readable result.json"
+        elif config is not None:
+            outcome = check(out, config, result.status)
+        differs = differs or (isinstance(outcome, dict) and not outcome["ok"])
+        print(f"{out}: {json.dumps(outcome)}")
+    return 1 if differs else 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv[1:]))

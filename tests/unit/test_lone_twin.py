@@ -138,3 +138,8 @@ def test_a_path_equal_to_its_twin_or_no_twin_leaves_the_verdict():
     v = fidelity.with_twin(late, {"ok": True, "steps": 1901, "wall_s": 0.4})
     assert v["ok"] is False and v["reason"] == late["reason"]
     assert list(v)[:2] == ["ok", "reason"]
+
+
+def test_main_checks_run_directories(tmp_path, capsys):
+    assert twin.main([str(tmp_path / "none")]) == 0
+    assert "not applicable: no readable result.json" in capsys.readouterr().out
