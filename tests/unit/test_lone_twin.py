@@ -40,7 +40,7 @@ def test_the_twin_takes_the_runs_steps_and_path(seed):
 
 def test_the_time_scale_and_the_network_change_nothing():
     a = twin.twin(_cfg(1))
-    b = twin.twin(_cfg(1, time_scale=100.0, routing="olsr", loss_pct=10.0))
+    b = twin.twin(_cfg(1, time_scale=100.0, routing="babel", loss_pct=10.0))
     assert a.rows == b.rows
 
 
