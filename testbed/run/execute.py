@@ -225,6 +225,8 @@ class Run:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
                 self.parts.mark("steps")
+                # Of those, the wait for the robots' first answers (steploop's warm-up).
+                self.parts.parts["steps_warmup"] = round(loop.clock.warmup_s, 3)
                 self._say_steps_over()
                 self._end_processes(started)
             self.parts.mark("network_down")

@@ -19,10 +19,12 @@ that time back: having woken late by L for a step's deadline, it waits `grace(L)
 most one period) before it takes the step's commands, and the clock's schedule moves on by
 as much, so the steps after the stall are not squeezed either. A plan that a stall held back
 then lands in the step it would have landed in had the machine not stopped, and the robot's
-path stays what it is without stalls (docs/architecture.md, "Host stalls"). What was given
-back is counted (`granted_s`): the achieved time scale shows it. Every miss is still counted in the run's `deadline_miss_fraction`; the
-ones in stalls are also counted apart, so that the sweep (testbed.sweep.command) slows a team size
-down only for the misses a slower clock would have avoided.
+path stays what it is without stalls (docs/architecture.md, "The process tree and its
+priorities"). What was given back is counted (`granted_s`): the achieved time scale shows it.
+
+Every miss is still counted in the run's `deadline_miss_fraction`; the ones in stalls are
+also counted apart, so that the sweep (testbed.sweep.command) slows a team size down only for
+the misses a slower clock would have avoided.
 """
 
 from __future__ import annotations

@@ -81,6 +81,7 @@ class StepClock:
         self.missed_robots = 0
         self.world_missed_steps: list[tuple[int, float]] = []
         self.stopped_at: float | None = None
+        self.warmup_s = 0.0  # waited for the robots' first answers (not emulated time)
 
     def deadline(self, step: int | None = None) -> float:
         """When `step`'s commands are due (default: the next step's, `self.step + 1`'s
@@ -103,6 +104,12 @@ class StepClock:
             self.stalls.granted(grace)
             self.anchor += late + grace
         return grace
+
+    def warmed_up(self, seconds: float) -> None:
+        """The world waited `seconds` for the robots' first answers (the step loop's warm-up):
+        the schedule moves by as much, and it is counted apart (`warmup_s`)."""
+        self.anchor += seconds
+        self.warmup_s += seconds
 
     def robots_missed(self, misses: int) -> None:
         """`misses` robots had not answered the current step's frame by its deadline."""

@@ -35,6 +35,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+WARMUP_STEPS = 3  # the first steps wait for every robot's answer (see _collect_commands)
+WARMUP_WAIT_S = 5.0  # at most this long a step: a robot that is not up by then misses it
+WAIT_POLL_S = 0.0002
+
 
 class StepLoop:
     """The steps of a started run: `run()` sends step 0's frames and steps until the end."""
@@ -108,7 +112,10 @@ class StepLoop:
         """Sleep until the step's deadline, then take every command that arrived by then
         and count who had not answered the step's frame. The commands wait in their
         sockets meanwhile: nothing is done with one before the deadline, and waking for
-        each (once per robot per step) cost the world more than its own step."""
+        each (once per robot per step) cost the world more than its own step. In the first
+        WARMUP_STEPS steps the world waits for every live robot's answer (up to
+        WARMUP_WAIT_S), and the schedule moves by the wait: a robot's first frames and
+        first plan run cold (its pages, its caches), and at time scale 100 a step is 1 ms."""
         clock = self.clock
         step = clock.step
         left = clock.deadline() - time.monotonic()
@@ -117,6 +124,14 @@ class StepLoop:
         grace = clock.woke(time.monotonic())
         if grace > 0:  # a host stall stopped the robots too: their time is given back
             time.sleep(grace)
+        self._take_commands(step)
+        if step < WARMUP_STEPS:
+            clock.warmed_up(self._wait_for_answers(step, WARMUP_WAIT_S))
+        for r in self.robots.values():
+            if r.missed_deadline(step):
+                clock.robots_missed(1)
+
+    def _take_commands(self, step: int) -> None:
         for k, msg in self.server.take(self.n):
             if not 1 <= k <= self.n:
                 continue
@@ -126,9 +141,19 @@ class StepLoop:
                 self.world.command(k - 1, msg[2])
             elif msg[0] == "done":
                 r.finished(step, msg[1])
-        for r in self.robots.values():
-            if r.missed_deadline(step):
-                clock.robots_missed(1)
+
+    def _wait_for_answers(self, step: int, limit_s: float) -> float:
+        """Take commands until every live robot answered `step`'s frame (or `limit_s`
+        passed); returns the seconds waited."""
+        t0 = time.monotonic()
+        waited = 0.0
+        while waited < limit_s and any(
+            not r.gone and r.finish_step is None and r.last_cmd < step for r in self.robots.values()
+        ):
+            time.sleep(WAIT_POLL_S)
+            self._take_commands(step)
+            waited = time.monotonic() - t0
+        return waited
 
     def _update_links(self, step: int) -> None:
         """The new positions to the topology controller; links.csv gets what changed."""
