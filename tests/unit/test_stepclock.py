@@ -92,3 +92,14 @@ def test_the_world_missed_steps_kept_are_capped():
         c.world_done(c.deadline() + 0.001)
     assert c.missed_world == MAX_MISSED_STEPS_KEPT + 5
     assert len(c.world_missed_steps) == MAX_MISSED_STEPS_KEPT
+
+
+def test_the_warm_up_wait_moves_the_schedule_and_is_counted_apart():
+    """Waiting 0.4 s for the robots' first answers misses nothing and moves every later
+    deadline by the wait."""
+    c = StepClock(time_scale=10.0, robots=2, now=T0)
+    assert c.woke(T0 + 0.01) == 0.0
+    c.warmed_up(0.4)
+    c.advance()
+    assert c.deadline() == pytest.approx(T0 + 0.02 + 0.4)
+    assert (c.warmup_s, c.missed_robots, c.missed_world) == (pytest.approx(0.4), 0, 0)
