@@ -43,11 +43,17 @@ STEPCORE := build/libstepcore.so
 # float rounds as in the Python robot.
 TB_ROBOT := build/tb-robot
 TB_ROBOT_SRC := $(wildcard native/robot/*.cc) native/stepcore/stepcore.cc
-TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h
+# Its command line is NodeArgs' (node/launch.py): node/argsgen.py writes the flags, bounds,
+# defaults and help as a table that native/robot/args.cc reads (rewritten only when it changes).
+TB_ROBOT_ARGS := build/gen/node_args.h
+TB_ROBOT_ARGS_FROM := node/argsgen.py node/launch.py node/rays.py node/messaging/maps.py \
+	node/messaging/__init__.py topology/names.py topology/spec.py
+TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h \
+	$(TB_ROBOT_ARGS)
 TB_ROBOT_UNBUILT := build/tb-robot.unbuilt
 # Warnings are shown, not fatal: a newer g++ (Debian 13's 14, say) may warn where 12 did not,
 # and a user's setup must not stop on that.
-TB_ROBOT_FLAGS := -std=c++17 -ffp-contract=off -Wall -Wextra -pthread
+TB_ROBOT_FLAGS := -std=c++17 -ffp-contract=off -Wall -Wextra -pthread -I$(dir $(TB_ROBOT_ARGS))
 TB_ROBOT_LIBS := -lnng -lz
 TB_ROBOT_CAN = command -v g++ >/dev/null && [ -e /usr/include/nng/nng.h ] && [ -e /usr/include/zlib.h ]
 # ZeroMQ too where libzmq3-dev is there (read when the recipe runs, after apt): `tb-robot
@@ -94,6 +100,9 @@ $(TB_ROBOT): $(TB_ROBOT_DEPS)
 		g++ -O3 $(TB_ROBOT_FLAGS) -o $@ $(TB_ROBOT_SRC) $(TB_ROBOT_LIBS) $(TB_ROBOT_ZMQ) || { rm -f $@; \
 		echo "C++ robot not built: g++ failed on native/robot (above); the Python robot runs" \
 			| tee $(TB_ROBOT_UNBUILT); }; fi
+
+$(TB_ROBOT_ARGS): $(TB_ROBOT_ARGS_FROM) | venv
+	$(PY) -m node.argsgen $@
 
 build/asan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }

@@ -1,223 +1,351 @@
+// The robot's command line, read as node/launch.py's NodeArgs.parse reads it, from the table
+// make writes from NodeArgs (build/gen/node_args.h, node/argsgen.py): the flags, their types,
+// bounds, choices, defaults and help are there, not here. Here: how each type is spelled
+// (node.launch's WHOLE and REAL, robot_number, shape, steps) and NodeArgs.refusal's checks
+// across flags. tests/unit/test_robot_cli_contract.py holds the two robots to one verdict.
 #include "args.h"
 
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
-#include <functional>
-#include <map>
-#include <set>
+#include <cstring>
+
+#include "laser.h"
+#include "node_args.h"
 
 namespace tb {
 
 namespace {
 
-using Setter = std::function<bool(const std::string&, Args&, std::string&)>;
+using gen::Flag;
+using gen::Kind;
+
+static_assert(gen::MAX_RANGE_M == MAX_RANGE_M, "laser.h's MAX_RANGE_M is node.rays'");
+
+// Where each NodeArgs field goes, in NodeArgs' order. The static_asserts below hold this
+// list to the generated table, name for name and type for type: a field added to NodeArgs
+// and not here stops the build.
+struct Binding {
+    const char* field;
+    int Args::*whole;
+    double Args::*real;
+    std::string Args::*text;
+    std::set<int64_t> Args::*steps;
+};
+
+constexpr Binding W(const char* f, int Args::*m) { return {f, m, nullptr, nullptr, nullptr}; }
+constexpr Binding R(const char* f, double Args::*m) { return {f, nullptr, m, nullptr, nullptr}; }
+constexpr Binding T(const char* f, std::string Args::*m) {
+    return {f, nullptr, nullptr, m, nullptr};
+}
+constexpr Binding S(const char* f, std::set<int64_t> Args::*m) {
+    return {f, nullptr, nullptr, nullptr, m};
+}
+constexpr Binding SHAPE(const char* f) { return {f, nullptr, nullptr, nullptr, nullptr}; }
+
+constexpr Binding BINDINGS[] = {
+    W("robot", &Args::robot),
+    W("robots", &Args::robots),
+    T("body", &Args::body),
+    T("role", &Args::role),
+    T("events", &Args::events),
+    SHAPE("map_size"),  // rows and cols
+    R("cell", &Args::cell),
+    R("laser_range", &Args::laser_range),
+    W("laser_rays", &Args::laser_rays),
+    R("speed", &Args::speed),
+    R("radius", &Args::radius),
+    W("plan_period", &Args::plan_period),
+    W("map_period", &Args::map_period),
+    R("time_scale", &Args::time_scale),
+    W("timer_phase", &Args::timer_phase),
+    T("iface", &Args::iface),
+    W("flood_port", &Args::flood_port),
+    T("flood", &Args::flood),
+    T("coordination", &Args::coordination),
+    W("goal_port", &Args::goal_port),
+    T("middleware", &Args::middleware),
+    T("maps", &Args::maps),
+    T("bind", &Args::bind),
+    T("out_dir", &Args::out_dir),
+    S("snapshots", &Args::snapshots),
+    W("video_every", &Args::video_every),
+};
+constexpr int N_BINDINGS = sizeof(BINDINGS) / sizeof(BINDINGS[0]);
+
+constexpr bool same_text(const char* a, const char* b) {
+    while (*a && *a == *b) ++a, ++b;
+    return *a == *b;
+}
+
+constexpr bool fits(const Flag& f, const Binding& b) {
+    switch (f.kind) {
+    case Kind::Int:
+    case Kind::Robot: return b.whole != nullptr;
+    case Kind::Real: return b.real != nullptr;
+    case Kind::String:
+    case Kind::Choice: return b.text != nullptr;
+    case Kind::Steps: return b.steps != nullptr;
+    case Kind::Shape: return same_text(b.field, "map_size");
+    }
+    return false;
+}
+
+constexpr bool bindings_match() {
+    for (int i = 0; i < gen::N_FLAGS; ++i)
+        if (!same_text(gen::FLAGS[i].field, BINDINGS[i].field) || !fits(gen::FLAGS[i], BINDINGS[i]))
+            return false;
+    return true;
+}
+
+static_assert(N_BINDINGS == gen::N_FLAGS, "NodeArgs has a field args.cc does not bind");
+static_assert(bindings_match(), "args.cc's BINDINGS are not NodeArgs' fields in order");
 
 std::string quoted(const std::string& t) { return "'" + t + "'"; }
+
+std::string number_text(double v) {
+    char buf[64];
+    snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+}
+
+bool ascii_digit(char c) { return c >= '0' && c <= '9'; }
 
 bool all_digits(const std::string& t, size_t lo, size_t hi) {
     if (t.size() < lo || t.size() > hi) return false;
     for (char c : t)
-        if (c < '0' || c > '9') return false;
+        if (!ascii_digit(c)) return false;
     return true;
 }
 
-// Python's int(): optional blanks and sign, digits with single underscores between them.
-bool int_text(const std::string& t, std::string& digits) {
-    size_t a = t.find_first_not_of(" \t"), b = t.find_last_not_of(" \t");
-    if (a == std::string::npos) return false;
-    std::string s = t.substr(a, b - a + 1);
-    size_t i = (s[0] == '-' || s[0] == '+') ? 1 : 0;
-    digits = s.substr(0, i);
-    bool prev_digit = false;
-    for (; i < s.size(); ++i) {
-        if (s[i] >= '0' && s[i] <= '9') {
-            digits += s[i];
-            prev_digit = true;
-        } else if (s[i] == '_' && prev_digit && i + 1 < s.size()) {
-            prev_digit = false;
-        } else {
-            return false;
-        }
-    }
-    return prev_digit;
+// Digits (node.launch: [0-9]+) as a value; false beyond WHOLE_MAX, however many zeros lead.
+bool digits_value(const std::string& d, long long& v) {
+    size_t i = d.find_first_not_of('0');
+    std::string sig = i == std::string::npos ? "" : d.substr(i);
+    if (sig.size() > 10) return false;
+    v = sig.empty() ? 0 : std::stoll(sig);
+    return v <= gen::WHOLE_MAX;
 }
 
-// common.argtypes.number: a finite int or float, within the bounds.
-Setter number_int(int Args::*field, const char* flag, const char* bound, long lo) {
-    return [=](const std::string& t, Args& a, std::string& err) {
-        std::string digits;
-        if (!int_text(t, digits)) {
-            err = std::string(flag) + " must be a whole number, not " + quoted(t);
-            return false;
-        }
-        errno = 0;
-        long v = strtol(digits.c_str(), nullptr, 10);
-        if (errno || v > 1000000000L || v < -1000000000L) {
-            err = std::string(flag) + " is out of range: " + t;
-            return false;
-        }
-        if ((bound[0] == '>' && !(v > lo)) || (bound[0] == 'm' && v < lo)) {
-            err = std::string(flag) + " must be " +
-                  (bound[0] == '>' ? "greater than " : "at least ") + std::to_string(lo) +
-                  ", not " + t;
-            return false;
-        }
-        a.*field = (int)v;
-        return true;
+// node.launch.WHOLE: -?[0-9]+
+bool whole_spelling(const std::string& t) {
+    size_t i = !t.empty() && t[0] == '-' ? 1 : 0;
+    return all_digits(t.substr(i), 1, std::string::npos);
+}
+
+// node.launch.REAL: -?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?
+bool real_spelling(const std::string& t) {
+    size_t i = 0, n = t.size();
+    auto digits = [&]() {
+        size_t from = i;
+        while (i < n && ascii_digit(t[i])) ++i;
+        return i - from;
     };
+    if (i < n && t[i] == '-') ++i;
+    size_t before = digits();
+    if (i < n && t[i] == '.') {
+        ++i;
+        size_t after = digits();
+        if (!before && !after) return false;
+    } else if (!before) {
+        return false;
+    }
+    if (i < n && (t[i] == 'e' || t[i] == 'E')) {
+        ++i;
+        if (i < n && (t[i] == '-' || t[i] == '+')) ++i;
+        if (!digits()) return false;
+    }
+    return i == n;
 }
 
-Setter number_real(double Args::*field, const char* flag) {
-    return [=](const std::string& t, Args& a, std::string& err) {
-        char* end = nullptr;
-        errno = 0;
-        double v = strtod(t.c_str(), &end);
-        if (t.empty() || *end != '\0' || t.find_first_of("xXpP") != std::string::npos) {
-            err = std::string(flag) + " must be a number, not " + quoted(t);
+// common.argtypes.number's bounds, in its order.
+bool within(const Flag& f, double v, const std::string& t, std::string& err) {
+    std::string why;
+    if (f.has_above && !(v > f.above))
+        why = "greater than " + number_text(f.above);
+    else if (f.has_minimum && v < f.minimum)
+        why = f.minimum == 0 ? "not negative" : "at least " + number_text(f.minimum);
+    else if (f.has_maximum && std::fabs(v) > f.maximum)
+        why = "within " + number_text(f.maximum) + " of 0";
+    if (why.empty()) return true;
+    err = "argument " + std::string(f.flag) + ": " + f.flag + " must be " + why + ", not " + t;
+    return false;
+}
+
+// One flag's value into `a`, as NodeArgs' parser reads it; false with the line in `err`.
+bool set(int at, const std::string& t, Args& a, std::string& err) {
+    const Flag& f = gen::FLAGS[at];
+    const Binding& b = BINDINGS[at];
+    std::string arg = "argument " + std::string(f.flag) + ": ";
+    switch (f.kind) {
+    case Kind::Int: {
+        long long v = 0;
+        if (!whole_spelling(t)) {
+            err = arg + f.flag + " must be a whole number, not " + quoted(t);
             return false;
         }
+        if (!digits_value(t[0] == '-' ? t.substr(1) : t, v)) {
+            err = arg + f.flag + " must be within " + std::to_string(gen::WHOLE_MAX) +
+                  " of 0, not " + t;
+            return false;
+        }
+        if (t[0] == '-') v = -v;
+        if (!within(f, (double)v, t, err)) return false;
+        a.*b.whole = (int)v;
+        return true;
+    }
+    case Kind::Real: {
+        if (!real_spelling(t)) {
+            err = arg + f.flag + " must be a number, not " + quoted(t);
+            return false;
+        }
+        double v = strtod(t.c_str(), nullptr);
         if (!std::isfinite(v)) {
-            err = std::string(flag) + " must be finite, not " + quoted(t);
+            err = arg + f.flag + " must be finite, not " + quoted(t);
             return false;
         }
-        if (!(v > 0)) {
-            err = std::string(flag) + " must be greater than 0, not " + t;
-            return false;
-        }
-        a.*field = v;
+        if (!within(f, v, t, err)) return false;
+        a.*b.real = v;
         return true;
-    };
-}
-
-Setter text(std::string Args::*field) {
-    return [=](const std::string& t, Args& a, std::string&) {
-        a.*field = t;
-        return true;
-    };
-}
-
-Setter choice(std::string Args::*field, const char* flag, std::set<std::string> allowed) {
-    return [=](const std::string& t, Args& a, std::string& err) {
-        if (!allowed.count(t)) {
-            err = std::string("argument ") + flag + ": invalid choice: " + quoted(t);
-            return false;
-        }
-        a.*field = t;
-        return true;
-    };
-}
-
-// node.launch.steps: comma-separated whole numbers as Python's int() reads them, blank
-// parts skipped.
-bool steps_list(const std::string& t, Args& a, std::string& err) {
-    std::set<int64_t> out;
-    for (size_t at = 0; at <= t.size();) {
-        size_t end = std::min(t.find(',', at), t.size());
-        std::string part = t.substr(at, end - at), digits;
-        at = end + 1;
-        if (part.find_first_not_of(" \t") == std::string::npos) continue;
-        bool whole = int_text(part, digits);
-        errno = 0;
-        long long v = whole ? strtoll(digits.c_str(), nullptr, 10) : 0;
-        if (!whole || errno) {
-            err = "argument --snapshots: " + quoted(t) + " is not a list of steps";
-            return false;
-        }
-        out.insert(v);
     }
-    a.snapshots = std::move(out);
-    return true;
+    case Kind::String:
+        a.*b.text = t;
+        return true;
+    case Kind::Choice:
+        for (int i = 0; i < f.n_choices; ++i)
+            if (t == f.choices[i]) {
+                a.*b.text = t;
+                return true;
+            }
+        err = arg + "invalid choice: " + quoted(t);
+        return false;
+    case Kind::Robot: {  // node.launch.robot_number: r?[0-9]{1,ROBOT_DIGITS}, at least 1
+        std::string d = !t.empty() && t[0] == 'r' ? t.substr(1) : t;
+        if (!all_digits(d, 1, gen::ROBOT_DIGITS) || std::stoi(d) < 1) {
+            err = arg + quoted(t) + " is not a robot name like r3";
+            return false;
+        }
+        a.*b.whole = std::stoi(d);
+        return true;
+    }
+    case Kind::Shape: {  // node.launch.shape: [0-9]{1,SHAPE_DIGITS}x[0-9]{1,SHAPE_DIGITS}
+        size_t x = t.find('x');
+        std::string r = t.substr(0, x), c = x == std::string::npos ? "" : t.substr(x + 1);
+        if (!all_digits(r, 1, gen::SHAPE_DIGITS) || !all_digits(c, 1, gen::SHAPE_DIGITS) ||
+            std::stoi(r) < 1 || std::stoi(c) < 1) {
+            err = arg + quoted(t) + " is not ROWSxCOLS";
+            return false;
+        }
+        a.rows = std::stoi(r);
+        a.cols = std::stoi(c);
+        return true;
+    }
+    case Kind::Steps: {  // node.launch.steps: [0-9]+ within WHOLE_MAX, comma-separated
+        std::set<int64_t> out;
+        for (size_t at = 0; at <= t.size();) {
+            size_t end = std::min(t.find(',', at), t.size());
+            std::string part = t.substr(at, end - at);
+            at = end + 1;
+            if (part.empty()) continue;
+            long long v = 0;
+            if (!all_digits(part, 1, std::string::npos) || !digits_value(part, v)) {
+                err = arg + quoted(t) + " is not a list of steps";
+                return false;
+            }
+            out.insert(v);
+        }
+        a.*b.steps = std::move(out);
+        return true;
+    }
+    }
+    return false;
 }
 
-const std::map<std::string, Setter>& table() {
-    static const std::map<std::string, Setter> t = {
-        {"--robot",
-         [](const std::string& v, Args& a, std::string& err) {
-             std::string d = !v.empty() && v[0] == 'r' ? v.substr(1) : v;
-             if (!all_digits(d, 1, 3) || std::stoi(d) < 1) {
-                 err = "argument --robot: " + quoted(v) + " is not a robot name like r3";
-                 return false;
-             }
-             a.robot = std::stoi(d);
-             return true;
-         }},
-        {"--robots", number_int(&Args::robots, "--robots", ">", 0)},
-        {"--body", text(&Args::body)},
-        {"--role", choice(&Args::role, "--role", {"robot", "display"})},
-        {"--events", text(&Args::events)},
-        {"--map-size",
-         [](const std::string& v, Args& a, std::string& err) {
-             size_t x = v.find('x');
-             std::string r = v.substr(0, x), c = x == std::string::npos ? "" : v.substr(x + 1);
-             if (!all_digits(r, 1, 5) || !all_digits(c, 1, 5) || std::stoi(r) < 1 ||
-                 std::stoi(c) < 1) {
-                 err = "argument --map-size: " + quoted(v) + " is not ROWSxCOLS";
-                 return false;
-             }
-             a.rows = std::stoi(r);
-             a.cols = std::stoi(c);
-             return true;
-         }},
-        {"--cell", number_real(&Args::cell, "--cell")},
-        {"--laser-range", number_real(&Args::laser_range, "--laser-range")},
-        {"--laser-rays", number_int(&Args::laser_rays, "--laser-rays", "m", 4)},
-        {"--speed", number_real(&Args::speed, "--speed")},
-        {"--radius", number_real(&Args::radius, "--radius")},
-        {"--plan-period", number_int(&Args::plan_period, "--plan-period", ">", 0)},
-        {"--map-period", number_int(&Args::map_period, "--map-period", "m", 1)},
-        {"--time-scale", number_real(&Args::time_scale, "--time-scale")},
-        {"--timer-phase", number_int(&Args::timer_phase, "--timer-phase", "-", 0)},
-        {"--iface", text(&Args::iface)},
-        {"--flood-port", number_int(&Args::flood_port, "--flood-port", ">", 0)},
-        {"--flood", choice(&Args::flood, "--flood", {"pruned", "blind"})},
-        {"--coordination", choice(&Args::coordination, "--coordination", {"paper", "ours"})},
-        {"--goal-port", number_int(&Args::goal_port, "--goal-port", ">", 0)},
-        {"--middleware", choice(&Args::middleware, "--middleware",
-                                {"nanomsg", "zeromq", "zeromq-reqrep", "zenoh", "dds"})},
-        {"--maps", choice(&Args::maps, "--maps", {"flood", "pubsub"})},
-        {"--bind", text(&Args::bind)},
-        {"--out-dir", text(&Args::out_dir)},
-        {"--snapshots", steps_list},
-        {"--video-every", number_int(&Args::video_every, "--video-every", ">", 0)},
-    };
-    return t;
+int flag_index(const std::string& name) {
+    for (int i = 0; i < gen::N_FLAGS; ++i)
+        if (name == gen::FLAGS[i].flag) return i;
+    return -1;
+}
+
+// NodeArgs.refusal: what is wrong across flags, or "".
+std::string refusal(const Args& a) {
+    if (!(a.cell <= a.laser_range && a.laser_range <= gen::MAX_RANGE_M))
+        return "--laser-range " + number_text(a.laser_range) + " must be at least a cell (" +
+               number_text(a.cell) + " m) and at most " + number_text(gen::MAX_RANGE_M) + " m";
+    if (a.laser_range / a.cell > gen::MAX_LASER_CELLS)
+        return "--laser-range " + number_text(a.laser_range) + " is more than " +
+               number_text(gen::MAX_LASER_CELLS) + " cells of " + number_text(a.cell) + " m";
+    if (a.role == "display" && a.out_dir.empty()) return "the display needs --out-dir";
+    if (a.maps == "pubsub") {
+        std::string names;
+        for (int i = 0; i < gen::N_PUBSUB_MIDDLEWARES; ++i) {
+            if (a.middleware == gen::PUBSUB_MIDDLEWARES[i]) return "";
+            names += std::string(i ? " or " : "") + gen::PUBSUB_MIDDLEWARES[i];
+        }
+        return "--maps pubsub needs --middleware " + names + " (not " + a.middleware +
+               "): maps are published on their topics";
+    }
+    return "";
 }
 
 }  // namespace
 
-bool parse_args(const std::vector<std::string>& argv, Args& out, std::string& err) {
+const char* args_listing() { return gen::LISTING; }
+
+ArgsVerdict read_args(const std::vector<std::string>& argv, Args& out, std::string& err) {
     out = Args();
-    std::set<std::string> given;
-    for (size_t i = 0; i < argv.size(); ++i) {
-        std::string flag = argv[i], value;
-        size_t eq = flag.find('=');
-        bool inline_value = flag.rfind("--", 0) == 0 && eq != std::string::npos;
-        if (inline_value) {
-            value = flag.substr(eq + 1);
-            flag = flag.substr(0, eq);
+    for (int i = 0; i < gen::N_FLAGS; ++i)
+        if (gen::FLAGS[i].default_text && !set(i, gen::FLAGS[i].default_text, out, err)) {
+            err = "NodeArgs' default does not read back: " + err;
+            return ArgsVerdict::refused;
         }
-        auto it = table().find(flag);
-        if (it == table().end()) {
-            err = "unrecognized arguments: " + argv[i];
-            return false;
+    // node.launch._tokens: a flag's value is the next argument, whatever it is, or follows '='.
+    std::vector<std::pair<int, std::string>> given;
+    std::string unknown;
+    bool check = false;
+    for (size_t i = 0; i < argv.size();) {
+        const std::string& token = argv[i++];
+        for (const char* h : gen::HELP_FLAGS)
+            if (token == h) return ArgsVerdict::help;
+        if (token == gen::CHECK_FLAG) {
+            check = true;
+            continue;
         }
-        if (!inline_value) {
-            if (i + 1 >= argv.size()) {
-                err = "argument " + flag + ": expected one argument";
-                return false;
-            }
-            value = argv[++i];
+        bool dashes = token.rfind("--", 0) == 0;
+        size_t eq = dashes ? token.find('=') : std::string::npos;
+        int at = flag_index(token.substr(0, eq));
+        if (at < 0) {
+            unknown += (unknown.empty() ? "" : " ") + token;
+        } else if (eq != std::string::npos) {
+            given.emplace_back(at, token.substr(eq + 1));
+        } else if (i < argv.size()) {
+            given.emplace_back(at, argv[i++]);
+        } else {
+            err = "argument " + token + ": expected one argument";
+            return ArgsVerdict::refused;
         }
-        if (!it->second(value, out, err)) return false;
-        given.insert(flag);
     }
-    for (const char* req : {"--robot", "--robots", "--body"})
-        if (!given.count(req)) {
-            err = std::string("the following arguments are required: ") + req;
-            return false;
-        }
-    return true;
+    if (!unknown.empty()) {
+        err = "unrecognized arguments: " + unknown;
+        return ArgsVerdict::refused;
+    }
+    std::vector<bool> seen(gen::N_FLAGS);
+    for (const auto& [at, value] : given) {
+        if (!set(at, value, out, err)) return ArgsVerdict::refused;
+        seen[at] = true;
+    }
+    std::string missing;
+    for (int i = 0; i < gen::N_FLAGS; ++i)
+        if (gen::FLAGS[i].required && !seen[i])
+            missing += (missing.empty() ? "" : ", ") + std::string(gen::FLAGS[i].flag);
+    if (!missing.empty()) {
+        err = "the following arguments are required: " + missing;
+        return ArgsVerdict::refused;
+    }
+    err = refusal(out);
+    if (!err.empty()) return ArgsVerdict::refused;
+    return check ? ArgsVerdict::check : ArgsVerdict::run;
 }
 
 }  // namespace tb

@@ -10,6 +10,8 @@
 // arguments or a middleware it does not carry, 3 a part failed.
 //
 // `tb-robot --decode KIND` and `--encode KIND` are the contract's self-test (selftest.cc).
+// Otherwise the command line is NodeArgs' (args.cc): `--help` prints its listing and
+// `--check-args` checks it, each with exit 0 and nothing run.
 #include <csignal>
 #include <sys/prctl.h>
 #include <sys/stat.h>
@@ -129,12 +131,13 @@ int main(int argc, char** argv) {
     }
     tb::Args a;
     std::string err;
-    if (!tb::parse_args(args, a, err)) return fail(err, 2);
+    switch (tb::read_args(args, a, err)) {  // NodeArgs.parse's verdict (args.cc)
+    case tb::ArgsVerdict::refused: return fail(err, 2);
+    case tb::ArgsVerdict::help: fputs(tb::args_listing(), stdout); return 0;
+    case tb::ArgsVerdict::check: return 0;  // --check-args: nothing runs
+    case tb::ArgsVerdict::run: break;
+    }
     if (a.role == "display") return display_main(a, argv[0]);
-    if (a.laser_range > tb::MAX_RANGE_M || a.laser_range / a.cell > 10000)
-        return fail("--laser-range " + std::to_string(a.laser_range) +
-                        ": longer than a run's lasers (at most 30 m, node.rays.MAX_RANGE_M)",
-                    2);
     tb::RobotTimings timing;
     timing.time_scale = a.time_scale;
     timing.map_period = a.map_period;
