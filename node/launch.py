@@ -292,7 +292,7 @@ def _tokens(p: argparse.ArgumentParser, argv: list[str]) -> tuple[list[str], boo
         else:
             p.error(f"argument {token}: expected one argument")
     if unknown:
-        p.error(f"unrecognized arguments: {' '.join(unknown)}")
+        p.error(f"unrecognized arguments: {' '.join(repr(u) for u in unknown)}")
     return tokens, check
 
 

@@ -102,7 +102,29 @@ constexpr bool bindings_match() {
 static_assert(N_BINDINGS == gen::N_FLAGS, "NodeArgs has a field args.cc does not bind");
 static_assert(bindings_match(), "args.cc's BINDINGS are not NodeArgs' fields in order");
 
-std::string quoted(const std::string& t) { return "'" + t + "'"; }
+// As Python's repr of a str quotes it, near enough to keep the reason on one line.
+std::string quoted(const std::string& t) {
+    std::string out = "'";
+    for (unsigned char c : t) {
+        char buf[8];
+        if (c == '\\' || c == '\'') {
+            out += '\\';
+            out += (char)c;
+        } else if (c == '\n') {
+            out += "\\n";
+        } else if (c == '\t') {
+            out += "\\t";
+        } else if (c == '\r') {
+            out += "\\r";
+        } else if (c < 0x20 || c == 0x7f) {
+            snprintf(buf, sizeof buf, "\\x%02x", c);
+            out += buf;
+        } else {
+            out += (char)c;
+        }
+    }
+    return out + "'";
+}
 
 std::string number_text(double v) {
     char buf[64];
@@ -316,7 +338,7 @@ ArgsVerdict read_args(const std::vector<std::string>& argv, Args& out, std::stri
         size_t eq = dashes ? token.find('=') : std::string::npos;
         int at = flag_index(token.substr(0, eq));
         if (at < 0) {
-            unknown += (unknown.empty() ? "" : " ") + token;
+            unknown += (unknown.empty() ? "" : " ") + quoted(token);
         } else if (eq != std::string::npos) {
             given.emplace_back(at, token.substr(eq + 1));
         } else if (i < argv.size()) {
