@@ -66,6 +66,13 @@ MAX_RADIUS_M = 10.0
 MAX_PORT = 65535
 
 
+def _within_whole_max(digits: str) -> bool:
+    """Whether digits (an optional '-' and [0-9]+) are within +-WHOLE_MAX, however many zeros
+    lead (without converting thousands of digits)."""
+    significant = digits.lstrip("-").lstrip("0")
+    return len(significant) <= len(str(WHOLE_MAX)) and int(significant or "0") <= WHOLE_MAX
+
+
 def robot_number(text: str) -> int:
     """`r3` or `3`: a robot's number, 1 to 999."""
     m = re.fullmatch(rf"r?([0-9]{{1,{ROBOT_DIGITS}}})", text)
@@ -86,7 +93,7 @@ def shape(text: str) -> tuple[int, int]:
 def steps(text: str) -> frozenset[int]:
     """Comma-separated steps, each 0 to WHOLE_MAX in digits; empty parts are skipped."""
     parts = [s for s in text.split(",") if s]
-    if not all(re.fullmatch(r"[0-9]+", s) and int(s) <= WHOLE_MAX for s in parts):
+    if not all(re.fullmatch(r"[0-9]+", s) and _within_whole_max(s) for s in parts):
         raise argparse.ArgumentTypeError(f"{text!r} is not a list of steps")
     return frozenset(int(s) for s in parts)
 
@@ -227,11 +234,14 @@ def _number(kind: type, flag: str, meta: dict) -> Callable[[str], Any]:
         if not (WHOLE if whole else REAL).fullmatch(text):
             noun = "a whole number" if whole else "a number"
             raise argparse.ArgumentTypeError(f"{flag} must be {noun}, not {text!r}")
-        if whole and abs(int(text)) > WHOLE_MAX:
+        if not whole:
+            return check(text)
+        if not _within_whole_max(text):
             raise argparse.ArgumentTypeError(
                 f"{flag} must be within {WHOLE_MAX:,} of 0, not {text}"
             )
-        return check(text)
+        sign, digits = ("-", text[1:]) if text.startswith("-") else ("", text)
+        return check(sign + (digits.lstrip("0") or "0"))  # int() takes 4,300 digits at most
 
     return parse
 
