@@ -17,6 +17,7 @@ from pathlib import Path
 
 from common.argtypes import checked
 from common.errors import UsageError
+from node.launch import MAX_LASER_CELLS
 from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
@@ -354,6 +355,11 @@ def refusal(cfg: RunConfig, program: bool = True) -> tuple[str, str] | None:
         return "laser_range", (
             f"a laser range of {cfg.laser_range:g} m is shorter than a map cell "
             f"({cell:g} m): the robots would see nothing"
+        )
+    if cfg.laser_range / cell > MAX_LASER_CELLS:  # the robots refuse it (node.launch)
+        return "laser_range", (
+            f"a laser range of {cfg.laser_range:g} m is over {MAX_LASER_CELLS:,} map cells of "
+            f"{cell:g} m: use a coarser --map-cell or a shorter laser"
         )
     if cfg.wall_loss_pct is not None and cfg.range_model not in LOS_MODELS:
         return "wall_loss_pct", "--wall-loss is for the los range models: add --range-model los"
