@@ -89,12 +89,11 @@ int display_main(const tb::Args& a, const char* program) {
     tb::Flooder flooder(a.robot, a.flood_port, a.iface, a.flood, timing.neighbour_hold_s());
     tb::ReplayWriter replay;
     std::string err;
-    bool opened = events.open(a.events);
-    if (!opened)
-        err = a.events + ": " + strerror(errno);
-    else
-        opened = link.open(a.body, a.robot, err, 1) && flooder.open(err) &&
-                 replay.open(a.out_dir + "/" + REPLAY_FILE, err);
+    // An --events file that cannot be opened is bad input (status 2), as in the Python robot.
+    if (!events.open(a.events))
+        return fail(me + ": cannot open --events '" + a.events + "': " + strerror(errno), 2);
+    bool opened = link.open(a.body, a.robot, err, 1) && flooder.open(err) &&
+                  replay.open(a.out_dir + "/" + REPLAY_FILE, err);
     if (!opened) return fail(me + ": cannot start: " + err, 1);
     tb::Display display(a, link, flooder, events, replay);
     g_display = &display;
@@ -156,10 +155,10 @@ int main(int argc, char** argv) {
     std::string title = "r" + std::to_string(a.robot) + " robot";
     prctl(PR_SET_NAME, title.c_str(), 0, 0, 0);
     tb::EventLog events;
-    if (!events.open(a.events))
-        return fail("r" + std::to_string(a.robot) + ": cannot start: " + a.events + ": " +
-                        strerror(errno),
-                    1);
+    if (!events.open(a.events))  // bad input (status 2), as in the Python robot
+        return fail("r" + std::to_string(a.robot) + ": cannot open --events '" + a.events +
+                        "': " + strerror(errno),
+                    2);
     tb::BodyClient link;
     tb::Flooder flooder(a.robot, a.flood_port, a.iface, a.flood, timing.neighbour_hold_s());
     std::string bind = a.bind.empty() ? tb::robot_addr(a.robot) : a.bind;
