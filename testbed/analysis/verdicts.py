@@ -136,14 +136,6 @@ def _single_run_note(rows: list[Fig2Row]) -> list[str]:
     ]
 
 
-def _points(fig2: list[Fig2Row]) -> dict[tuple, dict[int, float]]:
-    """(laser, range) -> {team size: mean steps}."""
-    out: dict[tuple, dict[int, float]] = {}
-    for r in fig2:
-        out.setdefault((r.laser_range, r.comm_range), {})[r.robots] = r.steps.mean
-    return out
-
-
 def _rows(fig2: list[Fig2Row]) -> dict[tuple, dict[int, Fig2Row]]:
     """(laser, range) -> {team size: fig2 row} (mean, interval, spread)."""
     out: dict[tuple, dict[int, Fig2Row]] = {}
@@ -156,14 +148,62 @@ def _group_name(laser, comm) -> str:
     return f"laser {_f(laser)} m, range {_f(comm)} m"
 
 
+# -- The comparisons the claims rest on, shared with testbed.analysis.decide (which tests each
+# on fresh runs): each names the points a claim compares, the one it says needs more steps.
+
+
+def team_groups(fig2: list[Fig2Row]) -> list[tuple[tuple[float, float], dict[int, Fig2Row]]]:
+    """Team work beats one robot: each (laser, range) group with a one-robot point and at
+    least one team, with its points by team size (one robot needs more steps than each)."""
+    return [(g, pts) for g, pts in sorted(_rows(fig2).items()) if 1 in pts and len(pts) >= 2]
+
+
+def rise_groups(fig2: list[Fig2Row]) -> list[tuple[tuple[float, float], dict[int, Fig2Row]]]:
+    """Fall then rise: each (laser, range) group with three team sizes or more."""
+    return [(g, pts) for g, pts in sorted(_rows(fig2).items()) if len(pts) >= 3]
+
+
+def rise_pair(pts: dict[int, Fig2Row]) -> tuple[int, int]:
+    """Fall then rise, one group (three team sizes or more): (the team size strictly between
+    the smallest and the largest with the fewest steps, the largest): the rise says the
+    largest team needs more steps than that one."""
+    inner = [n for n in pts if min(pts) < n < max(pts)]
+    return min(inner, key=lambda n: (pts[n].steps.mean, n)), max(pts)
+
+
+def range_pairs(fig2: list[Fig2Row]) -> list[tuple[tuple[float, int], Fig2Row, Fig2Row]]:
+    """A smaller range needs more steps: for each (laser, team of two or more) with two
+    ranges or more, its points at the smallest and at the largest range."""
+    by: dict[tuple, dict[float, Fig2Row]] = {}
+    for r in fig2:
+        if r.robots >= 2:
+            by.setdefault((r.laser_range, r.robots), {})[r.comm_range] = r
+    return [(key, pts[min(pts)], pts[max(pts)]) for key, pts in sorted(by.items())
+            if len(pts) >= 2]  # fmt: skip
+
+
+def laser_pairs(fig2: list[Fig2Row]) -> list[tuple[tuple[float, int], Fig2Row, Fig2Row]]:
+    """A shorter laser needs more steps: for each (range, team) that ran both the shortest
+    and the longest laser of the sweep, its points at the shorter and the longer (none when
+    the sweep has one laser)."""
+    lasers = sorted({r.laser_range for r in fig2})
+    if len(lasers) < 2:
+        return []
+    short, long_ = lasers[0], lasers[-1]
+    by: dict[tuple, dict[float, Fig2Row]] = {}
+    for r in fig2:
+        by.setdefault((r.comm_range, r.robots), {})[r.laser_range] = r
+    return [(key, pts[short], pts[long_]) for key, pts in sorted(by.items())
+            if short in pts and long_ in pts]  # fmt: skip
+
+
 def verdict_team_beats_one(fig2: list[Fig2Row]) -> Verdict:
     v = Verdict(
         "5.1", "Team work beats one robot: every team needs fewer steps than one robot", NO_DATA
     )
     results = []
-    for (laser, comm), pts in sorted(_points(fig2).items()):
-        if 1 not in pts or len(pts) < 2:
-            continue
+    for (laser, comm), rows in team_groups(fig2):
+        pts = {n: row.steps.mean for n, row in rows.items()}
         teams = {n: s for n, s in pts.items() if n > 1}
         ok = all(s < pts[1] for s in teams.values())
         results.append(ok)
@@ -184,9 +224,7 @@ def verdict_fall_then_rise(fig2: list[Fig2Row]) -> Verdict:
     of the runs (their 95% intervals do not overlap; testbed.analysis.ablation.rise)."""
     v = Verdict("5.1", "Exploration steps fall, then rise again as the team grows", NO_DATA)
     results: list[bool | None] = []
-    for (laser, comm), pts in sorted(_rows(fig2).items()):
-        if len(pts) < 3:
-            continue
+    for (laser, comm), pts in rise_groups(fig2):
         few = _few(pts.values())
         ok: bool | None
         ok, why = ablation.rise(pts)
@@ -206,16 +244,9 @@ def verdict_smaller_range(fig2: list[Fig2Row]) -> Verdict:
     """Noise-aware: for each laser and team of two or more, the smallest range needs more
     steps than the largest and their 95% intervals do not overlap."""
     v = Verdict("5.1", "A smaller communication range needs more steps", NO_DATA)
-    by: dict[tuple, dict[float, Fig2Row]] = {}
-    for r in fig2:
-        if r.robots >= 2:
-            by.setdefault((r.laser_range, r.robots), {})[r.comm_range] = r
     results: list[bool | None] = []
     within: list[int | None] = []
-    for (laser, robots), pts in sorted(by.items()):
-        if len(pts) < 2:
-            continue
-        small, large = pts[min(pts)], pts[max(pts)]
+    for (laser, robots), small, large in range_pairs(fig2):
         a, b = small.steps.ci, large.steps.ci
         ok: bool | None = small.steps.mean > large.steps.mean and stats.separated(a, b)
         if _few([small, large]):
@@ -224,8 +255,8 @@ def verdict_smaller_range(fig2: list[Fig2Row]) -> Verdict:
         if small.steps.mean > large.steps.mean and not ok and a is not None and b is not None:
             within.append(ablation.runs_needed(large.steps, small.steps))
         v.evidence.append(
-            f"laser {_f(laser)} m, {robots} robots: range {_f(min(pts))} m "
-            f"{small.steps.mean:.0f} {ablation._interval(a)}, range {_f(max(pts))} m "
+            f"laser {_f(laser)} m, {robots} robots: range {_f(small.comm_range)} m "
+            f"{small.steps.mean:.0f} {ablation._interval(a)}, range {_f(large.comm_range)} m "
             f"{large.steps.mean:.0f} {ablation._interval(b)} -> {_yes_no(ok)}"
         )
     v.verdict = _overall(results)
@@ -257,15 +288,11 @@ def verdict_shorter_laser(fig2: list[Fig2Row]) -> Verdict:
     if len(lasers) < 2:
         return v
     short, long_ = lasers[0], lasers[-1]
-    by: dict[tuple, dict[float, Fig2Row]] = {}
-    for r in fig2:
-        by.setdefault((r.comm_range, r.robots), {})[r.laser_range] = r
     more: list[bool] = []
     pairs_by_range: dict[float, list[tuple[Fig2Row, Fig2Row]]] = {}
-    for (comm, _robots), pts in sorted(by.items()):
-        if short in pts and long_ in pts:
-            more.append(pts[short].steps.mean > pts[long_].steps.mean)
-            pairs_by_range.setdefault(comm, []).append((pts[short], pts[long_]))
+    for (comm, _robots), a, b in laser_pairs(fig2):
+        more.append(a.steps.mean > b.steps.mean)
+        pairs_by_range.setdefault(comm, []).append((a, b))
     if not more:
         return v
     same_ratio: list[bool | None] = []
