@@ -14,10 +14,16 @@ overlap (a conservative test: it needs more than a 5% two-sample t-test does).
 two-sample comparison needs to detect a difference `diff` between two means with standard
 deviation `sd` each, at 5% significance and 80% power (normal approximation):
 n = 2 * ((z(0.975) + z(0.8)) * sd / diff)^2, rounded up.
+
+For the deciding design (testbed.analysis.decide), which tests at other levels than 5%:
+Student's t distribution at any degrees of freedom (`t_sf2`, its two-sided tail, from the
+regularized incomplete beta function; `t_quantile`) and Welch's two-sample t test (`welch`),
+in the standard library alone (the testbed does not depend on scipy).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import statistics
 
@@ -78,3 +84,86 @@ def share_ci(hits: int, n: int) -> tuple[float, float, float] | None:
     centre = (p + z2 / (2 * n)) / (1 + z2 / n)
     half = Z975 * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
     return p, max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _beta_fraction(a: float, b: float, x: float) -> float:
+    """The continued fraction of the incomplete beta function (modified Lentz's method)."""
+    tiny, eps = 1e-300, 1e-15
+    c, d = 1.0, 1.0 - (a + b) * x / (a + 1)
+    d = 1 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 100_000):
+        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):  # fmt: skip
+            d = 1 + num * d
+            d = 1 / (d if abs(d) > tiny else tiny)
+            c = 1 + num / c
+            c = c if abs(c) > tiny else tiny
+            h *= d * c
+        if abs(d * c - 1) < eps:
+            break
+    return h
+
+
+def beta_reg(a: float, b: float, x: float) -> float:
+    """The regularized incomplete beta function I_x(a, b), a, b > 0, 0 <= x <= 1."""
+    if x <= 0:
+        return 0.0
+    if x >= 1:
+        return 1.0
+    front = math.exp(math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b)
+                     + a * math.log(x) + b * math.log1p(-x))  # fmt: skip
+    if x < (a + 1) / (a + b + 2):
+        return front * _beta_fraction(a, b, x) / a
+    return 1 - front * _beta_fraction(b, a, 1 - x) / b
+
+
+def t_sf2(t: float, df: float) -> float:
+    """P(|T| >= |t|) for Student's t with `df` (> 0, need not be whole) degrees of freedom:
+    the two-sided p-value of a t statistic."""
+    if df <= 0:
+        raise ValueError(f"degrees of freedom must be > 0, not {df}")
+    if math.isinf(t):
+        return 0.0
+    return beta_reg(df / 2, 0.5, df / (df + t * t))
+
+
+def t_cdf(t: float, df: float) -> float:
+    """P(T <= t) for Student's t with `df` degrees of freedom."""
+    tail = t_sf2(t, df) / 2
+    return 1 - tail if t > 0 else tail
+
+
+@functools.lru_cache(maxsize=4096)
+def t_quantile(q: float, df: float) -> float:
+    """The `q` quantile of Student's t with `df` degrees of freedom (0 < q < 1), by bisection
+    on t_cdf (to 1e-9 relative)."""
+    if not 0 < q < 1:
+        raise ValueError(f"a quantile's probability is in (0, 1), not {q}")
+    if q < 0.5:
+        return -t_quantile(1 - q, df)
+    lo, hi = 0.0, 1.0
+    while t_cdf(hi, df) < q:
+        lo, hi = hi, hi * 2
+    while hi - lo > 1e-9 * max(1.0, hi):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if t_cdf(mid, df) < q else (lo, mid)
+    return (lo + hi) / 2
+
+
+def welch(a: list[float], b: list[float]) -> tuple[float, float, float]:
+    """Welch's two-sample t test of mean(a) = mean(b): (t, degrees of freedom, two-sided p),
+    t > 0 when a's mean is the larger. Both samples need two values or more. Identical
+    values on both sides: t 0 and p 1 when the means are equal, else t infinite and p 0."""
+    na, nb = len(a), len(b)
+    if na < 2 or nb < 2:
+        raise ValueError(f"Welch's test needs two values a side, not {na} and {nb}")
+    diff = statistics.fmean(a) - statistics.fmean(b)
+    va, vb = statistics.variance(a) / na, statistics.variance(b) / nb
+    se2 = va + vb
+    if se2 == 0:
+        return (0.0, float(na + nb - 2), 1.0) if diff == 0 else \
+            (math.copysign(math.inf, diff), float(na + nb - 2), 0.0)  # fmt: skip
+    df = se2 * se2 / (va * va / (na - 1) + vb * vb / (nb - 1))
+    t = diff / math.sqrt(se2)
+    return t, df, t_sf2(t, df)
