@@ -151,6 +151,14 @@ def t_quantile(q: float, df: float) -> float:
     return (lo + hi) / 2
 
 
+def mean_var(values: list[float]) -> tuple[float, float]:
+    """The mean and the sample variance (n - 1) of two values or more, in floating point
+    (statistics.variance computes exactly, in fractions: a hundred times slower)."""
+    n = len(values)
+    m = math.fsum(values) / n
+    return m, math.fsum((x - m) ** 2 for x in values) / (n - 1)
+
+
 def welch(a: list[float], b: list[float]) -> tuple[float, float, float]:
     """Welch's two-sample t test of mean(a) = mean(b): (t, degrees of freedom, two-sided p),
     t > 0 when a's mean is the larger. Both samples need two values or more. Identical
@@ -158,8 +166,9 @@ def welch(a: list[float], b: list[float]) -> tuple[float, float, float]:
     na, nb = len(a), len(b)
     if na < 2 or nb < 2:
         raise ValueError(f"Welch's test needs two values a side, not {na} and {nb}")
-    diff = statistics.fmean(a) - statistics.fmean(b)
-    va, vb = statistics.variance(a) / na, statistics.variance(b) / nb
+    (ma, va), (mb, vb) = mean_var(a), mean_var(b)
+    diff = ma - mb
+    va, vb = va / na, vb / nb
     se2 = va + vb
     if se2 == 0:
         return (0.0, float(na + nb - 2), 1.0) if diff == 0 else \
