@@ -108,10 +108,10 @@ def compare(drivers: Drivers, events: list[Event]) -> int:
         if got != want:
             FAILURE.parent.mkdir(exist_ok=True)
             FAILURE.write_text("\n".join(lines[: n + 1]) + "\n")
-            diff = next(
-                (k, w, g) for k, (w, g) in enumerate(zip(want + [""] * 9, got + [""] * 9, strict=False))
-                if w != g
-            )  # fmt: skip
+            pad = max(len(want), len(got))
+            w_all, g_all = want + [""] * pad, got + [""] * pad
+            k = next(k for k in range(pad) if w_all[k] != g_all[k])
+            diff = (k, w_all[k], g_all[k])
             raise AssertionError(
                 f"event {n + 1} of {len(lines)}: {line}\n line {diff[0]}\n  python: {diff[1]}"
                 f"\n  c++:    {diff[2]}\n(replay: python -m aodv.coretrace --against "
@@ -154,15 +154,32 @@ PARAM_CHOICES: dict[str, list[Any]] = {
 }
 
 
+# The bounds against floods at their smallest, and rate limits low enough to be reached.
+TIGHT_BOUNDS = {
+    "route_table_limit": 16,
+    "neighbor_limit": 16,
+    "rreq_cache_limit": 16,
+    "rreq_forward_ratelimit": 3,
+    "rerr_ratelimit": 1,
+    "rreq_ratelimit": 2,
+    "queue_len": 2,
+}
+
+
 @st.composite
 def param_specs(draw) -> dict[str, Any]:
     spec: dict[str, Any] = {"profile": draw(st.sampled_from(["rfc", "ns3"]))}
     spec["time_scale"] = draw(st.sampled_from([1.0, 1.0, 10.0, 0.5, 3.0, 7]))
     if draw(st.booleans()):
-        for name in draw(st.sets(st.sampled_from(sorted(PARAM_CHOICES)), max_size=6)):
+        spec.update(TIGHT_BOUNDS)
+    if draw(st.booleans()):
+        for name in draw(st.lists(st.sampled_from(sorted(PARAM_CHOICES)), max_size=6)):
             spec[name] = draw(st.sampled_from(PARAM_CHOICES[name]))
-    if params_of(spec).problems():
-        spec = {"profile": spec["profile"], "time_scale": spec["time_scale"]}
+    # Overrides that break a section 10 constraint go, the last first, until none does.
+    for name in reversed([k for k in spec if k in PARAM_CHOICES]):
+        if not params_of(spec).problems():
+            break
+        del spec[name]
     return spec
 
 
@@ -182,6 +199,8 @@ lifetimes = st.one_of(
 hello_ms = st.sampled_from([0, 1, 62, 63, 250, 1000, 1500, 16000, 24000, 24001, 2**32 - 1])
 far_addr = st.integers(0, 2**32 - 1).map(lambda v: wire._addr(v.to_bytes(4, "big")))
 addrs = st.one_of(st.sampled_from(POOL), st.sampled_from(POOL), far_addr)
+WIDE = (addrs, seqs, hop_counts)
+NARROW = (st.sampled_from(POOL[:4]), st.integers(0, 2), st.integers(0, 2))
 EXTENSIONS = [
     b"\x01\x04\x00\x00\x03\xe8",  # Hello Interval 1000
     b"\x02\x04\x00\x00\x01\xf4",  # Wireshark's type 2
@@ -201,11 +220,15 @@ EXTENSIONS = [
 
 
 @st.composite
-def messages(draw, src: str) -> bytes:
+def messages(draw, src: str, narrow: bool = False) -> bytes:
+    """A datagram from `src`; `narrow` draws from few addresses and small numbers, so that
+    messages meet: the same originator, sequence number and hop count by two paths."""
+    addrs, seqs, hop_counts = NARROW if narrow else WIDE
     kind = draw(st.sampled_from(["rreq", "rreq", "rrep", "hello", "hello", "rerr", "ack", "raw"]))
     if kind == "rreq":
+        rreq_ids = st.integers(0, 3) if narrow else st.one_of(st.integers(0, 5), u32)
         m: wire.Message = wire.Rreq(
-            draw(st.one_of(st.integers(0, 5), u32)), draw(addrs), draw(seqs), draw(addrs),
+            draw(rreq_ids), draw(addrs), draw(seqs), draw(addrs),
             draw(seqs), draw(hop_counts), *draw(st.lists(st.booleans(), min_size=5, max_size=5)),
         )  # fmt: skip
     elif kind == "rrep":
@@ -249,7 +272,8 @@ def random_sequences(draw) -> list[Event]:
     }  # fmt: skip
     events = [init]
     others = [a for a in POOL if a != me]
-    steps = st.sampled_from([0.0, 0.0, 1e-6, 0.001, 0.04, 0.3, 1.0, 2.5, 7.0, 30.0])
+    narrow = draw(st.booleans())
+    steps = st.sampled_from([0.0, 0.0, 1e-6, 0.0005, 0.001, 0.04, 0.3, 1.0, 2.5, 7.0, 30.0])
     for _ in range(draw(st.integers(1, 60))):
         kind = draw(st.sampled_from(
             ["control"] * 8 + ["no_route"] * 2 + ["used", "used_many", "lost", "dump", "flood"]
@@ -261,7 +285,7 @@ def random_sequences(draw) -> list[Event]:
         now += draw(steps)
         src = draw(st.one_of(st.sampled_from(others), st.just(me), addrs))
         if kind == "control":
-            raw = draw(messages(src))
+            raw = draw(messages(src, narrow))
             ttl = draw(st.sampled_from([0, 1, 1, 2, 3, 64, 255]))
             events.append({"ev": "control", "now": now, "src": src, "ttl": ttl, "bytes": raw.hex()})
         elif kind == "no_route":
@@ -297,12 +321,17 @@ def random_sequences(draw) -> list[Event]:
 
 
 # == recorded from the in-memory medium ===================================================
+class Stalled(Exception):
+    """A core's timer left its deadline at `now`, again and again (see `recorded_sequences`)."""
+
+
 class Recorder:
     """Stands in for a node's core in aodv.sim: records each event, then passes it on."""
 
     def __init__(self, core: Any, init: Event) -> None:
         self.core = core
         self.events: list[Event] = [init]
+        self.stalls = 0
 
     def on_control(self, now: float, src: str, ttl: int, msg: wire.Message) -> list:
         raw = wire.encode(msg).hex()
@@ -320,7 +349,14 @@ class Recorder:
 
     def on_timer(self, now: float) -> list:
         self.events.append({"ev": "timer", "now": now})
-        return self.core.on_timer(now)
+        out = self.core.on_timer(now)
+        if self.core.next_deadline() <= now:
+            self.stalls += 1
+            if self.stalls > 50:
+                raise Stalled(now)
+        else:
+            self.stalls = 0
+        return out
 
     def next_deadline(self) -> float:
         return self.core.next_deadline()
@@ -353,14 +389,24 @@ def recorded_sequences(draw) -> list[list[Event]]:
     for _ in range(draw(st.integers(1, 8))):
         t = draw(st.floats(0.0, span, allow_nan=False))
         a, b = draw(st.sampled_from(names)), draw(st.sampled_from(names))
-        what = draw(st.sampled_from(["send", "send", "send", "unlink", "link"]))
+        what = draw(st.sampled_from(["send", "send", "stream", "stream", "unlink", "link"]))
         if what == "send" and a != b:
             m.at(t, functools.partial(m.send_data, a, b))
+        elif what == "stream" and a != b:  # data every 0.4 s for 8 s: routes stay active
+            for k in range(20):
+                m.at(t + k * 0.4 / p.time_scale, functools.partial(m.send_data, a, b))
         elif what == "unlink":
             m.at(t, functools.partial(m.unlink, a, b))
         elif what == "link" and a != b:
             m.at(t, functools.partial(m.link, a, b))
-    m.run_until(span + draw(st.sampled_from([0.0, 20.0])) / p.time_scale)
+    try:
+        m.run_until(span + draw(st.sampled_from([0.0, 20.0])) / p.time_scale)
+    except Stalled:
+        # Both cores can leave a deferred RREQ's deadline at `now` for good: RateLimit
+        # (aodv/state.py) promises the next free slot at times[0] + window, but at that
+        # instant its trim asks times[0] <= now - window, which rounding can make false.
+        # A daemon's clock moves on; the medium's does not. The events up to here count.
+        STATS["sim_stalls"] += 1
     return [mutate(draw, r.events) for r in recs]
 
 
@@ -379,6 +425,8 @@ def mutate(draw, events: list[Event]) -> list[Event]:
         how = draw(st.sampled_from(["flip", "cut", "extend", "ttl", "drop", "repeat", "insert"]))
         if how in ("flip", "cut", "extend", "ttl") and ev["ev"] == "control":
             raw = bytes.fromhex(ev["bytes"])
+            if how in ("flip", "cut") and not raw:
+                how = "extend"
             if how == "flip":
                 k = draw(st.integers(0, len(raw) - 1))
                 raw = raw[:k] + bytes([raw[k] ^ draw(st.integers(1, 255))]) + raw[k + 1 :]
@@ -489,6 +537,37 @@ def scenario_events(name: str) -> list[list[Event]]:
 def test_fixed_scenarios_agree(core_binary, name):
     for events in scenario_events(name):
         compare(core_binary, events)
+
+
+def half_millisecond_lifetimes() -> list[Event]:
+    """Lifetimes that land on exactly half a millisecond: the Lifetime field is rounded half
+    to even (Python's round), 2.5 ms to 2 and 0.5 ms to 0."""
+    me, nb, asker = POOL[0], POOL[1], POOL[2]
+    events: list[Event] = [{"ev": "init", "now": 0.0, "addr": me, "params": {"profile": "rfc"}}]
+    for k, life in enumerate([3, 1, 2, 5]):
+        dest = f"10.0.1.{k + 1}"
+        rrep = wire.Rrep(dest, 5, "10.0.2.1", life, 1)
+        rreq = wire.Rreq(k + 1, dest, 5, f"10.0.3.{k + 1}", 1, 0, gratuitous=True)
+        t0 = float(k)
+        events.append({"ev": "control", "now": t0, "src": nb, "ttl": 64,
+                       "bytes": rrep.encode().hex()})  # fmt: skip
+        events.append({"ev": "control", "now": t0 + 0.0005, "src": asker, "ttl": 5,
+                       "bytes": rreq.encode().hex()})  # fmt: skip
+    return events + [{"ev": "dump"}]
+
+
+def test_half_millisecond_lifetimes_agree(core_binary):
+    events = half_millisecond_lifetimes()
+    lines = list(run_python(events))
+    rreps = [ln for ln in lines if '"dst":"10.0.0.3"' in ln and '"msg":"02' in ln]
+    # 2.5 ms and 0.5 ms exactly (at t = 2 and 3 the subtraction is not exact: no tie).
+    assert [int(json.loads(ln)["msg"][32:40], 16) for ln in rreps][:2] == [2, 0]
+    compare(core_binary, events)
+
+
+def run_python(events: list[Event]) -> list[str]:
+    t = Trace()
+    return [out for ev in events for out in t.feed(json.loads(json.dumps(ev)))]
 
 
 def test_replay_tool_agrees_on_a_file(core_binary, tmp_path):
