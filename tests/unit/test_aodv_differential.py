@@ -455,13 +455,13 @@ DIFF_SETTINGS = settings(
 )
 
 
-@settings(DIFF_SETTINGS, max_examples=300)
+@settings(DIFF_SETTINGS, max_examples=200)
 @given(random_sequences())
 def test_random_events_agree(core_binary, seq):
     compare(core_binary, seq)
 
 
-@settings(DIFF_SETTINGS, max_examples=80)
+@settings(DIFF_SETTINGS, max_examples=60)
 @given(recorded_sequences())
 def test_recorded_and_mutated_topologies_agree(core_binary, seqs):
     for s in seqs:
@@ -565,6 +565,57 @@ def test_half_millisecond_lifetimes_agree(core_binary):
     compare(core_binary, events)
 
 
+def rerr_over_255() -> list[Event]:
+    """300 routes through one neighbour, each carrying a RREP on to another: the neighbour's
+    loss invalidates them all (and the route to it) and the RERR goes out in two messages
+    (255 + 46)."""
+    me, via, back, orig = POOL[0], POOL[1], POOL[2], "10.0.9.9"
+    events: list[Event] = [{"ev": "init", "now": 0.0, "addr": me, "params": {"profile": "ns3"}}]
+    rreq = wire.Rreq(1, "10.0.5.5", 0, orig, 7, 2, unknown_seq=True)
+    events.append({"ev": "control", "now": 0.0, "src": back, "ttl": 9,
+                   "bytes": rreq.encode().hex()})  # fmt: skip
+    for k in range(300):
+        rrep = wire.Rrep(f"10.1.{k // 250}.{k % 250 + 1}", 3, orig, 5000, 1)
+        events.append({"ev": "control", "now": 0.001 + k * 1e-5, "src": via, "ttl": 64,
+                       "bytes": rrep.encode().hex()})  # fmt: skip
+    events += [{"ev": "link_lost", "now": 0.5, "neighbor": via}, {"ev": "dump"}]
+    return events
+
+
+def test_rerr_over_255_destinations_agrees(core_binary):
+    events = rerr_over_255()
+    rerrs = [ln for ln in run_python(events) if '"msg":"03' in ln]
+    assert [json.loads(ln)["msg"][6:8] for ln in rerrs] == ["ff", "2e"]
+    compare(core_binary, events)
+
+
+# Lines that are not events (each gets one "error" line, and the driver goes on).
+GARBAGE = [
+    "{",
+    "[]",
+    "nul\x00",
+    '{"ev":"nope"}',
+    '{"ev":"init","now":0,"addr":"10.0.0.256"}',
+    '{"ev":"init","now":"x","addr":"10.0.0.1"}',
+    '{"ev":"init","now":0,"addr":"10.0.0.1","params":{"ttl_increment":0}}',
+    '{"ev":"init","now":0,"addr":"10.0.0.1","params":{"profile":"x"}}',
+    '{"ev":"control","now":1,"src":"10.0.0.2","ttl":300,"bytes":"04"}',
+    '{"ev":"control","now":1,"src":"10.0.0.2","ttl":1,"bytes":"0g"}',
+    "[" * 10000,
+    '{"a":' * 5000,
+]
+
+
+def test_driver_survives_any_line(core_binary):
+    """A line that is not an event gets one "error" line; the driver goes on."""
+    d = Driver(str(core_binary.binary))  # a fresh one: no core yet
+    for line in ['{"ev":"timer"}', *GARBAGE]:
+        got = d.feed(line)
+        assert len(got) == 1 and got[0].startswith('{"error":'), (line[:40], got)
+    assert d.feed('{"ev":"init","now":0,"addr":"10.0.0.1"}') == ['{"now":0,"next":1,"dropped":{}}']
+    assert d.close() == 0
+
+
 def run_python(events: list[Event]) -> list[str]:
     t = Trace()
     return [out for ev in events for out in t.feed(json.loads(json.dumps(ev)))]
@@ -594,6 +645,10 @@ def test_sanitized_core_agrees():
         for name in sorted(SCENARIOS):
             for events in scenario_events(name):
                 compare(drivers, events)
+        compare(drivers, half_millisecond_lifetimes())
+        compare(drivers, rerr_over_255())
+        for line in GARBAGE:
+            assert drivers.get().feed(line)[0].startswith('{"error":')
 
         @settings(max_examples=150, derandomize=True, deadline=None,
                   suppress_health_check=list(HealthCheck))  # fmt: skip
