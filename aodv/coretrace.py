@@ -24,8 +24,8 @@ it); then one line per action, in the order returned; then {"now":..,"next":..,
 Floats are printed with "%.17g", which names every double exactly, so equal text means
 equal bits.
 
-    python -m aodv.coretrace events.jsonl                  the Python core's output
-    python -m aodv.coretrace --against build/tb-aodv-core events.jsonl
+    python -m aodv.coretrace EVENTS_FILE                  the Python core's output
+    python -m aodv.coretrace --against build/tb-aodv-core EVENTS_FILE
                                                            both, and the first difference
 """
 
