@@ -86,7 +86,7 @@ class Neighbors:
                 if now >= n.last_heard + n.timeout:
                     out.append(n.addr)
                     del self._n[n.addr]
-            elif now > n.last_heard + delete_period:
+            elif now >= n.last_heard + delete_period:  # at next_deadline's instant, not after
                 del self._n[n.addr]
         return out
 

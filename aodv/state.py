@@ -57,7 +57,10 @@ class RateLimit:
         self._times: deque[float] = deque()
 
     def _trim(self, now: float) -> None:
-        while self._times and self._times[0] <= now - self.window:
+        # The same sum as next_free's deadline: at that deadline the oldest time has left the
+        # window (`now - window` may round the other way, and the deferred RREQ would be
+        # deferred again to the same instant, waking the loop at once, again and again).
+        while self._times and self._times[0] + self.window <= now:
             self._times.popleft()
 
     def allow(self, now: float) -> bool:

@@ -205,7 +205,7 @@ std::vector<Addr> Neighbors::lost(double now, double dp) {
                 it = n_.erase(it);
                 continue;
             }
-        } else if (now > n.last_heard + dp) {
+        } else if (now >= n.last_heard + dp) {  // at next_deadline's instant
             it = n_.erase(it);
             continue;
         }
@@ -284,7 +284,8 @@ std::vector<std::string> RequestQueue::pop_all(Addr dest) {
 }
 
 void RateLimit::trim(double now) {
-    while (!times_.empty() && times_.front() <= now - window_) times_.pop_front();
+    // The same sum as next_free's deadline (aodv/state.py RateLimit._trim).
+    while (!times_.empty() && times_.front() + window_ <= now) times_.pop_front();
 }
 
 bool RateLimit::allow(double now) {
