@@ -47,7 +47,7 @@ TB_ROBOT_SRC := $(wildcard native/robot/*.cc) native/stepcore/stepcore.cc
 # defaults and help as a table that native/robot/args.cc reads (rewritten only when it changes).
 TB_ROBOT_ARGS := build/gen/node_args.h
 TB_ROBOT_ARGS_FROM := node/argsgen.py node/launch.py node/rays.py node/messaging/maps.py \
-	node/messaging/__init__.py topology/names.py topology/spec.py
+	node/messaging/__init__.py node/wire.py topology/names.py topology/spec.py
 TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h \
 	$(TB_ROBOT_ARGS)
 TB_ROBOT_UNBUILT := build/tb-robot.unbuilt

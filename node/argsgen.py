@@ -17,7 +17,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from node import launch
+from node import launch, wire
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 
 # The parse functions NodeArgs names, each with its twin in native/robot/args.cc.
@@ -122,6 +122,8 @@ constexpr int SHAPE_DIGITS = {launch.SHAPE_DIGITS};
 // NodeArgs.refusal's numbers.
 constexpr double MAX_RANGE_M = {c_real(launch.MAX_RANGE_M)};
 constexpr double MAX_LASER_CELLS = {c_real(launch.MAX_LASER_CELLS)};
+// node.wire's: the largest robot number a flood may name (origin, sender).
+constexpr int MAX_FLOOD_ID = {wire.MAX_FLOOD_ID};
 constexpr const char* PUBSUB_MIDDLEWARES[] = {{{pubsub}}};
 constexpr int N_PUBSUB_MIDDLEWARES = {len(PUBSUB_MIDDLEWARES)};
 

@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from node.grid import decode_ternary, encode_ternary
+from topology.names import MAX_ROBOTS
 
 MAGIC = b"RMF2"
 KIND_MAP = 1
@@ -88,6 +89,12 @@ def pack_flood(h: FloodHeader, payload: bytes) -> bytes:
     )
 
 
+# The largest robot number a flood may name as its origin or sender: a team's robots and the
+# display (docs/robot-contract.md, section 2). Bounded before anything is kept per origin, so a
+# peer that names 65,535 origins cannot grow the duplicate cache past the largest team's.
+MAX_FLOOD_ID = MAX_ROBOTS + 1
+
+
 def flood_ids(data: bytes) -> tuple[int, int, int, int]:
     """(ttl, origin, seq, sender) of a flood in wire form; ValueError if it is not one."""
     if len(data) < _FIXED:
@@ -95,7 +102,10 @@ def flood_ids(data: bytes) -> tuple[int, int, int, int]:
     magic, _, ttl, origin, seq, _ = _HDR.unpack_from(data)
     if magic != MAGIC:
         raise ValueError("not a robot flood (bad magic)")
-    return ttl, origin, seq, _COPY.unpack_from(data, _HDR.size)[0]
+    sender = _COPY.unpack_from(data, _HDR.size)[0]
+    if not (1 <= origin <= MAX_FLOOD_ID and 1 <= sender <= MAX_FLOOD_ID):
+        raise ValueError(f"flood of origin {origin} from {sender}: robots are 1..{MAX_FLOOD_ID}")
+    return ttl, origin, seq, sender
 
 
 def flood_neighbours(data: bytes) -> tuple[tuple[int, ...], int]:

@@ -5,6 +5,7 @@
 #include <zlib.h>
 
 #include "json.h"
+#include "node_args.h"
 #include "wirebytes.h"
 
 namespace tb {
@@ -50,6 +51,14 @@ bool unpack_flood(const uint8_t* d, size_t n, FloodHeader& h, std::string& err) 
     h.seq = rd32(d + 8);
     h.step = rd32(d + 12);
     h.sender = rd16(d + 16);
+    // Robots are 1..MAX_FLOOD_ID (node.wire's, generated): checked before anything is kept
+    // per origin, so a peer naming 65,535 origins cannot grow the duplicate cache.
+    if (h.origin < 1 || h.origin > gen::MAX_FLOOD_ID || h.sender < 1 ||
+        h.sender > gen::MAX_FLOOD_ID) {
+        err = "flood of origin " + std::to_string(h.origin) + " from " +
+              std::to_string(h.sender) + ": robots are 1.." + std::to_string(gen::MAX_FLOOD_ID);
+        return false;
+    }
     size_t k = d[18];
     size_t end = FLOOD_FIXED + 2 * k;
     if (n < end) {

@@ -303,3 +303,22 @@ def test_a_map_window_with_a_bad_cell_is_refused_by_both():
 def test_bad_self_test_input_is_one_line_and_status_2(argv, stdin):
     p = subprocess.run([str(TB_ROBOT), *argv], input=stdin, capture_output=True, timeout=20)
     assert p.returncode == 2 and p.stderr.count(b"\n") == 1 and p.stderr.startswith(b"node: ")
+
+
+TOP = wire.MAX_FLOOD_ID
+ROBOT_IDS = [(0, 1), (1, 0), (TOP + 1, 1), (1, TOP + 1), (65535, 65535), (TOP, TOP), (1, 2)]
+
+
+@pytest.mark.parametrize("origin,sender", ROBOT_IDS)
+def test_floods_name_robots_of_a_team_alike(origin, sender):
+    """A flood's origin and sender are robots 1..MAX_FLOOD_ID (a team's and its display) in
+    both robots, before either keeps anything per origin (a peer naming 65,535 origins
+    would otherwise grow the duplicate cache without bound)."""
+    h = wire.FloodHeader(wire.KIND_MAP, 3, origin, 7, 9, sender, (2,))
+    data = wire.pack_flood(h, b"")
+    py = py_decode("flood", data)
+    assert (py is not None) == (
+        1 <= origin <= wire.MAX_FLOOD_ID and 1 <= sender <= wire.MAX_FLOOD_ID
+    )
+    if TB_ROBOT.exists():
+        assert cpp_decode("flood", data) == py
