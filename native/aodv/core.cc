@@ -599,17 +599,23 @@ void AodvCore::discovery_timeout(double now, Discovery& d, Out& out) {
     Addr dest = d.dest;
     double started = d.started, round_started = d.round_started;
     discoveries.erase(dest);
-    Action drop;
-    drop.kind = Act::Drop;
-    drop.addr = dest;
-    drop.packets = queue.pop_all(dest);
-    out.push_back(std::move(drop));
+    end_discovery(now, dest, started, round_started, false, false, out);
+}
+
+void AodvCore::end_discovery(double now, Addr dest, double started, double round_started,
+                             bool ok, bool repair, Out& out) {
+    Action packets;
+    packets.kind = ok ? Act::Release : Act::Drop;
+    packets.addr = dest;
+    packets.packets = queue.pop_all(dest);
+    out.push_back(std::move(packets));
     Action done;
     done.kind = Act::Done;
     done.addr = dest;
-    done.ok = false;
+    done.ok = ok;
     done.latency = now - started;
     done.round_latency = now - round_started;
+    done.repair = repair;
     out.push_back(std::move(done));
 }
 
@@ -624,19 +630,7 @@ std::vector<AodvCore::Repaired> AodvCore::complete(double now, Out& out) {
         if (r == nullptr) continue;
         Discovery d = *discoveries.find(dest);
         discoveries.erase(dest);
-        Action rel;
-        rel.kind = Act::Release;
-        rel.addr = dest;
-        rel.packets = queue.pop_all(dest);
-        out.push_back(std::move(rel));
-        Action done;
-        done.kind = Act::Done;
-        done.addr = dest;
-        done.ok = true;
-        done.latency = now - d.started;
-        done.round_latency = now - d.round_started;
-        done.repair = d.is_repair;
-        out.push_back(std::move(done));
+        end_discovery(now, dest, d.started, d.round_started, true, d.is_repair, out);
         if (d.is_repair) rep.push_back(Repaired{d, r});
     }
     return rep;
@@ -1093,19 +1087,7 @@ void AodvCore::repair_failed(double now, Addr dest, Out& out) {
     // one RING_TRAVERSAL_TIME of the repair's TTL.
     Discovery d = *discoveries.find(dest);
     discoveries.erase(dest);
-    Action drop;
-    drop.kind = Act::Drop;
-    drop.addr = dest;
-    drop.packets = queue.pop_all(dest);
-    out.push_back(std::move(drop));
-    Action done;
-    done.kind = Act::Done;
-    done.addr = dest;
-    done.ok = false;
-    done.latency = now - d.started;
-    done.round_latency = now - d.round_started;
-    done.repair = true;
-    out.push_back(std::move(done));
+    end_discovery(now, dest, d.started, d.round_started, false, true, out);
     Route* r = table.get(dest);
     if (r != nullptr && !r->precursors.empty()) send_rerr(now, std::vector<Route*>{r}, out, false);
 }

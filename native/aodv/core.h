@@ -231,6 +231,10 @@ class AodvCore {
     void keep_invalid_entry(double now, Addr dst);
     void send_rreq(double now, Discovery& d, Out& out);
     void discovery_timeout(double now, Discovery& d, Out& out);
+    // The discovery of `dest` ended: its buffered packets released (ok) or dropped, then
+    // its DiscoveryDone (aodv.discovery: both leave in this order).
+    void end_discovery(double now, Addr dest, double started, double round_started, bool ok,
+                       bool repair, Out& out);
     struct Repaired {
         Discovery d;
         Route* r;
