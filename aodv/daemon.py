@@ -186,6 +186,9 @@ class Daemon:
         self._actuator = Actuator(
             self.core, self.control, self.routes, self.raw, self.tun, self.stats, self.store
         )
+        # Undone first: the kernel thread's last batches reach the kernel before the routes
+        # are flushed and the sockets closed.
+        undo.callback(_quietly, "finish the kernel thread's batches", self._actuator.close)
         # What start-up allocated lives for good: keep it out of the collector's
         # full passes, which would otherwise walk it on some discovery's hot path.
         gc.freeze()

@@ -33,6 +33,7 @@ import select
 import socket
 import struct
 import subprocess
+import threading
 
 from topology.kernel import netlinkmsg as nl
 
@@ -130,16 +131,19 @@ class KernelRoutes:
         # without NLM_F_ACK are answered only on failure, at once (within send()): only
         # the newest PENDING_MAX are kept.
         self._pending: dict[int, str] = {}
+        # Requests are sent by the actuator's kernel thread and answered on the loop's.
+        self._pending_lock = threading.Lock()
         self.errors = 0
 
     # -- raw rtnetlink ---------------------------------------------------------------------
     def _next_seq(self, what: str) -> int:
         """The sequence number of a new request, remembered with what the request is."""
-        self._seq += 1
-        self._pending[self._seq] = what
-        if len(self._pending) > self.PENDING_MAX:
-            del self._pending[next(iter(self._pending))]
-        return self._seq
+        with self._pending_lock:
+            self._seq += 1
+            self._pending[self._seq] = what
+            if len(self._pending) > self.PENDING_MAX:
+                del self._pending[next(iter(self._pending))]
+            return self._seq
 
     def _send(self, request: bytes, what: str) -> None:
         try:
@@ -163,7 +167,8 @@ class KernelRoutes:
     def _ack(self, seq: int, data: bytes, start: int) -> str | None:
         """The failure an NLMSG_ERROR carries, or None for an acknowledgement."""
         code = nl.error_code(data, start)
-        what = self._pending.pop(seq, "?")
+        with self._pending_lock:
+            what = self._pending.pop(seq, "?")
         if code and code not in (errno.ESRCH, errno.ENOENT):
             self.errors += 1
             return f"{what}: {os.strerror(code)}"
