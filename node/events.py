@@ -2,11 +2,11 @@
 `read` / `parse_lines` are the one way back in, for the run to summarise and check.
 
 Every record has "e" (the event) and "step" (the robot's step when it happened), then the
-event's own fields ("kind", "goal", "frm", ...). The file is line-buffered so a robot killed
-mid-run leaves every complete line behind. The C++ robot (native/robot/events.h) writes the
-same lines, compact JSON with "e" first, so `event_name` (and, cheaper, `line_prefix`) can
-tell a line's event from its first bytes without parsing it: a reader that wants only some
-events (the live view counts sends every second) parses only those lines.
+event's own fields ("kind", "goal", "frm", ...). Each line is written whole, at once, so a
+robot killed mid-run leaves every complete line behind. The C++ robot (native/robot/events.h)
+writes the same lines, compact JSON with "e" first, so `event_name` (and, cheaper,
+`line_prefix`) can tell a line's event from its first bytes without parsing it: a reader that
+wants only some events (the live view counts sends every second) parses only those lines.
 
 Reading: a line cut short by a crash, one that is not a JSON object, or one without a string
 "e" and a whole-number "step" is skipped (a log is evidence, not input to trust), and so
@@ -18,8 +18,10 @@ opens an event log to parse its lines (tests/unit/test_file_types.py holds this)
 
 from __future__ import annotations
 
+import errno
 import io
 import json
+import logging
 import os
 import threading
 from collections.abc import Collection, Iterable, Iterator, Mapping
@@ -27,6 +29,8 @@ from types import MappingProxyType
 from typing import Any, NamedTuple, cast
 
 from common import boundedfile
+
+log = logging.getLogger(__name__)
 
 EVENTS_SUFFIX = ".events.jsonl"  # robots/rK.events.jsonl; the display's: display/events.jsonl
 MAX_LINE = 1 << 20  # a map diff or a summary is a few kB
@@ -36,22 +40,53 @@ _NO_FIELDS: Mapping[str, Any] = MappingProxyType({})
 
 
 class EventLog:
+    """Writes a log: each line one write(2) under a lock, so that a robot killed mid-run
+    leaves complete lines. A write that fails (a full disk) loses its event: the log counts
+    it (`failed`, the summary's "events_failed"), says so once in the process's log, and
+    starts its next line on a line of its own when the failed one was cut short; the C++
+    robot's (native/robot/events.cc) does the same."""
+
     def __init__(self, path: str | None):
-        self.f = open(path, "a", buffering=1) if path else None  # noqa: SIM115
+        # As open(path, "a"): created 0666 less the umask, appended to, closed on exec.
+        flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_CLOEXEC
+        self.fd: int | None = os.open(path, flags, 0o666) if path else None
+        self.path = path
         self.lock = threading.Lock()
+        self.failed = 0  # events lost to a failed write
+        self._cut = False  # a failed write left part of a line in the file
 
     def write(self, event: str, step: int, **fields) -> None:
-        if self.f is None:
+        if self.fd is None:
             return
-        line = Event(event, step, fields).to_line()
+        data = (Event(event, step, fields).to_line() + "\n").encode()
         with self.lock:
-            self.f.write(line + "\n")
+            if self.fd is None:
+                return
+            if self._cut:
+                data = b"\n" + data
+            done = 0
+            try:
+                while done < len(data):
+                    n = os.write(self.fd, data[done:])
+                    if n == 0:  # never for a file, but no spinning under the lock
+                        raise OSError(errno.EIO, "nothing written")
+                    done += n
+            except OSError as e:
+                self._cut = self._cut or done > 0
+                self.failed += 1
+                if self.failed == 1:
+                    log.warning(
+                        "cannot write the event log %s: %s; events are lost (counted in the "
+                        "summary's events_failed)", self.path, e.strerror or e,
+                    )  # fmt: skip
+                return
+            self._cut = False
 
     def close(self) -> None:
-        if self.f is not None:
-            with self.lock:
-                self.f.close()
-                self.f = None
+        with self.lock:
+            if self.fd is not None:
+                os.close(self.fd)
+                self.fd = None
 
 
 class Event(NamedTuple):

@@ -169,4 +169,6 @@ class Robot(MotionControl, Planning, TimerPart, Receiving):
             middleware=self.goals.name,
             messenger=self.goals.stats.as_dict(),
             arrivals=self.arrivals.as_dict(),
+            events_failed=self.events.failed,
+            robot_impl="python",
         )

@@ -18,6 +18,17 @@ namespace {
 constexpr size_t HELLO = 4, FRAME = 27, CMD = 14, DONE = 5;
 }
 
+const char* body_kind_name(BodyKind k) {
+    switch (k) {
+        case BodyKind::hello: return "hello";
+        case BodyKind::frame: return "frame";
+        case BodyKind::end: return "end";
+        case BodyKind::cmd: return "cmd";
+        case BodyKind::done: return "done";
+    }
+    return "?";
+}
+
 bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
     if (n == 0) {
         err = "empty body message";
@@ -27,13 +38,13 @@ bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
     switch (d[0]) {
         case 'H':
             if (n != HELLO) break;
-            out.kind = "hello";
+            out.kind = BodyKind::hello;
             out.robot = rd16(d + 1);
             out.role = d[3];
             return true;
         case 'F': {
             if (n < FRAME) break;
-            out.kind = "frame";
+            out.kind = BodyKind::frame;
             Frame& f = out.frame;
             f.step = rd32(d + 1);
             f.x = rdf32(d + 5);
@@ -55,11 +66,11 @@ bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
             return true;
         }
         case 'E':
-            out.kind = "end";  // as node.body: the first byte decides
+            out.kind = BodyKind::end;  // as node.body: the first byte decides
             return true;
         case 'C':
             if (n != CMD) break;
-            out.kind = "cmd";
+            out.kind = BodyKind::cmd;
             out.step = rd32(d + 1);
             out.go = d[5] != 0;
             out.tx = rdf32(d + 6);
@@ -67,7 +78,7 @@ bool body_parse(const uint8_t* d, size_t n, BodyMsg& out, std::string& err) {
             return true;
         case 'D':
             if (n != DONE) break;
-            out.kind = "done";
+            out.kind = BodyKind::done;
             out.step = rd32(d + 1);
             return true;
         default:
@@ -84,7 +95,7 @@ bool body_check_frame(const Frame& f, double width_m, double height_m, int n_ray
         err = "frame position (" + py_float(f.x) + ", " + py_float(f.y) + ") is off the map";
         return false;
     }
-    if ((int64_t)f.ranges.size() != n_rays) {
+    if (static_cast<int64_t>(f.ranges.size()) != n_rays) {
         err = "frame has " + std::to_string(f.ranges.size()) + " ranges, the laser " +
               std::to_string(n_rays);
         return false;
@@ -103,12 +114,12 @@ int body_frame_selftest(const std::vector<std::string>& argv, const std::string&
     }
     BodyMsg m;
     std::string err;
-    bool ok = body_parse((const uint8_t*)in.data(), in.size(), m, err);
-    if (ok && m.kind != "frame") {
+    bool ok = body_parse(reinterpret_cast<const uint8_t*>(in.data()), in.size(), m, err);
+    if (ok && m.kind != BodyKind::frame) {
         ok = false;
         err = "not a frame";
     }
-    if (ok) ok = body_check_frame(m.frame, w, h, (int)rays, err);
+    if (ok) ok = body_check_frame(m.frame, w, h, static_cast<int>(rays), err);
     if (ok) {
         printf("ok\n");
         return 0;
@@ -119,8 +130,8 @@ int body_frame_selftest(const std::vector<std::string>& argv, const std::string&
 
 std::string body_hello(int robot, int role) {
     std::string o = "H";
-    put16(o, (uint16_t)robot);
-    put8(o, (uint8_t)role);
+    put16(o, static_cast<uint16_t>(robot));
+    put8(o, static_cast<uint8_t>(role));
     return o;
 }
 
@@ -128,8 +139,8 @@ std::string body_cmd(uint32_t step, bool go, double x, double y) {
     std::string o = "C";
     put32(o, step);
     put8(o, go ? 1 : 0);
-    putf32(o, go ? (float)x : 0.0f);
-    putf32(o, go ? (float)y : 0.0f);
+    putf32(o, go ? static_cast<float>(x) : 0.0f);
+    putf32(o, go ? static_cast<float>(y) : 0.0f);
     return o;
 }
 
@@ -142,24 +153,20 @@ std::string body_done(uint32_t step) {
 std::string body_frame(const Frame& f) {
     std::string o = "F";
     put32(o, f.step);
-    putf32(o, (float)f.x);
-    putf32(o, (float)f.y);
-    putf32(o, (float)f.theta);
+    putf32(o, static_cast<float>(f.x));
+    putf32(o, static_cast<float>(f.y));
+    putf32(o, static_cast<float>(f.theta));
     putf64(o, f.sent);
-    put16(o, (uint16_t)f.ranges.size());
+    put16(o, static_cast<uint16_t>(f.ranges.size()));
     for (float r : f.ranges) putf32(o, r);
     return o;
-}
-
-BodyClient::~BodyClient() {
-    if (fd_ >= 0) close(fd_);
 }
 
 bool BodyClient::open(const std::string& path, int robot, std::string& err, int role) {
     robot_ = robot;
     role_ = role;
-    fd_ = socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
-    if (fd_ < 0) {
+    fd_.reset(socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0));
+    if (!fd_.valid()) {
         err = std::string("body link: ") + strerror(errno);
         return false;
     }
@@ -170,7 +177,7 @@ bool BodyClient::open(const std::string& path, int robot, std::string& err, int 
         return false;
     }
     memcpy(a.sun_path, path.c_str(), path.size() + 1);
-    if (connect(fd_, (sockaddr*)&a, sizeof a) != 0) {
+    if (connect(fd_.get(), reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
         err = "body link " + path + ": " + strerror(errno);
         return false;
     }
@@ -187,30 +194,30 @@ void BodyClient::expect(double width_m, double height_m, int n_rays) {
 }
 
 int BodyClient::recv(double timeout_s, BodyMsg& out, std::string& err) {
-    pollfd p{fd_, POLLIN, 0};
-    int r = poll(&p, 1, (int)(timeout_s * 1000));
+    pollfd p{fd_.get(), POLLIN, 0};
+    int r = poll(&p, 1, static_cast<int>(timeout_s * 1000));
     if (r == 0 || (r < 0 && errno == EINTR)) return 0;
-    ssize_t n = ::recv(fd_, buf_.data(), buf_.size(), 0);
+    ssize_t n = ::recv(fd_.get(), buf_.data(), buf_.size(), 0);
     if (n <= 0) {
         out = BodyMsg();
-        out.kind = "end";
+        out.kind = BodyKind::end;
         return 1;
     }
-    if (!body_parse(buf_.data(), (size_t)n, out, err)) return -1;
-    if (bounded_ && out.kind == "frame" &&
+    if (!body_parse(buf_.data(), static_cast<size_t>(n), out, err)) return -1;
+    if (bounded_ && out.kind == BodyKind::frame &&
         !body_check_frame(out.frame, width_m_, height_m_, n_rays_, err))
         return -1;
     return 1;
 }
 
 bool BodyClient::pending() {
-    pollfd p{fd_, POLLIN, 0};
+    pollfd p{fd_.get(), POLLIN, 0};
     return poll(&p, 1, 0) > 0;
 }
 
 void BodyClient::send(const std::string& data) {
     // The world gone: the reader sees the hang-up.
-    (void)::send(fd_, data.data(), data.size(), MSG_NOSIGNAL);
+    (void)::send(fd_.get(), data.data(), data.size(), MSG_NOSIGNAL);
 }
 
 }  // namespace tb

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "fd.h"
+
 namespace tb {
 
 struct Frame {
@@ -15,9 +17,13 @@ struct Frame {
     std::vector<float> ranges;
 };
 
-// One decoded body message; `kind` is "hello", "frame", "end", "cmd" or "done".
+// A body message's kind: node.body.parse's first item.
+enum class BodyKind { hello, frame, end, cmd, done };
+const char* body_kind_name(BodyKind k);  // "hello", "frame", ... (node.body's names)
+
+// One decoded body message.
 struct BodyMsg {
-    std::string kind;
+    BodyKind kind = BodyKind::end;
     Frame frame;                 // frame
     uint32_t step = 0;           // cmd, done
     int robot = 0, role = 0;     // hello
@@ -44,7 +50,6 @@ std::string body_frame(const Frame& f);
 class BodyClient {
 public:
     BodyClient() = default;
-    ~BodyClient();
     BodyClient(const BodyClient&) = delete;
     BodyClient& operator=(const BodyClient&) = delete;
     // `role`: 0 a robot, 1 the display (node.body.ROLE_ROBOT, ROLE_DISPLAY).
@@ -59,7 +64,7 @@ public:
     void send(const std::string& data);
 
 private:
-    int fd_ = -1;
+    Fd fd_;
     int robot_ = 0, role_ = 0;
     bool bounded_ = false;  // expect() was called
     double width_m_ = 0, height_m_ = 0;

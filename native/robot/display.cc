@@ -2,7 +2,7 @@
 
 #include <cerrno>
 #include <cstring>
-#include <fcntl.h>
+#include <exception>
 #include <poll.h>
 #include <thread>
 #include <unistd.h>
@@ -17,8 +17,8 @@ namespace {
 
 void put_le(FILE* f, uint64_t v, int bytes) {
     uint8_t b[8];
-    for (int i = 0; i < bytes; ++i) b[i] = (uint8_t)(v >> (8 * i));
-    fwrite(b, 1, (size_t)bytes, f);
+    for (int i = 0; i < bytes; ++i) b[i] = static_cast<uint8_t>(v >> (8 * i));
+    fwrite(b, 1, static_cast<size_t>(bytes), f);
 }
 
 }  // namespace
@@ -37,8 +37,8 @@ void ReplayWriter::map(int origin, const uint8_t* payload, size_t n) {
     std::lock_guard<std::mutex> g(lock_);
     if (!f_) return;
     fputc('M', f_);
-    put_le(f_, (uint64_t)origin, 2);
-    put_le(f_, (uint64_t)n, 4);
+    put_le(f_, static_cast<uint64_t>(origin), 2);
+    put_le(f_, n, 4);
     if (fwrite(payload, 1, n, f_) != n) failed_ = true;
 }
 
@@ -66,19 +66,26 @@ Display::Display(const Args& a, BodyClient& link, Flooder& flooder, EventLog& ev
       video_every_(std::max(1, a.video_every)) {}
 
 void Display::run() {
-    int p[2];
-    if (pipe2(p, O_CLOEXEC | O_NONBLOCK) == 0) {
-        wake_r_ = p[0];
-        wake_w_ = p[1];
-    }
-    std::thread in(&Display::inbox, this);
+    wake_pipe(wake_r_, wake_w_);  // none: the inbox notices the end within its poll's 0.5 s
+    std::thread in(&Display::guarded_inbox, this);
     link_.ready();
     visualization();
     stopping = true;
-    if (wake_w_ >= 0) (void)!write(wake_w_, "x", 1);
+    if (wake_w_.valid()) (void)!write(wake_w_.get(), "x", 1);
     in.join();
-    for (int fd : {wake_r_, wake_w_})
-        if (fd >= 0) close(fd);
+    wake_r_.reset();
+    wake_w_.reset();
+}
+
+// An inbox that dies takes the display with it (exit status 3, as a robot's part), with its
+// reason in the log, rather than std::terminate's abort.
+void Display::guarded_inbox() {
+    try {
+        inbox();
+    } catch (const std::exception& e) {
+        LOG_ERROR("node.display", "the inbox part failed; the display stops: %s", e.what());
+        _exit(3);
+    }
 }
 
 // node.display._visualization: the frames of the steps it acts on (node.displaysteps).
@@ -99,21 +106,21 @@ void Display::visualization() {
             continue;
         }
         if (got == 0) continue;
-        if (msg.kind == "end") return;
-        if (msg.kind != "frame") continue;
+        if (msg.kind == BodyKind::end) return;
+        if (msg.kind != BodyKind::frame) continue;
         const Frame& f = msg.frame;
         int64_t step = f.step;
         step_ = step;
         if (step % map_period_ == 0) {
-            uint32_t seq = flooder_.originate(KIND_BEACON, (uint32_t)step, pack_beacon(f.x, f.y));
+            uint32_t seq = flooder_.originate(KIND_BEACON, f.step, pack_beacon(f.x, f.y));
             events_.write("send", step, JsonObj().str("kind", "beacon").num("seq", seq));
         }
-        if (step % video_every_ == 0 && !link_.pending()) replay_.mark('V', (uint32_t)step);
+        if (step % video_every_ == 0 && !link_.pending()) replay_.mark('V', f.step);
         if (f.sent > 0) frame_lateness_.add((monotonic_s() - f.sent) * 1000 * a_.time_scale);
         if (a_.snapshots.count(step)) {
-            replay_.mark('S', (uint32_t)step);
+            replay_.mark('S', f.step);
             char name[32];
-            snprintf(name, sizeof name, "step-%05lld.png", (long long)step);
+            snprintf(name, sizeof name, "step-%05lld.png", static_cast<long long>(step));
             events_.write("snapshot", step, JsonObj().str("file", name).boolean("final", false));
         }
     }
@@ -121,15 +128,15 @@ void Display::visualization() {
 
 // node.display._inbox: every new map flood is merged (here: kept for the replay, in order).
 void Display::inbox() {
-    pollfd fds[2] = {{flooder_.fileno(), POLLIN, 0}, {wake_r_, POLLIN, 0}};
+    pollfd fds[2] = {{flooder_.fileno(), POLLIN, 0}, {wake_r_.get(), POLLIN, 0}};
     while (!stopping) {
-        if (poll(fds, wake_r_ >= 0 ? 2 : 1, 500) <= 0 || !(fds[0].revents & POLLIN)) continue;
+        if (poll(fds, wake_r_.valid() ? 2 : 1, 500) <= 0 || !(fds[0].revents & POLLIN)) continue;
         for (const std::string& d : flooder_.receive_raw()) on_map_flood(d);
     }
 }
 
 void Display::on_map_flood(const std::string& data) {
-    const uint8_t* d = (const uint8_t*)data.data();
+    const uint8_t* d = reinterpret_cast<const uint8_t*>(data.data());
     FloodHeader h;
     std::string err;
     if (!unpack_flood(d, data.size(), h, err)) return;  // receive_raw let through only floods

@@ -16,6 +16,7 @@
 #include "args.h"
 #include "body.h"
 #include "events.h"
+#include "fd.h"
 #include "flood.h"
 #include "stats.h"
 
@@ -48,6 +49,12 @@ public:
     std::atomic<bool> stopping{false};
 
 private:
+    // The inbox thread shares with visualization (the calling thread) only what is guarded:
+    // the flooder (its cache, counts and map stats under their locks; its receive buffer
+    // the inbox's alone, its sequence number visualization's alone), the replay and the event
+    // log (each under its lock), received_ and malformed_ (counts_lock_), step_ and stopping
+    // (atomics); a_ is read only and the wake pipe is made before the thread starts.
+    void guarded_inbox();
     void inbox();
     void visualization();
     void on_map_flood(const std::string& data);
@@ -59,7 +66,7 @@ private:
     ReplayWriter& replay_;
     int map_period_, video_every_;
     std::atomic<int64_t> step_{-1};
-    int wake_r_ = -1, wake_w_ = -1;
+    Fd wake_r_, wake_w_;  // run()'s end wakes the inbox's poll
     std::mutex counts_lock_;  // guards received_ and malformed_ (inbox), read at the end
     Counter received_;
     int64_t malformed_ = 0;

@@ -27,7 +27,7 @@ DuplicateCache::Verdict DuplicateCache::check(int origin, uint32_t seq) {
     rec.insert(seq);
     if (d > 0) {
         high_[origin] = seq;
-        if ((int64_t)rec.size() > 2 * WINDOW)
+        if (static_cast<int64_t>(rec.size()) > 2 * WINDOW)
             for (auto it = rec.begin(); it != rec.end();)
                 it = seq_diff(*it, seq) > -WINDOW ? std::next(it) : rec.erase(it);
     }
@@ -45,37 +45,34 @@ int flood_seq_selftest(const std::string& in) {
             fprintf(stderr, "node: --decode floodseq: origin 0..65535, seq 0..2^32-1\n");
             return 2;
         }
-        printf("%s\n", names[cache.check((int)origin, (uint32_t)seq)]);
+        printf("%s\n", names[cache.check(static_cast<int>(origin), static_cast<uint32_t>(seq))]);
         p += used;
     }
     return 0;
 }
 
-Flooder::Flooder(int me, int port, std::string iface, std::string mode, double hold_s)
-    : stats(), me_(me), port_(port), iface_(std::move(iface)), mode_(std::move(mode)),
+Flooder::Flooder(int me, int port, std::string iface, const std::string& mode, double hold_s)
+    : stats(), me_(me), port_(port), iface_(std::move(iface)), blind_(mode == "blind"),
       hold_(hold_s) {}
 
-Flooder::~Flooder() {
-    if (fd_ >= 0) close(fd_);
-}
-
 bool Flooder::open(std::string& err) {
-    fd_ = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    fd_.reset(socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
+    const int fd = fd_.get();
     int one = 1, buf = 4 << 20;
-    if (fd_ < 0 || setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) ||
-        setsockopt(fd_, SOL_SOCKET, SO_BROADCAST, &one, sizeof one) ||
-        setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &buf, sizeof buf) ||
-        setsockopt(fd_, SOL_SOCKET, SO_SNDBUF, &buf, sizeof buf) ||
+    if (fd < 0 || setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) ||
+        setsockopt(fd, SOL_SOCKET, SO_BROADCAST, &one, sizeof one) ||
+        setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &buf, sizeof buf) ||
+        setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &buf, sizeof buf) ||
         (!iface_.empty() &&
-         setsockopt(fd_, SOL_SOCKET, SO_BINDTODEVICE, iface_.c_str(), iface_.size()))) {
+         setsockopt(fd, SOL_SOCKET, SO_BINDTODEVICE, iface_.c_str(), iface_.size()))) {
         err = std::string("flood socket: ") + strerror(errno);
         return false;
     }
     sockaddr_in a{};
     a.sin_family = AF_INET;
-    a.sin_port = htons((uint16_t)port_);
+    a.sin_port = htons(static_cast<uint16_t>(port_));
     a.sin_addr.s_addr = htonl(INADDR_ANY);
-    if (bind(fd_, (sockaddr*)&a, sizeof a) != 0) {
+    if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
         err = std::string("flood socket bind: ") + strerror(errno);
         return false;
     }
@@ -85,7 +82,7 @@ bool Flooder::open(std::string& err) {
 std::vector<uint16_t> Flooder::neighbours(double now) {
     std::vector<uint16_t> out;
     for (const auto& kv : heard_)
-        if (now - kv.second <= hold_) out.push_back((uint16_t)kv.first);
+        if (now - kv.second <= hold_) out.push_back(static_cast<uint16_t>(kv.first));
     return out;
 }
 
@@ -107,9 +104,10 @@ std::string Flooder::counts_json() {
 bool Flooder::send(const std::string& data) {
     sockaddr_in a{};
     a.sin_family = AF_INET;
-    a.sin_port = htons((uint16_t)port_);
+    a.sin_port = htons(static_cast<uint16_t>(port_));
     a.sin_addr.s_addr = htonl(INADDR_BROADCAST);
-    if (sendto(fd_, data.data(), data.size(), 0, (sockaddr*)&a, sizeof a) < 0) {
+    if (sendto(fd_.get(), data.data(), data.size(), 0, reinterpret_cast<sockaddr*>(&a),
+               sizeof a) < 0) {
         note("send_failed");
         return false;
     }
@@ -126,10 +124,10 @@ uint32_t Flooder::originate(uint8_t kind, uint32_t step, const std::string& payl
     }
     h.kind = kind;
     h.ttl = ttl_;
-    h.origin = (uint16_t)me_;
+    h.origin = static_cast<uint16_t>(me_);
     h.seq = seq_;
     h.step = step;
-    h.sender = (uint16_t)me_;
+    h.sender = static_cast<uint16_t>(me_);
     std::string data = pack_flood(h, payload);
     double t0 = monotonic_s();
     bool ok = send(data);
@@ -139,7 +137,7 @@ uint32_t Flooder::originate(uint8_t kind, uint32_t step, const std::string& payl
 
 bool Flooder::must_relay(int sender, int origin, const std::vector<uint16_t>& covered,
                          double now) {
-    if (mode_ == "blind") return true;
+    if (blind_) return true;
     for (uint16_t k : neighbours(now)) {
         if (k == sender || k == origin) continue;
         bool skip = false;
@@ -154,11 +152,12 @@ std::vector<std::string> Flooder::receive_raw() {
     std::vector<uint8_t>& buf = recv_buf_;
     double now = monotonic_s();
     while (true) {
-        ssize_t n = recv(fd_, buf.data(), buf.size(), 0);
-        if (n < 0) return out;  // EAGAIN: drained
+        ssize_t got = recv(fd_.get(), buf.data(), buf.size(), 0);
+        if (got < 0) return out;  // EAGAIN: drained
+        const size_t n = static_cast<size_t>(got);
         FloodHeader h;
         std::string err;
-        if (!unpack_flood(buf.data(), (size_t)n, h, err)) {
+        if (!unpack_flood(buf.data(), n, h, err)) {
             note("malformed");
             continue;
         }
@@ -182,13 +181,14 @@ std::vector<std::string> Flooder::receive_raw() {
             if (relay) nb = neighbours(now);
         }
         if (relay) {
-            send(relayed(buf.data(), (size_t)n, h, (uint8_t)(h.ttl - 1), (uint16_t)me_, nb));
+            const uint8_t ttl = static_cast<uint8_t>(h.ttl - 1);
+            send(relayed(buf.data(), n, h, ttl, static_cast<uint16_t>(me_), nb));
             note("relayed");
         } else if (h.ttl > 1) {
             note("pruned");
         }
-        if (h.kind == KIND_MAP) stats.note_receive(h.origin, (size_t)n);
-        out.emplace_back((const char*)buf.data(), (size_t)n);
+        if (h.kind == KIND_MAP) stats.note_receive(h.origin, n);
+        out.emplace_back(reinterpret_cast<const char*>(buf.data()), n);
     }
 }
 

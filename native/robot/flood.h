@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "fd.h"
 #include "stats.h"
 #include "wire.h"
 
@@ -23,7 +24,7 @@ namespace tb {
 constexpr int64_t SEQ_WINDOW = int64_t(1) << 24;
 
 // a - b as a signed 32-bit number (RFC 3561, 6.1): > 0 when a is the newer.
-inline int64_t seq_diff(uint32_t a, uint32_t b) { return (int64_t)(int32_t)(a - b); }
+inline int64_t seq_diff(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b); }
 
 // node.flood.DuplicateCache: per origin, the highest sequence number believed and those seen
 // within 256 below it.
@@ -46,12 +47,12 @@ int flood_seq_selftest(const std::string& in);
 
 class Flooder {
 public:
-    Flooder(int me, int port, std::string iface, std::string mode, double hold_s);
-    ~Flooder();
+    // `mode`: "blind" relays every new flood, anything else prunes (--flood, checked there).
+    Flooder(int me, int port, std::string iface, const std::string& mode, double hold_s);
     Flooder(const Flooder&) = delete;
     Flooder& operator=(const Flooder&) = delete;
     bool open(std::string& err);
-    int fileno() const { return fd_; }
+    int fileno() const { return fd_.get(); }
     uint32_t originate(uint8_t kind, uint32_t step, const std::string& payload);
     // Drains the socket: the new floods (wire form), relayed on the way.
     std::vector<std::string> receive_raw();
@@ -66,10 +67,11 @@ private:
     void note(const std::string& key);
 
     int me_, port_;
-    std::string iface_, mode_;
+    std::string iface_;
+    bool blind_;  // --flood blind, not self-pruning
     double hold_;
     uint8_t ttl_ = 16;
-    int fd_ = -1;
+    Fd fd_;
     uint32_t seq_ = 0;  // the timer's alone
     std::mutex cache_lock_;  // guards cache_ and heard_ (the inbox relays, the timer originates)
     DuplicateCache cache_;

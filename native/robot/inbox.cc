@@ -25,7 +25,7 @@ bool higher_priority(double my_cost, int me, double other_cost, int other) {
 
 void Robot::inbox() {
     pollfd fds[3] = {{flooder_.fileno(), POLLIN, 0}, {goals_.fileno(), POLLIN, 0},
-                     {wake_r_, POLLIN, 0}};
+                     {wake_r_.get(), POLLIN, 0}};
     const double linger = timing_.flood_linger_s();
     while (!stopping) {
         if (poll(fds, 3, 500) <= 0) continue;
@@ -58,7 +58,7 @@ void Robot::processing() {
 
 bool Robot::on_flood(const std::string& data, std::string& err) {
     double t_cpu = thread_cpu_s();
-    const uint8_t* d = (const uint8_t*)data.data();
+    const uint8_t* d = reinterpret_cast<const uint8_t*>(data.data());
     FloodHeader h;
     if (!unpack_flood(d, data.size(), h, err)) return false;
     if ((h.kind != KIND_MAP && h.kind != KIND_BEACON) || h.origin < 1 ||
@@ -93,11 +93,12 @@ bool Robot::on_flood(const std::string& data, std::string& err) {
     {
         std::lock_guard<std::mutex> g(lock_);
         const int p = laser_.pad;
-        learnt = m.cells.h * m.cells.w == 0
-                     ? 0
-                     : sc_merge_ternary(lp_.data() + (size_t)(p + m.r0) * stride_ + p + m.c0,
-                                        stride_, m.cells.cells.data(), m.cells.h, m.cells.w,
-                                        THRESHOLD, MERGED);
+        learnt = 0;
+        if (m.cells.h * m.cells.w != 0) {
+            float* at = lp_.data() + static_cast<size_t>(p + m.r0) * stride_ + p + m.c0;
+            learnt = sc_merge_ternary(at, stride_, m.cells.cells.data(), m.cells.h, m.cells.w,
+                                      THRESHOLD, MERGED);
+        }
         auto tm = teammates_.find(h.origin);
         if (tm != teammates_.end()) {
             tm->second.heard = step_;

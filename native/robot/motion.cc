@@ -44,12 +44,13 @@ void Robot::motion() {
             continue;
         }
         if (got == 0) continue;
-        if (msg.kind == "end") {
+        if (msg.kind == BodyKind::end) {
             std::lock_guard<std::mutex> g(lock_);
-            LOG_INFO("node.robot", "the world ended the run at step %lld", (long long)step_);
+            LOG_INFO("node.robot", "the world ended the run at step %lld",
+                     static_cast<long long>(step_));
             return;
         }
-        if (msg.kind != "frame") continue;
+        if (msg.kind != BodyKind::frame) continue;
         const Frame& f = msg.frame;
         ++frames_;
         keep_step_order(f);
@@ -99,7 +100,7 @@ void Robot::motion() {
 
 void Robot::plan_applied(int64_t step) {
     const char* age = plan_fresh_waited_ ? "plan_age_blocked_steps" : "plan_age_steps";
-    lateness_.at(age).add((double)(step - *plan_fresh_ - 1));
+    lateness_.at(age).add(static_cast<double>(step - *plan_fresh_ - 1));
     plan_fresh_.reset();
 }
 
@@ -108,7 +109,7 @@ void Robot::plan_applied(int64_t step) {
 void Robot::keep_step_order(const Frame& f) {
     auto caught_up = [&] {
         if (stopping || step_ < 0) return true;
-        bool waiting = plan_pending_ && plan_asked_ < (int64_t)f.step && !planner_sending_;
+        bool waiting = plan_pending_ && plan_asked_ < f.step && !planner_sending_;
         return timer_seen_ >= step_ && !waiting;
     };
     std::unique_lock<std::mutex> g(lock_);
@@ -125,15 +126,16 @@ void Robot::keep_step_order(const Frame& f) {
 // per-cell form where the laser's window sticks out of the padded map.
 void Robot::put_scan(const Frame& f) {
     const Laser& L = laser_;
-    float fx = (float)(f.x / L.cell + BIAS);
-    float fy = (float)(f.y / L.cell + BIAS);
-    int r0 = (int)fy - BIAS, c0 = (int)fx - BIAS, w = L.window;
+    float fx = static_cast<float>(f.x / L.cell + BIAS);
+    float fy = static_cast<float>(f.y / L.cell + BIAS);
+    const int ify = static_cast<int>(fy), ifx = static_cast<int>(fx);
+    int r0 = ify - BIAS, c0 = ifx - BIAS, w = L.window;
     int height = a_.rows + 2 * L.pad;
     // A scan of another ray count is refused before (BodyClient::expect); were one to come
     // here, it is cut or padded with "nothing hit" rather than read past its end.
     static thread_local std::vector<float> padded;
     const std::vector<float>* rp = &f.ranges;
-    if ((int)f.ranges.size() != L.n_rays) {
+    if (static_cast<int>(f.ranges.size()) != L.n_rays) {
         padded = f.ranges;
         padded.resize(L.n_rays, INFINITY);
         rp = &padded;
@@ -142,29 +144,30 @@ void Robot::put_scan(const Frame& f) {
     if (r0 >= 0 && c0 >= 0 && r0 + w <= height && c0 + w <= stride_) {
         static thread_local std::vector<uint8_t> free_tmp;
         static thread_local std::vector<int64_t> occ_tmp;
-        free_tmp.resize((size_t)w * w);
+        free_tmp.resize(static_cast<size_t>(w) * w);
         occ_tmp.resize(L.n_rays);
         const MarkTable* t = L.table_for(fx, fy);
         sc_scan_into(L.dx.data(), L.dy.data(), L.mark.data(), L.n_rays, L.n_samples, L.step32,
-                     w, fx, fy, L.pad - (int)fy, L.pad - (int)fx, ranges.data(), lp_.data(),
+                     w, fx, fy, L.pad - ify, L.pad - ifx, ranges.data(), lp_.data(),
                      own_.data(), stride_, r0, c0, L_FREE, L_OCC, L_MAX, free_tmp.data(),
                      occ_tmp.data(), t ? t->sure.data() : nullptr, t ? t->odx.data() : nullptr,
-                     t ? t->ody.data() : nullptr, t ? (int)t->odx.size() : 0);
+                     t ? t->ody.data() : nullptr, t ? static_cast<int>(t->odx.size()) : 0);
         return;
     }
     // Laser.scan_cells + OccupancyGrid.update_cells: every cell once, free first.
-    int64_t base = (int64_t)(L.pad - BIAS) * stride_ + (L.pad - BIAS);
-    int64_t total = (int64_t)lp_.size();
+    int64_t base = static_cast<int64_t>(L.pad - BIAS) * stride_ + (L.pad - BIAS);
+    int64_t total = static_cast<int64_t>(lp_.size());
     std::vector<int64_t> free_cells, occ_cells;
     for (int k = 0; k < L.n_rays; ++k) {
         float r = ranges[k];
         int idx = L.n_samples;
         if (std::isfinite(r))
-            idx = std::min(std::max((int)std::nearbyintf(r / L.step32) - 1, 0), L.n_samples);
+            idx = std::min(std::max(static_cast<int>(std::nearbyintf(r / L.step32)) - 1, 0),
+                           L.n_samples);
         for (int s = 0; s <= std::min(idx, L.n_samples - 1); ++s) {
-            size_t i = (size_t)k * L.n_samples + s;
-            int64_t at = (int64_t)(int32_t)(L.dy[i] + fy) * stride_ +
-                         (int32_t)(L.dx[i] + fx) + base;
+            size_t i = static_cast<size_t>(k) * L.n_samples + s;
+            int64_t at = static_cast<int64_t>(static_cast<int32_t>(L.dy[i] + fy)) * stride_ +
+                         static_cast<int32_t>(L.dx[i] + fx) + base;
             if (at < 0 || at >= total) continue;
             if (s < idx && L.mark[i]) free_cells.push_back(at);
             if (s == idx) occ_cells.push_back(at);
@@ -182,8 +185,9 @@ void Robot::put_scan(const Frame& f) {
 
 Box Robot::footprint(double x, double y) const {
     double c = a_.cell, rng = a_.laser_range;
-    return {std::max(0, (int)((y - rng) / c) - 1), std::max(0, (int)((x - rng) / c) - 1),
-            std::min(a_.rows, (int)((y + rng) / c) + 2), std::min(a_.cols, (int)((x + rng) / c) + 2)};
+    auto cell = [c](double v) { return static_cast<int>(v / c); };
+    return {std::max(0, cell(y - rng) - 1), std::max(0, cell(x - rng) - 1),
+            std::min(a_.rows, cell(y + rng) + 2), std::min(a_.cols, cell(x + rng) + 2)};
 }
 
 // The next waypoint of the current plan (lock held); a robot that has not moved for

@@ -19,6 +19,8 @@ std::unique_ptr<Messenger> make_zmq_messenger(int me, const MessengerTimings& t)
 
 namespace {
 
+constexpr int SEND_BUFFER = 8;  // messages queued per teammate (pynng's send_buffer_size)
+
 class NngMessenger : public Messenger {
 public:
     NngMessenger(int me, const MessengerTimings& t)
@@ -62,7 +64,9 @@ public:
             have = p != nullptr;
             if (have) s = *p;
         }
-        bool ok = have && nng_send(s, (void*)data.data(), data.size(), 0) == 0;
+        // nng_send's buffer is not const but, without NNG_FLAG_ALLOC, only read.
+        void* bytes = const_cast<char*>(data.data());
+        bool ok = have && nng_send(s, bytes, data.size(), 0) == 0;
         stats.send_ended(token, ok);
         return ok;
     }
@@ -77,7 +81,7 @@ public:
             nng_free(buf, n);
         }
         std::lock_guard<std::mutex> g(stats.lock);
-        stats.received += (int64_t)out.size();
+        stats.received += static_cast<int64_t>(out.size());
         return out;
     }
 
@@ -93,14 +97,21 @@ private:
     nng_socket* push_socket(int j) {  // lock held
         auto it = push_.find(j);
         if (it != push_.end()) return &it->second;
-        nng_socket s;
-        if (nng_push0_open(&s) != 0) return nullptr;
-        nng_socket_set_ms(s, NNG_OPT_SENDTIMEO, send_timeout_ms_);
-        nng_socket_set_ms(s, NNG_OPT_RECONNMINT, reconnect_min_);
-        nng_socket_set_ms(s, NNG_OPT_RECONNMAXT, reconnect_max_);
-        nng_socket_set_int(s, NNG_OPT_SENDBUF, 8);
+        nng_socket s = NNG_SOCKET_INITIALIZER;
+        int rv = nng_push0_open(&s);
+        // A socket without its send timeout would block a send for good: none rather than
+        // that (the send fails, counted, and the next one tries again).
+        if (rv == 0) rv = nng_socket_set_ms(s, NNG_OPT_SENDTIMEO, send_timeout_ms_);
+        if (rv == 0) rv = nng_socket_set_ms(s, NNG_OPT_RECONNMINT, reconnect_min_);
+        if (rv == 0) rv = nng_socket_set_ms(s, NNG_OPT_RECONNMAXT, reconnect_max_);
+        if (rv == 0) rv = nng_socket_set_int(s, NNG_OPT_SENDBUF, SEND_BUFFER);
+        if (rv != 0) {
+            if (nng_socket_id(s) > 0) nng_close(s);
+            LOG_WARN("node.messaging", "socket to r%d: %s", j, nng_strerror(rv));
+            return nullptr;
+        }
         std::string url = "tcp://" + robot_addr(j) + ":" + std::to_string(port_);
-        int rv = nng_dial(s, url.c_str(), nullptr, NNG_FLAG_NONBLOCK);
+        rv = nng_dial(s, url.c_str(), nullptr, NNG_FLAG_NONBLOCK);
         if (rv != 0) LOG_WARN("node.messaging", "dial r%d: %s", j, nng_strerror(rv));
         return &(push_[j] = s);
     }

@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
-#include <fcntl.h>
 #include <unistd.h>
 
 #include "log.h"
@@ -14,13 +13,13 @@
 namespace tb {
 
 int RobotTimings::goal_send_timeout_ms() const {
-    return std::max(2, (int)std::nearbyint(50 / time_scale));
+    return std::max(2, static_cast<int>(std::nearbyint(50 / time_scale)));
 }
 int RobotTimings::goal_reconnect_min_ms() const {
-    return std::max(1, (int)std::nearbyint(50 / time_scale));
+    return std::max(1, static_cast<int>(std::nearbyint(50 / time_scale)));
 }
 int RobotTimings::goal_reconnect_max_ms() const {
-    return std::max(1, (int)std::nearbyint(500 / time_scale));
+    return std::max(1, static_cast<int>(std::nearbyint(500 / time_scale)));
 }
 double RobotTimings::flood_linger_s() const { return std::min(0.001, 0.01 / time_scale); }
 
@@ -32,7 +31,7 @@ Robot::Robot(const Args& a, const RobotTimings& timing, BodyClient& link, Floode
     params_.factor = 2;
     params_.robot_radius = a.radius;
     stride_ = a.cols + 2 * laser_.pad;
-    size_t cells = (size_t)(a.rows + 2 * laser_.pad) * stride_;
+    size_t cells = static_cast<size_t>(a.rows + 2 * laser_.pad) * stride_;
     lp_.assign(cells, 0.0f);
     own_.assign(cells, 0);
     for (int j = 1; j <= a.robots; ++j)
@@ -42,11 +41,7 @@ Robot::Robot(const Args& a, const RobotTimings& timing, BodyClient& link, Floode
         lateness_.emplace(k, Lateness());
     lateness_.emplace("frame_answer_ms", Lateness(MS_BOUNDS));
     lateness_.emplace("order_wait_ms", Lateness(MS_BOUNDS));
-    int p[2];
-    if (pipe2(p, O_CLOEXEC | O_NONBLOCK) == 0) {
-        wake_r_ = p[0];
-        wake_w_ = p[1];
-    }
+    wake_pipe(wake_r_, wake_w_);  // none: the inbox notices a stop within its poll's 0.5 s
 }
 
 void Robot::count(Counter& c, const std::string& key, double v) {
@@ -112,7 +107,7 @@ void Robot::stop() {
     tick_cv_.notify_all();
     requests_.put("");  // the planner's stop
     inbox_q_.put({'S', ""});
-    if (wake_w_ >= 0) (void)!write(wake_w_, "x", 1);
+    if (wake_w_.valid()) (void)!write(wake_w_.get(), "x", 1);
     for (auto& t : threads_)
         if (t.joinable()) t.join();
     threads_.clear();
@@ -145,7 +140,7 @@ void Robot::stop() {
     JsonObj o;
     o.raw("sent", sent_.json_int()).raw("received", received_.json_int());
     o.raw("send_failed", failed_.json_int());
-    o.num("malformed", malformed_ + (int64_t)flooder_.count("malformed"));
+    o.num("malformed", malformed_ + static_cast<int64_t>(flooder_.count("malformed")));
     o.raw("flood", flooder_.counts_json()).raw("maps", flooder_.stats.json());
     o.num("frames", frames_).num("frames_skipped", skipped_);
     o.num("order_timeouts", order_timeouts_).num("inbox_dropped", inbox_dropped_);
@@ -156,7 +151,7 @@ void Robot::stop() {
     o.raw("priority", prio.text()).raw("lateness", late.text()).raw("latency_ms", lat.text());
     o.boolean("finished", finished).str("middleware", goals_.name());
     o.raw("messenger", goals_.stats.json()).raw("arrivals", arrivals_.json());
-    o.str("robot_impl", "cpp");
+    o.num("events_failed", events_.failed()).str("robot_impl", "cpp");
     events_.write("summary", step, o);
 }
 

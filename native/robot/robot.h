@@ -30,6 +30,7 @@
 #include "args.h"
 #include "body.h"
 #include "events.h"
+#include "fd.h"
 #include "flood.h"
 #include "laser.h"
 #include "messenger.h"
@@ -185,7 +186,7 @@ private:
 
     Queue<std::string> requests_;
     Queue<std::pair<char, std::string>> inbox_q_{10000};
-    int wake_r_ = -1, wake_w_ = -1;
+    Fd wake_r_, wake_w_;  // stop() wakes the inbox's poll
     std::vector<std::thread> threads_;
 };
 

@@ -43,23 +43,23 @@ int refused(const std::string& why) {
 
 int decode(const std::string& kind, int robots, int rows, int cols) {
     std::string in = read_stdin();
-    const uint8_t* d = (const uint8_t*)in.data();
+    const uint8_t* d = reinterpret_cast<const uint8_t*>(in.data());
     std::string err;
     JsonObj o;
     if (kind == "body") {
         BodyMsg m;
         if (!body_parse(d, in.size(), m, err)) return refused(err);
-        o.str("kind", m.kind);
-        if (m.kind == "hello") o.num("robot", m.robot).num("role", m.role);
-        if (m.kind == "frame") {
+        o.str("kind", body_kind_name(m.kind));
+        if (m.kind == BodyKind::hello) o.num("robot", m.robot).num("role", m.role);
+        if (m.kind == BodyKind::frame) {
             const Frame& f = m.frame;
             std::vector<double> r(f.ranges.begin(), f.ranges.end());
             o.num("step", f.step).real("x", f.x).real("y", f.y).real("theta", f.theta);
             o.real("sent", f.sent).raw("ranges", real_list(r));
         }
-        if (m.kind == "cmd")
+        if (m.kind == BodyKind::cmd)
             o.num("step", m.step).raw("target", m.go ? real_list({m.tx, m.ty}) : "null");
-        if (m.kind == "done") o.num("step", m.step);
+        if (m.kind == BodyKind::done) o.num("step", m.step);
     } else if (kind == "flood") {
         FloodHeader h;
         if (!unpack_flood(d, in.size(), h, err)) return refused(err);
@@ -68,12 +68,12 @@ int decode(const std::string& kind, int robots, int rows, int cols) {
             nb += (i ? "," : "") + std::to_string(h.neighbours[i]);
         o.num("kind", h.kind).num("ttl", h.ttl).num("origin", h.origin).num("seq", h.seq);
         o.num("step", h.step).num("sender", h.sender).raw("neighbours", nb + "]");
-        o.num("payload", (int64_t)(in.size() - h.payload_at));
+        o.num("payload", static_cast<int64_t>(in.size() - h.payload_at));
     } else if (kind == "map") {
         MapMsg m;
         if (!unpack_map(d, in.size(), rows, cols, m, err)) return refused(err);
         std::string cells;
-        for (uint8_t c : m.cells.cells) cells += (char)('0' + c);
+        for (uint8_t c : m.cells.cells) cells += static_cast<char>('0' + c);
         o.real("x", m.x).real("y", m.y).num("r0", m.r0).num("c0", m.c0);
         o.num("h", m.cells.h).num("w", m.cells.w).str("cells", cells);
     } else if (kind == "msg") {
@@ -97,6 +97,12 @@ double num(const Json& o, const char* k, double dflt = 0) {
     return std::isfinite(d) && std::fabs(d) < 9e15 ? d : 0;
 }
 
+// num() converted to the type of the field it fills.
+template <typename T>
+T field(const Json& o, const char* k, double dflt = 0) {
+    return static_cast<T>(num(o, k, dflt));
+}
+
 int encode(const std::string& kind) {
     Json o;
     std::string err, out;
@@ -107,48 +113,50 @@ int encode(const std::string& kind) {
     const Json* k = o.get("kind");
     std::string what = k && k->kind == Json::STR ? k->s : "";
     if (kind == "body") {
-        if (what == "hello") out = body_hello((int)num(o, "robot"), (int)num(o, "role"));
+        if (what == "hello") out = body_hello(field<int>(o, "robot"), field<int>(o, "role"));
         else if (what == "cmd") {
             const Json* t = o.get("target");
             bool go = t && t->kind == Json::ARR && t->arr.size() == 2;
-            out = body_cmd((uint32_t)num(o, "step"), go, go ? t->arr[0].number() : 0,
+            out = body_cmd(field<uint32_t>(o, "step"), go, go ? t->arr[0].number() : 0,
                            go ? t->arr[1].number() : 0);
-        } else if (what == "done") out = body_done((uint32_t)num(o, "step"));
+        } else if (what == "done") out = body_done(field<uint32_t>(o, "step"));
         else if (what == "end") out = "E";
         else if (what == "frame") {
             Frame f;
-            f.step = (uint32_t)num(o, "step");
+            f.step = field<uint32_t>(o, "step");
             f.x = num(o, "x");
             f.y = num(o, "y");
             f.theta = num(o, "theta");
             f.sent = num(o, "sent");
             if (const Json* r = o.get("ranges"))
                 for (const Json& v : r->arr)
-                    f.ranges.push_back(v.is_number() ? (float)v.number() : INFINITY);
+                    f.ranges.push_back(v.is_number() ? static_cast<float>(v.number()) : INFINITY);
             out = body_frame(f);
         }
     } else if (kind == "map") {
         Ternary t;
-        t.h = (int)num(o, "h");
-        t.w = (int)num(o, "w");
-        if (t.h < 0 || t.w < 0 || t.h > 65535 || t.w > 65535 || (int64_t)t.h * t.w > 4000000) {
+        t.h = field<int>(o, "h");
+        t.w = field<int>(o, "w");
+        if (t.h < 0 || t.w < 0 || t.h > 65535 || t.w > 65535 ||
+            static_cast<int64_t>(t.h) * t.w > 4000000) {
             fprintf(stderr, "node: --encode map: h and w in 0..65535, at most 4,000,000 cells\n");
             return 2;
         }
         const Json* c = o.get("cells");
-        for (char ch : c ? c->s : "") t.cells.push_back((uint8_t)(ch - '0'));
-        t.cells.resize((size_t)t.h * t.w, 0);
-        out = pack_map(num(o, "x"), num(o, "y"), t, (int)num(o, "r0"), (int)num(o, "c0"));
+        for (char ch : c ? c->s : "") t.cells.push_back(static_cast<uint8_t>(ch - '0'));
+        t.cells.resize(static_cast<size_t>(t.h) * t.w, 0);
+        out = pack_map(num(o, "x"), num(o, "y"), t, field<int>(o, "r0"), field<int>(o, "c0"));
     } else if (kind == "flood") {
         FloodHeader h;
-        h.kind = (uint8_t)num(o, "kind_code", KIND_MAP);
-        h.ttl = (uint8_t)num(o, "ttl");
-        h.origin = (uint16_t)num(o, "origin");
-        h.seq = (uint32_t)num(o, "seq");
-        h.step = (uint32_t)num(o, "step");
-        h.sender = (uint16_t)num(o, "sender");
+        h.kind = field<uint8_t>(o, "kind_code", KIND_MAP);
+        h.ttl = field<uint8_t>(o, "ttl");
+        h.origin = field<uint16_t>(o, "origin");
+        h.seq = field<uint32_t>(o, "seq");
+        h.step = field<uint32_t>(o, "step");
+        h.sender = field<uint16_t>(o, "sender");
         if (const Json* nb = o.get("neighbours"))
-            for (const Json& v : nb->arr) h.neighbours.push_back((uint16_t)v.number());
+            for (const Json& v : nb->arr)
+                h.neighbours.push_back(static_cast<uint16_t>(v.number()));
         const Json* p = o.get("payload");
         out = pack_flood(h, p && p->kind == Json::STR ? p->s : "");
     } else if (kind == "msg") {
@@ -157,11 +165,11 @@ int encode(const std::string& kind) {
         double gy = g && g->arr.size() == 2 ? g->arr[1].number() : 0;
         const Json* f = o.get("fallback");
         if (what == "goal")
-            out = goal_msg((int)num(o, "from"), (int64_t)num(o, "step"), gx, gy, num(o, "cost"),
-                           f && f->kind == Json::BOOL && f->b, (int64_t)num(o, "n"));
+            out = goal_msg(field<int>(o, "from"), field<int64_t>(o, "step"), gx, gy, num(o, "cost"),
+                           f && f->kind == Json::BOOL && f->b, field<int64_t>(o, "n"));
         else
-            out = replan_msg((int)num(o, "from"), (int64_t)num(o, "step"), gx, gy,
-                             (int64_t)num(o, "n"));
+            out = replan_msg(field<int>(o, "from"), field<int64_t>(o, "step"), gx, gy,
+                             field<int64_t>(o, "n"));
     }
     if (out.empty()) {
         fprintf(stderr, "node: --encode %s: nothing to encode for kind %s\n", kind.c_str(),
@@ -205,7 +213,7 @@ int selftest_main(const std::vector<std::string>& argv) {
             fprintf(stderr, "node: --laser-tables: RANGE in (0, 30] m, RAYS >= 1, CELL > 1 mm\n");
             return 2;
         }
-        return laser_tables(range, (int)rays, cell);
+        return laser_tables(range, static_cast<int>(rays), cell);
     }
     if (argv.size() < 2) {
         fprintf(stderr, "node: %s KIND\n", argv[0].c_str());

@@ -26,6 +26,8 @@
 
 #include <zmq.h>
 
+#include "log.h"
+
 namespace tb {
 
 namespace {
@@ -37,7 +39,9 @@ struct Sock {
     std::mutex lock;  // held for the whole of a call on `sock`
 };
 
-void set_int(void* s, int option, int value) { zmq_setsockopt(s, option, &value, sizeof value); }
+bool set_int(void* s, int option, int value) {
+    return zmq_setsockopt(s, option, &value, sizeof value) == 0;
+}
 
 class ZmqMessenger : public Messenger {
 public:
@@ -67,10 +71,9 @@ public:
             err = std::string("zeromq: ") + zmq_strerror(errno);
             return false;
         }
-        set_int(rx_.sock, ZMQ_LINGER, 0);
         std::string url = "tcp://" + where;
         size_t len = sizeof fd_;
-        if (zmq_bind(rx_.sock, url.c_str()) != 0 ||
+        if (!set_int(rx_.sock, ZMQ_LINGER, 0) || zmq_bind(rx_.sock, url.c_str()) != 0 ||
             zmq_getsockopt(rx_.sock, ZMQ_FD, &fd_, &len) != 0) {
             err = "zeromq: cannot listen on " + where + ": " + zmq_strerror(errno);
             return false;
@@ -113,7 +116,7 @@ public:
             zmq_getsockopt(rx_.sock, ZMQ_EVENTS, &events, &len);  // re-arms ZMQ_FD
         }
         std::lock_guard<std::mutex> g(stats.lock);
-        stats.received += (int64_t)out.size();
+        stats.received += static_cast<int64_t>(out.size());
         return out;
     }
 
@@ -145,15 +148,20 @@ private:
         auto it = peers_.find(j);
         if (it != peers_.end()) return it->second.get();
         void* s = zmq_socket(ctx_, ZMQ_PUSH);
-        if (!s) return nullptr;
-        set_int(s, ZMQ_LINGER, 0);
-        set_int(s, ZMQ_RECONNECT_IVL, reconnect_min_);
-        set_int(s, ZMQ_RECONNECT_IVL_MAX, reconnect_max_);
-        set_int(s, ZMQ_IMMEDIATE, 1);
-        set_int(s, ZMQ_SNDTIMEO, send_timeout_ms_);
-        set_int(s, ZMQ_SNDHWM, SEND_HWM);
         std::string url = "tcp://" + robot_addr(j) + ":" + std::to_string(port_);
-        zmq_connect(s, url.c_str());  // connects and reconnects in the background
+        // A socket without its send timeout would block a send for good: none rather than
+        // that (the send fails, counted, and the next one tries again).
+        bool ok = s && set_int(s, ZMQ_LINGER, 0) &&
+                  set_int(s, ZMQ_RECONNECT_IVL, reconnect_min_) &&
+                  set_int(s, ZMQ_RECONNECT_IVL_MAX, reconnect_max_) &&
+                  set_int(s, ZMQ_IMMEDIATE, 1) && set_int(s, ZMQ_SNDTIMEO, send_timeout_ms_) &&
+                  set_int(s, ZMQ_SNDHWM, SEND_HWM) &&
+                  zmq_connect(s, url.c_str()) == 0;  // connects and reconnects in the background
+        if (!ok) {
+            LOG_WARN("node.messaging", "socket to r%d: %s", j, zmq_strerror(zmq_errno()));
+            if (s) zmq_close(s);
+            return nullptr;
+        }
         auto made = std::make_unique<Sock>();
         made->sock = s;
         return (peers_[j] = std::move(made)).get();

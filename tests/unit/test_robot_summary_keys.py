@@ -1,0 +1,84 @@
+"""Both robot programs write one summary (docs/robot-contract.md, section 4): the same keys,
+nested ones too, in the last event of their event log, which testbed/run/results.py makes
+robots/rK.json of.
+
+Each program runs through test_robot_body_link's test world (a Unix socket, no namespace:
+80 frames of an empty world, then END) and its summary is read back from its event log.
+Their keys are compared level by level. Some dicts count what happened, one key per kind of
+thing seen (sends and receipts by message kind, flood verdicts, busy seconds by part,
+latencies by what was timed): there the two robots, which took the same steps and plans
+here, must still agree on the keys both have, and each key must be one the robot's reference
+counts (COUNTED) so that a misspelt kind shows. The summary's events_failed counts what a
+full disk cost the event log (node/events.py; native/robot/events.cc alike), said once in
+the robot's log.
+"""
+
+import logging
+
+import pytest
+
+from node.events import EventLog
+from node.native import unbuilt_reason
+from tests.unit.test_robot_body_link import drive
+
+# The summary's counters: each the kinds it may count, a key only once one happened.
+COUNTED = {
+    "sent": {"goal", "replan", "map"},
+    "received": {"goal", "replan", "map", "beacon"},
+    "send_failed": {"goal", "replan"},
+    "flood": {"malformed", "forged", "duplicate", "relayed", "pruned", "send_failed"},
+    "busy_s": {"motion", "plan", "merge", "share"},
+    "latency_ms": {"delivery", "answer"},
+}
+
+
+def key_differences(py: dict, cc: dict, where: str = "summary") -> list[str]:
+    """Where the two summaries' keys differ ([] when nowhere), as `where.key: python only`,
+    `where.key: C++ only` or, in a counter, `where.key: not a kind it counts`, looking into
+    every dict both hold under one key. A counter's key that one robot lacks is no
+    difference (it counts what happened)."""
+    out = []
+    counted = COUNTED.get(where.removeprefix("summary."))
+    for k in sorted(set(py) | set(cc)):
+        if counted is not None and k not in counted:
+            out.append(f"{where}.{k}: not a kind it counts")
+        elif k not in cc or k not in py:
+            if counted is None:
+                out.append(f"{where}.{k}: {'python' if k in py else 'C++'} only")
+        elif isinstance(py[k], dict) and isinstance(cc[k], dict):
+            out += key_differences(py[k], cc[k], f"{where}.{k}")
+        elif isinstance(py[k], dict) or isinstance(cc[k], dict):
+            out.append(f"{where}.{k}: a dict in one robot only")
+    return out
+
+
+def test_key_differences_names_each_missing_key():
+    py = {"a": 1, "lateness": {"x": {"n": 1}}, "sent": {"map": 1}}
+    cc = {"b": 1, "lateness": {"x": {"m": 1}}, "sent": {"goal": 1, "mop": 1}}
+    assert sorted(key_differences(py, cc)) == [
+        "summary.a: python only", "summary.b: C++ only", "summary.lateness.x.m: C++ only",
+        "summary.lateness.x.n: python only", "summary.sent.mop: not a kind it counts",
+    ]  # fmt: skip
+
+
+@pytest.mark.skipif(unbuilt_reason() is not None, reason=str(unbuilt_reason()))
+def test_both_robots_write_the_same_summary_keys(tmp_path):
+    py = drive(tmp_path, "python")[3]
+    cc = drive(tmp_path, "cpp")[3]
+    assert py["robot_impl"] == "python" and cc["robot_impl"] == "cpp"
+    assert py["events_failed"] == 0 and cc["events_failed"] == 0
+    assert key_differences(py, cc) == []
+
+
+def test_a_full_disk_is_counted_and_said_once(caplog):
+    """The summary's events_failed: /dev/full refuses every write (ENOSPC), as a full disk."""
+    log = EventLog("/dev/full")
+    with caplog.at_level(logging.WARNING, logger="node.events"):
+        for step in range(3):
+            log.write("send", step, kind="map")
+    log.close()
+    assert log.failed == 3
+    assert [r.getMessage() for r in caplog.records if "event log" in r.getMessage()] == [
+        "cannot write the event log /dev/full: No space left on device; events are lost "
+        "(counted in the summary's events_failed)"
+    ]
