@@ -9,17 +9,24 @@ thing seen (sends and receipts by message kind, flood verdicts, busy seconds by 
 latencies by what was timed): there the two robots, which took the same steps and plans
 here, must still agree on the keys both have, and each key must be one the robot's reference
 counts (COUNTED) so that a misspelt kind shows. The summary's events_failed counts what a
-full disk cost the event log (node/events.py; native/robot/events.cc alike), said once in
-the robot's log.
+full disk cost the event log (node/events.py; native/robot/events.cc alike): with their log
+on /dev/full both robots run on and say so once, in the same words.
 """
 
 import logging
+import os
+import socket
+import subprocess
+import sys
+import time
 
+import numpy as np
 import pytest
 
+from node import body
 from node.events import EventLog
-from node.native import unbuilt_reason
-from tests.unit.test_robot_body_link import drive
+from node.native import TB_ROBOT, unbuilt_reason
+from tests.unit.test_robot_body_link import RAYS, REPO, drive, free_port
 
 # The summary's counters: each the kinds it may count, a key only once one happened.
 COUNTED = {
@@ -82,3 +89,46 @@ def test_a_full_disk_is_counted_and_said_once(caplog):
         "cannot write the event log /dev/full: No space left on device; events are lost "
         "(counted in the summary's events_failed)"
     ]
+
+
+def run_on_a_full_disk(tmp_path, program: str) -> tuple[int, list[str]]:
+    """Run one robot program for a few frames with its event log on /dev/full: its exit
+    status and what its log said about the event log (the part after "node.events: ")."""
+    path = str(tmp_path / f"{program}-full.sock")
+    argv = ["--robot", "r1", "--robots", "1", "--body", path, "--events", "/dev/full",
+            "--iface", "lo", "--bind", "127.0.0.1", "--goal-port", str(free_port()),
+            "--flood-port", str(free_port()), "--time-scale", "0.02"]  # fmt: skip
+    cmd = [str(TB_ROBOT), *argv] if program == "cpp" else [sys.executable, "-m", "node", *argv]
+    with socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET) as server:
+        server.bind(path)
+        server.listen(1)
+        env = dict(os.environ, TESTBED_REALTIME="0", PYTHONPATH=REPO)
+        proc = subprocess.Popen(cmd, cwd=REPO, env=env, stderr=subprocess.PIPE, text=True)
+        try:
+            server.settimeout(30)
+            conn, _ = server.accept()
+            with conn:
+                conn.settimeout(30)
+                conn.recv(64)  # HELLO
+                ranges = np.full(RAYS, np.inf, dtype=np.float32)
+                for step in range(5):  # a plan and its events, each one lost
+                    conn.send(body.frame(step, 3.0, 4.0, 0.0, ranges, time.monotonic()))
+                    conn.recv(64)
+                conn.send(body.END)
+                _, stderr = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    said = [ln.split("node.events: ", 1)[1] for ln in stderr.splitlines() if "node.events: " in ln]
+    return proc.returncode, said
+
+
+@pytest.mark.skipif(unbuilt_reason() is not None, reason=str(unbuilt_reason()))
+def test_both_robots_say_once_that_their_event_log_is_full(tmp_path):
+    expected = [
+        "cannot write the event log /dev/full: No space left on device; events are lost "
+        "(counted in the summary's events_failed)"
+    ]
+    assert run_on_a_full_disk(tmp_path, "python") == (0, expected)
+    assert run_on_a_full_disk(tmp_path, "cpp") == (0, expected)
