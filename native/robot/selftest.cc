@@ -188,7 +188,7 @@ int laser_tables(double range, int rays, double cell) {
     put(L.dy.data(), 4 * L.dy.size());
     put(L.mark.data(), L.mark.size());
     for (const MarkTable& t : L.tables) {
-        int32_t n = (int32_t)t.odx.size();
+        int32_t n = static_cast<int32_t>(t.odx.size());
         put(t.sure.data(), t.sure.size());
         put(&n, 4);
         put(t.odx.data(), 4 * t.odx.size());
