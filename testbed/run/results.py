@@ -35,7 +35,7 @@ log = logging.getLogger(__name__)
 SUMMARY_KEYS = (
     "send_failed", "flood", "frames_skipped", "plan_ms_median", "cpu_s", "max_rss_mb", "busy_s",
     "frames", "latency_ms", "thread_cpu_s", "lateness", "middleware", "messenger", "arrivals",
-    "maps", "priority", "malformed",
+    "maps", "priority", "malformed", "events_failed",
 )  # fmt: skip
 # The team's messaging totals (result.json's "messaging"): these are summed over the robots,
 # the others are the largest of any robot.
