@@ -47,9 +47,16 @@ class EventLog:
     robot's (native/robot/events.cc) does the same."""
 
     def __init__(self, path: str | None):
-        # As open(path, "a"): created 0666 less the umask, appended to, closed on exec.
+        # As open(path, "a"): created 0666 less the umask, appended to, closed on exec, and
+        # at its end (a file that cannot seek there, /proc/self/mem say, is refused: OSError).
         flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_CLOEXEC
         self.fd: int | None = os.open(path, flags, 0o666) if path else None
+        if self.fd is not None:
+            try:
+                os.lseek(self.fd, 0, os.SEEK_END)
+            except OSError:
+                os.close(self.fd)
+                raise
         self.path = path
         self.lock = threading.Lock()
         self.failed = 0  # events lost to a failed write

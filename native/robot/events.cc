@@ -10,8 +10,15 @@ namespace tb {
 bool EventLog::open(const std::string& path) {
     if (path.empty()) return true;
     path_ = path;
-    // As Python's open(path, "a"): created 0666 less the umask, appended to, closed on exec.
+    // As Python's open(path, "a"): created 0666 less the umask, appended to, closed on exec,
+    // and at its end (a file that cannot seek there, /proc/self/mem say, is refused; errno).
     fd_.reset(::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0666));
+    if (fd_.valid() && lseek(fd_.get(), 0, SEEK_END) < 0) {
+        int e = errno;
+        fd_.reset(-1);
+        errno = e;
+        return false;
+    }
     return fd_.valid();
 }
 
