@@ -82,3 +82,14 @@ def tb_name() -> str:
     from topology.network import destroy
 
     destroy(name)
+
+
+@pytest.fixture
+def small_map(tmp_path):
+    """An empty 10 x 10 m map (100 x 100 cells of 0.1 m), for short runs."""
+    import cv2
+    import numpy as np
+
+    path = tmp_path / "small.png"
+    cv2.imwrite(str(path), np.full((100, 100), 255, dtype=np.uint8))  # 10 x 10 m, no walls
+    return str(path)

@@ -62,16 +62,6 @@ def ht_name():
     destroy(name)
 
 
-@pytest.fixture
-def small_map(tmp_path):
-    import cv2
-    import numpy as np
-
-    path = tmp_path / "small.png"
-    cv2.imwrite(str(path), np.full((100, 100), 255, dtype=np.uint8))  # 10 x 10 m, no walls
-    return str(path)
-
-
 def robot_summary(out: Path, k: int) -> dict:
     """Robot k's summary event (node.events; the C++ robot writes the same)."""
     with open(out / "robots" / f"r{k}.events.jsonl") as f:

@@ -33,16 +33,6 @@ def fal_name():
     destroy(name)
 
 
-@pytest.fixture
-def small_map(tmp_path):
-    import cv2
-    import numpy as np
-
-    path = tmp_path / "small.png"
-    cv2.imwrite(str(path), np.full((100, 100), 255, dtype=np.uint8))  # 10 x 10 m, no walls
-    return str(path)
-
-
 def small_run(tmp_path, name, small_map, **kw):
     out = str(tmp_path / "run")
     cfg = RunConfig(
