@@ -7,9 +7,12 @@ team size of the paper's main variant). With the paper's 3 runs a point many com
 are "within the noise", and which side of the noise a comparison falls on changes between
 sweeps. This module decides them in two stages:
 
-1. **Stage 1** is the sweep already run (the paper's 3 runs a point). Each comparison the
-   report's claims rest on (the same ones: verdicts.team_groups, rise_groups and rise_pair,
-   range_pairs, laser_pairs) is tested with Welch's two-sample t test (two-sided), and a
+1. **Stage 1** is the sweep already run (the paper's 3 runs a point), with any sweeps of the
+   same design at team sizes past the paper's ten (testbed/experiments/paper-large-teams.toml,
+   `PLAN --with DIR`). Each comparison the report's claims rest on (the same ones:
+   verdicts.team_groups, rise_groups and rise_pair, range_pairs, laser_pairs; the rise's over
+   every team size that ran, the others over the paper's 1-10 alone, as the paper claims
+   them) is tested with Welch's two-sample t test (two-sided), and a
    claim's comparisons together by Holm's step-down procedure at level alpha1 = alpha / 5.
    A comparison significant there is decided: "holds" when the point the claim says needs
    more steps does, "does not hold" when it needs significantly fewer.
@@ -60,11 +63,14 @@ measured it; stage 1's spread rests on 2 x 3 runs, so the power achieved over re
 experiments is lower than planned when the spread was underestimated (the simulation
 measures it too).
 
-Verdicts are per comparison (`Decision`: runs, test, p-value, the alpha it was judged at
-after the correction, its stage-1 verdict and whether stage 2 changed it); a claim holds when
+Verdicts are per comparison (`Decision`: runs, test, p-value, its Holm-adjusted p (at most
+alpha exactly when Holm rejects), the alpha it was judged at after the correction, its
+stage-1 verdict and whether stage 2 changed it); a claim holds when
 every comparison holds, does not hold when none does and all are decided, partly holds when
-decided ones disagree, and is undecided otherwise. The report (`testbed report`) does not
-read stage 2 yet: `python -m testbed.analysis.decide JUDGE` prints the verdicts.
+decided ones disagree, and is undecided otherwise. `python -m testbed.analysis.decide JUDGE`
+prints the verdicts; `testbed report` shows them beside the 3-run ones
+(testbed.analysis.decidereport) and `testbed compare` of two deciding sweeps sets them side
+by side (testbed.analysis.claimcompare).
 
 Not decided here: the shorter laser's "same steps-to-team ratio" (a bound on a spread of
 ratios, not a comparison of two points) and Section 5.2's plan-generation claims.
@@ -79,7 +85,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 from testbed.analysis import stats, verdicts
-from testbed.analysis.tables import Fig2Row
+from testbed.analysis.tables import PAPER_MAX_TEAM, Fig2Row
 
 ALPHA = 0.05
 POWER = 0.8
@@ -125,11 +131,13 @@ class Test:
     p: float
     alpha: float  # the threshold p was judged against, after the correction
     verdict: str  # HOLDS, FAILS or UNDECIDED
+    p_holm: float = 1.0  # Holm-adjusted p (candidates included): <= the family's alpha
+    # exactly when Holm rejects
 
     def words(self) -> str:
         return (f"{self.runs[0]}+{self.runs[1]} runs, difference {self.diff:+.0f} steps, "
-                f"t = {self.t:.2f} ({self.df:.1f} df), p = {_p(self.p)} "
-                f"(alpha {_p(self.alpha)}) -> {self.verdict}")  # fmt: skip
+                f"t = {self.t:.2f} ({self.df:.1f} df), p = {_p(self.p)}, Holm-adjusted "
+                f"{_p(self.p_holm)} (alpha {_p(self.alpha)}) -> {self.verdict}")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -210,14 +218,16 @@ def _p(p: float) -> str:
 
 def comparisons(fig2: list[Fig2Row]) -> list[Comparison]:
     """The comparisons the claims rest on, in the report's order (testbed.analysis.verdicts'
-    definitions), for one variant's Fig. 2 points."""
+    definitions), for one variant's Fig. 2 points: the rise over every team size, the other
+    claims over the paper's (up to PAPER_MAX_TEAM)."""
     out = []
+    everyone, fig2 = fig2, [r for r in fig2 if r.robots <= PAPER_MAX_TEAM]
     for (laser, comm), pts in verdicts.team_groups(fig2):
         for n in sorted(pts):
             if n > 1:
                 out.append(Comparison("team", f"laser {_g(laser)} m, range {_g(comm)} m: 1 "
                                       f"robot vs {n}", _pt(pts[1]), _pt(pts[n])))  # fmt: skip
-    for (laser, comm), pts in verdicts.rise_groups(fig2):
+    for (laser, comm), pts in verdicts.rise_groups(everyone):
         best, largest = verdicts.rise_pair(pts)
         inner = sum(1 for n in pts if min(pts) < n < max(pts))
         out.append(Comparison("rise", f"laser {_g(laser)} m, range {_g(comm)} m: {largest} "
@@ -240,6 +250,18 @@ def samples(fig2: list[Fig2Row]) -> dict[Point, tuple[float, ...]]:
 
 
 # ------------------------------------------------------------------ tests
+
+
+def holm_adjusted(ps: Sequence[float]) -> list[float]:
+    """Holm's adjusted p-values (in the given order): the smallest family level at which each
+    is rejected, max over the ranks up to its own of min(1, (m - rank) p)."""
+    m = len(ps)
+    out = [1.0] * m
+    running = 0.0
+    for rank, i in enumerate(sorted(range(m), key=lambda i: ps[i])):
+        running = max(running, min(1.0, (m - rank) * ps[i]))
+        out[i] = running
+    return out
 
 
 def holm(ps: Sequence[float], alpha: float) -> list[tuple[float, bool]]:
@@ -273,14 +295,16 @@ def _tests(
     factor = [c.candidates if chosen else 1 for c in comps]
     ps = [1.0 if r is None else min(1.0, r[3] * k) for r, k in zip(raw, factor, strict=True)]
     out: list[Test | None] = []
-    for c, r, k, (threshold, rejected) in zip(comps, raw, factor, holm(ps, alpha), strict=True):
+    adjusted = holm_adjusted(ps)
+    for c, r, k, (threshold, rejected), adj in zip(comps, raw, factor, holm(ps, alpha), adjusted,
+                                                   strict=True):  # fmt: skip
         if r is None:
             out.append(None)
             continue
         diff, t, df, p = r
         verdict = UNDECIDED if not rejected else HOLDS if diff > 0 else FAILS
         runs = (len(data[c.more]), len(data[c.fewer]))
-        out.append(Test(runs, diff, t, df, p, threshold / k, verdict))
+        out.append(Test(runs, diff, t, df, p, threshold / k, verdict, adj))
     return out
 
 

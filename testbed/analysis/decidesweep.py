@@ -3,15 +3,23 @@ statistics; docs/guide.md, "Deciding the paper's claims"): a finished sweep read
 planning, stage 2's sweep files written, and the command line
 `python -m testbed.analysis.decide PLAN | JUDGE SWEEP_DIR ...`.
 
-- Reading: the runs through testbed.analysis.runs (result.json's type), the Fig. 2 points
-  the report decides on (the main network, messaging and variant), each point's expected
-  wall time from its runs' `wall_time_s`, and sweep.json through testbed.sweep.state (a
-  stage-1 run's planned config at each point is the template of its stage-2 runs).
+- Reading: stage 1 is the sweep directory and any `--with` directories (sweeps of the same
+  design at other team sizes: paper-large-teams.toml), their runs through
+  testbed.analysis.runs (result.json's type), the Fig. 2 points the report decides on (the
+  main network, messaging and variant), each point's expected wall time from its runs'
+  `wall_time_s`, and sweep.json through testbed.sweep.state (a stage-1 run's planned
+  config at each point is the template of its stage-2 runs).
 - Writing: a sweep file holds one `runs` for a product grid, so stage 2 is several files
   (`blocks`: the points of one runs count grouped into grids), each checked by the sweep
   file's own parser (testbed.sweep.file.parse) before it is written, with a base seed
   (stage 1's + STAGE2_SEED, raised while any derived seed would repeat one of stage 1's)
   so that stage 2's runs are fresh draws. Every other option is stage 1's.
+- The plan written down: PLAN writes `plan.json` beside stage 2's files (stage 1's
+  directories relative to it, alpha, power, the budget, each file's points and runs);
+  `load_decided` reads a plan directory back (JUDGE, `testbed report`, `testbed compare`): it
+  plans again from stage 1 with the recorded options, refuses a stage 1 that no longer gives
+  the recorded plan, and takes from each stage-2 directory (stage2-NN/ beside its file) only
+  the runs its file plans, so a stale or foreign run is not judged.
 - The command line: bad input (a path that is not a sweep directory, an alpha or power
   outside (0, 1), a wall-time budget without wall times, a sweep.json that is not one) is
   one line on stderr and status 2.
@@ -22,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
 import tomllib
@@ -29,6 +38,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from common import boundedfile
 from common.errors import UsageError
 from common.jsonfile import write_atomic
 from testbed.analysis import middlewares, tables
@@ -90,26 +100,30 @@ def wall_times(runs: list[FinishedRun], points: Iterable[Point]) -> dict[Point, 
 
 @dataclass
 class Stage1:
-    """A finished sweep read for planning."""
+    """A finished sweep read for planning (with the sweeps of other team sizes, if any)."""
 
     runs: list[FinishedRun]
     rows: list[Fig2Row]
     comps: list[Comparison] = field(default_factory=list)
     data: dict[Point, tuple[float, ...]] = field(default_factory=dict)
+    dirs: tuple[Path, ...] = ()  # the sweep directory first, then the --with ones
 
 
-def read_stage1(sweep_dir: Path) -> Stage1:
-    if not sweep_dir.is_dir():
-        raise UsageError(f"{sweep_dir}: not a directory")
-    runs = load_runs(sweep_dir)
-    if not runs:
-        raise UsageError(f"{sweep_dir}: no finished runs (no runs/*/result.json)")
+def read_stage1(sweep_dir: Path, more: Sequence[Path] = ()) -> Stage1:
+    runs: list[FinishedRun] = []
+    for d in (sweep_dir, *more):
+        if not d.is_dir():
+            raise UsageError(f"{d}: not a directory")
+        found = load_runs(d)
+        if not found:
+            raise UsageError(f"{d}: no finished runs (no runs/*/result.json)")
+        runs += found
     rows = paper_rows(runs)
     comps = comparisons(rows)
     if not comps:
         raise UsageError(f"{sweep_dir}: no comparison the paper's claims rest on (too few "
                          "points with usable runs)")  # fmt: skip
-    return Stage1(runs, rows, comps, samples(rows))
+    return Stage1(runs, rows, comps, samples(rows), (sweep_dir, *more))
 
 
 # ------------------------------------------------------------------ stage 2's sweep files
@@ -180,34 +194,40 @@ def stage2_text(
     return "\n".join(lines) + "\n"
 
 
-def _templates(stage1: Stage1, state: sweepstate.SweepState, pts: Iterable[Point]):
-    """A stage-1 run's config (as sweep.json planned it) at each point."""
+def _templates(stage1: Stage1, states: Sequence[sweepstate.SweepState], pts: Iterable[Point]):
+    """A stage-1 run's config (as its sweep.json planned it) at each point, and each team
+    size's time scale as its sweep file set it."""
     ids = {_pt(r): r.runs for r in stage1.rows}
     out: dict[Point, RunConfig] = {}
+    scales: dict[int, float] = {}
     for pt in pts:
-        for rid in ids.get(pt, ()):
-            planned = state.run(rid)
-            if planned is not None and planned.config is not None:
-                out[pt] = RunConfig.from_dict(dict(planned.config))
-                break
-        else:
+        found = [(st, run) for rid in ids.get(pt, ()) for st in states
+                 if (run := st.run(rid)) is not None and run.config is not None]  # fmt: skip
+        if not found:
             raise UsageError(f"sweep.json plans no run of {_point_name(pt)}")
-    return out
+        state, planned = found[0]
+        assert planned.config is not None
+        out[pt] = t = RunConfig.from_dict(dict(planned.config))
+        by_file = state.spec.get("time_scale_by_robots") or {}
+        scales[pt[2]] = float(by_file.get(str(pt[2]), t.time_scale))
+    return out, scales
 
 
 def write_stage2(
     p: Plan, stage1: Stage1, sweep_dir: Path, out: Path
 ) -> list[tuple[Path, list[Point], int]]:
     """Stage 2's sweep files in `out` (stage2-01.toml, ...; one per grid of `blocks`), each
-    checked by the sweep file's own parser, their seeds none of stage 1's. Returns (file,
-    points, runs a point) for each."""
-    state = sweepstate.read(sweep_dir)
-    if state is None:
-        raise UsageError(f"{sweep_dir}: no sweep.json (not a sweep directory)")
-    templates = _templates(stage1, state, p.point_runs)
-    by_file = state.spec.get("time_scale_by_robots") or {}
-    scales = {pt[2]: float(by_file.get(str(pt[2]), t.time_scale)) for pt, t in templates.items()}
-    used = {r.config.get("seed") for r in state.runs if r.config}
+    checked by the sweep file's own parser, their seeds none of stage 1's (of any of its
+    directories). Returns (file, points, runs a point) for each."""
+    states = []
+    for d in stage1.dirs or (sweep_dir,):
+        state = sweepstate.read(d)
+        if state is None:
+            raise UsageError(f"{d}: no sweep.json (not a sweep directory)")
+        states.append(state)
+    state = states[0]
+    templates, scales = _templates(stage1, states, p.point_runs)
+    used = {r.config.get("seed") for st in states for r in st.runs if r.config}
     base = state.spec.get("seed") or 0
     base = (base if isinstance(base, int) else 0) + STAGE2_SEED
     grids = blocks(p.point_runs)
@@ -233,6 +253,131 @@ def write_stage2(
     return written
 
 
+# ------------------------------------------------------------------ the plan written down
+
+PLAN_NAME = "plan.json"
+PLAN_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class Options:
+    """What a plan was made with (PLAN's options, recorded in plan.json)."""
+
+    alpha: float = ALPHA
+    power: float = POWER
+    budget_runs: int | None = None
+    budget_minutes: float | None = None
+
+
+def write_plan_file(
+    out: Path, p: Plan, stage1: Stage1, opts: Options,
+    files: Sequence[tuple[Path, list[Point], int]],
+) -> Path:  # fmt: skip
+    """plan.json in `out`: stage 1's directories (relative to `out`), the options, and each
+    stage-2 file's points and runs a point."""
+    doc = {
+        "format": PLAN_FORMAT,
+        "about": "the deciding design's stage 2, planned by testbed.analysis.decide PLAN",
+        "stage1": [os.path.relpath(d.resolve(), out.resolve()) for d in stage1.dirs],
+        "alpha": opts.alpha,
+        "power": opts.power,
+        "budget_runs": opts.budget_runs,
+        "budget_minutes": opts.budget_minutes,
+        "total_runs": p.total_runs,
+        "wall_s": round(p.total_wall_s, 1) if p.wall_s else None,
+        "files": [
+            {"file": f.name, "runs": n, "points": [list(pt) for pt in pts]} for f, pts, n in files
+        ],  # fmt: skip
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / PLAN_NAME
+    write_atomic(path, json.dumps(doc, indent=1) + "\n")
+    return path
+
+
+@dataclass
+class Decided:
+    """A plan directory read back and judged: stage 1, the plan, stage 2's runs (those its
+    files plan), each comparison's decision."""
+
+    plan_dir: Path
+    stage1: Stage1
+    plan: Plan
+    opts: Options
+    runs2: list[FinishedRun]
+    decisions: list[Decision]
+
+    @property
+    def done_runs(self) -> int:
+        """Usable stage-2 runs at the planned points."""
+        return sum(min(n, len(samples(paper_rows(self.runs2)).get(pt, ())))
+                   for pt, n in self.plan.point_runs.items())  # fmt: skip
+
+
+def _plan_doc(plan_dir: Path) -> dict:
+    path = plan_dir / PLAN_NAME
+    try:
+        doc = boundedfile.load_json(path, 1 << 20)
+    except boundedfile.Refused as e:
+        raise UsageError(f"{path}: {boundedfile.describe(e)}") from None
+    ok = (isinstance(doc, dict) and doc.get("format") == PLAN_FORMAT
+          and isinstance(doc.get("stage1"), list) and doc["stage1"]
+          and all(isinstance(d, str) for d in doc["stage1"])
+          and isinstance(doc.get("files"), list)
+          and all(isinstance(f, dict) and isinstance(f.get("file"), str)
+                  and f["file"] == Path(f["file"]).name and f["file"].endswith(".toml")
+                  for f in doc["files"]))  # fmt: skip
+    if not ok:
+        raise UsageError(f"{path}: not a plan of testbed.analysis.decide (format "
+                         f"{PLAN_FORMAT})")  # fmt: skip
+    return doc
+
+
+def _options(doc: dict, path: Path) -> Options:
+    def num(key, kind, default):
+        v = doc.get(key, default)
+        if v is None or (isinstance(v, kind) and not isinstance(v, bool)):
+            return v
+        raise UsageError(f"{path}: {key}: not a number")
+
+    return Options(num("alpha", float, ALPHA), num("power", float, POWER),
+                   num("budget_runs", int, None),
+                   num("budget_minutes", int | float, None))  # fmt: skip
+
+
+def load_decided(plan_dir: Path) -> Decided:
+    """A plan directory (PLAN's --out) judged: stage 1 read from the directories plan.json
+    names, planned again with its options (refused when that no longer gives its points and
+    runs), stage 2's runs from stage2-NN/ beside each file, those the file plans alone."""
+    doc = _plan_doc(plan_dir)
+    opts = _options(doc, plan_dir / PLAN_NAME)
+    dirs = [(plan_dir / d) for d in doc["stage1"]]
+    stage1 = read_stage1(dirs[0], dirs[1:])
+    _checked_options(opts)
+    p = make_plan(stage1, opts, dirs[0])
+    recorded: dict[Point, int] = {}
+    runs2: list[FinishedRun] = []
+    for f in doc["files"]:
+        for pt in f.get("points") or []:
+            recorded[(float(pt[0]), float(pt[1]), int(pt[2]))] = f.get("runs")
+        spec = sweepfile.load(plan_dir / f["file"])
+        ids = {r.run_id for r in sweepfile.expand(spec)}
+        d = plan_dir / Path(f["file"]).stem
+        if (d / "runs").is_dir():
+            runs2 += [r for r in load_runs(d) if r.run_id in ids]
+    if recorded != p.point_runs:
+        raise UsageError(f"{plan_dir}: stage 1 ({', '.join(map(str, dirs))}) no longer gives "
+                         "this plan (its runs changed since PLAN): plan again")  # fmt: skip
+    return Decided(plan_dir, stage1, p, opts, runs2, judge(p, samples(paper_rows(runs2))))
+
+
+def find_plan(sweep_dir: Path) -> Path | None:
+    """The plan directory PLAN writes by default for `sweep_dir` (SWEEP_DIR-stage2 beside
+    it), when it holds a plan.json."""
+    d = sweep_dir.parent / f"{sweep_dir.name}-stage2"
+    return d if (d / PLAN_NAME).is_file() else None
+
+
 def _minutes(s: float) -> str:
     m = round(s / 60)
     return f"{m // 60} h {m % 60:02d} min" if m >= 60 else f"{max(m, 1) if s else 0} min"
@@ -245,7 +390,23 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("action", choices=("PLAN", "JUDGE"))
     ap.add_argument("sweep_dir", type=Path, help="the finished stage-1 sweep directory")
-    ap.add_argument("stage2", type=Path, nargs="*", help="JUDGE: the stage-2 sweep directories")
+    ap.add_argument(
+        "stage2",
+        type=Path,
+        nargs="*",
+        help="JUDGE: the stage-2 sweep directories "
+        "(none: the plan in SWEEP_DIR, when it is PLAN's --out, or beside it)",
+    )
+    ap.add_argument(
+        "--with",
+        dest="more",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="PLAN: another stage-1 sweep of the same design at "
+        "other team sizes (paper-large-teams.toml), for the rise; repeatable",
+    )
     budget = ap.add_mutually_exclusive_group()
     budget.add_argument("--budget-runs", type=int, metavar="N")
     budget.add_argument("--budget-minutes", type=float, metavar="M")
@@ -265,40 +426,59 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
-def _checked(args: argparse.Namespace) -> None:
-    if not 0 < args.alpha < 1 or not math.isfinite(args.alpha):
-        raise UsageError(f"--alpha must be in (0, 1), not {args.alpha}")
-    if not 0 < args.power < 1 or not math.isfinite(args.power):
-        raise UsageError(f"--power must be in (0, 1), not {args.power}")
-    if args.budget_runs is not None and args.budget_runs < 0:
-        raise UsageError(f"--budget-runs must be 0 or more, not {args.budget_runs}")
-    if args.budget_minutes is not None and not (
-        math.isfinite(args.budget_minutes) and args.budget_minutes >= 0
+def _checked_options(o: Options) -> None:
+    if not 0 < o.alpha < 1 or not math.isfinite(o.alpha):
+        raise UsageError(f"--alpha must be in (0, 1), not {o.alpha}")
+    if not 0 < o.power < 1 or not math.isfinite(o.power):
+        raise UsageError(f"--power must be in (0, 1), not {o.power}")
+    if o.budget_runs is not None and o.budget_runs < 0:
+        raise UsageError(f"--budget-runs must be 0 or more, not {o.budget_runs}")
+    if o.budget_minutes is not None and not (
+        math.isfinite(o.budget_minutes) and o.budget_minutes >= 0
     ):
-        raise UsageError(f"--budget-minutes must be 0 or more, not {args.budget_minutes}")
-    if args.action == "PLAN" and args.stage2:
-        raise UsageError("PLAN takes one sweep directory (stage 2's are JUDGE's)")
-    if args.action == "JUDGE" and not args.stage2:
-        raise UsageError("JUDGE needs the stage-2 sweep directories after the stage-1 one")
+        raise UsageError(f"--budget-minutes must be 0 or more, not {o.budget_minutes}")
 
 
-def make_plan(stage1: Stage1, args: argparse.Namespace) -> Plan:
+def _options_of(args: argparse.Namespace) -> Options:
+    return Options(args.alpha, args.power, args.budget_runs, args.budget_minutes)
+
+
+def _plan_dir_of(args: argparse.Namespace) -> Path | None:
+    """JUDGE without stage-2 directories: SWEEP_DIR is a plan directory, or has one beside."""
+    if (args.sweep_dir / PLAN_NAME).is_file():
+        return args.sweep_dir
+    return find_plan(args.sweep_dir)
+
+
+def make_plan(stage1: Stage1, opts: Options, where: Path) -> Plan:
     walls = wall_times(stage1.runs, stage1.data)
-    if args.budget_minutes is not None and not walls:
-        raise UsageError(f"{args.sweep_dir}: no run recorded wall_time_s: use --budget-runs")
-    minutes = args.budget_minutes
-    return plan(stage1.comps, stage1.data, alpha=args.alpha, power=args.power,
-                wall_s=walls or None, budget_runs=args.budget_runs,
+    if opts.budget_minutes is not None and not walls:
+        raise UsageError(f"{where}: no run recorded wall_time_s: use --budget-runs")
+    minutes = opts.budget_minutes
+    return plan(stage1.comps, stage1.data, alpha=opts.alpha, power=opts.power,
+                wall_s=walls or None, budget_runs=opts.budget_runs,
                 budget_s=None if minutes is None else minutes * 60)  # fmt: skip
 
 
 def _run(args: argparse.Namespace) -> int:
-    _checked(args)
-    stage1 = read_stage1(args.sweep_dir)
-    p = make_plan(stage1, args)
+    opts = _options_of(args)
+    _checked_options(opts)
+    if args.action == "PLAN" and args.stage2:
+        raise UsageError("PLAN takes one sweep directory (stage 2's are JUDGE's)")
+    if args.action == "JUDGE" and not args.stage2:
+        plan_dir = _plan_dir_of(args)
+        if plan_dir is None:
+            raise UsageError("JUDGE needs the stage-2 sweep directories after the stage-1 one, "
+                             "or a plan directory (PLAN's --out, with plan.json)")  # fmt: skip
+        decided = load_decided(plan_dir)
+        print("\n".join(judge_lines(decided.plan, decided.decisions)))
+        return 0
+    stage1 = read_stage1(args.sweep_dir, args.more)
+    p = make_plan(stage1, opts, args.sweep_dir)
     if args.action == "PLAN":
         out = args.out or args.sweep_dir.parent / f"{args.sweep_dir.name}-stage2"
         files = write_stage2(p, stage1, args.sweep_dir, out)
+        write_plan_file(out, p, stage1, opts, files)
         print("\n".join(plan_lines(p, files, out)))
         return 0
     runs2 = [r for d in args.stage2 for r in _stage2_runs(d)]
@@ -356,8 +536,8 @@ def plan_lines(p: Plan, files: Sequence[tuple[Path, list[Point], int]], out: Pat
     if files:
         lines.append(f"Run: for f in {out}/stage2-*.toml; do testbed sweep \"$f\" "
                      f"--out {out}/$(basename \"$f\" .toml); done")  # fmt: skip
-        lines.append(f"Judge: python -m testbed.analysis.decide JUDGE SWEEP_DIR {out}/stage2-* "
-                     "(with this plan's --alpha, --power and budget)")  # fmt: skip
+        lines.append(f"Judge: python -m testbed.analysis.decide JUDGE {out} (its plan.json "
+                     "has the options); testbed report shows the verdicts")  # fmt: skip
     return lines
 
 

@@ -1,7 +1,9 @@
 """Drawing the figures (matplotlib, Agg backend): each plot takes a table of
 testbed.analysis.tables and writes PNG and PDF files; nothing here reads a run.
 
-Fig. 2 draws each point's mean with its 95% interval as an error bar; the routing and
+Fig. 2 draws each point's mean with its 95% interval as an error bar; teams past the
+paper's ten (tables.PAPER_MAX_TEAM) are drawn hollow on a shaded band labelled as beyond the
+paper's range (`fig2_lines` is the data drawn, marks included). The routing and
 impairment figures draw min-to-max bars over the point's runs. Fig. 4 scatters each plan
 generation's interval against its step, by cause, with the 20-step timer dashed.
 """
@@ -17,7 +19,14 @@ from matplotlib.ticker import MaxNLocator
 
 from common.jsonfile import write_atomic
 from testbed.analysis.rows import MeanRange
-from testbed.analysis.tables import ROUTING_METRICS, Fig2Row, Fig4Row, ImpairmentRow, RoutingRow
+from testbed.analysis.tables import (
+    PAPER_MAX_TEAM,
+    ROUTING_METRICS,
+    Fig2Row,
+    Fig4Row,
+    ImpairmentRow,
+    RoutingRow,
+)
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -47,25 +56,43 @@ def _fmt(x: float) -> str:
     return f"{x:g}"
 
 
-def fig2_figure(rows: list[Fig2Row], laser: float, label: str):
-    """Fig. 2 for one laser range: each range's line of means, its 95% intervals where a
-    point has them, and each point's number of runs."""
-    fig, ax = plt.subplots(figsize=(6, 4))
-    bars = False
+BEYOND_PAPER = f"beyond the paper's range (teams of 1-{PAPER_MAX_TEAM})"
+
+
+def fig2_lines(rows: list[Fig2Row], laser: float) -> list[tuple[str, list[Point]]]:
+    """What Fig. 2 draws for one laser range: each range's line (its label, its points by
+    team size), a point past the paper's teams marked `beyond`."""
+    out = []
     for comm in sorted({r.comm_range for r in rows if r.laser_range == laser}):
         pts = sorted(
             (r for r in rows if r.laser_range == laser and r.comm_range == comm),
             key=lambda r: r.robots,
         )
-        points = [Point(r.robots, r.steps.mean, r.steps.ci_low, r.steps.ci_high, r.steps.n)
-                  for r in pts]  # fmt: skip
-        bars |= _line(ax, points, f"range {_fmt(comm)} m")
+        points = [Point(r.robots, r.steps.mean, r.steps.ci_low, r.steps.ci_high, r.steps.n,
+                        r.beyond_paper) for r in pts]  # fmt: skip
+        out.append((f"range {_fmt(comm)} m", points))
+    return out
+
+
+def fig2_figure(rows: list[Fig2Row], laser: float, label: str, title: str = ""):
+    """Fig. 2 for one laser range: each range's line of means, its 95% intervals where a
+    point has them, and each point's number of runs; teams past the paper's drawn hollow
+    over a shaded band that says so."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    bars = False
+    lines = fig2_lines(rows, laser)
+    for name, points in lines:
+        bars |= _line(ax, points, name)
+    beyond = [p.x for _, points in lines for p in points if p.beyond]
+    if beyond:
+        ax.axvspan(PAPER_MAX_TEAM + 0.5, max(beyond) + 0.5, color="0.9", zorder=0,
+                   label=BEYOND_PAPER)  # fmt: skip
     ax.set_xlabel("team size (robots)")
     ax.set_ylabel("exploration steps (mean over robots)")
-    ax.set_title(f"Fig. 2({label}): laser range {_fmt(laser)} m")
+    ax.set_title(title or f"Fig. 2({label}): laser range {_fmt(laser)} m", fontsize=9)
     _team_axis(ax)
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=7 if beyond else None)
     _note(ax, "bars: 95% interval of the mean; n: runs" if bars
           else "n: runs; one run per point, so no interval")  # fmt: skip
     fig.tight_layout()
@@ -95,6 +122,7 @@ class Point:
     low: float | None
     high: float | None
     n: int
+    beyond: bool = False  # past the paper's team sizes: drawn hollow
 
 
 def _line(ax, pts: list[Point], label: str) -> bool:
@@ -109,6 +137,10 @@ def _line(ax, pts: list[Point], label: str) -> bool:
         err = [[y - lo for _, y, lo, _ in barred], [hi - y for _, y, _, hi in barred]]
         ax.errorbar([x for x, *_ in barred], [y for _, y, *_ in barred], yerr=err, fmt="none",
                     ecolor=line.get_color(), capsize=3)  # fmt: skip
+    far = [p for p in pts if p.beyond]
+    if far:  # hollow: beyond the paper's range
+        ax.plot([p.x for p in far], [p.y for p in far], ls="none", marker="o",
+                markerfacecolor="white", markeredgecolor=line.get_color())  # fmt: skip
     ax.margins(x=0.08, y=0.12)  # room for the n labels inside the frame
     for p in pts:
         ax.annotate(f"n={p.n}", (p.x, p.y), textcoords="offset points", xytext=(4, 4),

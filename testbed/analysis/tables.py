@@ -9,7 +9,8 @@ same tables. Which runs count is the caller's choice of runs plus `FinishedRun.u
 
 - `fig2_rows`: exploration steps per (variant, laser, range, team size) with each point's
   spread and the 95% interval of its mean (testbed.analysis.stats). A point of one run has
-  no spread: its std and interval are empty (None), not 0.
+  no spread: its std and interval are empty (None), not 0. A team past the paper's ten
+  (`Fig2Row.beyond_paper`; testbed/experiments/paper-large-teams.toml) is marked in Fig. 2.
 - `fig4_runs` / `fig4_rows`: the plan intervals of one run per team size (teams 1, 2, 5 and
   10 at laser 2 m and range 20 m where they ran).
 - `plan_cause_rows`: plan generations by cause, per run.
@@ -35,6 +36,7 @@ from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 from topology.spec import VETH
 
 FIG4_TEAMS = (1, 2, 5, 10)
+PAPER_MAX_TEAM = 10  # the paper's team sizes are 1-10: larger ones are beyond its range
 FIG4_LASER = 2.0
 FIG4_RANGE = 20.0
 ROUTING_METRICS = (
@@ -76,6 +78,11 @@ class Fig2Row:
     @property
     def variant(self) -> tuple[str, str]:
         return self.coordination, self.start_placement
+
+    @property
+    def beyond_paper(self) -> bool:
+        """A team larger than the paper's (PAPER_MAX_TEAM): Fig. 2 marks it."""
+        return self.robots > PAPER_MAX_TEAM
 
 
 @dataclass(frozen=True)
