@@ -218,6 +218,8 @@ class RunResult:
     step_core: str | None = None
     robot: str | None = None  # "cpp", "python", "mixed" (a test's team); None: older file
     robot_reason: str = ""  # why that one (testbed.run.robotchoice)
+    aodv_daemon: str | None = None  # "cpp", "python"; None: no AODV daemon ran, or older file
+    aodv_daemon_reason: str = ""  # why that one (testbed.run.daemonchoice)
     display: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
     world_timing_s: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
     world_missed_steps_ms_late: tuple[Any, ...] = ()
@@ -433,6 +435,8 @@ class RunResult:
             step_core=get_value(doc, "step_core", (str,)),
             robot=get_value(doc, "robot", (str,)),
             robot_reason=get_value(doc, "robot_reason", (str,), ""),
+            aodv_daemon=get_value(doc, "aodv_daemon", (str,)),
+            aodv_daemon_reason=get_value(doc, "aodv_daemon_reason", (str,), ""),
             display=get_mapping(doc, "display"),
             world_timing_s=get_mapping(doc, "world_timing_s"),
             world_missed_steps_ms_late=tuple(

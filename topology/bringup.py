@@ -48,12 +48,15 @@ def preflight(spec: NetworkSpec) -> None:
             f"missing tool(s): {', '.join(missing)} (package(s) {pkgs}: `sudo make setup` "
             "installs those the distribution has)"
         )
+    why = routing.preflight_refusal(spec)
+    if why:
+        raise UsageError(why)
 
 
 def routing_fork_server(spec: NetworkSpec) -> ForkServer | None:
     """The fork server of the routing daemon when it is written in Python (its imports run
     while the kernel objects are made), else None."""
-    forkable = routing.FORKABLE.get(spec.routing)
+    forkable = routing.forkable(spec)
     if forkable is None:
         return None
     return ForkServer(
@@ -101,7 +104,7 @@ def start_routing(net: Network, forks: ForkServer | None) -> None:
     """The routing daemon of every robot: forked from `forks` (the fork server of a daemon
     written in Python) or started as a program; returns once every one can route."""
     started = []
-    forkable = routing.FORKABLE.get(net.spec.routing)
+    forkable = routing.forkable(net.spec)
     for k in net.spec.robot_ids():
         argv = routing.argv_for(net.spec, k, net.state_dir)
         if argv is None:

@@ -23,15 +23,20 @@ adding one function here.
 - oracle: no daemon and no control packet: the topology controller installs shortest-path
          routes in every robot the moment a link changes (topology.oracle), the baseline
          the real protocols are measured against.
-- aodv:  this project's AODV daemon (python -m aodv), on demand, with the parameter profile
-         the spec names (`aodv_profile`: rfc or ns3) and a counter file in the run dir that
-         makes a restarted daemon obey the RFC 6.13 reboot rule.
+- aodv:  this project's AODV daemon, on demand, with the parameter profile the spec names
+         (`aodv_profile`: rfc or ns3) and a counter file in the run dir that makes a
+         restarted daemon obey the RFC 6.13 reboot rule. Two programs with one command line
+         and one statistics file: the spec's `aodv_daemon` says which runs, `python` (python
+         -m aodv, the reference) or `cpp` (build/tb-aodv, native/aodv/daemon, built by
+         `make setup`; exec'd in the namespace like babeld). testbed.run.daemonchoice turns a
+         run's `--aodv-daemon auto|cpp|python` into one of the two; `preflight_refusal` says,
+         before anything is made, when the compiled one was asked for and is not there.
 
-A protocol written in Python (aodv) is also *forkable*: the Network starts its daemons from a
-fork server (topology.kernel.forkserver) that has imported the daemon and warmed it up once, instead
-of one interpreter per robot. Starting 11 daemons as interpreters took 1.1-1.2 s of wall time
-on two cores (about 0.2 s of CPU each for start-up and imports); from the fork server,
-started at the beginning of the network's bring-up, 0.34-0.49 s.
+A daemon written in Python (aodv's Python daemon) is also *forkable*: the Network starts it
+from a fork server (topology.kernel.forkserver) that has imported the daemon and warmed it up
+once, instead of one interpreter per robot. Starting 11 daemons as interpreters took 1.1-1.2 s
+of wall time on two cores (about 0.2 s of CPU each for start-up and imports); from the fork
+server, started at the beginning of the network's bring-up, 0.34-0.49 s.
 """
 
 import os
@@ -39,7 +44,9 @@ import shutil
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
+from common.paths import PROJECT_ROOT
 from topology import names
 
 BABEL_HELLO_S = 1.0  # babeld's wireless default is 4 s; 1 s converges a 5-hop chain in ~5 s
@@ -101,8 +108,48 @@ def aodv_args(k: int, run_dir: str, spec) -> list[str]:
     ]  # fmt: skip
 
 
+# The compiled AODV daemon (native/aodv/daemon), and make setup's one line where it could not
+# build it. TESTBED_TB_AODV in the environment names another build of the same program (a
+# sanitizer's, say).
+TB_AODV = Path(PROJECT_ROOT) / "build" / "tb-aodv"
+TB_AODV_UNBUILT = TB_AODV.with_name("tb-aodv.unbuilt")
+TB_AODV_ENV = "TESTBED_TB_AODV"
+
+
+def aodv_binary() -> str:
+    """The compiled AODV daemon's path: TESTBED_TB_AODV, else build/tb-aodv."""
+    return os.environ.get(TB_AODV_ENV) or str(TB_AODV)
+
+
+def aodv_built() -> bool:
+    """Whether the compiled AODV daemon is there to run."""
+    path = aodv_binary()
+    return os.path.isfile(path) and os.access(path, os.X_OK)
+
+
+def aodv_unbuilt_reason() -> str | None:
+    """Why build/tb-aodv is not here: make setup's one line where it could not build it, or
+    None (also where neither the program nor that line is there: setup has not run, and what
+    needs the program fails rather than skipping in silence)."""
+    if aodv_built():
+        return None
+    try:
+        with open(TB_AODV_UNBUILT) as f:
+            return f.readline(500).strip() or None
+    except OSError:
+        return None
+
+
+def aodv_command(daemon: str = "python") -> list[str]:
+    """The AODV daemon's program, before its arguments (aodv_args): `python -m aodv` or the
+    compiled daemon; both take the same arguments and write the same statistics file."""
+    if daemon == "cpp":
+        return [aodv_binary()]
+    return [sys.executable, "-m", "aodv"]
+
+
 def aodv_argv(k: int, run_dir: str, spec) -> list[str]:
-    return [sys.executable, "-m", "aodv", *aodv_args(k, run_dir, spec)]
+    return [*aodv_command(spec.aodv_daemon), *aodv_args(k, run_dir, spec)]
 
 
 # (robot number, the testbed's run dir, the NetworkSpec) -> argv
@@ -146,6 +193,23 @@ READY_FILES: dict[str, Callable[[int, str], str]] = {"aodv": aodv_stats_file}
 # The statistics a protocol's daemons write, if any.
 STATS_FILES: dict[str, Callable[[int, str], str]] = {"aodv": aodv_stats_file}
 READY_TIMEOUT_S = 30.0
+
+
+def forkable(spec) -> Forkable | None:
+    """How to fork the spec's routing daemon from a fork server, or None: it is a program
+    (babeld, batmand, the compiled AODV daemon), started as such."""
+    if spec.routing == "aodv" and spec.aodv_daemon == "cpp":
+        return None
+    return FORKABLE.get(spec.routing)
+
+
+def preflight_refusal(spec) -> str | None:
+    """Why the spec's routing daemon cannot start on this machine, in one line, or None;
+    asked before anything is made (the tools babeld and batmand need: missing_tools)."""
+    if spec.routing != "aodv" or spec.aodv_daemon != "cpp" or aodv_built():
+        return None
+    why = aodv_unbuilt_reason() or "make setup builds it where g++ is"
+    return f"the compiled AODV daemon {aodv_binary()} is not there: {why}"
 
 
 def ready_file(routing: str, k: int, run_dir: str) -> str | None:

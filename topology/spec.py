@@ -15,6 +15,9 @@ RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
 LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.radio.los)
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
 AODV_PROFILES = ("rfc", "ns3")
+# Which AODV daemon runs (topology.routing): the Python reference or the compiled one. A run's
+# `--aodv-daemon auto` is decided before a spec is made (testbed.run.daemonchoice).
+AODV_DAEMONS = ("python", "cpp")
 LAYOUTS = ("chain", "grid", "random")
 # The radio medium (topology.radio.veth: veth links; topology.radio.ns3wifi: ns-3's 802.11) and, for
 # ns3-wifi, its propagation (a cut-off at the range, or log-distance) and 802.11 standard.
@@ -125,6 +128,7 @@ class NetworkSpec:
     capture_dir: str | None = None
     time_scale: float = 1.0
     aodv_profile: str = "rfc"  # aodv.params.PROFILES; used only with routing "aodv"
+    aodv_daemon: str = "python"  # AODV_DAEMONS; used only with routing "aodv"
     # The walls of the los range models (topology.radio.los): a PNG, metres per pixel, and the
     # loss a wall costs (None: a wall blocks).
     map_png: str | None = None
@@ -180,6 +184,10 @@ class NetworkSpec:
             raise ValueError(
                 f"unknown AODV profile {self.aodv_profile!r} "
                 f"(choose from {', '.join(AODV_PROFILES)})"
+            )
+        if self.aodv_daemon not in AODV_DAEMONS:
+            raise ValueError(
+                f"unknown AODV daemon {self.aodv_daemon!r} (choose from {', '.join(AODV_DAEMONS)})"
             )
 
     @property

@@ -14,6 +14,7 @@ import sys
 from common.argtypes import checked, number
 from common.errors import UsageError
 from testbed.net import movers
+from testbed.run import daemonchoice
 from testbed.run import options as runoptions
 from testbed.run.config import NET_OPTIONS, network_fields
 from topology.names import check_name, parse_robot_ref
@@ -198,6 +199,7 @@ def _net_up(args) -> int:
             capture_dir=os.path.abspath(args.capture) if args.capture else None,
             **network_fields(args),
         )
+        _, daemon_reason = daemonchoice.choose(args.aodv_daemon, args.routing)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.view:
@@ -219,6 +221,8 @@ def _net_up(args) -> int:
         raise
     net.detach()
     print(f"testbed {spec.name}: {spec.robots} robots, {len(links)} links, routing {spec.routing}")
+    if spec.routing == "aodv":  # which AODV daemon runs, and why (testbed.run.daemonchoice)
+        print(f"  AODV daemon: {spec.aodv_daemon} ({daemon_reason})")
     print(f"  robot K is 10.0.0.K in namespace tb-{spec.name}-rK; try: "
           f"testbed net exec {spec.name} r1 -- ping 10.0.0.{min(2, spec.robots)}")  # fmt: skip
     if spec.time_scale != 1 and net.timers is not None:

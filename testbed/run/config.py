@@ -22,7 +22,7 @@ from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
-from testbed.run import failures, robotchoice
+from testbed.run import daemonchoice, failures, robotchoice
 from testbed.run import options as runoptions
 from testbed.run.isolation import Outage
 from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
@@ -147,6 +147,12 @@ class RunConfig:
     aodv_profile: str = option(
         str, "AODV parameters (routing aodv): rfc, RFC 3561 section 10, or ns3, ns-3's "
         "defaults", "rfc", choices=AODV_PROFILES, sweep={RUN}, newer=True, net=True,
+    )  # fmt: skip
+    aodv_daemon: str = option(
+        str, "the AODV daemon (routing aodv): auto (the compiled daemon, build/tb-aodv, where "
+        "make setup built it, else the Python daemon), cpp, or python (the reference); "
+        "testbed.run.daemonchoice", "auto", choices=daemonchoice.CHOICES, sweep={GRID, RUN},
+        newer=True, net=True, grid=GridDim(14, lambda d: f"aodv{d}", VARIED),
     )  # fmt: skip
     map: str | None = option(
         str, "PNG map: dark pixels are obstacles, and walls for the los range models", None,
@@ -315,6 +321,8 @@ def network_fields(values) -> dict:
 
     fields = {o.name: getattr(values, o.name) for o in NET_OPTIONS}
     loss, delay = (fields.pop(name) for name in _IMPAIRMENT_OPTIONS)
+    # auto becomes the daemon that runs (ValueError: cpp asked for where it is not built).
+    fields["aodv_daemon"] = daemonchoice.spec_daemon(fields["aodv_daemon"], fields["routing"])
     return dict(fields, impairment=Impairment(loss_pct=loss, delay_ms=delay))
 
 
@@ -349,7 +357,8 @@ def refusal(cfg: RunConfig, program: bool = True) -> tuple[str, str] | None:
     line), or None: the one rule of `testbed run` (config_from_args), of a sweep file's runs
     (testbed.sweep.file) and of a plan in sweep.json (testbed.sweep.state). `program`: also
     whether the robot program asked for can carry the run (testbed.run.robotchoice: it asks
-    the C++ robot built on this machine)."""
+    the C++ robot built on this machine) and whether the AODV daemon asked for is built
+    (testbed.run.daemonchoice)."""
     cell = cfg.map_cell if cfg.map else CELL_M  # the empty terrain's cells are CELL_M
     if cfg.laser_range < cell:
         return "laser_range", (
@@ -383,6 +392,10 @@ def refusal(cfg: RunConfig, program: bool = True) -> tuple[str, str] | None:
             robotchoice.choose(cfg.robot, cfg.middleware, cfg.maps)
         except ValueError as e:
             return "robot", str(e)
+        try:
+            daemonchoice.choose(cfg.aodv_daemon, cfg.routing)
+        except ValueError as e:
+            return "aodv_daemon", str(e)
     return None
 
 

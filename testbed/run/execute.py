@@ -63,8 +63,8 @@ from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
 from testbed.resultfile import RunResult
+from testbed.run import daemonchoice, robotchoice
 from testbed.run import results as runresults
-from testbed.run import robotchoice
 from testbed.run.config import RunConfig, add_arguments, config_from_args
 from testbed.run.configfile import RunConfigFile
 from testbed.run.files import RunFiles
@@ -208,6 +208,15 @@ class Run:
             names = ", ".join(f"r{k}" for k in sorted(self.cpp)) or "none"
             self.robot_impl = "mixed"
             self.robot_reason = f"mixed: C++ robots {names}, the others Python"
+        # Which AODV daemon runs and why (testbed.run.daemonchoice): the spec's, which the
+        # same choice made (testbed.run.config.network_fields).
+        try:
+            daemon, self.aodv_daemon_reason = daemonchoice.choose(
+                self.cfg.aodv_daemon, self.cfg.routing
+            )
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+        self.aodv_daemon = prepared.spec.aodv_daemon if daemon else None
 
     # -- the whole run ------------------------------------------------------------------------
 
@@ -427,6 +436,7 @@ class Run:
             parts=dict(self.parts.parts), priority=priority, t_start=self.parts.t_start,
             network_timers=network_timers, outages=self.cfg.isolate,
             robot=self.robot_impl, robot_reason=self.robot_reason,
+            aodv_daemon=self.aodv_daemon, aodv_daemon_reason=self.aodv_daemon_reason,
         )  # fmt: skip
 
 

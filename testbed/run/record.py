@@ -153,6 +153,8 @@ class RunRecord:
     outages: tuple = ()  # testbed.run.isolation.Outage: the radio outages asked for (--isolate)
     robot: str | None = None  # the robot program: "cpp", "python" or (a test's) "mixed"
     robot_reason: str = ""  # why that one
+    aodv_daemon: str | None = None  # the AODV daemon: "cpp", "python"; None: the routing has none
+    aodv_daemon_reason: str = ""  # why that one
 
     @property
     def steps(self) -> int:

@@ -146,6 +146,8 @@ def contents(rec: RunRecord) -> RunResult:
         step_core=stepcore.kind(),
         robot=rec.robot,
         robot_reason=rec.robot_reason,
+        aodv_daemon=rec.aodv_daemon,
+        aodv_daemon_reason=rec.aodv_daemon_reason,
         display={
             "robot": len(rec.robots) + 1,
             "coverage_final": display_coverage(rec.out, rec.world),

@@ -48,6 +48,7 @@ def test_every_option_round_trips_through_argv_with_non_default_values():
         kill=((2, 150), (3, 300)), view="127.0.0.1:8123", medium="ns3-wifi",
         wifi_loss="logdistance", wifi_standard="80211b", wifi_rate="DsssRate1Mbps",
         middleware="zeromq-reqrep", battery_failure="midrun", robot="python",
+        aodv_daemon="python",
     )  # fmt: skip
     # --isolate is for the veth medium: its non-default value rides on a veth config.
     veth = dataclasses.replace(
