@@ -93,3 +93,22 @@ def small_map(tmp_path):
     path = tmp_path / "small.png"
     cv2.imwrite(str(path), np.full((100, 100), 255, dtype=np.uint8))  # 10 x 10 m, no walls
     return str(path)
+
+
+@pytest.fixture(params=["python", "cpp"])
+def aodv_daemon(request) -> str:
+    """Which AODV daemon the test runs: every daemon test runs against both, the Python
+    reference (`python -m aodv`) and the compiled one (build/tb-aodv; topology.routing). The
+    compiled one is skipped only where `make setup` could not build it, with its one line
+    (build/tb-aodv.unbuilt); where it was to be built, its absence fails the test."""
+    from topology import routing
+
+    if request.param == "cpp" and not routing.aodv_built():
+        why = routing.aodv_unbuilt_reason()
+        if why:
+            pytest.skip(why)
+        pytest.fail(
+            f"{routing.aodv_binary()} is not there and {routing.TB_AODV_UNBUILT} does not say "
+            "why: run `make setup`"
+        )
+    return request.param

@@ -1,6 +1,9 @@
 """The AODV daemon in real namespaces (topology.Network with routing="aodv").
 
-Each test builds its own testbed named "ta" + random hex and removes it in a finally.
+Each test runs against both daemons, the Python reference and the compiled one (the
+`aodv_daemon` fixture, tests/integration/conftest.py), and builds its own testbed named "ta"
++ random hex, which it removes in a finally. A test that starts a daemon itself takes its
+command line from `daemon_argv`, the one place that knows both programs' names.
 Time scales above 1 shorten the waits: a time scale K runs every protocol timer K times
 faster (HELLO, lifetimes, ring search), so the same protocol events happen sooner.
 """
@@ -18,6 +21,7 @@ import uuid
 from aodv import packet as wire
 from aodv.stats import read_fresh
 from aodv.statsfile import DaemonStats
+from topology import routing
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 
@@ -27,7 +31,8 @@ CHAIN5 = tuple((8.0 * i, 0.0) for i in range(5))
 
 
 @contextlib.contextmanager
-def aodv_net(positions, time_scale=1.0, capture_dir=None):
+def aodv_net(positions, time_scale=1.0, capture_dir=None, *, daemon):
+    """A network of robots at `positions` running AODV daemon `daemon` (python or cpp)."""
     name = "ta" + uuid.uuid4().hex[:6]
     spec = NetworkSpec(
         name=name,
@@ -36,6 +41,7 @@ def aodv_net(positions, time_scale=1.0, capture_dir=None):
         routing="aodv",
         time_scale=time_scale,
         capture_dir=capture_dir,
+        aodv_daemon=daemon,
     )
     try:
         with Network(spec) as net:
@@ -43,6 +49,12 @@ def aodv_net(positions, time_scale=1.0, capture_dir=None):
             yield net
     finally:
         destroy(name)
+
+
+def daemon_argv(daemon: str, *args: str) -> list[str]:
+    """The command line of AODV daemon `daemon` (python or cpp) with `args`: the same
+    arguments for both (topology.routing.aodv_command)."""
+    return [*routing.aodv_command(daemon), *args]
 
 
 def daemon(net, k):
@@ -83,13 +95,13 @@ def ping(net, k, dst, *args, timeout=30):
     ).stdout
 
 
-def test_chain_ping_4_hops_pcap_and_nng():
+def test_chain_ping_4_hops_pcap_and_nng(aodv_daemon):
     with tempfile.TemporaryDirectory(prefix="ta-aodv-") as cap:
-        _chain_ping_4_hops_pcap_and_nng(cap)
+        _chain_ping_4_hops_pcap_and_nng(cap, aodv_daemon)
 
 
-def _chain_ping_4_hops_pcap_and_nng(cap):
-    with aodv_net(CHAIN5, 1.0, cap) as net:
+def _chain_ping_4_hops_pcap_and_nng(cap, aodv_daemon):
+    with aodv_net(CHAIN5, 1.0, cap, daemon=aodv_daemon) as net:
         assert "10.0.0.5" not in routes(net, 1)
         out = ping(net, 1, "10.0.0.5", "-c", "2", "-W", "5")
         assert " 0% packet loss" in out, out
@@ -158,10 +170,10 @@ def _chain_ping_4_hops_pcap_and_nng(cap):
     assert hellos and all(h["ip.ttl"] == "1" and h["aodv.hopcount"] == "0" for h in hellos)
 
 
-def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
+def test_link_cut_gives_rerr_and_traffic_takes_the_other_path(aodv_daemon):
     # 1 - 2 - 3 - 4 in a line; 5 sits above 2 and 3 and offers a detour 2 - 5 - 3.
     positions = [(0, 0), (8, 0), (16, 0), (24, 0), (12, 6)]
-    with aodv_net(positions, time_scale=5.0) as net:
+    with aodv_net(positions, time_scale=5.0, daemon=aodv_daemon) as net:
         out = ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
         assert "ttl=62" in out, out  # 3 hops
         pinger = net.spawn(
@@ -188,8 +200,8 @@ def test_link_cut_gives_rerr_and_traffic_takes_the_other_path():
         assert [d["dest"] for d in s1["discoveries"]].count("10.0.0.4") == 1
 
 
-def test_unknown_destination_icmp_unreachable_others_unaffected():
-    with aodv_net(CHAIN5[:3], time_scale=10.0) as net:
+def test_unknown_destination_icmp_unreachable_others_unaffected(aodv_daemon):
+    with aodv_net(CHAIN5[:3], time_scale=10.0, daemon=aodv_daemon) as net:
         good = net.spawn(
             1, ["ping", "-n", "-i", "0.1", "-c", "40", "-W", "2", "10.0.0.3"],
             role="test", stdout=subprocess.PIPE, text=True,
@@ -209,8 +221,8 @@ def test_unknown_destination_icmp_unreachable_others_unaffected():
         assert " 0% packet loss" in text, text
 
 
-def test_idle_route_expires_active_route_stays():
-    with aodv_net(CHAIN5[:4], time_scale=5.0) as net:
+def test_idle_route_expires_active_route_stays(aodv_daemon):
+    with aodv_net(CHAIN5[:4], time_scale=5.0, daemon=aodv_daemon) as net:
         assert " 0% packet loss" in ping(net, 1, "10.0.0.4", "-c", "1", "-W", "5")
         # The pinger keeps the route to 3 in use: at real-time priority 1, as the daemons, so
         # that a loaded machine does not starve it past ACTIVE_ROUTE_TIMEOUT (0.6 s here), after
@@ -282,8 +294,8 @@ FUZZER = textwrap.dedent("""
 """)
 
 
-def test_fuzzed_datagrams_are_counted_and_change_nothing():
-    with aodv_net(CHAIN5[:3]) as net:
+def test_fuzzed_datagrams_are_counted_and_change_nothing(aodv_daemon):
+    with aodv_net(CHAIN5[:3], daemon=aodv_daemon) as net:
         assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
         # Keep 2's one route in use so that its table is stable while it is fuzzed.
         keep = net.spawn(2, ["ping", "-n", "-i", "0.2", "10.0.0.3"], role="test",
@@ -334,8 +346,8 @@ def _udp_counter(snmp: str, name: str) -> int:
     return int(values[header.index(name)])
 
 
-def test_sigterm_writes_stats_and_leaves_no_kernel_state():
-    with aodv_net(CHAIN5[:2]) as net:
+def test_sigterm_writes_stats_and_leaves_no_kernel_state(aodv_daemon):
+    with aodv_net(CHAIN5[:2], daemon=aodv_daemon) as net:
         assert " 0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
         proc = daemon(net, 1)
         assert routes(net, 1)
@@ -353,8 +365,8 @@ def test_sigterm_writes_stats_and_leaves_no_kernel_state():
         assert all(line.startswith("r1 ") for line in log.splitlines() if line.strip())
 
 
-def test_forwarded_packet_without_route_draws_rerr_and_rediscovery():
-    with aodv_net(CHAIN5[:3]) as net:
+def test_forwarded_packet_without_route_draws_rerr_and_rediscovery(aodv_daemon):
+    with aodv_net(CHAIN5[:3], daemon=aodv_daemon) as net:
         assert " 0% packet loss" in ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
         # Robot 2's daemon restarts cleanly: its routes are gone, 1 and 3 still use it.
         old = daemon(net, 2)
@@ -362,7 +374,7 @@ def test_forwarded_packet_without_route_draws_rerr_and_rediscovery():
         assert old.wait(timeout=10) == 0
         os.remove(stats_path(net, 2))
         net.spawn(
-            2, [PY, "-m", "aodv", "--robot", "r2", "--stats", stats_path(net, 2)],
+            2, daemon_argv(aodv_daemon, "--robot", "r2", "--stats", stats_path(net, 2)),
             role="aodv", cwd=REPO, stderr=subprocess.DEVNULL,
         )  # fmt: skip
         while not os.path.exists(stats_path(net, 2)):
@@ -376,13 +388,13 @@ def test_forwarded_packet_without_route_draws_rerr_and_rediscovery():
         assert "ttl=63" in out, out
 
 
-def restart_daemon(net, k, words, *extra):
-    """Start robot k's daemon again (time scale 10) and read its log until it is up; returns
-    the process and whether a line said `words` on the way."""
+def restart_daemon(net, k, words, *extra, daemon):
+    """Start robot k's daemon `daemon` again (time scale 10) and read its log until it is up;
+    returns the process and whether a line said `words` on the way."""
     os.remove(stats_path(net, k))
     new = net.spawn(
-        k, [PY, "-m", "aodv", "--robot", f"r{k}", "--time-scale", "10",
-            "--stats", stats_path(net, k), *extra],
+        k, daemon_argv(daemon, "--robot", f"r{k}", "--time-scale", "10",
+                       "--stats", stats_path(net, k), *extra),
         role="aodv", cwd=REPO, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     deadline = time.monotonic() + 20
@@ -393,15 +405,15 @@ def restart_daemon(net, k, words, *extra):
     return new, logged
 
 
-def test_restart_after_crash_applies_the_reboot_rule():
+def test_restart_after_crash_applies_the_reboot_rule(aodv_daemon):
     # Time scale 10: DELETE_PERIOD is 1.5 s.
-    with aodv_net(CHAIN5[:2], time_scale=10.0) as net:
+    with aodv_net(CHAIN5[:2], time_scale=10.0, daemon=aodv_daemon) as net:
         assert " 0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
         old = daemon(net, 2)
         old.kill()  # no teardown: its routes stay in the kernel
         old.wait(timeout=5)
         assert routes(net, 2)
-        new, logged = restart_daemon(net, 2, "reboot rule")
+        new, logged = restart_daemon(net, 2, "reboot rule", daemon=aodv_daemon)
         assert logged
         t_up = time.monotonic()
         deadline = t_up + 10
@@ -440,14 +452,14 @@ GHOST_RREQ = textwrap.dedent("""
 """)
 
 
-def test_a_reply_the_kernel_could_not_transmit_is_counted_as_such():
+def test_a_reply_the_kernel_could_not_transmit_is_counted_as_such(aodv_daemon):
     """Robot 2 answers a RREQ from a neighbour that is gone before the RREP leaves (robot 1
     sends it from an address nobody holds): ARP for it fails, the kernel reports the RREP
     back to the daemon (IP_RECVERR), and the daemon counts it as sent but not transmitted,
     which is what robot 2's capture shows."""
     ghost = "10.0.0.77"
     with tempfile.TemporaryDirectory(prefix="ta-aodv-") as cap:
-        with aodv_net(CHAIN5[:2], 1.0, cap) as net:
+        with aodv_net(CHAIN5[:2], 1.0, cap, daemon=aodv_daemon) as net:
             assert " 0% packet loss" in ping(net, 1, "10.0.0.2", "-c", "1", "-W", "5")
             replies = stats(net, 2)["messages_sent"]["RREP"]
             net.exec(1, [PY, "-c", GHOST_RREQ, REPO, ghost, "10.0.0.2"], check=True, timeout=30)
@@ -469,10 +481,10 @@ def test_a_reply_the_kernel_could_not_transmit_is_counted_as_such():
         assert out.stdout.strip() == ""  # it never reached wlan0
 
 
-def test_clean_restart_waits_delete_period_and_resumes_its_numbers():
+def test_clean_restart_waits_delete_period_and_resumes_its_numbers(aodv_daemon):
     """RFC 6.13 after a clean exit: no routes are left in the kernel, but the counter file the
     topology gives every daemon (--state) says this is a restart."""
-    with aodv_net(CHAIN5[:3], time_scale=10.0) as net:  # DELETE_PERIOD 1.5 s
+    with aodv_net(CHAIN5[:3], time_scale=10.0, daemon=aodv_daemon) as net:  # DELETE_PERIOD 1.5 s
         assert " 0% packet loss" in ping(net, 1, "10.0.0.3", "-c", "2", "-W", "5")
         state = f"{net.state_dir}/r1.aodv.state"
         with open(state) as f:
@@ -481,7 +493,7 @@ def test_clean_restart_waits_delete_period_and_resumes_its_numbers():
         old.terminate()
         assert old.wait(timeout=10) == 0
         assert routes(net, 1) == {}  # a clean exit: nothing for the old rule to find
-        new, logged = restart_daemon(net, 1, "restarted", "--state", state)
+        new, logged = restart_daemon(net, 1, "restarted", "--state", state, daemon=aodv_daemon)
         assert logged
         t_up = time.monotonic()
         out = ping(net, 1, "10.0.0.3", "-c", "1", "-W", "5")
@@ -566,8 +578,8 @@ def _rss_kb(pid: int) -> int:
 RSS_BOUND_MB = 48  # the daemon's resident memory under the flood (17 MB idle, 19 MB peak here)
 
 
-def test_hostile_flood_keeps_the_daemon_up_bounded_and_in_step_with_the_kernel():
-    with aodv_net(CHAIN5[:3]) as net:
+def test_hostile_flood_keeps_the_daemon_up_bounded_and_in_step_with_the_kernel(aodv_daemon):
+    with aodv_net(CHAIN5[:3], daemon=aodv_daemon) as net:
         assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
         proc = daemon(net, 2)
         rss_idle = _rss_kb(proc.pid)

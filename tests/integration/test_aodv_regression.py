@@ -6,7 +6,8 @@ run the middle robot moves out of range, at two thirds it comes back. Time scale
 RERR for robot 5, RREQs while the chain is cut, and echo replies again at the end. After
 the return the ping runs until replies come again (up to RECOVERY_S): a rediscovery begun
 while the chain was cut may have to fail first (21 s of protocol time, 4.2 s here) before
-the next one succeeds; on a loaded machine it may take longer in wall time.
+the next one succeeds; on a loaded machine it may take longer in wall time. It runs against
+both AODV daemons (the `aodv_daemon` fixture).
 
 The scenario ends when the test starts taking the network down (`t_end`). What comes after
 is teardown, not the scenario: the daemons are stopped together but exit one by one, and
@@ -48,9 +49,9 @@ def tshark(path, *fields, filt="aodv"):
     return [line.split("\t") for line in out.splitlines()]
 
 
-def test_aodv_regression_middle_robot_leaves_and_returns():
+def test_aodv_regression_middle_robot_leaves_and_returns(aodv_daemon):
     with tempfile.TemporaryDirectory(prefix="ta-reg-") as cap:
-        with aodv_net(CHAIN5, time_scale=5.0, capture_dir=cap) as net:
+        with aodv_net(CHAIN5, time_scale=5.0, capture_dir=cap, daemon=aodv_daemon) as net:
             pinger = net.spawn(
                 # A count, not -w: ping -w gives up at the first unreachable while cut.
                 1, ["ping", "-n", "-D", "-i", "0.1", "-c", str(int(10 * (T + RECOVERY_S))),

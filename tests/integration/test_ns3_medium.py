@@ -63,8 +63,10 @@ def totals(counters: dict, key: str) -> float:
     return sum(r[key] for r in counters["robots"])
 
 
-def test_chain_routes_over_two_hops_with_aodv(tb_name):
-    with wifi(tb_name, [(0, 0), (8, 0), (16, 0)], routing="aodv") as net:
+def test_chain_routes_over_two_hops_with_aodv(tb_name, aodv_daemon):
+    """AODV over ns-3's 802.11 channel, with each AODV daemon (the `aodv_daemon` fixture)."""
+    positions = [(0, 0), (8, 0), (16, 0)]
+    with wifi(tb_name, positions, routing="aodv", aodv_daemon=aodv_daemon) as net:
         assert net.medium.kernel_links() == {(1, 2), (2, 3)}
         # The first request may be lost to discovery: retry until a reply comes back.
         wait_for(lambda: ping(net, 1, "10.0.0.3", "-c", "1", "-W", "2").returncode == 0,
