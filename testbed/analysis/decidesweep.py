@@ -351,7 +351,7 @@ def load_decided(plan_dir: Path) -> Decided:
     runs), stage 2's runs from stage2-NN/ beside each file, those the file plans alone."""
     doc = _plan_doc(plan_dir)
     opts = _options(doc, plan_dir / PLAN_NAME)
-    dirs = [(plan_dir / d) for d in doc["stage1"]]
+    dirs = [Path(os.path.normpath(plan_dir / d)) for d in doc["stage1"]]
     stage1 = read_stage1(dirs[0], dirs[1:])
     _checked_options(opts)
     p = make_plan(stage1, opts, dirs[0])

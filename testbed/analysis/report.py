@@ -9,6 +9,12 @@ Section 5 on those tables. `render` puts the verdicts, the figures and the sweep
 bookkeeping (testbed.analysis.sweepinfo: runs done, excluded, skipped, achieved time scale)
 and the routing metrics (captures against the AODV daemons' own counters) into
 DIR/report.md, next to DIR/figures/, and the same text as one page into DIR/report.html.
+
+The deciding design's stage 2 (testbed.analysis.decidereport): when a plan directory is
+given (`--stage2 DIR`) or found beside the sweep (DIR-stage2 with a plan.json), a section
+after the 3-run verdicts sets each claim's deciding verdict beside them, with its runs, its
+test and its error rate, and figures/decided.json holds them as data. Without one the report
+is the single sweep's, as it was.
 """
 
 from __future__ import annotations
@@ -23,6 +29,8 @@ from common.errors import UsageError
 from common.jsonfile import write_atomic
 from testbed.analysis import (
     ablation,
+    decidereport,
+    decidesweep,
     figures,
     htmlreport,
     media,
@@ -78,7 +86,7 @@ def _img(name: str, figdir: Path) -> str | None:
     return f"![{name}](figures/{name}.png)" if (figdir / f"{name}.png").is_file() else None
 
 
-def render(sweep_dir: Path, made: Made, vs: list[Verdict]) -> str:
+def render(sweep_dir: Path, made: Made, vs: list[Verdict], stage2: list[str] | None = None) -> str:
     figdir = sweep_dir / "figures"
     tables = made.tables
     out = [f"# Sweep report: {one_line(sweep_dir.name)}", ""]
@@ -103,6 +111,7 @@ def render(sweep_dir: Path, made: Made, vs: list[Verdict]) -> str:
         "",
     ]
     out += [f"- {rule}" for rule in RULES] + [""]
+    out += stage2 or []
     out += ablation.section(tables.fig2_all, tables.ablation_thirds)
     out += protocols.section(tables.protocols)
     out += media.section(tables.media)
@@ -196,14 +205,45 @@ def _num(x, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
+def read_stage2(
+    sweep_dir: Path, stage2: Path | None
+) -> tuple[decidesweep.Decided | None, str | None]:
+    """The deciding design's stage 2 for the report: `stage2` (a plan directory, refused in
+    one line when it cannot be read or is not this sweep's), else the one beside the sweep
+    (its failure to read as words instead); (None, None) when there is none."""
+    plan_dir = stage2 or decidesweep.find_plan(sweep_dir)
+    if plan_dir is None:
+        return None, None
+    try:
+        if not (plan_dir / decidesweep.PLAN_NAME).is_file():
+            raise UsageError(f"{plan_dir}: no {decidesweep.PLAN_NAME} (not PLAN's --out)")
+        decided = decidesweep.load_decided(plan_dir)
+        if decided.stage1.dirs[0].resolve() != sweep_dir.resolve():
+            raise UsageError(f"{plan_dir}: its plan is of {decided.stage1.dirs[0]}, not of "
+                             f"{sweep_dir}")  # fmt: skip
+    except (UsageError, ValueError, OSError) as e:
+        if stage2 is not None:
+            raise UsageError(f"--stage2 {one_line(str(e))}") from None
+        return None, str(e)
+    return decided, None
+
+
 def write_report(
-    sweep_dir: str | Path, metrics_of=None, unfaithful: bool = False
-) -> tuple[Path, list[Verdict]]:
+    sweep_dir: str | Path, metrics_of=None, unfaithful: bool = False,
+    stage2: Path | None = None,
+) -> tuple[Path, list[Verdict]]:  # fmt: skip
     sweep_dir = Path(sweep_dir)
+    decided, error = read_stage2(sweep_dir, stage2)
     made = figures.make_all(sweep_dir, metrics_of=metrics_of, unfaithful=unfaithful)
     vs = verdicts(made.tables)
     path = sweep_dir / "report.md"
-    text = render(sweep_dir, made, vs) + "\n"
+    figdir = sweep_dir / "figures"
+    section = decidereport.section(decided, error, vs, made.tables.fig2, figdir)
+    if decided is not None:
+        write_atomic(figdir / "decided.json",
+                     json.dumps(decidereport.decided_doc(decided), indent=1) + "\n",
+                     root=sweep_dir)  # fmt: skip
+    text = render(sweep_dir, made, vs, section) + "\n"
     write_atomic(path, text)  # never through a link (common.jsonfile)
     htmlreport.write_html(sweep_dir, text)  # the same report as one page, figures inlined
     write_atomic(
@@ -231,10 +271,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="count the runs whose fidelity verdict says time dilation changed them "
         "(result.json's fidelity.ok false); by default they are left out and counted",
     )
+    parser.add_argument(
+        "--stage2",
+        metavar="PLAN_DIR",
+        help="the deciding design's plan directory (python -m testbed.analysis.decide PLAN's "
+        "--out, with plan.json and the stage-2 sweeps): the report adds each claim's deciding "
+        "verdict; default DIR-stage2 beside DIR when it has a plan.json",
+    )
 
 
-def _sweep_main(sweep_dir: Path, unfaithful: bool = False) -> int:
-    path, vs = write_report(sweep_dir, unfaithful=unfaithful)
+def _sweep_main(sweep_dir: Path, unfaithful: bool = False, stage2: Path | None = None) -> int:
+    path, vs = write_report(sweep_dir, unfaithful=unfaithful, stage2=stage2)
     held = sum(v.verdict == HOLDS for v in vs)
     print(f"{one_line(str(path))}: {held} of {len(vs)} claims hold", file=sys.stderr)
     for v in vs:
@@ -257,7 +304,9 @@ def _run_main(run_dir: Path) -> int:
 def main(args: argparse.Namespace) -> int:
     d = Path(args.dir)
     if (d / "runs").is_dir():
-        return _sweep_main(d, getattr(args, "include_unfaithful", False))
+        stage2 = getattr(args, "stage2", None)
+        return _sweep_main(d, getattr(args, "include_unfaithful", False),
+                           Path(stage2) if stage2 else None)  # fmt: skip
     if has_result(d):
         return _run_main(d)
     raise UsageError(

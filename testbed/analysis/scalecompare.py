@@ -27,6 +27,10 @@ namespaces had them divided by the time scale (topology.kernel.nettimers; result
 run's TCP did not keep emulated time (a kernel before 6.11, a scale past its jiffy, or a run
 made before the timers were dilated), TCP's measures (PDF, delays, retransmissions) are not
 compared, and the table marks that side's time scale "TCP undilated".
+
+After the measures, the paper's claims as each sweep decides them, and whether the two agree
+(testbed.analysis.claimcompare): the report's verdicts, and the deciding design's where both
+sweeps have a stage 2 beside them.
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ from pathlib import Path
 
 from common.errors import UsageError
 from common.jsonfile import write_atomic
-from testbed.analysis import media, pcapmetrics, stats
+from testbed.analysis import claimcompare, media, pcapmetrics, stats
 from testbed.analysis.runs import FinishedRun, ResultError, load_runs
 
 # (key, name, format)
@@ -283,6 +287,10 @@ def main(args: argparse.Namespace) -> int:
             raise UsageError(f"{d}: not a sweep directory (no runs/ in it)")
     try:
         lines = compare(args.a, args.b, args.include_unfaithful)
+        lines += claimcompare.section(
+            claimcompare.claims_of(args.a, args.include_unfaithful),
+            claimcompare.claims_of(args.b, args.include_unfaithful),
+        )
     except ResultError as e:
         raise UsageError(str(e)) from None
     text = "\n".join(lines)

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from testbed.analysis import ablation, stats
-from testbed.analysis.tables import Fig2Row, PlanCauseRow
+from testbed.analysis.tables import PAPER_MAX_TEAM, Fig2Row, PlanCauseRow
 
 if TYPE_CHECKING:  # figures imports middlewares, which imports this module
     from testbed.analysis.figures import Tables
@@ -234,6 +234,8 @@ def verdict_fall_then_rise(fig2: list[Fig2Row]) -> Verdict:
             why = f"one run at {', '.join(map(str, few))} robots, so the noise is unknown"
         elif min(pts, key=lambda n: pts[n].steps.mean) == max(pts):
             note = " (the sweep may stop short of the turning point)"
+        if max(pts) > PAPER_MAX_TEAM:
+            note += f" (teams past {PAPER_MAX_TEAM}: beyond the paper's range)"
         results.append(ok)
         v.evidence.append(f"{_group_name(laser, comm)}: {why} -> {_yes_no(ok)}{note}")
     v.verdict = _overall(results)
@@ -276,6 +278,12 @@ def verdict_smaller_range(fig2: list[Fig2Row]) -> Verdict:
                          "median)")  # fmt: skip
         v.evidence.insert(0, head)
     return v
+
+
+def laser_more_steps(fig2: list[Fig2Row]) -> str:
+    """The shorter laser's claim, its "more steps" part alone, on the means (as
+    verdict_shorter_laser decides that part): the part testbed.analysis.decide tests."""
+    return _overall([a.steps.mean > b.steps.mean for _, a, b in laser_pairs(fig2)])
 
 
 def verdict_shorter_laser(fig2: list[Fig2Row]) -> Verdict:
