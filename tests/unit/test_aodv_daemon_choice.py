@@ -144,6 +144,17 @@ def test_cpp_without_the_program_is_one_line_and_status_2_from_the_cli():
     assert "--aodv-daemon cpp" in p.stderr and MISSING not in p.stdout
 
 
+def test_net_up_refuses_cpp_without_the_program_in_one_line():
+    env = dict(os.environ, **{routing.TB_AODV_ENV: MISSING})
+    p = subprocess.run(
+        [sys.executable, "-m", "testbed", "net", "up", "tcwnone", "--robots", "2",
+         "--comm-range", "5", "--aodv-daemon", "cpp"],
+        capture_output=True, text=True, timeout=60, cwd=PROJECT_ROOT, env=env,
+    )  # fmt: skip
+    assert p.returncode == 2 and p.stderr.count("\n") == 1, p.stderr
+    assert "--aodv-daemon cpp" in p.stderr or "compiled AODV daemon" in p.stderr, p.stderr
+
+
 def test_network_fields_hand_the_spec_the_daemon_that_runs(built, monkeypatch):
     cfg = RunConfig(robots=2, comm_range=5)
     assert network_fields(cfg)["aodv_daemon"] == "cpp"
