@@ -69,6 +69,21 @@ TB_AODV_CORE_SRC := $(wildcard native/aodv/*.cc)
 TB_AODV_CORE_DEPS := $(TB_AODV_CORE_SRC) $(wildcard native/aodv/*.h)
 TB_AODV_CORE_UNBUILT := build/tb-aodv-core.unbuilt
 TB_AODV_CORE_FLAGS := -std=c++17 -Wall -Wextra
+# The compiled AODV daemon around that core (native/aodv/daemon, docs/aodv.md "The compiled
+# daemon"): `python -m aodv`'s command line, kernel side and statistics file. Its shared numbers
+# and its option table are generated from the Python daemon by aodv/constgen.py into
+# TB_AODV_CONSTS (rewritten only when it changes). Optional like the core: where g++ fails,
+# setup says so in one line, keeps it in TB_AODV_UNBUILT, and the Python daemon runs.
+TB_AODV := build/tb-aodv
+TB_AODV_SRC := $(wildcard native/aodv/daemon/*.cc) $(filter-out native/aodv/tb-aodv-core.cc,$(TB_AODV_CORE_SRC))
+TB_AODV_CONSTS := build/gen/aodv_consts.h
+TB_AODV_CONSTS_FROM := aodv/constgen.py aodv/__main__.py aodv/kernel.py aodv/daemon.py \
+	aodv/control.py aodv/packet.py aodv/params.py aodv/persist.py aodv/stats.py common/sched.py \
+	node/argsgen.py
+TB_AODV_DEPS := $(TB_AODV_SRC) $(wildcard native/aodv/daemon/*.h) $(wildcard native/aodv/*.h) \
+	$(TB_AODV_CONSTS)
+TB_AODV_UNBUILT := build/tb-aodv.unbuilt
+TB_AODV_FLAGS := $(TB_AODV_CORE_FLAGS) -pthread -I$(dir $(TB_AODV_CONSTS))
 
 NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespaces): run 'sudo make $@'"; exit 2; }
 
@@ -76,7 +91,7 @@ NEED_ROOT = @[ "$$(id -u)" = 0 ] || { echo "make $@ needs root (network namespac
 	experiment-protocols experiment-media experiment-media-rise experiment-middleware \
 	experiment-paper-literal bench lint format vm-test slurm-test browser-test distro-test clean
 
-setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT) $(TB_AODV_CORE)
+setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT) $(TB_AODV_CORE) $(TB_AODV)
 
 # The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
@@ -143,6 +158,33 @@ build/asan/tb-aodv-core: $(TB_AODV_CORE_DEPS)
 	@mkdir -p $(@D)
 	g++ -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,float-cast-overflow \
 		-fno-sanitize-recover=all $(TB_AODV_CORE_FLAGS) -o $@ $(TB_AODV_CORE_SRC)
+
+$(TB_AODV): $(TB_AODV_DEPS)
+	@mkdir -p $(@D); rm -f $(TB_AODV_UNBUILT); \
+	if ! command -v g++ >/dev/null; then \
+		echo "C++ AODV daemon not built: needs g++; the Python AODV daemon runs" \
+			| tee $(TB_AODV_UNBUILT); \
+	else echo "g++ -O2 ... -o $@ (native/aodv/daemon)" && \
+		g++ -O2 $(TB_AODV_FLAGS) -o $@ $(TB_AODV_SRC) || { rm -f $@; \
+		echo "C++ AODV daemon not built: g++ failed on native/aodv/daemon (above); the Python daemon runs" \
+			| tee $(TB_AODV_UNBUILT); }; fi
+
+$(TB_AODV_CONSTS): $(TB_AODV_CONSTS_FROM) | venv
+	$(PY) -m aodv.constgen $@
+
+# The daemon with AddressSanitizer and UndefinedBehaviorSanitizer, and with ThreadSanitizer (it
+# has threads: the kernel thread, the statistics writer, the log writer):
+# tests/integration/test_aodv_cpp_daemon.py runs both in namespaces.
+build/asan/tb-aodv: $(TB_AODV_DEPS)
+	@command -v g++ >/dev/null || { echo "C++ AODV daemon not built: needs g++"; exit 2; }
+	@mkdir -p $(@D)
+	g++ -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined,float-cast-overflow \
+		-fno-sanitize-recover=all $(TB_AODV_FLAGS) -o $@ $(TB_AODV_SRC)
+
+build/tsan/tb-aodv: $(TB_AODV_DEPS)
+	@command -v g++ >/dev/null || { echo "C++ AODV daemon not built: needs g++"; exit 2; }
+	@mkdir -p $(@D)
+	g++ -O1 -g -fsanitize=thread $(TB_AODV_FLAGS) -o $@ $(TB_AODV_SRC)
 
 $(NS3_MEDIUM): native/ns3wifi/wifi-medium.cc | apt
 	@mkdir -p $(@D); rm -f $(NS3_MEDIUM_UNBUILT)

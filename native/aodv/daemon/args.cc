@@ -1,0 +1,503 @@
+// See args.h. The order of the checks is argparse's: options as they come (each value
+// converted and checked when it is read), then the required ones, then build_params.
+#include "args.h"
+
+#include <cctype>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <map>
+
+#include "../packet.h"
+#include "aodv_consts.h"
+
+namespace aodv {
+
+namespace {
+
+std::string strip(const std::string& t) {
+    size_t a = 0, b = t.size();
+    while (a < b && isspace((unsigned char)t[a])) ++a;
+    while (b > a && isspace((unsigned char)t[b - 1])) --b;
+    return t.substr(a, b - a);
+}
+
+// Underscores only between digits (Python's numeric literals); removed.
+bool no_underscores(const std::string& t, std::string& out) {
+    out.clear();
+    for (size_t k = 0; k < t.size(); ++k) {
+        if (t[k] != '_') {
+            out += t[k];
+            continue;
+        }
+        if (k == 0 || k + 1 >= t.size() || !isdigit((unsigned char)t[k - 1]) ||
+            !isdigit((unsigned char)t[k + 1]))
+            return false;
+    }
+    return true;
+}
+
+std::string lower(std::string t) {
+    for (auto& c : t) c = char(tolower((unsigned char)c));
+    return t;
+}
+
+// Python's repr of a str, as argparse quotes a value in its messages.
+std::string py_quote(const std::string& t) {
+    bool sq = t.find('\'') != std::string::npos && t.find('"') == std::string::npos;
+    char q = sq ? '"' : '\'';
+    std::string out(1, q);
+    for (unsigned char c : t) {
+        if (c == '\\') out += "\\\\";
+        else if (c == (unsigned char)q) { out += '\\'; out += char(c); }
+        else if (c == '\n') out += "\\n";
+        else if (c == '\t') out += "\\t";
+        else if (c == '\r') out += "\\r";
+        else if (c < 0x20 || c == 0x7f) {
+            char b[8];
+            snprintf(b, sizeof b, "\\x%02x", c);
+            out += b;
+        } else out += char(c);
+    }
+    return out + q;
+}
+
+// common.argtypes.number's "%g" of a bound.
+std::string g_fmt(double x) {
+    char b[32];
+    snprintf(b, sizeof b, "%g", x);
+    return b;
+}
+
+bool looks_negative(const std::string& t) {
+    // argparse's _negative_number_matcher: '^-\d+$|^-\d*\.\d+$'
+    if (t.size() < 2 || t[0] != '-') return false;
+    size_t dot = t.find('.');
+    for (size_t k = 1; k < t.size(); ++k)
+        if (k != dot && !isdigit((unsigned char)t[k])) return false;
+    if (dot == std::string::npos) return true;
+    return t.find('.', dot + 1) == std::string::npos && dot + 1 < t.size();
+}
+
+// ipaddress.IPv4Network(text) (strict): "A.B.C.D[/prefix|/netmask|/hostmask]".
+bool dotted(const std::string& t, uint32_t& out) {
+    // ipaddress: four decimal octets, 1-3 digits, no leading zeros, each <= 255.
+    uint32_t v = 0;
+    int parts = 0;
+    size_t k = 0;
+    while (true) {
+        size_t start = k;
+        while (k < t.size() && isdigit((unsigned char)t[k])) ++k;
+        size_t n = k - start;
+        if (n == 0 || n > 3 || (n > 1 && t[start] == '0')) return false;
+        int oct = atoi(t.substr(start, n).c_str());
+        if (oct > 255) return false;
+        v = (v << 8) | uint32_t(oct);
+        ++parts;
+        if (k == t.size()) break;
+        if (t[k] != '.' || parts == 4) return false;
+        ++k;
+    }
+    if (parts != 4) return false;
+    out = v;
+    return true;
+}
+
+bool contiguous_prefix(uint32_t mask, int& plen) {
+    int n = 0;
+    while (n < 32 && (mask & (0x80000000u >> n))) ++n;
+    uint32_t expect = n == 0 ? 0 : ~uint32_t(0) << (32 - n);
+    if (mask != expect) return false;
+    plen = n;
+    return true;
+}
+
+bool network(const std::string& text, Args& a, std::string& err) {
+    size_t slash = text.find('/');
+    std::string addr = text.substr(0, slash);
+    std::string mask = slash == std::string::npos ? "32" : text.substr(slash + 1);
+    if (slash != std::string::npos && text.find('/', slash + 1) != std::string::npos) {
+        err = "Only one '/' permitted in " + py_quote(text);
+        return false;
+    }
+    uint32_t ip;
+    if (!dotted(addr, ip)) {
+        err = py_quote(addr) + " does not appear to be an IPv4 address";
+        return false;
+    }
+    int plen = -1;
+    bool digits = !mask.empty();
+    for (char c : mask) digits = digits && (unsigned char)c < 128 && isdigit((unsigned char)c);
+    if (digits) {
+        if (mask.size() <= 3) plen = atoi(mask.c_str());
+        if (plen > 32) plen = -1;
+    } else {
+        uint32_t m;
+        if (dotted(mask, m) && !contiguous_prefix(m, plen)) {
+            plen = -1;
+            contiguous_prefix(~m, plen) || (plen = -1);  // a host mask
+        }
+    }
+    if (plen < 0) {
+        err = py_quote(mask) + " is not a valid netmask";
+        return false;
+    }
+    uint32_t m = plen == 0 ? 0 : ~uint32_t(0) << (32 - plen);
+    if (ip & ~m) {
+        err = text + " has host bits set";
+        return false;
+    }
+    a.net_addr = ip;
+    a.net_mask = m;
+    a.net_prefix = plen;
+    a.net = addr_str(ip) + "/" + std::to_string(plen);
+    return true;
+}
+
+}  // namespace
+
+bool py_float(const std::string& text, double& out) {
+    std::string t = strip(text), u;
+    std::string l = lower(t);
+    std::string body = (!l.empty() && (l[0] == '+' || l[0] == '-')) ? l.substr(1) : l;
+    double sign = (!l.empty() && l[0] == '-') ? -1.0 : 1.0;
+    if (body == "inf" || body == "infinity") { out = sign * INFINITY; return true; }
+    if (body == "nan") { out = NAN; return true; }
+    if (!no_underscores(t, u) || u.empty()) return false;
+    // [sign] (digits [. digits] | . digits) [e [sign] digits]: no hex, no spaces inside.
+    size_t k = 0;
+    if (u[k] == '+' || u[k] == '-') ++k;
+    size_t m = k;
+    while (k < u.size() && isdigit((unsigned char)u[k])) ++k;
+    size_t ints = k - m, fr = 0;
+    if (k < u.size() && u[k] == '.') {
+        ++k;
+        size_t f0 = k;
+        while (k < u.size() && isdigit((unsigned char)u[k])) ++k;
+        fr = k - f0;
+    }
+    if (ints + fr == 0) return false;
+    if (k < u.size() && (u[k] == 'e' || u[k] == 'E')) {
+        ++k;
+        if (k < u.size() && (u[k] == '+' || u[k] == '-')) ++k;
+        size_t e0 = k;
+        while (k < u.size() && isdigit((unsigned char)u[k])) ++k;
+        if (k == e0) return false;
+    }
+    if (k != u.size()) return false;
+    out = strtod(u.c_str(), nullptr);
+    return true;
+}
+
+bool py_int(const std::string& text, long long& out) {
+    std::string t = strip(text), u;
+    if (!no_underscores(t, u) || u.empty()) return false;
+    size_t k = (u[0] == '+' || u[0] == '-') ? 1 : 0;
+    if (k == u.size()) return false;
+    for (size_t j = k; j < u.size(); ++j)
+        if (!isdigit((unsigned char)u[j])) return false;
+    // Decision: beyond +-2**53 a count or a bound means nothing to the core (Python would
+    // take it as a big integer); refused as not a whole number the core can hold.
+    if (u.size() - k > 16) return false;
+    out = strtoll(u.c_str(), nullptr, 10);
+    return out >= -(1LL << 53) && out <= (1LL << 53);
+}
+
+std::string usage_text() {
+    std::string u =
+        "usage: tb-aodv [-h] --robot ROBOT [--iface IFACE] [--time-scale TIME_SCALE]\n"
+        "               [--profile {ns3,rfc}] [--no-local-repair] [--set NAME=VALUE]\n"
+        "               [--stats PATH] [--state PATH]\n"
+        "               [--log-level {debug,info,warning,error}] [--net NET]\n\n"
+        "AODV (RFC 3561) routing daemon for one robot's network namespace, compiled\n"
+        "(the command line of python -m aodv).\n\noptions:\n";
+    for (const auto& o : gen::OPTIONS) {
+        u += "  ";
+        u += o.flag;
+        if (o.fallback) {
+            u += " (default ";
+            u += o.fallback;
+            u += ")";
+        }
+        if (o.required) u += " (required)";
+        u += "\n";
+    }
+    return u;
+}
+
+bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
+    help = false;
+    std::map<std::string, std::string> value;  // dest -> text, defaults first
+    for (const auto& o : gen::OPTIONS)
+        if (o.kind == gen::OptKind::Value && o.fallback) value[o.dest] = o.fallback;
+    std::map<std::string, bool> seen;
+    std::vector<std::string> extra;
+    bool time_scale_given = false;
+
+    auto check = [&](const gen::Option& o, const std::string& v) -> bool {
+        std::string where = std::string("argument ") + o.flag + ": ";
+        if (o.n_choices > 0) {
+            bool ok = false;
+            for (int c = 0; c < o.n_choices; ++c) ok = ok || v == o.choices[c];
+            if (!ok) {
+                err = where + "invalid choice: " + py_quote(v) + " (choose from ";
+                for (int c = 0; c < o.n_choices; ++c)
+                    err += (c ? ", " : "") + py_quote(o.choices[c]);
+                err += ")";
+                return false;
+            }
+        }
+        if (strcmp(o.dest, "time_scale") == 0) {
+            double x;
+            if (!py_float(v, x)) {
+                err = where + "time scale must be a number, not " + py_quote(v);
+                return false;
+            }
+            if (!std::isfinite(x)) {
+                err = where + "time scale must be finite, not " + py_quote(v);
+                return false;
+            }
+            if (!(x > 0)) {
+                err = where + "time scale must be greater than " + g_fmt(0) + ", not " + v;
+                return false;
+            }
+            a.time_scale = x;
+            time_scale_given = true;
+        }
+        if (strcmp(o.dest, "net") == 0) {
+            std::string why;
+            if (!network(v, a, why)) {
+                err = where + why;
+                return false;
+            }
+        }
+        return true;
+    };
+
+    bool only_positional = false;
+    for (int i = 1; i < argc; ++i) {
+        std::string arg = argv[i];
+        if (only_positional || arg.size() < 2 || arg[0] != '-' || looks_negative(arg)) {
+            extra.push_back(arg);
+            continue;
+        }
+        if (arg == "--") {
+            only_positional = true;
+            continue;
+        }
+        std::string name = arg, explicit_value;
+        bool has_explicit = false;
+        size_t eq = arg.find('=');
+        if (eq != std::string::npos) {
+            name = arg.substr(0, eq);
+            explicit_value = arg.substr(eq + 1);
+            has_explicit = true;
+        }
+        const gen::Option* opt = nullptr;
+        if (name == "-h") {
+            for (const auto& o : gen::OPTIONS)
+                if (o.kind == gen::OptKind::Help) opt = &o;
+        } else if (name.rfind("--", 0) == 0) {
+            std::vector<const gen::Option*> hits;
+            for (const auto& o : gen::OPTIONS) {
+                if (name == o.flag) {
+                    hits = {&o};
+                    break;
+                }
+                if (name.size() > 2 && std::string(o.flag).rfind(name, 0) == 0) hits.push_back(&o);
+            }
+            if (hits.size() > 1) {
+                err = "ambiguous option: " + name + " could match ";
+                for (size_t h = 0; h < hits.size(); ++h) err += (h ? ", " : "") + std::string(hits[h]->flag);
+                return false;
+            }
+            if (hits.size() == 1) opt = hits[0];
+        }
+        if (opt == nullptr) {
+            extra.push_back(arg);
+            continue;
+        }
+        switch (opt->kind) {
+            case gen::OptKind::Help:
+            case gen::OptKind::Switch:
+                if (has_explicit) {
+                    err = std::string("argument ") + (opt->kind == gen::OptKind::Help ? "-h/" : "") +
+                          opt->flag + ": ignored explicit argument " + py_quote(explicit_value);
+                    return false;
+                }
+                if (opt->kind == gen::OptKind::Help) {
+                    help = true;
+                    return true;
+                }
+                a.no_local_repair = true;
+                break;
+            case gen::OptKind::Append:
+            case gen::OptKind::Value: {
+                std::string v;
+                if (has_explicit) {
+                    v = explicit_value;
+                } else if (i + 1 < argc &&
+                           !(argv[i + 1][0] == '-' && argv[i + 1][1] != '\0' &&
+                             !looks_negative(argv[i + 1]))) {
+                    v = argv[++i];
+                } else {
+                    err = std::string("argument ") + opt->flag + ": expected one argument";
+                    return false;
+                }
+                if (!check(*opt, v)) return false;
+                if (opt->kind == gen::OptKind::Append) a.sets.push_back(v);
+                else value[opt->dest] = v;
+                break;
+            }
+        }
+        seen[opt->dest] = true;
+    }
+    std::string missing;
+    for (const auto& o : gen::OPTIONS)
+        if (o.required && !seen[o.dest]) missing += (missing.empty() ? "" : ", ") + std::string(o.flag);
+    if (!missing.empty()) {
+        err = "the following arguments are required: " + missing;
+        return false;
+    }
+    if (!extra.empty()) {
+        err = "unrecognized arguments:";
+        for (auto& e : extra) err += " " + e;
+        return false;
+    }
+    a.robot = value["robot"];
+    a.iface = value["iface"];
+    a.profile = value["profile"];
+    a.log_level = value["log_level"];
+    a.has_stats = value.count("stats") != 0;
+    a.has_state = value.count("state") != 0;
+    a.stats = value["stats"];
+    a.state = value["state"];
+    if (!time_scale_given && !py_float(value["time_scale"], a.time_scale)) a.time_scale = 1.0;
+    if (!seen["net"] && !network(value["net"], a, err)) return false;
+    return true;
+}
+
+namespace {
+using Setter = std::function<void(Params&, double)>;
+// Every field `--set` takes, by its Params name (build/gen/aodv_consts.h lists the names the
+// Python dataclass has: a field missing here is refused with a line saying so).
+const std::map<std::string, Setter>& setters() {
+    static const std::map<std::string, Setter> s = {
+        {"active_route_timeout_ms", [](Params& p, double v) { p.active_route_timeout_ms = v; }},
+        {"allowed_hello_loss", [](Params& p, double v) { p.allowed_hello_loss = (long long)v; }},
+        {"hello_interval_ms", [](Params& p, double v) { p.hello_interval_ms = v; }},
+        {"local_add_ttl", [](Params& p, double v) { p.local_add_ttl = (long long)v; }},
+        {"net_diameter", [](Params& p, double v) { p.net_diameter = (long long)v; }},
+        {"node_traversal_time_ms", [](Params& p, double v) { p.node_traversal_time_ms = v; }},
+        {"rerr_ratelimit", [](Params& p, double v) { p.rerr_ratelimit = (long long)v; }},
+        {"rreq_retries", [](Params& p, double v) { p.rreq_retries = (long long)v; }},
+        {"rreq_ratelimit", [](Params& p, double v) { p.rreq_ratelimit = (long long)v; }},
+        {"timeout_buffer", [](Params& p, double v) { p.timeout_buffer = (long long)v; }},
+        {"ttl_start", [](Params& p, double v) { p.ttl_start = (long long)v; }},
+        {"ttl_increment", [](Params& p, double v) { p.ttl_increment = (long long)v; }},
+        {"ttl_threshold", [](Params& p, double v) { p.ttl_threshold = (long long)v; }},
+        {"delete_period_k", [](Params& p, double v) { p.delete_period_k = (long long)v; }},
+        {"my_route_timeout_ms", [](Params& p, double v) { p.my_route_timeout_ms = v; }},
+        {"blacklist_timeout_ms", [](Params& p, double v) { p.blacklist_timeout_ms = v; }},
+        {"local_repair", [](Params& p, double v) { p.local_repair = v != 0; }},
+        {"queue_len", [](Params& p, double v) { p.queue_len = (long long)v; }},
+        {"gratuitous_rrep", [](Params& p, double v) { p.gratuitous_rrep = v != 0; }},
+        {"dest_only", [](Params& p, double v) { p.dest_only = v != 0; }},
+        {"route_table_limit", [](Params& p, double v) { p.route_table_limit = (long long)v; }},
+        {"rreq_cache_limit", [](Params& p, double v) { p.rreq_cache_limit = (long long)v; }},
+        {"neighbor_limit", [](Params& p, double v) { p.neighbor_limit = (long long)v; }},
+        {"rreq_forward_ratelimit",
+         [](Params& p, double v) { p.rreq_forward_ratelimit = (long long)v; }},
+    };
+    return s;
+}
+
+std::string ms_text(const Params& p, double seconds) { return std::to_string(p.ms(seconds)); }
+}  // namespace
+
+std::vector<std::string> problems(const Params& p) {
+    std::vector<std::string> out;
+    if (!(p.active_route_timeout_ms > 0)) out.push_back("active_route_timeout_ms must be > 0");
+    if (!(p.hello_interval_ms > 0)) out.push_back("hello_interval_ms must be > 0");
+    if (!(p.node_traversal_time_ms > 0)) out.push_back("node_traversal_time_ms must be > 0");
+    if (p.allowed_hello_loss < 1) out.push_back("allowed_hello_loss must be >= 1");
+    if (p.ttl_start < 1) out.push_back("ttl_start must be >= 1");
+    if (p.ttl_increment < 1) out.push_back("ttl_increment must be >= 1");
+    if (p.delete_period_k < 1) out.push_back("delete_period_k must be >= 1");
+    if (!(p.ttl_start <= p.ttl_threshold && p.ttl_threshold <= p.net_diameter &&
+          p.net_diameter <= MAX_TTL))
+        out.push_back("TTL_START <= TTL_THRESHOLD <= NET_DIAMETER <= 255 must hold (" +
+                      std::to_string(p.ttl_start) + ", " + std::to_string(p.ttl_threshold) +
+                      ", " + std::to_string(p.net_diameter) + ")");
+    if (p.my_route_timeout < 2 * p.path_discovery_time - 1e-9)
+        out.push_back("MY_ROUTE_TIMEOUT (" + ms_text(p, p.my_route_timeout) +
+                      " ms) must be at least 2 * PATH_DISCOVERY_TIME (" +
+                      ms_text(p, 2 * p.path_discovery_time) + " ms)");
+    if (p.delete_period < p.neighbor_timeout)
+        out.push_back("DELETE_PERIOD must be at least ALLOWED_HELLO_LOSS * HELLO_INTERVAL");
+    if (p.rreq_ratelimit < 1) out.push_back("rreq_ratelimit must be >= 1");
+    if (p.rerr_ratelimit < 1) out.push_back("rerr_ratelimit must be >= 1");
+    if (p.rreq_forward_ratelimit < 1) out.push_back("rreq_forward_ratelimit must be >= 1");
+    if (p.queue_len < 1) out.push_back("queue_len must be >= 1");
+    if (p.route_table_limit < 16) out.push_back("route_table_limit must be >= 16");
+    if (p.rreq_cache_limit < 16) out.push_back("rreq_cache_limit must be >= 16");
+    if (p.neighbor_limit < 16) out.push_back("neighbor_limit must be >= 16");
+    return out;
+}
+
+bool build_params(const Args& a, Params& p, std::string& err) {
+    if (!profile(a.profile, a.time_scale, p)) {
+        err = "unknown AODV profile " + py_quote(a.profile);
+        return false;
+    }
+    if (a.no_local_repair) p.local_repair = false;
+    for (const auto& item : a.sets) {
+        size_t eq = item.find('=');
+        std::string name = item.substr(0, eq);
+        std::string text = eq == std::string::npos ? "" : item.substr(eq + 1);
+        const gen::ParamField* f = nullptr;
+        for (const auto& pf : gen::PARAMS)
+            if (name == pf.name) f = &pf;
+        if (eq == std::string::npos || f == nullptr) {
+            err = "--set " + py_quote(item) + ": not NAME=VALUE with NAME a field of Params";
+            return false;
+        }
+        auto it = setters().find(name);
+        if (it == setters().end()) {
+            err = "--set " + py_quote(item) + ": " + name + " is not known to tb-aodv";
+            return false;
+        }
+        double v = 0;
+        bool ok;
+        const char* kind;
+        if (f->kind == gen::ParamKind::Bool) {
+            kind = "bool";
+            ok = text == "true" || text == "false";
+            v = text == "true";
+        } else if (f->kind == gen::ParamKind::Int) {
+            kind = "int";
+            long long x = 0;
+            ok = py_int(text, x);
+            v = double(x);
+        } else {
+            kind = "float";
+            ok = py_float(text, v);
+        }
+        if (!ok) {
+            err = "--set " + py_quote(item) + ": " + name + " takes " + kind;
+            return false;
+        }
+        it->second(p, v);
+    }
+    p.derive();
+    auto bad = problems(p);
+    if (!bad.empty()) {
+        err = "parameters break RFC 3561: ";
+        for (size_t k = 0; k < bad.size(); ++k) err += (k ? "; " : "") + bad[k];
+        return false;
+    }
+    return true;
+}
+
+}  // namespace aodv
