@@ -61,6 +61,7 @@ from testbed.analysis.decide import (
 )  # fmt: skip
 from testbed.analysis.runs import FinishedRun, load_runs
 from testbed.analysis.tables import Fig2Row
+from testbed.resultfile import RESULT_NAME
 from testbed.run.config import OPTIONS, RunConfig
 from testbed.run.options import GRID, RUN
 from testbed.sweep import file as sweepfile
@@ -250,6 +251,8 @@ def write_stage2(
         path = out / f"stage2-{k:02d}.toml"
         write_atomic(path, text)
         written.append((path, pts, n))
+    for old in set(out.glob("stage2-*.toml")) - {w[0] for w in written}:
+        old.unlink()  # an earlier plan's: not run by mistake (make experiment-decide)
     return written
 
 
@@ -361,14 +364,21 @@ def load_decided(plan_dir: Path) -> Decided:
         for pt in f.get("points") or []:
             recorded[(float(pt[0]), float(pt[1]), int(pt[2]))] = f.get("runs")
         spec = sweepfile.load(plan_dir / f["file"])
-        ids = {r.run_id for r in sweepfile.expand(spec)}
+        ids = {(r.run_id, r.config.seed) for r in sweepfile.expand(spec)}
         d = plan_dir / Path(f["file"]).stem
         if (d / "runs").is_dir():
-            runs2 += [r for r in load_runs(d) if r.run_id in ids]
+            runs2 += [r for r in load_runs(d) if (r.run_id, r.config.seed) in ids]
     if recorded != p.point_runs:
         raise UsageError(f"{plan_dir}: stage 1 ({', '.join(map(str, dirs))}) no longer gives "
                          "this plan (its runs changed since PLAN): plan again")  # fmt: skip
     return Decided(plan_dir, stage1, p, opts, runs2, judge(p, samples(paper_rows(runs2))))
+
+
+def large_teams(sweep_dir: Path) -> list[Path]:
+    """PLAN's stage 1 without --with: the large teams' sweep beside the sweep
+    (SWEEP_DIR-large-teams, paper-large-teams.toml's) when it has finished runs."""
+    d = sweep_dir.parent / f"{sweep_dir.name}-large-teams"
+    return [d] if any(d.glob(f"runs/*/{RESULT_NAME}")) else []
 
 
 def find_plan(sweep_dir: Path) -> Path | None:
@@ -404,8 +414,9 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="DIR",
-        help="PLAN: another stage-1 sweep of the same design at "
-        "other team sizes (paper-large-teams.toml), for the rise; repeatable",
+        help="PLAN: another stage-1 sweep of the same design at other team sizes "
+        "(paper-large-teams.toml), for the rise; repeatable (default: SWEEP_DIR-large-teams "
+        "beside it, when it has runs)",
     )
     budget = ap.add_mutually_exclusive_group()
     budget.add_argument("--budget-runs", type=int, metavar="N")
@@ -473,12 +484,15 @@ def _run(args: argparse.Namespace) -> int:
         decided = load_decided(plan_dir)
         print("\n".join(judge_lines(decided.plan, decided.decisions)))
         return 0
-    stage1 = read_stage1(args.sweep_dir, args.more)
+    stage1 = read_stage1(args.sweep_dir, args.more or large_teams(args.sweep_dir))
     p = make_plan(stage1, opts, args.sweep_dir)
     if args.action == "PLAN":
         out = args.out or args.sweep_dir.parent / f"{args.sweep_dir.name}-stage2"
         files = write_stage2(p, stage1, args.sweep_dir, out)
         write_plan_file(out, p, stage1, opts, files)
+        if len(stage1.dirs) > 1:
+            print(f"Stage 1: {', '.join(map(str, stage1.dirs))} (the rise over every team size; "
+                  "the other claims over the paper's 1-10)")  # fmt: skip
         print("\n".join(plan_lines(p, files, out)))
         return 0
     runs2 = [r for d in args.stage2 for r in _stage2_runs(d)]

@@ -247,3 +247,31 @@ def test_testbed_compare_adds_the_claims_of_two_plain_sweeps(tmp_path, capsys):
     assert "## The paper's claims in both sweeps" in text
     assert "- Deciding verdicts: not compared (one: no stage 2" in text
     assert re.search(r"- The report's verdicts: the two sweeps agree on \d of 6 claims", text)
+
+
+def test_plan_takes_the_large_teams_beside_it_and_only_its_own_files_and_runs(tmp_path, capsys):
+    rng = np.random.default_rng(41)
+    stage1, large = tmp_path / "paper", tmp_path / "paper-large-teams"
+    write_sweep(stage1, rng, sweepfile.SweepSpec.of(**STAGE1), mean_of(120.0))
+    write_sweep(large, rng, sweepfile.SweepSpec.of(**LARGE), mean_of(120.0))
+    out = tmp_path / "paper-stage2"
+    out.mkdir()
+    (out / "stage2-99.toml").write_text("an earlier plan's file\n")
+    assert decidesweep.main(["PLAN", str(stage1)]) == 0  # no --with: the one beside it
+    assert f"Stage 1: {stage1}, {large}" in capsys.readouterr().out
+    assert json.loads((out / "plan.json").read_text())["stage1"] == [
+        "../paper",
+        "../paper-large-teams",
+    ]
+    assert not (out / "stage2-99.toml").exists()
+    for f in sorted(out.glob("stage2-*.toml")):
+        write_sweep(out / f.stem, rng, sweepfile.load(f), mean_of(120.0))
+    d = decidesweep.load_decided(out)
+    assert d.done_runs == d.plan.total_runs
+    assert any(c.more[2] == 20 for c in d.stage1.comps)
+    # a run of another plan under a planned run's id (another seed) is not judged
+    result = next(out.glob("stage2-*/runs/*/result.json"))
+    doc = json.loads(result.read_text())
+    doc["config"]["seed"] += 1
+    result.write_text(json.dumps(doc))
+    assert decidesweep.load_decided(out).done_runs == d.plan.total_runs - 1
