@@ -15,7 +15,8 @@ next build instead of drifting:
   (aodv.persist), the deadline priority (common.sched);
 - the command line: every option of aodv.__main__'s parser in order (flags, default,
   choices, whether it is required or a switch) and every field of aodv.params.Params that
-  `--set` takes, with its type and the profiles' names.
+  `--set` takes, with its type and the profiles' names; the digits and blanks Python's int()
+  and float() take beyond ASCII.
 
 tests/unit/test_aodv_cpp_cli.py holds the binary's answers to the same command lines equal
 to the Python daemon's. The file is rewritten only when its text changes, so that make
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import unicodedata
 from pathlib import Path
 
 from aodv import __main__ as cli
@@ -120,6 +122,18 @@ def param_rows() -> list[str]:
     return rows
 
 
+def unicode_rows() -> list[str]:
+    """What Python's int() and float() read as digits and blanks beyond ASCII: the first code
+    point of every run of ten decimal digits (category Nd), and every str.isspace() one."""
+    digits = [chr(c) for c in range(0x110000) if unicodedata.category(chr(c)) == "Nd"]
+    zeros = [ord(d) for d in digits if unicodedata.digit(d) == 0]
+    spaces = [c for c in range(0x110000) if chr(c).isspace()]
+    return [
+        f"constexpr unsigned DIGIT_ZEROS[] = {{{', '.join(hex(c) for c in zeros)}}};",
+        f"constexpr unsigned SPACES[] = {{{', '.join(hex(c) for c in spaces)}}};",
+    ]
+
+
 def header() -> str:
     lines = [
         "// Written by `python -m aodv.constgen` from the Python daemon: do not edit.",
@@ -142,6 +156,7 @@ def header() -> str:
         f"constexpr const char* USE_RULESET = {c_string(ruleset())};",
         f"constexpr const char* PROFILES[] = {{{', '.join(c_string(p) for p in PROFILES)}}};",
         f"constexpr int N_PROFILES = {len(PROFILES)};",
+        *unicode_rows(),
         "",
         "enum class OptKind { Help, Switch, Append, Value };",
         "struct Option {",

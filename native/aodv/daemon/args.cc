@@ -16,13 +16,6 @@ namespace aodv {
 
 namespace {
 
-std::string strip(const std::string& t) {
-    size_t a = 0, b = t.size();
-    while (a < b && isspace((unsigned char)t[a])) ++a;
-    while (b > a && isspace((unsigned char)t[b - 1])) --b;
-    return t.substr(a, b - a);
-}
-
 // Underscores only between digits (Python's numeric literals); removed.
 bool no_underscores(const std::string& t, std::string& out) {
     out.clear();
@@ -157,8 +150,67 @@ bool network(const std::string& text, Args& a, std::string& err) {
 
 }  // namespace
 
+namespace {
+// Python's int() and float() read their text as ASCII first: blanks (str.isspace) around it
+// stripped, decimal digits of every script (category Nd) as 0-9; any other character beyond
+// ASCII fails. false for text that is not UTF-8 (Python's argv holds it as lone surrogates,
+// which neither takes).
+bool to_ascii(const std::string& text, std::string& out) {
+    std::vector<unsigned> cps;
+    for (size_t k = 0; k < text.size();) {
+        unsigned char c = (unsigned char)text[k];
+        int len = c < 0x80 ? 1 : c >= 0xF0 && c < 0xF5 ? 4 : c >= 0xE0 ? 3 : c >= 0xC2 && c < 0xE0 ? 2 : 0;
+        if (len == 0 || k + size_t(len) > text.size()) return false;
+        unsigned cp = len == 1 ? c : len == 2 ? c & 31 : len == 3 ? c & 15 : c & 7;
+        for (int j = 1; j < len; ++j) {
+            unsigned char d = (unsigned char)text[k + size_t(j)];
+            if ((d & 0xC0) != 0x80) return false;
+            cp = (cp << 6) | (d & 0x3F);
+        }
+        if ((len == 3 && cp < 0x800) || (len == 4 && (cp < 0x10000 || cp > 0x10FFFF)) ||
+            (cp >= 0xD800 && cp < 0xE000))
+            return false;
+        cps.push_back(cp);
+        k += size_t(len);
+    }
+    auto space = [](unsigned cp) {
+        for (unsigned s : gen::SPACES)
+            if (s == cp) return true;
+        return false;
+    };
+    // ASCII stays as it is; blanks beyond ASCII become ' ', digits beyond it 0-9 (CPython's
+    // _PyUnicode_TransformDecimalAndSpaceToASCII); then ASCII blanks around are stripped.
+    std::string t;
+    for (unsigned cp : cps) {
+        if (cp < 0x80) {
+            t += char(cp);
+            continue;
+        }
+        if (space(cp)) {
+            t += ' ';
+            continue;
+        }
+        bool digit = false;
+        for (unsigned z : gen::DIGIT_ZEROS)
+            if (cp >= z && cp < z + 10) {
+                t += char('0' + (cp - z));
+                digit = true;
+                break;
+            }
+        if (!digit) return false;
+    }
+    auto blank = [](char c) { return c == ' ' || (c >= '\t' && c <= '\r'); };
+    size_t a = 0, b = t.size();
+    while (a < b && blank(t[a])) ++a;
+    while (b > a && blank(t[b - 1])) --b;
+    out = t.substr(a, b - a);
+    return true;
+}
+}  // namespace
+
 bool py_float(const std::string& text, double& out) {
-    std::string t = strip(text), u;
+    std::string t, u;
+    if (!to_ascii(text, t)) return false;
     std::string l = lower(t);
     std::string body = (!l.empty() && (l[0] == '+' || l[0] == '-')) ? l.substr(1) : l;
     double sign = (!l.empty() && l[0] == '-') ? -1.0 : 1.0;
@@ -191,17 +243,24 @@ bool py_float(const std::string& text, double& out) {
 }
 
 bool py_int(const std::string& text, long long& out) {
-    std::string t = strip(text), u;
-    if (!no_underscores(t, u) || u.empty()) return false;
+    std::string t, u;
+    if (!to_ascii(text, t) || !no_underscores(t, u) || u.empty()) return false;
     size_t k = (u[0] == '+' || u[0] == '-') ? 1 : 0;
     if (k == u.size()) return false;
     for (size_t j = k; j < u.size(); ++j)
         if (!isdigit((unsigned char)u[j])) return false;
-    // Decision: beyond +-2**53 a count or a bound means nothing to the core (Python would
-    // take it as a big integer); refused as not a whole number the core can hold.
-    if (u.size() - k > 16) return false;
+    // Python's int has no bound; past 2**53 a count or a limit is as good as infinite to
+    // the core (and its sums stay in range): saturated there.
+    constexpr long long SAT = 1LL << 53;
+    size_t first = u.find_first_not_of('0', k);
+    bool neg = u[0] == '-';
+    if (first != std::string::npos && u.size() - first > 18) {
+        out = neg ? -SAT : SAT;
+        return true;
+    }
     out = strtoll(u.c_str(), nullptr, 10);
-    return out >= -(1LL << 53) && out <= (1LL << 53);
+    out = std::max(-SAT, std::min(SAT, out));
+    return true;
 }
 
 std::string usage_text() {
@@ -225,6 +284,34 @@ std::string usage_text() {
     }
     return u;
 }
+
+namespace {
+// The options `name` names exactly or as a unique prefix (argparse's _get_option_tuples).
+std::vector<const gen::Option*> matches(const std::string& name) {
+    std::vector<const gen::Option*> hits;
+    if (name == "-h" || name == "--help") {
+        for (const auto& o : gen::OPTIONS)
+            if (o.kind == gen::OptKind::Help) return {&o};
+    }
+    if (name.rfind("--", 0) != 0 || name.size() <= 2) return hits;
+    for (const auto& o : gen::OPTIONS) {
+        if (name == o.flag) return {&o};
+        if (std::string(o.flag).rfind(name, 0) == 0) hits.push_back(&o);
+    }
+    return hits;
+}
+
+// argparse's _parse_optional: true when `arg` is taken as an option (or an unknown one),
+// false when it is a value.
+bool option_like(const std::string& arg) {
+    if (arg.empty() || arg[0] != '-' || arg.size() == 1) return false;
+    std::string name = arg.substr(0, arg.find('='));
+    if (!matches(arg).empty() || !matches(name).empty()) return true;
+    if (looks_negative(arg)) return false;
+    if (arg.find(' ') != std::string::npos) return false;
+    return true;
+}
+}  // namespace
 
 bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
     help = false;
@@ -278,46 +365,36 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
     bool only_positional = false;
     for (int i = 1; i < argc; ++i) {
         std::string arg = argv[i];
-        if (only_positional || arg.size() < 2 || arg[0] != '-' || looks_negative(arg)) {
+        // After "--" everything is a positional argument, and this parser takes none: all
+        // of it, "--" included, is unrecognized (argparse, Python 3.11).
+        if (arg == "--") only_positional = true;
+        if (only_positional || !option_like(arg)) {
             extra.push_back(arg);
-            continue;
-        }
-        if (arg == "--") {
-            only_positional = true;
             continue;
         }
         std::string name = arg, explicit_value;
         bool has_explicit = false;
-        size_t eq = arg.find('=');
-        if (eq != std::string::npos) {
-            name = arg.substr(0, eq);
-            explicit_value = arg.substr(eq + 1);
-            has_explicit = true;
-        }
-        const gen::Option* opt = nullptr;
-        if (name == "-h") {
-            for (const auto& o : gen::OPTIONS)
-                if (o.kind == gen::OptKind::Help) opt = &o;
-        } else if (name.rfind("--", 0) == 0) {
-            std::vector<const gen::Option*> hits;
-            for (const auto& o : gen::OPTIONS) {
-                if (name == o.flag) {
-                    hits = {&o};
-                    break;
-                }
-                if (name.size() > 2 && std::string(o.flag).rfind(name, 0) == 0) hits.push_back(&o);
+        auto hits = matches(arg);
+        if (hits.empty()) {
+            size_t eq = arg.find('=');
+            if (eq != std::string::npos) {
+                name = arg.substr(0, eq);
+                explicit_value = arg.substr(eq + 1);
+                has_explicit = true;
+                hits = matches(name);
             }
-            if (hits.size() > 1) {
-                err = "ambiguous option: " + name + " could match ";
-                for (size_t h = 0; h < hits.size(); ++h) err += (h ? ", " : "") + std::string(hits[h]->flag);
-                return false;
-            }
-            if (hits.size() == 1) opt = hits[0];
         }
-        if (opt == nullptr) {
+        if (hits.size() > 1) {
+            err = "ambiguous option: " + name + " could match ";
+            for (size_t h = 0; h < hits.size(); ++h)
+                err += (h ? ", " : "") + std::string(hits[h]->flag);
+            return false;
+        }
+        if (hits.empty()) {
             extra.push_back(arg);
             continue;
         }
+        const gen::Option* opt = hits[0];
         switch (opt->kind) {
             case gen::OptKind::Help:
             case gen::OptKind::Switch:
@@ -337,9 +414,8 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
                 std::string v;
                 if (has_explicit) {
                     v = explicit_value;
-                } else if (i + 1 < argc &&
-                           !(argv[i + 1][0] == '-' && argv[i + 1][1] != '\0' &&
-                             !looks_negative(argv[i + 1]))) {
+                } else if (i + 1 < argc && !option_like(argv[i + 1]) &&
+                           strcmp(argv[i + 1], "--") != 0) {
                     v = argv[++i];
                 } else {
                     err = std::string("argument ") + opt->flag + ": expected one argument";
@@ -490,7 +566,12 @@ bool build_params(const Args& a, Params& p, std::string& err) {
         }
         it->second(p, v);
     }
+    // Params.problems() reads no blacklist timeout, whose derivation divides by
+    // TTL_INCREMENT: derived with 1 in its place when it is 0, so the check can say so.
+    long long increment = p.ttl_increment;
+    if (increment == 0) p.ttl_increment = 1;
     p.derive();
+    p.ttl_increment = increment;
     auto bad = problems(p);
     if (!bad.empty()) {
         err = "parameters break RFC 3561: ";
