@@ -243,6 +243,9 @@ def write_report(
         write_atomic(figdir / "decided.json",
                      json.dumps(decidereport.decided_doc(decided), indent=1) + "\n",
                      root=sweep_dir)  # fmt: skip
+    else:  # an earlier report's, whose stage 2 is gone: not left to be read as this one's
+        for stale in [figdir / "decided.json", *figdir.glob("fig2-decided-*")]:
+            stale.unlink(missing_ok=True)
     text = render(sweep_dir, made, vs, section) + "\n"
     write_atomic(path, text)  # never through a link (common.jsonfile)
     htmlreport.write_html(sweep_dir, text)  # the same report as one page, figures inlined
@@ -286,6 +289,13 @@ def _sweep_main(sweep_dir: Path, unfaithful: bool = False, stage2: Path | None =
     print(f"{one_line(str(path))}: {held} of {len(vs)} claims hold", file=sys.stderr)
     for v in vs:
         print(f"  {v.section} {v.claim}: {v.verdict}", file=sys.stderr)
+    decided = sweep_dir / "figures" / "decided.json"
+    if decided.is_file():  # written just now, from stage 2
+        doc = json.loads(decided.read_text())
+        print(f"deciding runs ({doc['done_runs']} of {doc['planned_runs']} of stage 2 done):",
+              file=sys.stderr)  # fmt: skip
+        for c in doc["claims"].values():
+            print(f"  {c['claim']}: {c['verdict']}", file=sys.stderr)
     return 0
 
 

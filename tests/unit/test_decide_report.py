@@ -77,6 +77,12 @@ def test_without_a_stage_2_the_report_is_the_single_sweeps(tmp_path):
     assert not (stage1 / "figures" / "decided.json").exists()
     assert not list((stage1 / "figures").glob("fig2-decided-*"))
     assert decidereport.section(None, None, [], [], None) == []
+    # an earlier report's stage-2 files go with the stage 2 they came from
+    (stage1 / "figures" / "decided.json").write_text("{}")
+    (stage1 / "figures" / "fig2-decided-a.png").write_bytes(b"")
+    report.write_report(stage1, metrics_of=lambda run: None)
+    assert not (stage1 / "figures" / "decided.json").exists()
+    assert not list((stage1 / "figures").glob("fig2-decided-*"))
 
 
 def test_the_report_shows_each_claims_deciding_verdict_test_and_error_rate(decided_sweep):
