@@ -95,7 +95,11 @@ def _runs_line(d: Decided) -> str:
              f"at {len(d.plan.point_runs)} points")  # fmt: skip
     if d.plan.wall_s:
         text += f" (planned: about {_minutes(d.plan.total_wall_s)} one at a time)"
-    if planned and done < planned:
+    if planned and not done:
+        text += ("; **stage 2 has not run yet** (`sudo make experiment-decide`, or each "
+                 "stage-2 file with `testbed sweep`): the deciding verdicts below are those "
+                 "stage 1 decided, the rest undecided until it runs")  # fmt: skip
+    elif planned and done < planned:
         text += ("; **stage 2 is not finished**: its verdicts rest on the runs done so far, "
                  "at less than the planned power (the error rate stands, as long as the runs "
                  "are not stopped for what they show)")  # fmt: skip

@@ -313,8 +313,8 @@ class Decided:
     @property
     def done_runs(self) -> int:
         """Usable stage-2 runs at the planned points."""
-        return sum(min(n, len(samples(paper_rows(self.runs2)).get(pt, ())))
-                   for pt, n in self.plan.point_runs.items())  # fmt: skip
+        got = samples(paper_rows(self.runs2))
+        return sum(min(n, len(got.get(pt, ()))) for pt, n in self.plan.point_runs.items())
 
 
 def _plan_doc(plan_dir: Path) -> dict:

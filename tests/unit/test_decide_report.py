@@ -7,6 +7,7 @@ testbed/experiments/paper-large-teams.toml makes one."""
 
 import json
 import re
+import shutil
 import types
 
 import numpy as np
@@ -179,6 +180,12 @@ def test_an_unfinished_stage_2_says_so(tmp_path):
     assert d.done_runs < d.plan.total_runs
     assert f"{d.done_runs} of {d.plan.total_runs} planned runs done" in text
     assert "**stage 2 is not finished**" in text
+    for run_dir in (tmp_path / "paper-stage2").glob("stage2-*"):
+        if run_dir.is_dir():
+            shutil.rmtree(run_dir)
+    text = report.write_report(stage1, metrics_of=lambda run: None)[0].read_text()
+    assert f"0 of {d.plan.total_runs} planned runs done" in text
+    assert "**stage 2 has not run yet**" in text and "not finished" not in text
 
 
 def test_a_plan_stage_1_no_longer_gives_is_named_and_not_judged(tmp_path):
