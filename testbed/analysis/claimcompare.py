@@ -16,9 +16,12 @@ reach the same verdicts; two plain sweeps show how far 3 runs a point carry. For
 
 `section` sets them side by side: per claim the two verdicts and whether they agree
 (compared as holds, does not hold, partly holds, undecided: testbed.analysis.decidereport's
-`category`), with the comparisons both sweeps decided and how many of those agree, then one
-sentence per kind of verdict: on how many claims the sweeps agree, and on which they do not.
-The deciding verdicts are compared only when both sweeps have them.
+`category`): "yes", "one undecided" (a verdict on one side, none on the other: the budget or
+the power fell short, not a contradiction) or **no** (two different verdicts), with the
+comparisons both sweeps made and how many of those agree; then one sentence per kind of
+verdict: on how many claims the sweeps agree, where one is undecided, where they disagree.
+The deciding verdicts are compared only when both sweeps have them. Two sweeps of the same
+directory name are told apart by their paths.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ class SweepClaims:
     deciding ones (decide's claim key -> verdict, and -> {comparison: final verdict})."""
 
     name: str
+    path: str
     three_run: dict[str, str] = field(default_factory=dict)
     decided: dict[str, str] | None = None
     comparisons: dict[str, dict[str, str]] = field(default_factory=dict)
@@ -60,7 +64,7 @@ def report_verdicts(runs: list[FinishedRun]) -> list[verdicts.Verdict]:
 
 def claims_of(sweep_dir: str | Path, unfaithful: bool = False) -> SweepClaims:
     sweep_dir = Path(sweep_dir)
-    out = SweepClaims(sweep_dir.name)
+    out = SweepClaims(sweep_dir.name, str(sweep_dir))
     runs = load_runs(sweep_dir, unfaithful)
     out.three_run = {v.claim: v.verdict for v in report_verdicts(runs)}
     plan_dir = decidesweep.find_plan(sweep_dir)
@@ -80,8 +84,12 @@ def claims_of(sweep_dir: str | Path, unfaithful: bool = False) -> SweepClaims:
     return out
 
 
-def _agree(a: str, b: str) -> bool:
-    return decidereport.category(a) == decidereport.category(b)
+def agreement(a: str, b: str) -> str:
+    """ "yes", "one undecided" or "**no**" (see the module docstring)."""
+    ca, cb = decidereport.category(a), decidereport.category(b)
+    if ca == cb:
+        return "yes"
+    return "one undecided" if decidereport.UNDECIDED in (ca, cb) else "**no**"
 
 
 def _comparisons(a: Mapping[str, str], b: Mapping[str, str]) -> str:
@@ -94,18 +102,19 @@ def _comparisons(a: Mapping[str, str], b: Mapping[str, str]) -> str:
 def _sentence(kind: str, rows: list[tuple[str, str, str]], names: tuple[str, str]) -> str:
     if not rows:
         return f"- {kind}: none to compare."
-    off = [(c, x, y) for c, x, y in rows if not _agree(x, y)]
-    text = f"- {kind}: the two sweeps agree on {len(rows) - len(off)} of {len(rows)} claims"
-    if off:
-        text += "; they disagree on " + "; ".join(
-            f"{c} ({names[0]}: {x}, {names[1]}: {y})" for c, x, y in off
-        )
+    said = [(agreement(x, y), c, x, y) for c, x, y in rows]
+    same = sum(a == "yes" for a, *_ in said)
+    text = f"- {kind}: the two sweeps agree on {same} of {len(rows)} claims"
+    for word, head in (("one undecided", "one is undecided on"), ("**no**", "they disagree on")):
+        off = [f"{c} ({names[0]}: {x}, {names[1]}: {y})" for a, c, x, y in said if a == word]
+        if off:
+            text += f"; {head} " + "; ".join(off)
     return text + "."
 
 
 def section(a: SweepClaims, b: SweepClaims) -> list[str]:
     """Markdown: the claims' verdicts in both sweeps and whether they agree."""
-    names = (a.name, b.name)
+    names = (a.name, b.name) if a.name != b.name else (a.path, b.path)
     out = ["## The paper's claims in both sweeps", ""]
     deciding: list[tuple[str, str, str]] = []
     if a.decided is not None and b.decided is not None:
@@ -117,7 +126,7 @@ def section(a: SweepClaims, b: SweepClaims) -> list[str]:
             if key in a.decided and key in b.decided:
                 x, y = a.decided[key], b.decided[key]
                 deciding.append((text, x, y))
-                out.append(f"| {text} | {x} | {y} | {'yes' if _agree(x, y) else '**no**'} | "
+                out.append(f"| {text} | {x} | {y} | {agreement(x, y)} | "
                            f"{_comparisons(a.comparisons[key], b.comparisons[key])} |")  # fmt: skip
         out.append("")
     out += ["The report's verdicts (3 runs a point, or whatever each sweep ran):", "",
@@ -127,7 +136,7 @@ def section(a: SweepClaims, b: SweepClaims) -> list[str]:
         if claim in b.three_run:
             y = b.three_run[claim]
             plain.append((claim, x, y))
-            out.append(f"| {claim} | {x} | {y} | {'yes' if _agree(x, y) else '**no**'} |")
+            out.append(f"| {claim} | {x} | {y} | {agreement(x, y)} |")
     out.append("")
     if deciding:
         out.append(_sentence("Deciding verdicts", deciding, names))

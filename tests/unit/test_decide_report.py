@@ -237,16 +237,25 @@ def test_compare_of_two_deciding_sweeps_says_which_claims_agree(tmp_path):
         for key, claim in decide.CLAIMS.items():
             x, y, said = rows[claim]
             assert (x, y) == (ca.decided[key], other.decided[key])
-            same = decidereport.category(x) == decidereport.category(y)
-            assert said == ("yes" if same else "**no**")
-            agree += same
+            cx, cy = decidereport.category(x), decidereport.category(y)
+            undecided = decidereport.UNDECIDED in (cx, cy)
+            assert said == ("yes" if cx == cy else "one undecided" if undecided else "**no**")
+            agree += cx == cy
         summary = [s for s in lines if s.startswith("- Deciding verdicts:")]
         assert summary == [s for s in summary if f"agree on {agree} of 4 claims" in s]
         assert len(summary) == 1
     range_claim = decide.CLAIMS["range"]
     assert cc.decided["range"] == decide.FAILS != ca.decided["range"]
     text = "\n".join(claimcompare.section(ca, cc))
-    assert re.search(f"they disagree on [^.]*{re.escape(range_claim)}", text)
+    if ca.decided["range"] == decide.HOLDS:  # two verdicts that contradict
+        assert re.search(f"they disagree on [^.]*{re.escape(range_claim)}", text)
+    else:
+        assert re.search(f"one is undecided on [^.]*{re.escape(range_claim)}", text)
+    assert claimcompare.agreement(decide.HOLDS, decide.FAILS) == "**no**"
+    assert claimcompare.agreement("undecided (1 of 4 comparisons)", decide.FAILS) == (
+        "one undecided"
+    )
+    assert claimcompare.agreement("too few runs to decide", "undecided (2 of 3)") == "yes"
 
 
 def test_testbed_compare_adds_the_claims_of_two_plain_sweeps(tmp_path, capsys):
