@@ -286,8 +286,15 @@ def test_plan_takes_the_large_teams_beside_it_and_only_its_own_files_and_runs(tm
         "../paper-large-teams",
     ]
     assert not (out / "stage2-99.toml").exists()
+    scales = dict(STAGE1["time_scale_by_robots"]) | dict(LARGE["time_scale_by_robots"])
+    teams = set()
     for f in sorted(out.glob("stage2-*.toml")):
-        write_sweep(out / f.stem, rng, sweepfile.load(f), mean_of(120.0))
+        spec = sweepfile.load(f)
+        for run in sweepfile.expand(spec):  # each team at its own sweep file's time scale
+            assert run.config.time_scale == scales[run.config.robots]
+            teams.add(run.config.robots)
+        write_sweep(out / f.stem, rng, spec, mean_of(120.0))
+    assert teams & {12, 15, 20} and teams & {1, 2, 3, 4}
     d = decidesweep.load_decided(out)
     assert d.done_runs == d.plan.total_runs
     assert any(c.more[2] == 20 for c in d.stage1.comps)
