@@ -96,9 +96,11 @@ setup: apt venv $(NS3_MEDIUM) $(STEPCORE) $(TB_ROBOT) $(TB_AODV_CORE) $(TB_AODV)
 # The robots' and the world's per-step work in compiled code (node/stepcore.py loads it; the
 # numpy code runs where it is missing). -ffp-contract=off: no fused multiply-add, so every
 # float rounds as in numpy and the two agree cell for cell.
-# bodylink.cc is the world's alone: its body links' commands in and frames out, each step.
-STEPCORE_SRC := native/stepcore/stepcore.cc native/stepcore/bodylink.cc
-$(STEPCORE): $(STEPCORE_SRC) native/stepcore/stepcore.h
+# bodylink.cc and worldstep.cc are the world's alone: its body links' commands in and frames
+# out, and its step's commands, deadline count and moves (testbed/world/stepfast.py).
+STEPCORE_SRC := native/stepcore/stepcore.cc native/stepcore/bodylink.cc native/stepcore/worldstep.cc
+STEPCORE_HDR := native/stepcore/stepcore.h native/stepcore/worldstep.h
+$(STEPCORE): $(STEPCORE_SRC) $(STEPCORE_HDR)
 	@if ! command -v g++ >/dev/null; then echo "g++ not found: the per-step work runs in numpy" \
 		"(slower); install g++ and run make setup"; else mkdir -p $(@D) && \
 		echo "g++ -std=c++17 -O3 -fPIC -shared -ffp-contract=off -Wall -Wextra -o $@ $(STEPCORE_SRC)" && \
@@ -129,7 +131,7 @@ build/asan/tb-robot: $(TB_ROBOT_DEPS)
 # UndefinedBehaviorSanitizer (tests/integration/test_stepcore_sanitizers.py runs its tests on it),
 # float-cast-overflow included (-fsanitize=undefined leaves out a float converted to an int
 # that cannot hold it, the step core's own hazard: a laser range of 1e30).
-build/asan/libstepcore.so: $(STEPCORE_SRC) native/stepcore/stepcore.h
+build/asan/libstepcore.so: $(STEPCORE_SRC) $(STEPCORE_HDR)
 	@mkdir -p $(@D)
 	g++ -std=c++17 -O1 -g -fno-omit-frame-pointer \
 		-fsanitize=address,undefined,float-cast-overflow \

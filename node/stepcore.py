@@ -312,7 +312,8 @@ def cast_window(laser, occ: np.ndarray, seen: np.ndarray, x, y, s0: int, bias: i
 class WorldCast:
     """testbed.world's casts of one step, every robot's in one compiled call
     (sc_world_cast_moved): the world's grids and the laser's tables, as addresses, for the
-    run. The caller writes each robot's pose in `xyt` (n x 3: x, y, theta); `cast_moved(live)`
+    run. The caller writes each robot's pose in `xyt` (n x 3: x, y, theta; its own array when
+    it gives one); `cast_moved(live)`
     casts each robot that is live and stands elsewhere than at its last cast (`xy`, n x 2)
     and returns (fresh, fallbacks): the cells of `free` seen for the first time, and how many
     robots it did nothing for. After it, `has[i]` says what robot i's last cast gave: 1 its
@@ -321,7 +322,7 @@ class WorldCast:
 
     def __init__(self, laser, n: int, map_cell: float, bias: int, occ: np.ndarray,
                  seen: np.ndarray, free: np.ndarray, open_space: np.ndarray,
-                 skip: np.ndarray) -> None:  # fmt: skip
+                 skip: np.ndarray, xyt: np.ndarray | None = None) -> None:  # fmt: skip
         assert lib is not None  # callers check NATIVE
         assert occ.shape == seen.shape == free.shape and occ.dtype == seen.dtype == np.uint8
         self.laser = laser
@@ -332,7 +333,10 @@ class WorldCast:
         self.hit = np.empty(n, dtype=np.int8)
         self.xy = np.full((n, 2), np.nan, dtype=np.float64)  # no robot cast yet
         self.want = np.zeros(n, dtype=np.uint8)
-        self.xyt = np.zeros((n, 3), dtype=np.float64)
+        if xyt is None:
+            xyt = np.zeros((n, 3), dtype=np.float64)
+        assert xyt.shape == (n, 3) and xyt.dtype == np.float64 and xyt.flags.c_contiguous
+        self.xyt = xyt  # the poses: the caller's (the world's bodies), or its own
         self.has = np.zeros(n, dtype=np.int8)
         self._fallbacks = np.zeros(1, dtype=np.int32)
         _, (dx, dy, mark, _free, _occ, idx) = _laser_tables(laser)

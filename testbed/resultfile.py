@@ -216,6 +216,7 @@ class RunResult:
     wall_parts_s: Mapping[str, Any] = field(default_factory=lambda: EMPTY)
     world_priority: str | None = None
     step_core: str | None = None
+    step_loop: str | None = None  # the world's: "compiled", "python"; None: older file
     robot: str | None = None  # "cpp", "python", "mixed" (a test's team); None: older file
     robot_reason: str = ""  # why that one (testbed.run.robotchoice)
     aodv_daemon: str | None = None  # "cpp", "python"; None: no AODV daemon ran, or older file
@@ -433,6 +434,7 @@ class RunResult:
             wall_parts_s=get_mapping(doc, "wall_parts_s"),
             world_priority=get_value(doc, "world_priority", (str,)),
             step_core=get_value(doc, "step_core", (str,)),
+            step_loop=get_value(doc, "step_loop", (str,)),
             robot=get_value(doc, "robot", (str,)),
             robot_reason=get_value(doc, "robot_reason", (str,), ""),
             aodv_daemon=get_value(doc, "aodv_daemon", (str,)),

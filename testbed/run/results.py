@@ -144,6 +144,7 @@ def contents(rec: RunRecord) -> RunResult:
         wall_parts_s=dict(rec.parts),
         world_priority=rec.priority,
         step_core=stepcore.kind(),
+        step_loop=rec.world_timing.get("step_loop"),  # testbed.run.steploop.loop_kind
         robot=rec.robot,
         robot_reason=rec.robot_reason,
         aodv_daemon=rec.aodv_daemon,
@@ -153,7 +154,7 @@ def contents(rec: RunRecord) -> RunResult:
             "coverage_final": display_coverage(rec.out, rec.world),
             "snapshots": snapshot_steps(rec.out),
         },
-        world_timing_s=dict(rec.world_timing),
+        world_timing_s={k: v for k, v in rec.world_timing.items() if k != "step_loop"},
         world_missed_steps_ms_late=tuple(tuple(m) for m in clock.world_missed_steps),
         robots=tuple(r for r, _ in robots),
         cpu_s=cpu_seconds(rec, summaries, display, daemons),

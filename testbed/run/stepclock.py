@@ -172,9 +172,13 @@ class StepTiming:
     scan_s: float = 0.0
     send_s: float = 0.0
     world_cpu_s: float = 0.0
+    loop: str = "python"  # the step loop that ran (testbed.run.steploop.loop_kind)
 
-    def seconds(self) -> dict[str, float]:
-        return {
+    def seconds(self) -> dict[str, float | str]:
+        """The seconds, and `step_loop`: which loop ran (result.json's field of that name)."""
+        out: dict[str, float | str] = {
             k: round(getattr(self, k), 3)
             for k in ("net_s", "net_max_s", "world_s", "scan_s", "send_s", "world_cpu_s")
         }
+        out["step_loop"] = self.loop
+        return out

@@ -10,6 +10,17 @@ display its clock. `over` says when the run is over and with what status; `final
 names the first crash. What changes during a run lives in the clock, the robots' records,
 the timing counters and the files, each a class of its own module. The display is sent only
 the frames of the steps it acts on (node.displaysteps) and the last step's.
+
+Two loops, one behaviour. The step above is written twice: `_step_python`, the reference,
+and `_step_compiled`, which does the same with the per-robot work in compiled code
+(testbed.world.stepfast: the deadline's sleep, the commands into the bodies and the records,
+the deadline count, the moves) and calls Python only for what is rare or changes: a "done",
+a hang-up, a kill, a fork server's exit report, and the run's end (`over` is asked again
+only when a robot's state changed or the step cap is reached). The compiled loop takes over
+after the warm-up steps (the Python loop's, whose waits are rare by nature) wherever the step
+core was built with the world's step; `TESTBED_STEP_LOOP=python` (read by `loop_kind`, the
+one place) runs the reference throughout, and result.json's `step_loop` says which ran.
+tests/integration/test_step_loop_twin.py holds the two to the same positions.csv.
 """
 
 from __future__ import annotations
@@ -23,11 +34,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from common.errors import UsageError
 from node import body
 from testbed.run import isolation
 from testbed.run.progress import ProgressLine
 from testbed.run.record import RobotRecord
 from testbed.run.stepclock import StepClock, StepTiming
+from testbed.world import stepfast
 
 if TYPE_CHECKING:
     from testbed.run.execute import Started
@@ -38,6 +51,20 @@ log = logging.getLogger(__name__)
 WARMUP_STEPS = 3  # the first steps wait for every robot's answer (see _collect_commands)
 WARMUP_WAIT_S = 5.0  # at most this long a step: a robot that is not up by then misses it
 WAIT_POLL_S = 0.0002
+STEP_LOOP_ENV = "TESTBED_STEP_LOOP"
+LOOP_KINDS = ("compiled", "python")  # the first: what unset means
+
+
+def loop_kind() -> str:
+    """The step loop a run runs: "compiled" (the default, where the step core was built with
+    the world's step: testbed.world.stepfast) or "python" (the reference; asked for with
+    TESTBED_STEP_LOOP=python, or the only one there is). UsageError for a value it does not
+    know. The one reading of TESTBED_STEP_LOOP."""
+    got = os.environ.get(STEP_LOOP_ENV, "").strip().lower() or LOOP_KINDS[0]
+    if got not in LOOP_KINDS:
+        shown = os.environ.get(STEP_LOOP_ENV, "")[:40].encode("unicode_escape").decode()
+        raise UsageError(f"{STEP_LOOP_ENV}={shown!r} is not one of {', '.join(LOOP_KINDS)}")
+    return got if stepfast.AVAILABLE else "python"
 
 
 class StepLoop:
@@ -64,6 +91,13 @@ class StepLoop:
         self.cpu0 = time.process_time()
         self.clock = StepClock(prep.cfg.time_scale, self.n, time.monotonic())
         self.display_steps = prep.display_steps
+        self.kind = loop_kind()
+        self.timing.loop = self.kind
+        # The compiled steps' state (after the warm-up): it holds the records' answered steps
+        # and misses from the first compiled step until the loop ends.
+        self.fast = (
+            stepfast.WorldStep(self.world, self.live_robots) if self.kind == "compiled" else None
+        )
 
     def run(self) -> tuple[str, str]:
         """Step 0 (the first frames go out), then every step until the run is over;
@@ -72,8 +106,12 @@ class StepLoop:
         self.files.positions(0, self.world.positions())
         self._send_frames()
         status = None
-        while status is None:
-            status = self.step()
+        try:
+            while status is None:
+                status = self.step()
+        finally:
+            if self.fast is not None and self.fast.records_held:
+                self.fast.store_records(self.robots)
         if not self.display_steps.wanted(self.clock.step):  # its final snapshot is named after it
             self._send_display_frame(time.monotonic())
         self.clock.stop(time.monotonic())
@@ -83,6 +121,12 @@ class StepLoop:
 
     def step(self) -> tuple[str, str] | None:
         """One step of the clock; the run's (status, detail) when it is over, else None."""
+        if self.fast is not None and self.clock.step >= WARMUP_STEPS:
+            return self._step_compiled()
+        return self._step_python()
+
+    def _step_python(self) -> tuple[str, str] | None:
+        """`step`, the reference."""
         self._collect_commands()
         clock, t, world = self.clock, self.timing, self.world
         step = clock.advance()
@@ -107,6 +151,87 @@ class StepLoop:
         clock.world_done(time.monotonic())
         self._show_progress(cov)
         return self._over()
+
+    def _step_compiled(self) -> tuple[str, str] | None:
+        """`step` with the per-robot work compiled (see the module's docstring)."""
+        fast, clock, t, world, server = self.fast, self.clock, self.timing, self.world, self.server
+        assert fast is not None
+        if not fast.records_held:
+            self._start_compiled()
+        step = clock.step
+        deadline = clock.deadline()
+        now = fast.sleep_until(deadline)
+        while now < deadline:  # a signal ended the sleep (its Python handler has run)
+            now = fast.sleep_until(deadline)
+        grace = clock.woke(now)
+        if grace > 0:  # a host stall stopped the robots too: their time is given back
+            time.sleep(grace)
+        socks = server.step_sockets(self.n)
+        fast.sockets(socks)
+        used, hung, missed, spoke = fast.take(step, True)
+        if used or hung:
+            self._fast_messages(step, server.taken_rest(socks, used, hung))
+        if missed:
+            clock.robots_missed(missed)
+        step = clock.advance()
+        tw = time.monotonic()
+        if not fast.move():  # a target that is not finite: World.move's own path
+            world.move()
+        self._update_links(step)
+        if step in self.kills:
+            self._inject_kills(step)
+            self._watch_servers()
+        if spoke:
+            self._notice_crashes(step)
+            self._watch_servers()
+        ts = time.monotonic()
+        world.cast_live(self.live_robots)
+        cov = world.coverage()
+        self.files.coverage(step, cov)
+        if self.live is not None:
+            achieved = round(clock.achieved_scale(time.monotonic()), 2)
+            self.live.feed.publish(step, self.positions, self.net.current, cov,
+                                   clock.missed_robots, achieved)  # fmt: skip
+        tf = time.monotonic()
+        t.scan_s += tf - ts
+        self._send_frames()
+        t.send_s += time.monotonic() - tf
+        t.world_s += time.monotonic() - tw
+        clock.world_done(time.monotonic())
+        self._show_progress(cov)
+        if fast.changed or step >= self.prep.cfg.max_steps:
+            fast.changed = False
+            return self._over()
+        return None  # no robot changed since `over` said None, and the cap is not reached
+
+    def _start_compiled(self) -> None:
+        """The first compiled step: the records' state into the arrays, the fork servers'
+        reports so far taken in (so that only a new one makes their descriptors readable)."""
+        assert self.fast is not None
+        self._notice_crashes(self.clock.step)
+        self._watch_servers()
+        self.fast.load_records(self.robots)
+
+    def _watch_servers(self) -> None:
+        """The compiled step watches the fork servers of the robots still in the run."""
+        assert self.fast is not None
+        live = [r for r in self.robots.values() if not r.gone]
+        self.fast.watch(sorted({r.process.server.ctl.fileno() for r in live}))
+        self.fast.changed = True
+
+    def _fast_messages(self, step: int, msgs: list[tuple[int, tuple]]) -> None:
+        """`_take_commands` for what the compiled take left to Python (a command among them
+        goes to the arrays the compiled steps keep)."""
+        assert self.fast is not None
+        for k, msg in msgs:
+            if not 1 <= k <= self.n:
+                continue
+            if msg[0] == "cmd":
+                self.fast.last_cmd[k - 1] = max(int(self.fast.last_cmd[k - 1]), msg[1])
+                self.world.command(k - 1, msg[2])
+            elif msg[0] == "done":
+                self.robots[k].finished(step, msg[1])
+                self.fast.changed = True
 
     def _collect_commands(self) -> None:
         """Sleep until the step's deadline, then take every command that arrived by then

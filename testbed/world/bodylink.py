@@ -100,17 +100,24 @@ class BodyServer:
         World.command the last target). Compiled where the step core runs."""
         if stepcore.lib is None:
             return self.poll(0.0)
-        s = self._step_sockets(n)
-        out: list[tuple[int, tuple]] = []
+        s = self.step_sockets(n)
         used = stepcore.lib.sc_body_take(len(s.fds), s.fds_p, *s.take_args)
-        if used != 0:
-            self._others(s, used if used >= 0 else -1 - used, out)
         with_cmds, hung = s.counts.tolist()
+        out = self.taken_rest(s, used, hung)
         if with_cmds:
             taken, steps, go, xy = s.taken.tolist(), s.steps.tolist(), s.go.tolist(), s.xy.tolist()
             for i, t in enumerate(taken):
                 if t:
                     out.append((s.keys[i], ("cmd", steps[i], tuple(xy[i]) if go[i] else None)))
+        return out
+
+    def taken_rest(self, s: _Sockets, used: int, hung: int) -> list[tuple[int, tuple]]:
+        """What sc_body_take (its return `used`, `hung` sockets hung up) left to Python: the
+        datagrams that are not commands, parsed as `poll` parses them, and the sockets that
+        hung up, dropped."""
+        out: list[tuple[int, tuple]] = []
+        if used != 0:
+            self._others(s, used if used >= 0 else -1 - used, out)
         if hung:
             for i in np.flatnonzero(s.hung).tolist():
                 conn = s.conn(i)
@@ -145,11 +152,13 @@ class BodyServer:
             return
         assert xyt.dtype == np.float64 and ranges.dtype == np.float32 and has.dtype == np.int8
         assert live.dtype == np.bool_ and xyt.shape == (n, 3) and ranges.shape[0] == has.size == n
-        s = self._step_sockets(n)
+        s = self.step_sockets(n)
         stepcore.lib.sc_body_frames(n, s.fds_p, address(live), step, address(xyt), now,
                                     address(ranges), address(has), ranges.shape[1])  # fmt: skip
 
-    def _step_sockets(self, n: int) -> _Sockets:
+    def step_sockets(self, n: int) -> _Sockets:
+        """The sockets of robots 1..n and the displays, with the compiled calls' buffers (the
+        same object while no socket comes or goes)."""
         s = self._sockets
         if s is None or s.n != n:
             s = self._sockets = _Sockets(n, self.robots, self.displays)

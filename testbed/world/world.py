@@ -14,7 +14,6 @@ topology controller and its scans to the robots' body links.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -24,17 +23,89 @@ from node.rays import _BIAS, Laser, pad
 from testbed.world.worldmap import GroundTruth
 
 
-@dataclass
-class Body:
-    """One robot's simulated body."""
+class Bodies:
+    """Every robot's simulated body, as arrays (row i: robot i, 0-based): what World.move and
+    its compiled twin (testbed.world.stepfast) both read and write. `Body` is a view of a row."""
 
-    x: float
-    y: float
-    theta: float = 0.0
-    target: tuple[float, float] | None = None
-    collisions: int = 0
-    path_length: float = 0.0
-    alive: bool = True
+    def __init__(self, starts: list[tuple[float, float]]) -> None:
+        n = len(starts)
+        self.xyt = np.zeros((n, 3), dtype=np.float64)  # x, y, theta (metres, radians)
+        self.xyt[:, :2] = np.asarray(starts, dtype=np.float64).reshape(n, 2)
+        self.target = np.zeros((n, 2), dtype=np.float64)  # where has_target
+        self.has_target = np.zeros(n, dtype=np.uint8)
+        self.alive = np.ones(n, dtype=np.uint8)
+        self.collisions = np.zeros(n, dtype=np.int64)
+        self.path_length = np.zeros(n, dtype=np.float64)
+
+
+class Body:
+    """One robot's simulated body: row i of the world's `Bodies`, read and written as
+    attributes (floats and ints, as Python has them)."""
+
+    __slots__ = ("_a", "_i")
+
+    def __init__(self, arrays: Bodies, i: int) -> None:
+        self._a, self._i = arrays, i
+
+    @property
+    def x(self) -> float:
+        return float(self._a.xyt[self._i, 0])
+
+    @x.setter
+    def x(self, v: float) -> None:
+        self._a.xyt[self._i, 0] = v
+
+    @property
+    def y(self) -> float:
+        return float(self._a.xyt[self._i, 1])
+
+    @y.setter
+    def y(self, v: float) -> None:
+        self._a.xyt[self._i, 1] = v
+
+    @property
+    def theta(self) -> float:
+        return float(self._a.xyt[self._i, 2])
+
+    @theta.setter
+    def theta(self, v: float) -> None:
+        self._a.xyt[self._i, 2] = v
+
+    @property
+    def target(self) -> tuple[float, float] | None:
+        if not self._a.has_target[self._i]:
+            return None
+        tx, ty = self._a.target[self._i].tolist()
+        return (tx, ty)
+
+    @target.setter
+    def target(self, v: tuple[float, float] | None) -> None:
+        self._a.has_target[self._i] = v is not None
+        self._a.target[self._i] = (0.0, 0.0) if v is None else v
+
+    @property
+    def collisions(self) -> int:
+        return int(self._a.collisions[self._i])
+
+    @collisions.setter
+    def collisions(self, v: int) -> None:
+        self._a.collisions[self._i] = v
+
+    @property
+    def path_length(self) -> float:
+        return float(self._a.path_length[self._i])
+
+    @path_length.setter
+    def path_length(self, v: float) -> None:
+        self._a.path_length[self._i] = v
+
+    @property
+    def alive(self) -> bool:
+        return bool(self._a.alive[self._i])
+
+    @alive.setter
+    def alive(self, v: bool) -> None:
+        self._a.alive[self._i] = bool(v)
 
 
 def open_cells(clear: np.ndarray, reach: int) -> np.ndarray:
@@ -59,7 +130,8 @@ class World:
         self.laser = laser
         self.speed = float(speed)
         self.radius = float(radius)
-        self.bodies = [Body(x, y) for x, y in starts]
+        self.body_arrays = Bodies(starts)
+        self.bodies = [Body(self.body_arrays, i) for i in range(len(starts))]
         self.step_no = 0
         self.occ_padded = pad(truth.occupied, laser.pad, True)
         self.seen_padded = np.zeros(self.occ_padded.shape, dtype=bool)
@@ -72,7 +144,9 @@ class World:
         self.free_total = max(1, int(free_space.sum()))
         free_padded = pad(free_space.astype(bool), laser.pad, False)
         self._seen_free = (self._seen_u8, free_padded.view(np.uint8))  # coverage's operands
-        self.paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
+        self._paths: list[list[tuple[float, float]]] = [[(b.x, b.y)] for b in self.bodies]
+        # The compiled moves' log (robot, x, y), taken into the paths when they are read.
+        self.move_log = MoveLog(max(64, 64 * len(starts)))
         self._rays = np.arange(laser.n_rays)
         self._last_scan: list = [None] * len(self.bodies)
         self._no_returns = np.full(laser.n_rays, np.inf, dtype=np.float32)
@@ -108,8 +182,8 @@ class World:
         if stepcore.NATIVE:
             self._cast = stepcore.WorldCast(laser, n, truth.cell, _BIAS, self._occ_u8,
                                             self._seen_u8, self._seen_free[1], self.open_space,
-                                            self._skip)  # fmt: skip
-            # The compiled casts write the frames' rows in place.
+                                            self._skip, self.body_arrays.xyt)  # fmt: skip
+            # The compiled casts write the frames' rows in place; the poses are the bodies'.
             self.frame_xyt, self.frame_ranges = self._cast.xyt, self._cast.ranges
             self.frame_has = self._cast.has
 
@@ -117,8 +191,14 @@ class World:
     def n(self) -> int:
         return len(self.bodies)
 
+    @property
+    def paths(self) -> list[list[tuple[float, float]]]:
+        """Each robot's positions: where it started and where each move took it."""
+        self.move_log.drain(self._paths)
+        return self._paths
+
     def positions(self) -> list[tuple[float, float]]:
-        return [(b.x, b.y) for b in self.bodies]
+        return [(x, y) for x, y in self.body_arrays.xyt[:, :2].tolist()]
 
     def command(self, k: int, target: tuple[float, float] | None) -> None:
         """Robot k (0-based) asks to drive toward `target` (None: stop)."""
@@ -131,6 +211,7 @@ class World:
 
     def move(self) -> None:
         """Advance every live robot by one step toward its target."""
+        paths = self.paths
         for i, b in enumerate(self.bodies):
             if not b.alive or b.target is None:
                 continue
@@ -158,7 +239,7 @@ class World:
             b.theta = math.atan2(dy, dx)
             b.path_length += s
             b.x, b.y = nx, ny
-            self.paths[i].append((nx, ny))
+            paths[i].append((nx, ny))
         self.step_no += 1
 
     def cast_live(self, live: np.ndarray) -> None:
@@ -169,7 +250,8 @@ class World:
         nothing new). Where the step core runs, the robots that moved are cast in one
         compiled call (a call per robot cost more than its cast), which also counts the free
         cells seen for the first time; each robot is cast as `scan` casts it."""
-        self.frame_xyt[:] = [(b.x, b.y, b.theta) for b in self.bodies]
+        if self.frame_xyt is not self.body_arrays.xyt:
+            self.frame_xyt[:] = self.body_arrays.xyt
         cast = self._cast
         if cast is None:
             for i in np.flatnonzero(live).tolist():
@@ -286,3 +368,21 @@ class World:
             else:
                 self._seen_free_count = int(np.count_nonzero(self.seen & self.free_space))
         return self._seen_free_count / self.free_total
+
+
+class MoveLog:
+    """The moves the compiled World.move made (testbed.world.stepfast): robot, x, y, in the
+    order World.move appends them to the paths, until `drain` takes them there."""
+
+    def __init__(self, cap: int) -> None:
+        self.i = np.zeros(cap, dtype=np.int64)
+        self.xy = np.zeros((cap, 2), dtype=np.float64)
+        self.length = np.zeros(1, dtype=np.int64)  # the compiled step keeps its own count
+
+    def drain(self, paths: list[list[tuple[float, float]]]) -> None:
+        n = int(self.length[0])
+        if not n:
+            return
+        for i, (x, y) in zip(self.i[:n].tolist(), self.xy[:n].tolist(), strict=True):
+            paths[i].append((x, y))
+        self.length[0] = 0
