@@ -76,6 +76,9 @@ def claims_of(sweep_dir: str | Path, unfaithful: bool = False) -> SweepClaims:
     except (UsageError, ValueError, OSError) as e:
         out.note = f"its stage 2 was not read: {one_line(str(e))}"
         return out
+    if decidereport.not_run(d):
+        out.note = f"its stage 2 has not run ({d.plan.total_runs} runs planned)"
+        return out
     doc = decidereport.decided_doc(d)
     out.decided = {k: c["verdict"] for k, c in doc["claims"].items()}
     out.comparisons = {k: c["comparisons"] for k, c in doc["claims"].items()}

@@ -21,6 +21,8 @@ runs each stage-2 file plans) and judges every comparison (testbed.analysis.deci
   t and its degrees of freedom, p, Holm-adjusted p, the alpha it was judged at, its verdict
   and its stage-1 verdict where that changed; those decided at stage 1 in one line;
 - what the budget left undecided, each comparison with the runs a point it would need;
+- while no stage-2 run is done (`make experiment` plans stage 2 and stops), only what ran,
+  the design and what the budget leaves: no verdict table, nothing marked changed;
 - Fig. 2 again over every run the design read (stage 1, the large teams, stage 2), teams
   past ten marked as beyond the paper's range (testbed.analysis.plots).
 
@@ -97,8 +99,8 @@ def _runs_line(d: Decided) -> str:
         text += f" (planned: about {_minutes(d.plan.total_wall_s)} one at a time)"
     if planned and not done:
         text += ("; **stage 2 has not run yet** (`sudo make experiment-decide`, or each "
-                 "stage-2 file with `testbed sweep`): the deciding verdicts below are those "
-                 "stage 1 decided, the rest undecided until it runs")  # fmt: skip
+                 "stage-2 file with `testbed sweep`): no deciding verdict is drawn until it "
+                 "has")  # fmt: skip
     elif planned and done < planned:
         text += ("; **stage 2 is not finished**: its verdicts rest on the runs done so far, "
                  "at less than the planned power (the error rate stands, as long as the runs "
@@ -224,6 +226,8 @@ def section(
         return out + [f"A plan directory was found but not read: {one_line(str(error))}. No "
                       "verdict is drawn from it.", ""]  # fmt: skip
     out += [_runs_line(d), "", _design_line(d), ""]
+    if not_run(d):
+        return out + left_undecided(d)
     out += claims_table(d, vs, fig2) + [""]
     out += ["A verdict **changed** where the deciding runs' differs from the one 3 runs a point "
             "gave above (compared as holds, does not hold, partly holds, undecided). The 3-run "
@@ -236,6 +240,11 @@ def section(
     if figdir is not None:
         out += figures(d, figdir)
     return out
+
+
+def not_run(d: Decided) -> bool:
+    """Stage 2 planned runs and none is done: its verdicts would be stage 1's alone."""
+    return d.plan.total_runs > 0 and d.done_runs == 0
 
 
 def decided_doc(d: Decided) -> dict:

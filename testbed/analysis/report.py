@@ -239,7 +239,7 @@ def write_report(
     path = sweep_dir / "report.md"
     figdir = sweep_dir / "figures"
     section = decidereport.section(decided, error, vs, made.tables.fig2, figdir)
-    if decided is not None:
+    if decided is not None and not decidereport.not_run(decided):
         write_atomic(figdir / "decided.json",
                      json.dumps(decidereport.decided_doc(decided), indent=1) + "\n",
                      root=sweep_dir)  # fmt: skip

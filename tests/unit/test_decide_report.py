@@ -186,6 +186,9 @@ def test_an_unfinished_stage_2_says_so(tmp_path):
     text = report.write_report(stage1, metrics_of=lambda run: None)[0].read_text()
     assert f"0 of {d.plan.total_runs} planned runs done" in text
     assert "**stage 2 has not run yet**" in text and "not finished" not in text
+    assert "| Claim | 3 runs a point | Deciding runs |" not in text and "changed" not in text
+    assert not (stage1 / "figures" / "decided.json").exists()
+    assert "its stage 2 has not run" in claimcompare.claims_of(stage1).note
 
 
 def test_a_plan_stage_1_no_longer_gives_is_named_and_not_judged(tmp_path):
