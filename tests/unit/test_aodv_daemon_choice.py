@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+import tomllib
 
 import pytest
 
@@ -236,3 +237,24 @@ def test_the_cli_parser_builds():  # the flag on both commands' --help
     for cmd in (["run"], ["net"]):
         cli.build_parser(cmd)
     assert "--aodv-daemon" in " ".join(net_up_parser().format_help().split())
+
+
+def test_a_sweep_may_vary_the_daemon_and_its_run_ids_say_which():
+    from testbed.sweep import file as sweepfile
+
+    text = """
+[grid]
+robots = [2]
+comm_range = [5]
+laser_range = [2.0]
+aodv_daemon = ["python", "auto"]
+"""
+    runs = sweepfile.expand(sweepfile.parse(tomllib.loads(text), "s.toml"))
+    assert [r.config.aodv_daemon for r in runs] == ["python", "auto"]
+    ids = [r.run_id for r in runs]
+    assert [part for i in ids for part in i.split("-") if part.startswith("aodv")] == [
+        "aodvpython", "aodvauto",
+    ], ids  # fmt: skip
+    fixed = text.replace('aodv_daemon = ["python", "auto"]', '[run]\naodv_daemon = "python"')
+    (run,) = sweepfile.expand(sweepfile.parse(tomllib.loads(fixed)))
+    assert run.config.aodv_daemon == "python" and "aodv" not in run.run_id  # not a dimension
