@@ -2,7 +2,8 @@
 
 Each test runs against both daemons, the Python reference and the compiled one (the
 `aodv_daemon` fixture, tests/integration/conftest.py), and builds its own testbed named "ta"
-+ random hex, which it removes in a finally. A test that starts a daemon itself takes its
++ random hex ("tcw" for the last two, which ask for the daemon through `testbed net up` and
+`testbed run`), which it removes in a finally. A test that starts a daemon itself takes its
 command line from `daemon_argv`, the one place that knows both programs' names.
 Time scales above 1 shorten the waits: a time scale K runs every protocol timer K times
 faster (HELLO, lifetimes, ring search), so the same protocol events happen sooner.
@@ -13,6 +14,7 @@ import json
 import os
 import re
 import subprocess
+import sys
 import tempfile
 import textwrap
 import time
@@ -21,7 +23,7 @@ import uuid
 from aodv import packet as wire
 from aodv.stats import read_fresh
 from aodv.statsfile import DaemonStats
-from topology import routing
+from topology import routing, state
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 
@@ -621,3 +623,60 @@ def test_hostile_flood_keeps_the_daemon_up_bounded_and_in_step_with_the_kernel(a
             time.sleep(0.5)
         assert " 0% packet loss" in ping(net, 2, "10.0.0.3", "-c", "1", "-W", "5")
         print(f"RSS idle {rss_idle / 1024:.1f} MB, peak {peak / 1024:.1f} MB; {pd}")
+
+
+def _exe(pid: int) -> str:
+    return os.path.realpath(f"/proc/{pid}/exe")
+
+
+def test_net_up_starts_the_daemon_asked_for_and_says_so(aodv_daemon):
+    """`testbed net up --aodv-daemon` reaches the namespaces: every robot's daemon is the
+    program asked for (the compiled one exec'd, the Python one forked from the fork server)."""
+    name = "tcw" + uuid.uuid4().hex[:6]
+    try:
+        up = subprocess.run(
+            [PY, "-m", "testbed", "net", "up", name, "--robots", "3", "--comm-range", "10",
+             "--aodv-daemon", aodv_daemon],
+            capture_output=True, text=True, timeout=120, cwd=REPO,
+        )  # fmt: skip
+        assert up.returncode == 0, up.stderr
+        assert f"  AODV daemon: {aodv_daemon} ({aodv_daemon}: asked for)" in up.stdout, up.stdout
+        st = state.read(name)
+        assert st is not None
+        pids = {p.robot: p.pid for p in st.processes if p.role == "aodv"}
+        assert sorted(pids) == [1, 2, 3]
+        program = routing.aodv_binary() if aodv_daemon == "cpp" else sys.executable
+        assert {_exe(pid) for pid in pids.values()} == {os.path.realpath(program)}
+        ping = subprocess.run(
+            [PY, "-m", "testbed", "net", "exec", name, "r1", "--", "ping", "-n", "-c", "1",
+             "-W", "5", "10.0.0.3"],
+            capture_output=True, text=True, timeout=60, cwd=REPO,
+        )  # fmt: skip
+        assert " 0% packet loss" in ping.stdout, ping.stdout + ping.stderr
+    finally:
+        destroy(name)
+
+
+def test_a_run_records_which_daemon_ran_and_why(aodv_daemon, tmp_path, small_map):
+    name = "tcw" + uuid.uuid4().hex[:6]
+    out = tmp_path / "run"
+    try:
+        run = subprocess.run(
+            [PY, "-m", "testbed", "run", "--robots", "2", "--comm-range", "10",
+             "--laser-range", "2", "--map", small_map, "--max-steps", "30", "--time-scale",
+             "2", "--aodv-daemon", aodv_daemon, "--name", name, "--quiet", "--out", str(out)],
+            capture_output=True, text=True, timeout=300, cwd=REPO,
+        )  # fmt: skip
+    finally:
+        destroy(name)
+    with open(out / "result.json") as f:
+        result = json.load(f)
+    # 30 steps: the step cap ends it (exit status 1 says the run did not finish exploring).
+    assert (run.returncode, result["status"]) == (1, "step_cap"), run.stderr
+    assert result["aodv_daemon"] == aodv_daemon
+    assert result["aodv_daemon_reason"] == f"{aodv_daemon}: asked for"
+    assert result["config"]["extra"]["aodv_daemon"] == aodv_daemon
+    # The daemons ran and wrote their statistics, read back as the Python daemon's.
+    for k in (1, 2):
+        s = DaemonStats.read(str(out / "aodv" / f"r{k}.json")).to_json()
+        assert s["robot"] == f"r{k}" and s["messages_sent"].get("HELLO", 0) >= 1
