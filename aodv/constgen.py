@@ -36,8 +36,8 @@ from aodv import daemon, kernel, persist, stats
 from aodv.control import IP_RECVTTL
 from aodv.packet import AODV_PORT
 from aodv.params import PROFILES, Params
+from common.cliterals import c_string
 from common.sched import DEADLINE_PRIORITY
-from node.argsgen import c_string
 
 
 class _DryMonitor(kernel.UseMonitor):

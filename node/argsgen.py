@@ -17,32 +17,12 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from common.cliterals import c_real, c_string
 from node import launch, wire
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 
 # The parse functions NodeArgs names, each with its twin in native/robot/args.cc.
 PARSERS = {"robot_number": "Robot", "shape": "Shape", "steps": "Steps"}
-
-
-def c_string(text: str) -> str:
-    """`text` as a C string literal (UTF-8; a byte not printable ASCII as an octal escape)."""
-    out = []
-    for byte in text.encode():
-        ch = chr(byte)
-        if ch in '\\"':
-            out.append("\\" + ch)
-        elif ch == "\n":
-            out.append("\\n")
-        elif 32 <= byte < 127:
-            out.append(ch)
-        else:
-            out.append(f"\\{byte:03o}")
-    return '"' + "".join(out) + '"'
-
-
-def c_real(value: float | None) -> str:
-    """A bound as a C++ double literal that reads back as the same double (0.0 if none)."""
-    return repr(float(value if value is not None else 0.0))
 
 
 def kind_of(f: dataclasses.Field) -> str:

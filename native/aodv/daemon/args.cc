@@ -2,6 +2,7 @@
 // converted and checked when it is read), then the required ones, then build_params.
 #include "args.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>

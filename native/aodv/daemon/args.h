@@ -5,6 +5,7 @@
 // "tb-aodv: error: ...", and exit status 2.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 

@@ -6,6 +6,7 @@
 // `read_icmp` counts the messages the kernel took but never transmitted.
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <mutex>
 #include <string>

@@ -31,6 +31,7 @@
 #include "daemon.h"
 
 #include <arpa/inet.h>
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <csignal>

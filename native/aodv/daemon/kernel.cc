@@ -1,6 +1,7 @@
 // See kernel.h; aodv/kernel.py and topology/kernel/netlinkmsg.py are the reference.
 #include "kernel.h"
 
+#include <algorithm>
 #include <arpa/inet.h>
 #include <cerrno>
 #include <cstring>

@@ -6,6 +6,7 @@
 // actuator's) adds to under `kmu`; the loop locks it only to take a snapshot.
 #pragma once
 
+#include <cstdint>
 #include <condition_variable>
 #include <deque>
 #include <map>
