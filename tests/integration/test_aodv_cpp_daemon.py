@@ -20,7 +20,9 @@ this binary too (its aodv_daemon fixture).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import glob
+import json
 import os
 import subprocess
 import time
@@ -185,6 +187,8 @@ def _sigterm_leaves_nothing(net):
         assert proc.wait(timeout=30) == 0, log_of(net, k)
         final = DaemonStats.read(stats_path(net, k)).to_json()
         assert final["robot"] == f"r{k}" and final["pid"] == proc.pid
+        with open(stats_path(net, k)) as f:  # every key of the Python daemon's file, no other
+            assert set(json.load(f)) == {f.name for f in dataclasses.fields(DaemonStats)}
         assert routes(net, k) == {}
         all_routes = net.exec(k, ["ip", "-4", "route"], capture_output=True, text=True).stdout
         assert "aodv0" not in all_routes, all_routes

@@ -35,6 +35,7 @@ class ControlChannel {
     Addr addr_;
     Stats& stats_;
     int ttl_ = -1;
+    uint8_t rx_[4096];  // what receive() reads into (the loop's alone)
     std::mutex rreq_mu_;  // rreq_sent: written by the loop, read by the kernel thread
     std::map<Addr, double> rreq_sent_;
 };
@@ -55,11 +56,11 @@ namespace aodv {
 
 template <class F>
 void ControlChannel::receive(F&& each) {
-    static thread_local uint8_t data[4096];
+    uint8_t* data = rx_;
     alignas(cmsghdr) char anc[CMSG_SPACE(sizeof(int)) + 64];
     for (int k = 0; k < 64; ++k) {
         sockaddr_in from{};
-        iovec iov{data, sizeof data};
+        iovec iov{data, sizeof rx_};
         msghdr mh{};
         mh.msg_name = &from;
         mh.msg_namelen = sizeof from;

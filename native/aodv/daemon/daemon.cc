@@ -127,7 +127,8 @@ class Daemon {
     std::unordered_set<Addr> hosts_;  // addresses check_addresses found in our network
     long long malformed_logged_ = 0;
     double poll_started_ = 0;
-    std::vector<uint8_t> tun_buf_ = std::vector<uint8_t>(65535);
+    // Not zeroed: its pages are resident only once packets used them.
+    std::unique_ptr<uint8_t[]> tun_buf_{new uint8_t[65535]};
 };
 
 int Daemon::run() {
@@ -323,9 +324,9 @@ void Daemon::drop(const char* reason, Addr src, const std::string& why) {
 
 void Daemon::on_tun() {
     for (int k = 0; k < 256; ++k) {
-        ssize_t n = tun_->read(tun_buf_.data(), tun_buf_.size());
+        ssize_t n = tun_->read(tun_buf_.get(), 65535);
         if (n <= 0) return;
-        const uint8_t* p = tun_buf_.data();
+        const uint8_t* p = tun_buf_.get();
         if (n < 20 || (p[0] >> 4) != 4) {
             stats_->dropped["tun_not_ipv4"] += 1;
             continue;

@@ -304,13 +304,13 @@ void KernelRoutes::messages(int timeout_ms, F&& each) {
         pollfd p{nl_, POLLIN, 0};
         if (poll(&p, 1, timeout_ms) <= 0) return;
     }
-    static thread_local std::vector<uint8_t> buf(1 << 16);
+    uint8_t* buf = buf_.get();
     for (;;) {
-        ssize_t n = recv(nl_, buf.data(), buf.size(), 0);
+        ssize_t n = recv(nl_, buf, BUF, 0);
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) return;
-        each_message(buf.data(), size_t(n), [&](int type, uint32_t seq, size_t s, size_t e) {
-            each(type, seq, buf.data(), s, e);
+        each_message(buf, size_t(n), [&](int type, uint32_t seq, size_t s, size_t e) {
+            each(type, seq, buf, s, e);
         });
     }
 }
@@ -541,12 +541,11 @@ void SetReader::request() {
 }
 
 bool SetReader::receive(std::vector<Addr>& found) {
-    static thread_local std::vector<uint8_t> buf(1 << 16);
     for (;;) {
-        ssize_t n = recv(fd_, buf.data(), buf.size(), 0);
+        ssize_t n = recv(fd_, buf_.get(), BUF, 0);
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) return false;
-        const uint8_t* p = buf.data();
+        const uint8_t* p = buf_.get();
         bool done = false;
         int code = 0;
         each_message(p, size_t(n), [&](int type, uint32_t seq, size_t s, size_t e) {

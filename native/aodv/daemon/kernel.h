@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -68,6 +69,10 @@ class KernelRoutes {
     template <class F>
     void messages(int timeout_ms, F&& each);
 
+    // Answers are read on one thread at a time (start-up, then the loop, then teardown) into
+    // this buffer, not zeroed: its pages are resident only once answers used them.
+    static constexpr size_t BUF = 1 << 16;
+    std::unique_ptr<uint8_t[]> buf_{new uint8_t[BUF]};
     std::string ifname_;
     int ifindex_;
     int nl_ = -1;
@@ -116,6 +121,8 @@ class SetReader {
     bool busy = false;
 
   private:
+    static constexpr size_t BUF = 1 << 16;
+    std::unique_ptr<uint8_t[]> buf_{new uint8_t[BUF]};  // read by the loop alone
     int fd_ = -1;
     uint32_t seq_ = 0;
     std::vector<Addr> found_;
