@@ -92,6 +92,32 @@ lib = _load()
 NATIVE = lib is not None
 
 
+class _CastPack(ctypes.Structure):
+    """native/stepcore/worldstep.h's sc_cast_pack: sc_world_cast_moved's arguments."""
+
+    _fields_ = [
+        ("n", _L), ("xyt", _P), ("has_out", _P), ("xy", _P), ("want", _P),
+        ("map_cell", _D), ("laser_cell", _D), ("bias", _L), ("pad", _L), ("w", _L),
+        ("dx", _P), ("dy", _P), ("mark", _P), ("n_rays", _L), ("n_samples", _L), ("step", _D),
+        ("tabled", _L), ("frac", _L), ("buckets", _L), ("sures", _P), ("odxs", _P),
+        ("odys", _P), ("n_opens", _P), ("occ", _P), ("seen", _P), ("free_pad", _P),
+        ("ph", _L), ("pw", _L), ("open_space", _P), ("skip", _P), ("mh", _L), ("mw", _L),
+        ("ranges_out", _P), ("hit_out", _P), ("fallbacks", _L),
+    ]  # fmt: skip
+
+
+def _cast_step():
+    """sc_world_cast_step (worldstep.cc: the world's casts of a step, their arguments in one
+    struct), or None where the library has it not."""
+    fn = getattr(lib, "sc_world_cast_step", None) if lib is not None else None
+    if fn is not None:
+        fn.restype, fn.argtypes = _L, [_P, _P]
+    return fn
+
+
+_CAST_STEP = _cast_step()
+
+
 def kind() -> str:
     """Which implementation of the per-step work this process runs: native or numpy."""
     return "native" if NATIVE else "numpy"
@@ -357,9 +383,19 @@ class WorldCast:
                       laser.window, *self._head)  # fmt: skip
 
         self._moved_head = (ptr(self.xyt), None, ptr(self.has), ptr(self._fallbacks))
+        pack = self._pack = _CastPack()
+        head = self._head[:-1]  # all but the scratch of each ray's hit (not needed there)
+        fields = [f[0] for f in _CastPack._fields_]
+        values = (n, ptr(self.xyt), ptr(self.has), ptr(self.xy), ptr(self.want), map_cell,
+                  laser.cell, bias, laser.pad, laser.window, *head, 0)  # fmt: skip
+        for name, value in zip(fields, values, strict=True):
+            setattr(pack, name, value)
+        self._pack_p = ctypes.addressof(pack)
 
     def cast_moved(self, live: np.ndarray) -> tuple[int, int]:
         assert lib is not None and live.dtype == np.bool_ and live.shape == self.want.shape
+        if _CAST_STEP is not None:
+            return _CAST_STEP(self._pack_p, address(live)), self._pack.fallbacks
         xyt, _, has, fallbacks = self._moved_head
         fresh = lib.sc_world_cast_moved(xyt, address(live), has, fallbacks, *self._args)
         return fresh, int(self._fallbacks[0])

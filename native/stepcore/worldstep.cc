@@ -17,6 +17,17 @@
 //   CPython computes it (its vector_norm, not libm's hypot), math.atan2 as CPython wraps it,
 //   Python's min() and int() where the Python uses them. A target that is not finite is left
 //   to World.move itself (nothing is done: it returns 1).
+// - sc_world_cast_step: stepcore.cc's sc_world_cast_moved (World.cast_live), its arguments in
+//   one struct, and each ray's first hit and the cells it saw found in one pass over its
+//   samples (sc_world_cast's first_hits, then each_seen, walk them twice): the same ranges,
+//   the same cells seen, the same count of cells seen for the first time.
+// - sc_links_spend and sc_links_measure: topology.radio.slack's Slack, kept by the world so
+//   that the topology controller is given the positions only when a link can have come or
+//   gone: the least gap between any pair's distance and the radio range (less a micrometre),
+//   measured where the controller last took the positions, is spent by the two largest moves
+//   of each step (each counted a part in 1e9 long); while some is left, no pair can have
+//   crossed the range (the triangle inequality) and the links are the ones the controller
+//   has. Only where links follow the positions alone (the disc model on veth links).
 //
 // testbed/world/stepfast.py fills the struct (worldstep.h) with the world's arrays and calls
 // these; tests/unit/test_step_fast.py holds each equal to its Python twin.
@@ -26,6 +37,7 @@
 #include <poll.h>
 #include <time.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -267,6 +279,158 @@ int64_t sc_world_move(sc_world_step* s) {
         ++s->log_len;
     }
     return 0;
+}
+
+// World.cast_live's casts (see the top of this file; stepcore.cc's sc_world_cast_moved and
+// sc_world_cast say what each field means). Returns the cells of free_pad seen for the first
+// time; p->fallbacks counts the robots it did nothing for (has_out -1).
+int64_t sc_world_cast_step(sc_cast_pack* p, const uint8_t* live) {
+    const int64_t n = p->n, n_rays = p->n_rays, n_samples = p->n_samples, pw = p->pw;
+    const int64_t w = p->w, bias = p->bias, pad = p->pad;
+    p->fallbacks = 0;
+    bool moved = false;
+    for (int64_t i = 0; i < n; ++i) {
+        const double x = p->xyt[3 * i], y = p->xyt[3 * i + 1];
+        p->want[i] = live[i] && !(x == p->xy[2 * i] && y == p->xy[2 * i + 1]);
+        if (!p->want[i]) continue;
+        p->xy[2 * i] = x;
+        p->xy[2 * i + 1] = y;
+        moved = true;
+    }
+    if (!moved) return 0;
+    int64_t fresh = 0;
+    const int64_t size = p->frac / p->buckets;
+    for (int64_t i = 0; i < n; ++i) {
+        p->hit_out[i] = -1;
+        if (!p->want[i]) continue;
+        const double x = p->xy[2 * i], y = p->xy[2 * i + 1];
+        const double mr = y / p->map_cell, mc = x / p->map_cell;
+        if (!(mr >= 0 && mc >= 0 && mr < (double)p->mh && mc < (double)p->mw)) {
+            p->has_out[i] = -1;
+            ++p->fallbacks;
+            continue;
+        }
+        const int64_t cell = (int64_t)mr * p->mw + (int64_t)mc;
+        const int64_t s0 = p->open_space[cell] ? n_samples
+                                               : std::min<int64_t>(p->skip[cell], n_samples);
+        const float fx = (float)(x / p->laser_cell + (int)bias);
+        const float fy = (float)(y / p->laser_cell + (int)bias);
+        const int cb = (int)fx, rb = (int)fy;
+        const int64_t r0 = rb - bias, c0 = cb - bias;
+        if (r0 < 0 || c0 < 0 || r0 + w > p->ph || c0 + w > pw) {
+            p->has_out[i] = -1;
+            ++p->fallbacks;
+            continue;
+        }
+        const int roff = (int)(pad - rb), coff = (int)(pad - cb);
+        const int64_t at = r0 * pw + c0;
+        uint8_t* sn = p->seen + at;
+        const uint8_t* fp = p->free_pad + at;
+        auto see_at = [&](int64_t r, int64_t c) {  // branch-free: new cells are few
+            const int64_t k = r * pw + c;
+            fresh += (sn[k] ^ 1) & fp[k];
+            sn[k] = 1;
+        };
+        if (s0 >= n_samples && p->tabled && bias <= std::min(cb, rb) - pad - 1 &&
+            std::max(cb, rb) + pad + 1 < 2 * bias) {
+            const int64_t key = ((int)(((double)fx - cb) * p->frac) / size) * p->buckets +
+                                (int)(((double)fy - rb) * p->frac) / size;
+            const uint8_t* sure = p->sures[key];
+            for (int64_t r = 0; r < w; ++r) {
+                uint8_t* d = sn + r * pw;
+                const uint8_t* f = fp + r * pw;
+                const uint8_t* m = sure + (size_t)(r * w);
+                uint32_t row = 0;  // vectorises: no branch, a byte sum per row
+                for (int64_t c = 0; c < w; ++c) {
+                    row += (uint8_t)(m[c] & (d[c] ^ 1) & f[c]);
+                    d[c] |= m[c];
+                }
+                fresh += row;
+            }
+            const float* odx = p->odxs[key];
+            const float* ody = p->odys[key];
+            for (int j = 0; j < p->n_opens[key]; ++j)
+                see_at((int32_t)(ody[j] + fy) + roff, (int32_t)(odx[j] + fx) + coff);
+            p->hit_out[i] = 0;
+            p->has_out[i] = 0;
+            continue;
+        }
+        const uint8_t* oc = p->occ + at;
+        float* rg = p->ranges_out + (size_t)(i * n_rays);
+        bool any = false;
+        for (int64_t k = 0; k < n_rays; ++k) {
+            const float* rx = p->dx + (size_t)(k * n_samples);
+            const float* ry = p->dy + (size_t)(k * n_samples);
+            const uint8_t* mk = p->mark + (size_t)(k * n_samples);
+            int64_t first = n_samples, s = 0;
+            for (; s < s0; ++s)  // known free: only what the ray saw
+                if (mk[s]) see_at((int32_t)(ry[s] + fy) + roff, (int32_t)(rx[s] + fx) + coff);
+            for (; s < n_samples; ++s) {
+                const int64_t r = (int32_t)(ry[s] + fy) + roff;
+                const int64_t c = (int32_t)(rx[s] + fx) + coff;
+                if (oc[r * pw + c]) {
+                    first = s;
+                    see_at(r, c);
+                    break;
+                }
+                if (mk[s]) see_at(r, c);
+            }
+            if (first < n_samples) {
+                any = true;
+                rg[k] = (float)((double)(first + 1) * p->step);
+            } else {
+                rg[k] = INFINITY;
+            }
+        }
+        p->hit_out[i] = any ? 1 : 0;
+        p->has_out[i] = p->hit_out[i];
+    }
+    return fresh;
+}
+
+// Spend the moves since the positions the controller last took (link_xy's robots; the display
+// never moves). Returns 1 when the controller must be given the positions (a link may have
+// come or gone, or the slack does not apply), 0 when the links are the ones it has.
+int64_t sc_links_spend(sc_world_step* s) {
+    if (!s->links_slack || !(s->slack_left >= 0.0)) return 1;
+    double first = 0.0, second = 0.0;
+    for (int64_t i = 0; i < s->n; ++i) {
+        const double* p = s->xyt + 3 * i;
+        double* l = s->link_xy + 2 * i;
+        const double d = py_hypot(p[0] - l[0], p[1] - l[1]);
+        if (d > first) {
+            second = first;
+            first = d;
+        } else if (d > second) {
+            second = d;
+        }
+        l[0] = p[0];
+        l[1] = p[1];
+    }
+    s->slack_left -= (first + second) * (1.0 + 1e-9);
+    if (s->slack_left > 0.0) return 0;
+    s->slack_left = -1.0;
+    return 1;
+}
+
+// The controller just took the robots' positions (xyt) and the display's (link_xy row n): the
+// links are the range model's there. The least gap of any pair's distance from the range, less
+// a micrometre, is the slack from here (infinite for fewer than two; not a number: none).
+void sc_links_measure(sc_world_step* s) {
+    const int64_t m = s->n + 1;
+    for (int64_t i = 0; i < s->n; ++i) {
+        s->link_xy[2 * i] = s->xyt[3 * i];
+        s->link_xy[2 * i + 1] = s->xyt[3 * i + 1];
+    }
+    double least = INFINITY;
+    for (int64_t i = 0; i < m; ++i)
+        for (int64_t j = i + 1; j < m; ++j) {
+            const double* a = s->link_xy + 2 * i;
+            const double* b = s->link_xy + 2 * j;
+            const double gap = std::fabs(py_hypot(a[0] - b[0], a[1] - b[1]) - s->comm_range);
+            if (gap < least) least = gap;
+        }
+    s->slack_left = std::isnan(least) ? -1.0 : least - 1e-6;
 }
 
 }  // extern "C"

@@ -50,12 +50,54 @@ struct sc_world_step {
     int64_t others_used;   // sc_body_take's return
     int64_t missed_now;    // robots that missed this step's deadline
     int64_t watch_ready;   // 1: a watched descriptor is readable (or failed)
+    // The links' slack (topology.radio.slack, kept by the world): whether a link can have
+    // come or gone since the positions the topology controller was last given.
+    int64_t links_slack;   // 1: links follow the positions alone (disc model on veth)
+    double comm_range;
+    double slack_left;     // negative: nothing measured, or spent
+    double* link_xy;       // (n + 1) x 2: the positions last given (the display's last)
 };
 
+// The world's casts of a step (World.cast_live): sc_world_cast_moved's arguments in one struct
+// (node/stepcore.py's WorldCast fills it once: a ctypes call of 37 arguments cost more than
+// a step's casts of a lone robot).
+struct sc_cast_pack {
+    int64_t n;
+    const double* xyt;     // n x 3: the poses (the bodies')
+    int8_t* has_out;       // n: what each robot's last cast gave (1 ranges, 0 none, -1 not done)
+    double* xy;            // n x 2: where each robot was last cast
+    uint8_t* want;         // n: scratch
+    double map_cell, laser_cell;
+    int64_t bias, pad, w;
+    const float* dx;
+    const float* dy;
+    const uint8_t* mark;
+    int64_t n_rays, n_samples;
+    double step;
+    int64_t tabled, frac, buckets;
+    const uint8_t* const* sures;
+    const float* const* odxs;
+    const float* const* odys;
+    const int32_t* n_opens;
+    const uint8_t* occ;
+    uint8_t* seen;
+    const uint8_t* free_pad;
+    int64_t ph, pw;
+    const uint8_t* open_space;
+    const int32_t* skip;
+    int64_t mh, mw;
+    float* ranges_out;
+    int8_t* hit_out;
+    int64_t fallbacks;     // out: robots the call did nothing for (World.scan's own path)
+};
+
+int64_t sc_world_cast_step(sc_cast_pack* p, const uint8_t* live);
 double sc_monotonic(void);
 double sc_sleep_until(double deadline);
 int64_t sc_step_take(sc_world_step* s, int64_t step, int64_t count_missed);
 int64_t sc_world_move(sc_world_step* s);
+int64_t sc_links_spend(sc_world_step* s);
+void sc_links_measure(sc_world_step* s);
 double sc_py_hypot(double x, double y);
 double sc_py_atan2(double y, double x);
 

@@ -41,6 +41,7 @@ from testbed.run.progress import ProgressLine
 from testbed.run.record import RobotRecord
 from testbed.run.stepclock import StepClock, StepTiming
 from testbed.world import stepfast
+from topology.spec import VETH
 
 if TYPE_CHECKING:
     from testbed.run.execute import Started
@@ -177,11 +178,18 @@ class StepLoop:
         tw = time.monotonic()
         if not fast.move():  # a target that is not finite: World.move's own path
             world.move()
-        self._update_links(step)
+        if fast.links_due() or self.prep.cfg.isolate or self.net.isolated:
+            self._update_links(step)
+            fast.links_taken()
+        else:  # no link can have come or gone: the controller would say so (stepfast)
+            positions = world.positions()
+            self.positions[:] = positions
+            self.files.positions(step, positions)
         if step in self.kills:
             self._inject_kills(step)
             self._watch_servers()
-        if spoke:
+        if spoke or fast.crash_pending:
+            fast.crash_pending = False
             self._notice_crashes(step)
             self._watch_servers()
         ts = time.monotonic()
@@ -205,12 +213,22 @@ class StepLoop:
         return None  # no robot changed since `over` said None, and the cap is not reached
 
     def _start_compiled(self) -> None:
-        """The first compiled step: the records' state into the arrays, the fork servers'
-        reports so far taken in (so that only a new one makes their descriptors readable)."""
+        """The first compiled step: the records' state into the arrays, the fork servers to
+        watch. The Python steps before took in every report the servers had sent (each
+        `_notice_crashes` reads until nothing waits), so only a new one makes a watched
+        descriptor readable; one already read and not yet noticed is noticed at the step."""
         assert self.fast is not None
-        self._notice_crashes(self.clock.step)
         self._watch_servers()
+        live = [r for r in self.robots.values() if not r.gone]
+        servers = {r.process.server for r in live}
+        self.fast.crash_pending = any(r.process.returncode is not None for r in live) or any(
+            b"\n" in getattr(server, "buf", b"") for server in servers
+        )
         self.fast.load_records(self.robots)
+        spec = self.net.spec
+        # topology.radio.slack.Slack.applies: links follow the positions alone.
+        if spec.range_model == "disc" and spec.medium == VETH and not self.net.persistent:
+            self.fast.links_follow_positions(spec.comm_range, self.prep.display_pos)
 
     def _watch_servers(self) -> None:
         """The compiled step watches the fork servers of the robots still in the run."""

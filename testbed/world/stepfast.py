@@ -16,7 +16,14 @@ deadlines missed and which), the body links' sockets and buffers (testbed.world.
   servers; what is not a command (a "done", a HELLO, a hang-up) is left to BodyServer in
   Python, as are the crashed robots when a fork server spoke;
 - `move()`: World.move, compiled (False: it left the step to World.move, a target that is
-  not finite).
+  not finite);
+- `links_due()`: whether the topology controller must be given the positions this step: a
+  link may have come or gone (topology.radio.slack's reasoning, kept here in C: the least gap
+  of a pair's distance from the range where the controller last took them, spent by the two
+  largest moves of each step), or the links do not follow the positions alone (any range
+  model but the disc, the ns-3 medium, a network shared through its state file, robots
+  isolated: then always). Where it is not due, the controller's links are the range
+  model's at these positions already, and set_positions would have answered "no change".
 
 `load_records` and `store_records` carry the records between the arrays and the
 RobotRecords (the compiled steps own them in between: the loop stores them back whatever
@@ -50,6 +57,7 @@ _FIELDS: list[tuple[str, type[ctypes.c_int64] | type[ctypes.c_void_p] | type[cty
     ("others", _P), ("others_cap", _L), ("counts", _P),
     ("watch_fds", _P), ("n_watch", _L),
     ("others_used", _L), ("missed_now", _L), ("watch_ready", _L),
+    ("links_slack", _L), ("comm_range", _D), ("slack_left", _D), ("link_xy", _P),
 ]  # fmt: skip
 
 
@@ -62,6 +70,8 @@ _SIGNATURES = {
     "sc_sleep_until": (_D, [_D]),
     "sc_step_take": (_L, [_P, _L, _L]),
     "sc_world_move": (_L, [_P]),
+    "sc_links_spend": (_L, [_P]),
+    "sc_links_measure": (None, [_P]),
     "sc_py_hypot": (_D, [_D, _D]),
     "sc_py_atan2": (_D, [_D, _D]),
 }
@@ -108,6 +118,7 @@ class WorldStep:
         self._sockets = None
         self.records_held = False  # the arrays, not the RobotRecords, hold the records now
         self.changed = True  # a robot's state changed since the loop last asked if it is over
+        self.crash_pending = False  # an exit report was read before the watch began
         s = self.s = _Struct()
         s.n, s.m = n, 0
         s.xyt, s.target, s.has_target = _addr(a.xyt), _addr(a.target), _addr(a.has_target)
@@ -122,7 +133,27 @@ class WorldStep:
         s.live, s.last_cmd, s.missed = _addr(live), _addr(self.last_cmd), _addr(self.missed)
         s.missed_steps, s.missed_len = _addr(self.missed_steps), _addr(self.missed_len)
         s.missed_cap = MAX_MISSED_STEPS_KEPT
+        self.link_xy = np.zeros((n + 1, 2), dtype=np.float64)
+        s.link_xy, s.links_slack, s.slack_left = _addr(self.link_xy), 0, -1.0
         self.p = ctypes.addressof(s)
+
+    def links_follow_positions(self, comm_range: float, display: tuple[float, float]) -> None:
+        """Links follow the positions alone (the disc model of range `comm_range` on veth links,
+        the display standing at `display`): from now on `links_due` says when the topology
+        controller must be given them."""
+        self.link_xy[-1] = display
+        self.s.comm_range, self.s.links_slack, self.s.slack_left = float(comm_range), 1, -1.0
+
+    def links_due(self) -> bool:
+        """Whether a link may have come or gone since the positions the topology controller
+        last took (always, where the slack does not apply); spends this step's moves."""
+        assert lib is not None
+        return bool(lib.sc_links_spend(self.p))
+
+    def links_taken(self) -> None:
+        """The topology controller took the bodies' positions: the slack is measured there."""
+        assert lib is not None
+        lib.sc_links_measure(self.p)
 
     def sockets(self, socks) -> None:
         """The body links' sockets and buffers (a bodylink `_Sockets`), when they changed."""

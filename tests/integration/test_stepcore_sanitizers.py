@@ -3,9 +3,14 @@ ctypes), checked for memory errors and undefined behaviour: `make build/asan/lib
 builds it with AddressSanitizer and UndefinedBehaviorSanitizer, and its unit tests (every
 compiled function held equal to its numpy twin on random maps, poses and scans; the world's
 casts of a step in one call; its body links' commands and frames over real sockets; the
-most extreme ranges, poses and goals its callers can pass, test_stepcore_extremes) run on
-that build, in a Python with the ASan runtime preloaded. The build checks float-to-integer
-conversions too (float-cast-overflow, which -fsanitize=undefined leaves out).
+most extreme ranges, poses and goals its callers can pass, test_stepcore_extremes; the
+world's compiled step, each call and whole runs of both step loops, test_step_fast and
+test_step_loop_replay) run on that build, in a Python with the ASan runtime preloaded. The
+build checks float-to-integer conversions too (float-cast-overflow, which
+-fsanitize=undefined leaves out). The world's step (worldstep.cc) is called from the step
+loop's one thread and keeps nothing between calls but its caller's struct, so it needs no
+ThreadSanitizer run; the threaded callers (the robots) have theirs in
+test_cpp_robot_sanitizers.
 Clean means they pass and no sanitizer reported (a report stops the process). The C++ robot,
 which links the same source in, has its own sanitizer runs (test_cpp_robot_sanitizers)."""
 
@@ -42,8 +47,10 @@ def test_the_step_core_runs_clean_under_asan_and_ubsan():
         "tests/unit/test_stepcore.py",
         "tests/unit/test_world_step.py",
         "tests/unit/test_body_fast.py",
-        "tests/unit/test_stepcore_extremes.py",
-    ]  # the last: any range, pose and goal a caller can pass (issue 55)
+        "tests/unit/test_stepcore_extremes.py",  # any range, pose and goal a caller can pass
+        "tests/unit/test_step_fast.py",  # the world's step: commands, moves, the sleep
+        "tests/unit/test_step_loop_replay.py",  # both step loops over a scripted team
+    ]
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests],
         cwd=REPO, env=env, capture_output=True, text=True, timeout=900,
