@@ -446,8 +446,8 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
     a.iface = value["iface"];
     a.profile = value["profile"];
     a.log_level = value["log_level"];
-    a.has_stats = value.count("stats") != 0;
-    a.has_state = value.count("state") != 0;
+    a.has_stats = !value["stats"].empty();  // Python: `if self.stats_path`
+    a.has_state = !value["state"].empty();
     a.stats = value["stats"];
     a.state = value["state"];
     if (!time_scale_given && !py_float(value["time_scale"], a.time_scale)) a.time_scale = 1.0;

@@ -2,6 +2,7 @@
 #include "json.h"
 
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -23,13 +24,11 @@ std::string py_repr(double x) {
     if (std::isnan(x)) return "NaN";  // json.dumps spells them so
     if (std::isinf(x)) return x > 0 ? "Infinity" : "-Infinity";
     if (x == 0) return std::signbit(x) ? "-0.0" : "0.0";
-    // The shortest of %.1e .. %.17e that reads back as x: its digits and exponent.
+    // The shortest digits that read back as x (to_chars' shortest round trip, as Python's
+    // repr), in scientific form: its digits and exponent.
     char buf[64];
-    for (int p = 0; p < 17; ++p) {
-        snprintf(buf, sizeof buf, "%.*e", p, x);
-        if (strtod(buf, nullptr) == x) break;
-    }
-    std::string s(buf);
+    auto res = std::to_chars(buf, buf + sizeof buf, x, std::chars_format::scientific);
+    std::string s(buf, res.ptr);
     bool neg = s[0] == '-';
     if (neg) s.erase(0, 1);
     size_t e = s.find('e');
@@ -58,10 +57,13 @@ std::string py_repr(double x) {
 
 double py_round(double x, int n) {
     if (!std::isfinite(x)) return x;
-    // Through the shortest decimal text at n digits, as Python rounds the exact value.
-    char buf[64];
-    snprintf(buf, sizeof buf, "%.*f", n, x);
-    return strtod(buf, nullptr);
+    // Through the decimal text at n digits (correctly rounded from the exact value, as
+    // Python's round does), read back.
+    char buf[400];
+    auto res = std::to_chars(buf, buf + sizeof buf, x, std::chars_format::fixed, n);
+    double out = x;
+    std::from_chars(buf, res.ptr, out);
+    return out;
 }
 
 namespace {

@@ -73,7 +73,7 @@ json::Value TimerLateness::as_json() const {
         hist["<=" + std::to_string(gen::TIMER_BOUNDS_MS[b])] = json::Value::integer(counts_[b]);
     hist[">" + std::to_string(gen::TIMER_BOUNDS_MS[N_BOUNDS - 1])] =
         json::Value::integer(counts_[N_BOUNDS]);
-    v["hist"] = hist;
+    v["hist"] = std::move(hist);
     // [due, fired, ms late], in the order they were due (Python's sort is stable: ties keep
     // the heap's order, which only equal due times could tell apart).
     auto w = worst_;
@@ -85,9 +85,9 @@ json::Value TimerLateness::as_json() const {
         row.arr.push_back(json::Value::real(json::py_round(d, 4)));
         row.arr.push_back(json::Value::real(json::py_round(f, 4)));
         row.arr.push_back(json::Value::real(json::py_round(ms, 3)));
-        list.arr.push_back(row);
+        list.arr.push_back(std::move(row));
     }
-    v["worst"] = list;
+    v["worst"] = std::move(list);
     return v;
 }
 
@@ -114,9 +114,9 @@ std::string Stats::text(bool compact) {
         Value r = Value::object();
         r["next_hop"] = Value::str(nh.first);
         r["hops"] = Value::integer(nh.second);
-        rs[dest] = r;
+        rs[dest] = std::move(r);
     }
-    v["routes"] = rs;
+    v["routes"] = std::move(rs);
     v["packets_buffered"] = Value::integer(packets_buffered);
     v["route_use_refreshes"] = Value::integer(route_uses);
     {
@@ -139,14 +139,14 @@ std::string Stats::text(bool compact) {
             x["latency_s"] = Value::real(d.latency_s);
             x["round_latency_s"] = Value::real(d.round_latency_s);
             x["t"] = Value::real(d.t);
-            ds.arr.push_back(x);
+            ds.arr.push_back(std::move(x));
         }
-        v["discoveries"] = ds;
+        v["discoveries"] = std::move(ds);
     }
     Value tl = Value::object();
     tl["hello"] = hello.as_json();
     tl["expiry"] = expiry.as_json();
-    v["timer_lateness_ms"] = tl;
+    v["timer_lateness_ms"] = std::move(tl);
     timespec cpu{};
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &cpu);
     v["cpu_s"] = Value::real(json::py_round(double(cpu.tv_sec) + double(cpu.tv_nsec) * 1e-9, 3));
