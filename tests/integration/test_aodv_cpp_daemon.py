@@ -138,6 +138,9 @@ def _ping_4_hops(net):
     assert s1["routes"]["10.0.0.5"] == {"next_hop": "10.0.0.2", "hops": 4}
     assert s1["packets_buffered"] >= 1 and s1["packets_released"] >= 1
     assert set(s1["timer_lateness_ms"]) == {"hello", "expiry"}
+    with open(stats_path(net, 1)) as f:  # the rewrites: one line, as DaemonStats.compact_text
+        text = f.read()
+    assert text == DaemonStats.from_json(json.loads(text)).compact_text()
 
 
 def _flood(net, datagrams: int):
@@ -188,7 +191,11 @@ def _sigterm_leaves_nothing(net):
         final = DaemonStats.read(stats_path(net, k)).to_json()
         assert final["robot"] == f"r{k}" and final["pid"] == proc.pid
         with open(stats_path(net, k)) as f:  # every key of the Python daemon's file, no other
-            assert set(json.load(f)) == {f.name for f in dataclasses.fields(DaemonStats)}
+            text = f.read()
+        doc = json.loads(text)
+        assert set(doc) == {f.name for f in dataclasses.fields(DaemonStats)}
+        # Byte for byte as the Python daemon writes its last file (json.dumps, indent 1).
+        assert text == json.dumps(doc, indent=1, sort_keys=True) + "\n"
         assert routes(net, k) == {}
         all_routes = net.exec(k, ["ip", "-4", "route"], capture_output=True, text=True).stdout
         assert "aodv0" not in all_routes, all_routes
