@@ -144,6 +144,8 @@ inline bool world_free(const sc_world_step* s, double x, double y) {
     return !s->blocked[r * s->bw + c];
 }
 
+constexpr int64_t BLOCK = 16;  // samples whose cells sc_world_cast_step computes at once
+
 inline double seconds(const struct timespec& t) {
     // time.monotonic(): the nanoseconds as one integer, then a float divided by 1e9.
     const int64_t ns = (int64_t)t.tv_sec * 1000000000 + (int64_t)t.tv_nsec;
@@ -326,11 +328,11 @@ int64_t sc_world_cast_step(sc_cast_pack* p, const uint8_t* live) {
         const int64_t at = r0 * pw + c0;
         uint8_t* sn = p->seen + at;
         const uint8_t* fp = p->free_pad + at;
-        auto see_at = [&](int64_t r, int64_t c) {  // branch-free: new cells are few
-            const int64_t k = r * pw + c;
+        auto see_cell = [&](int64_t k) {  // branch-free: new cells are few
             fresh += (sn[k] ^ 1) & fp[k];
             sn[k] = 1;
         };
+        auto see_at = [&](int64_t r, int64_t c) { see_cell(r * pw + c); };
         if (s0 >= n_samples && p->tabled && bias <= std::min(cb, rb) - pad - 1 &&
             std::max(cb, rb) + pad + 1 < 2 * bias) {
             const int64_t key = ((int)(((double)fx - cb) * p->frac) / size) * p->buckets +
@@ -362,18 +364,24 @@ int64_t sc_world_cast_step(sc_cast_pack* p, const uint8_t* live) {
             const float* rx = p->dx + (size_t)(k * n_samples);
             const float* ry = p->dy + (size_t)(k * n_samples);
             const uint8_t* mk = p->mark + (size_t)(k * n_samples);
-            int64_t first = n_samples, s = 0;
-            for (; s < s0; ++s)  // known free: only what the ray saw
-                if (mk[s]) see_at((int32_t)(ry[s] + fy) + roff, (int32_t)(rx[s] + fx) + coff);
-            for (; s < n_samples; ++s) {
-                const int64_t r = (int32_t)(ry[s] + fy) + roff;
-                const int64_t c = (int32_t)(rx[s] + fx) + coff;
-                if (oc[r * pw + c]) {
-                    first = s;
-                    see_at(r, c);
-                    break;
+            int64_t first = n_samples;
+            // Each block's cells first (a loop the compiler vectorises), then its samples in
+            // order: known free before s0 (only what the ray saw), else until the first hit.
+            for (int64_t b = 0; b < n_samples && first == n_samples; b += BLOCK) {
+                const int64_t e = std::min<int64_t>(b + BLOCK, n_samples);
+                int32_t at_cell[BLOCK];
+                for (int64_t s = b; s < e; ++s)
+                    at_cell[s - b] = ((int32_t)(ry[s] + fy) + roff) * (int32_t)pw +
+                                     (int32_t)(rx[s] + fx) + coff;
+                for (int64_t s = b; s < e; ++s) {
+                    const int64_t cell = at_cell[s - b];
+                    if (s >= s0 && oc[cell]) {
+                        first = s;
+                        see_cell(cell);
+                        break;
+                    }
+                    if (mk[s]) see_cell(cell);
                 }
-                if (mk[s]) see_at(r, c);
             }
             if (first < n_samples) {
                 any = true;

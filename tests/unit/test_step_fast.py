@@ -96,7 +96,7 @@ def assert_same_bodies(py: World, c: World) -> None:
 def targets_for(rng, world: World, step: int) -> list:
     """Each robot's command this step: a target near it, on an axis, far, on itself, off the
     map, as float32 on the wire; or none (stop); or unchanged (no command)."""
-    out = []
+    out: list[str | tuple[float, float] | None] = []
     for b in world.bodies:
         kind = rng.integers(0, 9)
         if kind == 0:
