@@ -79,7 +79,7 @@ TB_AODV_SRC := $(wildcard native/aodv/daemon/*.cc) $(filter-out native/aodv/tb-a
 TB_AODV_CONSTS := build/gen/aodv_consts.h
 TB_AODV_CONSTS_FROM := aodv/constgen.py aodv/__main__.py aodv/kernel.py aodv/daemon.py \
 	aodv/control.py aodv/packet.py aodv/params.py aodv/persist.py aodv/stats.py common/sched.py \
-	node/argsgen.py
+	common/cliterals.py
 TB_AODV_DEPS := $(TB_AODV_SRC) $(wildcard native/aodv/daemon/*.h) $(wildcard native/aodv/*.h) \
 	$(TB_AODV_CONSTS)
 TB_AODV_UNBUILT := build/tb-aodv.unbuilt
