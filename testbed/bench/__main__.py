@@ -24,6 +24,8 @@ BENCHMARKS = (
     "fidelity",
     "cost",
     "neighbours",
+    "idle",
+    "aodv_grid",
 )
 
 

@@ -4,6 +4,7 @@ import json
 import os
 import platform
 import statistics
+import subprocess
 import time
 from collections.abc import Sequence
 
@@ -33,3 +34,11 @@ def write(name: str, data: dict) -> str:
     with open(path, "w") as f:
         json.dump(data, f, indent=2)
     return path
+
+
+def busiest_processes(n: int = 8) -> list[str]:
+    """The n busiest processes now (`ps -eo pcpu,comm --sort=-pcpu`: CPU % over each one's
+    lifetime), the machine's other work written beside a heavy benchmark's numbers."""
+    out = subprocess.run(["ps", "-eo", "pcpu,comm", "--sort=-pcpu"], capture_output=True,
+                         text=True, check=False).stdout  # fmt: skip
+    return [" ".join(line.split()) for line in out.splitlines()[1 : n + 1]]

@@ -21,8 +21,13 @@ kind, sampling /proc (every thread of every process under the run) while it runs
 the testbed of another checkout (its own code, this machine's venv) for a before/after
 figure. Each case runs with each robot program of TESTBED_COST_ROBOTS (default
 "python,cpp": `testbed run --robot`, the Python robot against the C++ robot in one sitting;
-a tree without the option takes "default"). Medians over RUNS runs; the sampler itself costs
-about 1% of a core.
+a tree without the option takes "default"), and each routing daemon of TESTBED_COST_DAEMONS
+(default "python,cpp": `--aodv-daemon`, the Python AODV daemon against the compiled one in
+the same sitting; "default" leaves it to the run). A case's label names the robot and the
+daemon where they were chosen (`ten-cpp-aodv-python`: ten C++ robots, the Python daemon); each
+run records the daemon result.json says ran (`aodv_daemon`) and the routing daemons' CPU per
+robot-step (`routing_ms_per_robot_step`, the issue's target: at most 0.02 ms). Medians over
+RUNS runs; the sampler itself costs about 1% of a core.
 """
 
 from __future__ import annotations
@@ -43,12 +48,17 @@ from common import boundedfile
 from node import events as nodeevents
 from node.events import EVENTS_SUFFIX
 from testbed import PROJECT_ROOT
-from testbed.bench.common import write
+from testbed.bench.common import busiest_processes, write
 from testbed.resultfile import RunResult
 from testbed.run import robotfile
 from testbed.run.robotfile import RobotStats
 
 RUNS = 3
+ROBOTS = ("default", "python", "cpp")  # `testbed run --robot` (auto: "default")
+DAEMONS = ("default", "python", "cpp")  # `testbed run --aodv-daemon`
+# The routing daemons started as programs (the Python AODV daemons are forked, titled "rK aodv").
+ROUTING_PROGRAMS = ("babeld", "batmand", "tb-aodv")
+ROUTING_TARGET_MS = 0.02  # issue 53: the routing daemons' CPU per robot-step, ten robots
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 SAMPLE_S = 0.05
 CASES = (  # (label, robots, time scale, seed)
@@ -121,7 +131,7 @@ def _kind(pid: int, tid: int, pcomm: str, root: int) -> str:
         return "robots"
     if pcomm.endswith(" display"):
         return "display"
-    if pcomm.endswith((" aodv", " babel", " batman")) or pcomm in ("babeld", "batmand"):
+    if pcomm.endswith((" aodv", " babel", " batman")) or pcomm in ROUTING_PROGRAMS:
         return "routing"
     if pcomm == "forkserver" or pcomm.startswith("python"):
         return "fork servers"
@@ -177,10 +187,16 @@ def _plans_and_frames(robots: list[tuple[RobotStats, str]]) -> tuple[list[float]
 
 
 def testbed_run(
-    robots: int, time_scale: float, seed: int, tree: str, robot: str = "default"
+    robots: int,
+    time_scale: float,
+    seed: int,
+    tree: str,
+    robot: str = "default",
+    daemon: str = "default",
 ) -> dict:
     """One `testbed run` of `tree`'s code, its CPU split by process kind; `robot`: the
-    robot program (`--robot`), "default" to leave it to the run."""
+    robot program (`--robot`), `daemon` the AODV daemon (`--aodv-daemon`), "default" to
+    leave either to the run."""
     out = tempfile.mkdtemp(prefix="bench-cost-")
     name = "tc" + uuid.uuid4().hex[:6]
     cmd = [sys.executable, "-m", "testbed.cli", "run", "--robots", str(robots),
@@ -188,6 +204,8 @@ def testbed_run(
            "--out", out, "--name", name, "--quiet", "--replace"]  # fmt: skip
     if robot != "default":
         cmd += ["--robot", robot]
+    if daemon != "default":
+        cmd += ["--aodv-daemon", daemon]
     load = os.getloadavg()[0]
     t_start = time.monotonic()
     proc = subprocess.Popen(cmd, cwd=tree, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -220,6 +238,8 @@ def testbed_run(
         "faithful": r.faithful, "fidelity_reason": r.fidelity_reason or None,
         "step_core": r.step_core or "numpy",
         "robot": r.robot or "python", "robot_reason": r.robot_reason,
+        "aodv_daemon": r.aodv_daemon or "python", "aodv_daemon_reason": r.aodv_daemon_reason,
+        "routing_ms_per_robot_step": round(inside.get("routing", 0.0) * 1000 / robot_steps, 4),
         "cpu_ms_per_robot_step": round(sum(inside.values()) * 1000 / robot_steps, 3),
         "stepping_cpu_ms_per_robot_step": {
             k: round(v * 1000 / robot_steps, 3) for k, v in sorted(inside.items())
@@ -265,16 +285,28 @@ def _median_of(runs: list[dict], key: str) -> float | None:
     return round(float(np.median(v)), 3) if v else None
 
 
+def _label(case: str, program: str, daemon: str) -> str:
+    """`ten`, `ten-cpp`, `ten-cpp-aodv-python`: the case, then the robot program and the AODV
+    daemon where they were chosen."""
+    robot = "" if program == "default" else f"-{program}"
+    aodv = "" if daemon == "default" else f"-aodv-{daemon}"
+    return f"{case}{robot}{aodv}"
+
+
 def measure(
-    tree: str = PROJECT_ROOT, runs: int = RUNS, programs: tuple[str, ...] = ("default",)
+    tree: str = PROJECT_ROOT,
+    runs: int = RUNS,
+    programs: tuple[str, ...] = ("default",),
+    daemons: tuple[str, ...] = ("default",),
 ) -> dict:
+    load, busiest = os.getloadavg()[0], busiest_processes()
     floor = [in_process(seed) for seed in (2, 2, 2)]
     floor_ms = float(np.median([f["wall_ms_per_step"] for f in floor]))
     floor_cpu = float(np.median([f["cpu_ms_per_step"] for f in floor]))
     cases = {}
-    for (case, robots, k, seed), program in itertools.product(CASES, programs):
-        label = case if program == "default" else f"{case}-{program}"
-        rs = [testbed_run(robots, k, seed, tree, program) for _ in range(runs)]
+    for (case, robots, k, seed), program, daemon in itertools.product(CASES, programs, daemons):
+        label = _label(case, program, daemon)
+        rs = [testbed_run(robots, k, seed, tree, program, daemon) for _ in range(runs)]
         for r in rs:
             if robots == 1 and r["step_loop_wall_s"] and r["steps"]:
                 # The floor is one robot's: a lone run's wall time per step against it (the
@@ -286,7 +318,9 @@ def measure(
         kinds = sorted({k for r in rs for k in r["stepping_cpu_ms_per_robot_step"]})
         cases[label] = {
             "runs": rs,
+            "aodv_daemon": sorted({r["aodv_daemon"] for r in rs}),
             "median_cpu_ms_per_robot_step": _median_of(rs, "cpu_ms_per_robot_step"),
+            "median_routing_ms_per_robot_step": _median_of(rs, "routing_ms_per_robot_step"),
             "median_by_kind_ms_per_robot_step": {
                 k: round(
                     float(np.median([r["stepping_cpu_ms_per_robot_step"].get(k, 0.0) for r in rs])),
@@ -299,7 +333,9 @@ def measure(
             ),  # fmt: skip
             "faithful_runs": sum(1 for r in rs if r["faithful"]),
         }
-    return {"tree": tree, "in_process": floor, "in_process_wall_ms_per_step": floor_ms,
+    return {"tree": tree, "load_average_1min_at_start": load, "busiest_at_start": busiest,
+            "routing_target_ms_per_robot_step": ROUTING_TARGET_MS,
+            "in_process": floor, "in_process_wall_ms_per_step": floor_ms,
             "cases": cases}  # fmt: skip
 
 
@@ -307,10 +343,17 @@ def run() -> None:
     tree = os.environ.get("TESTBED_COST_TREE", PROJECT_ROOT)
     runs = int(os.environ.get("TESTBED_COST_RUNS", RUNS))
     programs = tuple(os.environ.get("TESTBED_COST_ROBOTS", "python,cpp").split(","))
-    data = measure(tree, runs, programs)
+    daemons = tuple(os.environ.get("TESTBED_COST_DAEMONS", "python,cpp").split(","))
+    for what, asked, known in (("ROBOTS", programs, ROBOTS), ("DAEMONS", daemons, DAEMONS)):
+        if not set(asked) <= set(known):
+            print(f"bench cost: TESTBED_COST_{what}={','.join(asked)!r}: each of "
+                  f"{', '.join(known)}", file=sys.stderr)  # fmt: skip
+            sys.exit(2)
+    data = measure(tree, runs, programs, daemons)
     name = os.environ.get("TESTBED_COST_NAME", "cost")
     print(f"bench cost: {write(name, data)}")
     for label, c in data["cases"].items():
         print(f"  {label}: {c['median_cpu_ms_per_robot_step']} ms CPU per robot-step "
+              f"(routing {c['median_routing_ms_per_robot_step']}) "
               f"{c['median_by_kind_ms_per_robot_step']}, plan p99 {c['median_plan_ms_p99']} ms, "
               f"faithful {c['faithful_runs']}/{len(c['runs'])}")  # fmt: skip
