@@ -15,8 +15,9 @@
 // - sc_world_move: World.move, every live robot toward its target, byte for byte: the same
 //   float64 operations in the same order (built with -ffp-contract=off), math.hypot as
 //   CPython computes it (its vector_norm, not libm's hypot), math.atan2 as CPython wraps it,
-//   Python's min() and int() where the Python uses them. A target that is not finite is left
-//   to World.move itself (nothing is done: it returns 1).
+//   Python's min() and int() where the Python uses them. A target that is not finite moves
+//   no one (as in World.move); a position that is not finite (the world never makes one) is
+//   left to World.move itself (nothing is done: it returns 1).
 // - sc_world_cast_step: stepcore.cc's sc_world_cast_moved (World.cast_live), its arguments in
 //   one struct, and each ray's first hit and the cells it saw found in one pass over its
 //   samples (sc_world_cast's first_hits, then each_seen, walk them twice): the same ranges,
@@ -227,20 +228,19 @@ int64_t sc_step_take(sc_world_step* s, int64_t step, int64_t count_missed) {
 }
 
 // World.move (see the top of this file). Returns 0, or 1 with nothing done when a live robot
-// with a target has a coordinate that is not finite (World.move's own path then).
+// with a target stands somewhere not finite, or the move log is full (World.move's own path).
 int64_t sc_world_move(sc_world_step* s) {
     for (int64_t i = 0; i < s->n; ++i) {
         if (!s->alive[i] || !s->has_target[i]) continue;
-        const double* t = s->target + 2 * i;
         const double* p = s->xyt + 3 * i;
-        if (!(std::isfinite(t[0]) && std::isfinite(t[1]) && std::isfinite(p[0]) &&
-              std::isfinite(p[1])))
-            return 1;
+        if (!(std::isfinite(p[0]) && std::isfinite(p[1]))) return 1;
     }
     if (s->log_len + s->n > s->log_cap) return 1;  // no room to log the moves: Python's path
     for (int64_t i = 0; i < s->n; ++i) {
         if (!s->alive[i] || !s->has_target[i]) continue;
         double* p = s->xyt + 3 * i;
+        const double* t = s->target + 2 * i;
+        if (!(std::isfinite(t[0]) && std::isfinite(t[1]))) continue;  // no way leads there
         const double bx = p[0], by = p[1];
         const double dx = s->target[2 * i] - bx, dy = s->target[2 * i + 1] - by;
         const double d = py_hypot(dx, dy);

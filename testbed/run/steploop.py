@@ -176,7 +176,7 @@ class StepLoop:
             clock.robots_missed(missed)
         step = clock.advance()
         tw = time.monotonic()
-        if not fast.move():  # a target that is not finite: World.move's own path
+        if not fast.move():  # a position not finite, or the log full: World.move's own path
             world.move()
         if fast.links_due() or self.prep.cfg.isolate or self.net.isolated:
             self._update_links(step)

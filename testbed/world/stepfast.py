@@ -15,8 +15,8 @@ deadlines missed and which), the body links' sockets and buffers (testbed.world.
   the robots that had not answered counted (RobotRecord.missed_deadline), a look at the fork
   servers; what is not a command (a "done", a HELLO, a hang-up) is left to BodyServer in
   Python, as are the crashed robots when a fork server spoke;
-- `move()`: World.move, compiled (False: it left the step to World.move, a target that is
-  not finite);
+- `move()`: World.move, compiled (False: it left the step to World.move, a position that
+  is not finite);
 - `links_due()`: whether the topology controller must be given the positions this step: a
   link may have come or gone (topology.radio.slack's reasoning, kept here in C: the least gap
   of a pair's distance from the range where the controller last took them, spent by the two

@@ -215,6 +215,8 @@ class World:
         for i, b in enumerate(self.bodies):
             if not b.alive or b.target is None:
                 continue
+            if not (math.isfinite(b.target[0]) and math.isfinite(b.target[1])):
+                continue  # no way leads there (a robot's command may say anything): it stays
             dx, dy = b.target[0] - b.x, b.target[1] - b.y
             d = math.hypot(dx, dy)
             if d < 1e-9:

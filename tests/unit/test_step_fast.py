@@ -139,19 +139,36 @@ def test_compiled_move_equals_world_move(seed):
         assert_same_bodies(py, c)
 
 
-def test_compiled_move_leaves_a_target_that_is_not_finite_to_world_move():
+def test_a_target_that_is_not_finite_moves_no_one_in_either_move():
+    """A robot's command may carry any float32 (node.body): a target no way leads to leaves
+    its robot where it is, no collision counted, in World.move (it ended the world's step
+    loop with a ValueError before) and in the compiled move alike; the others move on."""
     truth = empty_terrain(4, 4)
-    py, c = twin_worlds(truth, [(1.0, 1.0), (2.0, 2.0)], 0.1)
-    fast = stepfast.WorldStep(c, np.ones(2, dtype=bool))
-    for w in (py, c):
-        w.command(0, (3.0, 1.0))
-        w.command(1, (math.inf, 2.0))
-    before = c.body_arrays.xyt.copy()
+    starts = [(1.0, 1.0), (2.0, 2.0), (3.0, 1.0)]
+    py, c = twin_worlds(truth, starts, 0.1)
+    fast = stepfast.WorldStep(c, np.ones(3, dtype=bool))
+    for target in ((math.inf, 2.0), (2.0, -math.inf), (math.nan, 2.0), (3.4e38, -3.4e38)):
+        for w in (py, c):
+            w.command(0, (3.0, 1.0))
+            w.command(1, target)
+            w.command(2, (1.0, 3.0))
+        py.move()
+        assert fast.move()
+        assert_same_bodies(py, c)
+    assert py.body_arrays.xyt[1, :2].tolist() != [2.0, 2.0]  # the huge finite one drove
+    assert py.body_arrays.collisions.tolist() == c.body_arrays.collisions.tolist()
+
+
+def test_compiled_move_leaves_a_position_that_is_not_finite_to_world_move():
+    truth = empty_terrain(4, 4)
+    py, c = twin_worlds(truth, [(1.0, 1.0)], 0.1)
+    fast = stepfast.WorldStep(c, np.ones(1, dtype=bool))
+    c.command(0, (3.0, 1.0))
+    c.bodies[0].x = math.nan  # the world never puts a robot there; were it to, Python decides
+    before = c.body_arrays.xyt.tobytes()
     assert not fast.move()
-    assert c.body_arrays.xyt.tobytes() == before.tobytes() and c.step_no == 0
-    c.command(1, (math.nan, 2.0))
-    assert not fast.move()
-    c.bodies[1].alive = False  # a dead robot's target is not looked at
+    assert c.body_arrays.xyt.tobytes() == before and c.step_no == 0
+    c.bodies[0].alive = False  # a dead robot is not looked at
     assert fast.move()
 
 

@@ -126,7 +126,7 @@ def replay(tmp_path, loop: str, monkeypatch) -> tuple[dict, dict, int]:
     try:
         server.wait_for(set(range(1, N + 1)), set(), timeout=10.0)
         robots = {k: RobotRecord(k, proc=stubs[k]) for k in range(1, N + 1)}  # type: ignore[arg-type]
-        cfg = SimpleNamespace(kills=[(KILLED, KILL_STEP)], max_steps=1000, time_scale=8.0,
+        cfg = SimpleNamespace(kills=[(KILLED, KILL_STEP)], max_steps=1000, time_scale=4.0,
                               isolate=[])  # fmt: skip
         prep = SimpleNamespace(world=world, cfg=cfg, display_steps=DisplaySteps(10),
                                display_pos=(5.0, 5.0), display_k=N + 1)  # fmt: skip
