@@ -4,12 +4,12 @@ routing-ready in at most 10 s).
 
 - idle: a network of IDLE_ROBOTS robots (topology.Network, routing aodv, a grid of spacing 8
   and range 12, so every robot has neighbours; no traffic, no robot programs), left WARMUP_S
-  after its bring-up, then each daemon's CPU over IDLE_S from /proc/PID/stat (user and
-  system time of all its threads and of its waited-for children) as a percentage of one
-  core, and its memory at the end from /proc/PID/smaps_rollup: RSS (resident) and PSS (the
-  Python daemons are forked from one fork server, so much of their RSS is pages shared with
-  it and each other; PSS charges each shared page in parts). Medians and maxima over the
-  daemons, for each daemon of DAEMONS.
+  after its bring-up, then each daemon's CPU over IDLE_S (its threads' time on a CPU, in
+  nanoseconds, and its waited-for children's: cpu_s) as a percentage of one core, and its
+  memory at the end from /proc/PID/smaps_rollup: RSS (resident) and PSS (the Python daemons
+  are forked from one fork server, so much of their RSS is pages shared with it and each
+  other; PSS charges each shared page in parts). Medians, means and maxima over the daemons,
+  for each daemon of DAEMONS.
 - ready: Network.up() of a grid with routing aodv, to its return, which is once every
   daemon has written its statistics file, i.e. has its socket, TUN device and routes ready
   (topology.bringup.start_routing): the time from bring-up to routing-ready, READY_REPEATS
@@ -56,13 +56,19 @@ def spec(n: int, daemon: str, prefix: str = "ti") -> NetworkSpec:
 
 
 def cpu_s(pid: int) -> float | None:
-    """CPU seconds of pid (its threads and its waited-for children), None once it is gone."""
+    """CPU seconds of pid: its threads' time on a CPU in nanoseconds (/proc/PID/task/*/
+    schedstat; /proc/PID/stat counts in clock ticks of 10 ms, and an idle daemon uses one
+    or two a minute), and its waited-for children's (stat, in ticks). None once it is gone."""
     try:
         with open(f"/proc/{pid}/stat") as f:
             fields = f.read().rsplit(")", 1)[1].split()
-    except OSError:
+        ns = 0
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/schedstat") as f:
+                ns += int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
         return None
-    return sum(int(x) for x in fields[11:15]) / CLK_TCK
+    return ns / 1e9 + (int(fields[13]) + int(fields[14])) / CLK_TCK
 
 
 def memory_kib(pid: int) -> tuple[int, int]:
@@ -123,6 +129,7 @@ def idle(daemon: str, n: int = IDLE_ROBOTS, window_s: float = IDLE_S) -> dict:
         "machine_at_start": at_start, "ready_s": round(ready_s, 3), "window_s": round(dt, 2),
         "cpu_percent_of_core_median": round(median(cpu), 4) if cpu else None,
         "cpu_percent_of_core_max": round(max(cpu), 4) if cpu else None,
+        "cpu_percent_of_core_mean": round(sum(cpu) / len(cpu), 4) if cpu else None,
         "cpu_percent_of_core_all_daemons": round(sum(cpu), 3),
         "rss_mib_median": round(median(rss), 3) if rss else None,
         "rss_mib_max": round(max(rss), 3) if rss else None,
