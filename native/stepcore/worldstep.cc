@@ -39,6 +39,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -65,6 +66,11 @@ inline DoubleLength dl_mul(double x, double y) {
     return {z, zz};
 }
 
+// How this machine's Python takes subnormal lengths (sc_py_hypot_mode, set by
+// testbed/world/stepfast.py to whichever of the two gives math.hypot's answers): 0 as
+// Debian 12's CPython 3.11, dividing by the larger; 1 as later ones, through DBL_MIN.
+int g_subnormal_by_dbl_min = 0;
+
 // CPython's vector_norm for two coordinates, given their absolute values and the larger.
 double vector_norm2(double a, double b, double max) {
     if (std::isinf(max)) return max;
@@ -72,6 +78,10 @@ double vector_norm2(double a, double b, double max) {
     if (max == 0.0) return max;
     int max_e;
     std::frexp(max, &max_e);
+    if (max_e < -1023 && g_subnormal_by_dbl_min) {  // ldexp(1.0, -max_e) would overflow:
+        // later CPythons make the subnormals normal (an exact division), then scale back
+        return DBL_MIN * vector_norm2(a / DBL_MIN, b / DBL_MIN, max / DBL_MIN);
+    }
     if (max_e < -1023) {  // ldexp(1.0, -max_e) would overflow: CPython 3.11 divides by max
         double csum = 1.0, frac = 0.0;
         const double v[2] = {a, b};
@@ -158,6 +168,7 @@ inline double seconds(const struct timespec& t) {
 extern "C" {
 
 double sc_py_hypot(double x, double y) { return py_hypot(x, y); }
+void sc_py_hypot_mode(int64_t by_dbl_min) { g_subnormal_by_dbl_min = by_dbl_min != 0; }
 
 double sc_py_atan2(double y, double x) { return py_atan2(y, x); }
 

@@ -99,6 +99,8 @@ int64_t sc_world_move(sc_world_step* s);
 int64_t sc_links_spend(sc_world_step* s);
 void sc_links_measure(sc_world_step* s);
 double sc_py_hypot(double x, double y);
+// 1: subnormal lengths through DBL_MIN, as CPython after 3.11 (see worldstep.cc); 0: not.
+void sc_py_hypot_mode(int64_t by_dbl_min);
 double sc_py_atan2(double y, double x);
 
 }  // extern "C"

@@ -35,6 +35,7 @@ equal to its Python twin.
 from __future__ import annotations
 
 import ctypes
+import math
 
 import numpy as np
 
@@ -74,7 +75,16 @@ _SIGNATURES = {
     "sc_links_measure": (None, [_P]),
     "sc_py_hypot": (_D, [_D, _D]),
     "sc_py_atan2": (_D, [_D, _D]),
+    "sc_py_hypot_mode": (None, [_L]),
 }
+
+# Subnormal lengths on which CPython 3.11's math.hypot and later versions' differ by an ulp:
+# the library is set to whichever way this Python takes them (worldstep.cc's vector_norm2).
+_SUBNORMAL_PROBES = (
+    (-4.739300185776e-311, -5.946557129608e-311),
+    (3e-310, 1e-312),
+    (5e-324, 5e-324),
+)
 
 
 def _load():
@@ -86,7 +96,11 @@ def _load():
         if fn is None:
             return None
         fn.restype, fn.argtypes = res, args
-    return lib
+    for mode in (0, 1):
+        lib.sc_py_hypot_mode(mode)
+        if all(lib.sc_py_hypot(x, y) == math.hypot(x, y) for x, y in _SUBNORMAL_PROBES):
+            return lib
+    return None  # neither takes them as this Python does: the Python step loop runs
 
 
 lib = _load()
