@@ -72,7 +72,7 @@ from testbed.run.prepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
 from testbed.run.progress import summary_line
 from testbed.run.record import RobotRecord, RunRecord, WallParts
 from testbed.run.stepclock import no_clock
-from testbed.run.steploop import StepLoop
+from testbed.run.steploop import StepLoop, loop_kind
 from testbed.world.bodylink import BodyServer
 from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 
@@ -208,6 +208,7 @@ class Run:
             names = ", ".join(f"r{k}" for k in sorted(self.cpp)) or "none"
             self.robot_impl = "mixed"
             self.robot_reason = f"mixed: C++ robots {names}, the others Python"
+        loop_kind()  # TESTBED_STEP_LOOP refused here, before the network is up, not at step 0
         # Which AODV daemon runs and why (testbed.run.daemonchoice): the spec's, which the
         # same choice made (testbed.run.config.network_fields).
         try:
