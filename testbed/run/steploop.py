@@ -129,33 +129,18 @@ class StepLoop:
     def _step_python(self) -> tuple[str, str] | None:
         """`step`, the reference."""
         self._collect_commands()
-        clock, t, world = self.clock, self.timing, self.world
-        step = clock.advance()
+        step = self.clock.advance()
         tw = time.monotonic()
-        world.move()
+        self.world.move()
         self._update_links(step)
         self._inject_kills(step)
         self._notice_crashes(step)
-        ts = time.monotonic()
-        world.cast_live(self.live_robots)
-        cov = world.coverage()
-        self.files.coverage(step, cov)
-        if self.live is not None:
-            achieved = round(clock.achieved_scale(time.monotonic()), 2)
-            self.live.feed.publish(step, self.positions, self.net.current, cov,
-                                   clock.missed_robots, achieved)  # fmt: skip
-        tf = time.monotonic()
-        t.scan_s += tf - ts
-        self._send_frames()
-        t.send_s += time.monotonic() - tf
-        t.world_s += time.monotonic() - tw
-        clock.world_done(time.monotonic())
-        self._show_progress(cov)
+        self._cast_and_send(step, tw)
         return self._over()
 
     def _step_compiled(self) -> tuple[str, str] | None:
         """`step` with the per-robot work compiled (see the module's docstring)."""
-        fast, clock, t, world, server = self.fast, self.clock, self.timing, self.world, self.server
+        fast, clock, world, server = self.fast, self.clock, self.world, self.server
         assert fast is not None
         if not fast.records_held:
             self._start_compiled()
@@ -192,6 +177,16 @@ class StepLoop:
             fast.crash_pending = False
             self._notice_crashes(step)
             self._watch_servers()
+        self._cast_and_send(step, tw)
+        if fast.changed or step >= self.prep.cfg.max_steps:
+            fast.changed = False
+            return self._over()
+        return None  # no robot changed since `over` said None, and the cap is not reached
+
+    def _cast_and_send(self, step: int, tw: float) -> None:
+        """Both loops' end of a step (its world work began at `tw`): the lasers cast, the
+        coverage written (and fed to the live view), every robot's frame sent."""
+        clock, t, world = self.clock, self.timing, self.world
         ts = time.monotonic()
         world.cast_live(self.live_robots)
         cov = world.coverage()
@@ -207,10 +202,6 @@ class StepLoop:
         t.world_s += time.monotonic() - tw
         clock.world_done(time.monotonic())
         self._show_progress(cov)
-        if fast.changed or step >= self.prep.cfg.max_steps:
-            fast.changed = False
-            return self._over()
-        return None  # no robot changed since `over` said None, and the cap is not reached
 
     def _start_compiled(self) -> None:
         """The first compiled step: the records' state into the arrays, the fork servers to
