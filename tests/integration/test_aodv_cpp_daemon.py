@@ -230,3 +230,40 @@ def test_cpp_daemon_chain_flood_and_teardown(build, monkeypatch, tmp_path):
         _sigterm_leaves_nothing(net)
     found = sorted(glob.glob(f"{reports}/*"))
     assert not found, "\n".join(Path(f).read_text()[:3000] for f in found)
+
+
+@pytest.mark.parametrize("build", ["asan", "tsan"])
+def test_sanitized_daemons_carry_an_exploring_team(build, small_map, tmp_path):
+    """Three robots explore for 150 steps with the sanitized daemon in every namespace (the
+    display's too): their routes, floods and link changes run through it, and no sanitizer
+    speaks. The run itself is not judged for timing: a sanitized daemon is slow."""
+    binary = _binary(build)
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    env = dict(os.environ, TESTBED_TB_AODV=str(binary),
+               ASAN_OPTIONS=f"log_path={reports}/asan:detect_leaks=1",
+               UBSAN_OPTIONS=f"log_path={reports}/ubsan:print_stacktrace=1",
+               TSAN_OPTIONS=f"log_path={reports}/tsan:exitcode=66")  # fmt: skip
+    name = "tcd" + uuid.uuid4().hex[:6]
+    out = tmp_path / "run"
+    try:
+        run = subprocess.run(
+            [PY, "-m", "testbed", "run", "--robots", "3", "--comm-range", "4",
+             "--laser-range", "1.5", "--map", small_map, "--max-steps", "150", "--time-scale",
+             "2", "--aodv-daemon", "cpp", "--name", name, "--quiet", "--out", str(out)],
+            capture_output=True, text=True, timeout=600, cwd=REPO, env=env,
+        )  # fmt: skip
+    finally:
+        destroy(name)
+    with open(out / "result.json") as f:
+        result = json.load(f)
+    assert result["status"] in ("complete", "step_cap"), run.stderr
+    assert result["aodv_daemon"] == "cpp"
+    sent = 0
+    for k in (1, 2, 3, 4):  # r4: the display's
+        s = DaemonStats.read(str(out / "aodv" / f"r{k}.json")).to_json()
+        sent += sum(s["messages_sent"].values())
+    assert sent > 0
+    found = sorted(glob.glob(f"{reports}/*"))
+    assert not found, "\n".join(Path(f).read_text()[:3000] for f in found)
+    assert not any(ns.startswith(f"tb-{name}-") for ns in netns.list_names())
