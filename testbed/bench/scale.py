@@ -18,6 +18,8 @@ robots (pairs reached, memory, idle CPU), and the position feed's rate.
   updates applied (links updated) per second; and the latency of one move_many of one robot
   (the cost of an unbatched update). A link met for the first time costs a veth pair (a few
   ms of kernel work, topology.radio.veth), so teleports anywhere would be slower.
+(The 1,000-robot check with traffic, 30 s of pings a pair, is testbed.bench.aodv_grid; its
+idle daemons and their bring-up to routing-ready, testbed.bench.idle.)
 Goals: bring-up <= 3 ms per robot at 500, up of 1000 <= 10 s, teardown of 1000
 <= 10 s, every pair reached, >= 1000 feed updates per second.
 """
