@@ -1,5 +1,7 @@
 """The compiled AODV daemon's shared numbers and command line, written from the Python
-daemon: `python -m aodv.constgen HEADER`.
+daemon: `python -m aodv.constgen HEADER`; and the protocol core's parameter table:
+`python -m aodv.constgen --params HEADER` (build/gen/aodv_params.h: aodv.params.Params'
+fields with their defaults and the profiles, which native/aodv/params.h builds on).
 
 `make` runs it before it compiles build/tb-aodv (native/aodv/daemon/): HEADER
 (build/gen/aodv_consts.h) holds what the two daemons must agree on, each read here from the
@@ -35,8 +37,8 @@ from aodv import __main__ as cli
 from aodv import daemon, kernel, persist, stats
 from aodv.control import IP_RECVTTL
 from aodv.packet import AODV_PORT
-from aodv.params import PROFILES, Params
-from common.cliterals import c_string
+from aodv.params import MAX_TTL, PROFILES, Params
+from common.cliterals import c_real, c_string
 from common.sched import DEADLINE_PRIORITY
 
 
@@ -186,12 +188,68 @@ def header() -> str:
     return "\n".join(lines)
 
 
+def _c_value(f: dataclasses.Field, value) -> str:
+    """A Params field's value as C++ (its type read from the dataclass field)."""
+    kind = str(f.type)
+    if value is None:
+        return "std::nullopt"
+    if "bool" in kind:
+        return "true" if value else "false"
+    if "float" in kind:
+        return c_real(value)
+    return str(int(value))
+
+
+def _c_type(f: dataclasses.Field) -> str:
+    kind = str(f.type)
+    if "None" in kind:
+        return "std::optional<double>"
+    if "bool" in kind:
+        return "bool"
+    return "double" if "float" in kind else "long long"
+
+
+def params_header() -> str:
+    """The protocol's parameter table for the compiled core (native/aodv/params.h): every input
+    of aodv.params.Params with its default, and each profile's overrides, from the one
+    Python place that defines them."""
+    fields = {f.name: f for f in dataclasses.fields(Params)}
+    lines = [
+        "// Written by `python -m aodv.constgen --params` from aodv/params.py: do not edit.",
+        "#pragma once",
+        "",
+        "#include <optional>",
+        "#include <string>",
+        "",
+        "namespace aodv::gen {",
+        f"constexpr int MAX_TTL = {MAX_TTL};",
+        "",
+        "// RFC 3561 section 10's inputs and the bounds beyond it (aodv.params.Params' fields).",
+        "struct ParamInputs {",
+        *(f"    {_c_type(f)} {f.name} = {_c_value(f, f.default)};" for f in fields.values()),
+        "};",
+        "",
+        "// aodv.params.PROFILES: a profile's overrides of the defaults; false for another name.",
+        "inline bool apply_profile(const std::string& name, ParamInputs& p) {",
+    ]
+    for name, overrides in PROFILES.items():
+        lines.append(f"    if (name == {c_string(name)}) {{")
+        lines += [f"        p.{k} = {_c_value(fields[k], v)};" for k, v in overrides.items()]
+        lines += ["        return true;", "    }"]
+    lines += ["    return false;", "}", "}  // namespace aodv::gen", ""]
+    return "\n".join(lines)
+
+
 def main(argv: list[str]) -> int:
-    if len(argv) != 1:
-        print("usage: python -m aodv.constgen HEADER", file=sys.stderr)
+    if len(argv) == 2 and argv[0] == "--params":
+        make = params_header
+    elif len(argv) == 1 and not argv[0].startswith("-"):
+        make = header
+    else:
+        print("usage: python -m aodv.constgen [--params] HEADER", file=sys.stderr)
         return 2
-    path = Path(argv[0])
-    text = header()
+    path = Path(argv[-1])
+    text = make()
     if not path.exists() or path.read_text() != text:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)

@@ -49,15 +49,7 @@ unsigned long Params::ms(double seconds) const {
 bool profile(const std::string& name, double time_scale, Params& out) {
     Params p;
     p.time_scale = time_scale;
-    if (name == "ns3") {
-        // ns-3's AODV model attribute defaults where they differ (aodv/params.py NS3_DEFAULTS).
-        p.my_route_timeout_ms = 11200;
-        p.blacklist_timeout_ms = 5600;
-        p.ttl_start = 1;
-        p.local_repair = false;
-    } else if (name != "rfc") {
-        return false;
-    }
+    if (!gen::apply_profile(name, p)) return false;  // aodv/params.py's PROFILES
     p.derive();
     out = p;
     return true;

@@ -1,44 +1,21 @@
 // Protocol parameters of RFC 3561 section 10 (aodv/params.py is the reference): the inputs
-// with the RFC's defaults (times in RFC milliseconds) and every derived value in scaled
-// seconds, computed with the same arithmetic, in the same order, as the Python properties
+// with the RFC's defaults (times in RFC milliseconds; written once, in Python, and generated
+// from it) and every derived value in scaled seconds, computed with the same arithmetic, in the same order, as the Python properties
 // (so each double is bit for bit the Python float). Profiles: "rfc" and "ns3".
 #pragma once
 
 #include <optional>
 #include <string>
 
+#include "aodv_params.h"  // generated: python -m aodv.constgen --params
+
 namespace aodv {
 
-constexpr int MAX_TTL = 255;
+constexpr int MAX_TTL = gen::MAX_TTL;
 
-struct Params {
-    // -- inputs (aodv/params.py field names) --
-    double time_scale = 1.0;
-    double active_route_timeout_ms = 3000;
-    long long allowed_hello_loss = 2;
-    double hello_interval_ms = 1000;
-    long long local_add_ttl = 2;
-    long long net_diameter = 35;
-    double node_traversal_time_ms = 40;
-    long long rerr_ratelimit = 10;
-    long long rreq_retries = 2;
-    long long rreq_ratelimit = 10;
-    long long timeout_buffer = 2;
-    long long ttl_start = 2;
-    long long ttl_increment = 2;
-    long long ttl_threshold = 7;
-    long long delete_period_k = 5;
-    std::optional<double> my_route_timeout_ms;
-    std::optional<double> blacklist_timeout_ms;
-    bool local_repair = true;
-    long long queue_len = 64;
-    bool gratuitous_rrep = true;
-    bool dest_only = false;
-    long long route_table_limit = 1024;
-    long long rreq_cache_limit = 4096;
-    long long neighbor_limit = 256;
-    long long rreq_forward_ratelimit = 100;
-
+// The inputs (aodv/params.py's fields, with its defaults: gen::ParamInputs, generated from it
+// into build/gen/aodv_params.h by aodv/constgen.py) and what they derive.
+struct Params : gen::ParamInputs {
     // -- derived, in scaled seconds (call derive() after changing an input) --
     double active_route_timeout = 0, hello_interval = 0, node_traversal_time = 0;
     double net_traversal_time = 0, path_discovery_time = 0, blacklist_timeout = 0;

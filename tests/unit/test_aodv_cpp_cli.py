@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from aodv import __main__ as cli
 from aodv import constgen, daemon, kernel, persist, stats
 from aodv.packet import AODV_PORT
-from aodv.params import Params
+from aodv.params import PROFILES, Params
 from common.paths import PROJECT_ROOT
 from common.sched import DEADLINE_PRIORITY
 
@@ -242,3 +242,22 @@ def test_shared_numbers_are_the_python_daemons():
     assert "@IFACE@" in ruleset and "@NET@" in ruleset and "@MS@ms" in ruleset
     names = re.findall(r'\{"(\w+)", ParamKind::', text)
     assert names == [f.name for f in PARAM_FIELDS]
+
+
+def test_the_cores_parameter_table_is_aodv_params():
+    """The protocol's parameters reach the compiled core from aodv/params.py alone: the header
+    it is built from is what aodv.constgen writes now, with every field's default and every
+    profile's overrides as Python has them."""
+    path = CONSTS.parent / "aodv_params.h"
+    if not path.is_file():
+        pytest.skip("build/gen/aodv_params.h not made (make setup makes it with the core)")
+    text = path.read_text()
+    assert text == constgen.params_header(), "aodv_params.h is stale: run make build/tb-aodv-core"
+    fields = {f.name: f for f in dataclasses.fields(Params)}
+    for f in fields.values():
+        assert f"{f.name} = {constgen._c_value(f, f.default)};" in text, f.name
+    assert "p.my_route_timeout_ms = 11200.0;" in text  # the ns3 profile, as a reader sees it
+    for name, overrides in PROFILES.items():
+        block = text.split(f'if (name == "{name}") {{')[1].split("return true;")[0]
+        for k, v in overrides.items():
+            assert f"p.{k} = {constgen._c_value(fields[k], v)};" in block, (name, k)
