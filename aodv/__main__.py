@@ -1,5 +1,6 @@
 """`python -m aodv --robot r3 --iface wlan0 [--time-scale K] [--profile rfc|ns3]
-[--no-local-repair] [--set NAME=VALUE ...] [--stats PATH] [--state PATH] [--log-level L]`"""
+[--no-local-repair] [--set NAME=VALUE ...] [--stats PATH] [--stats-period S] [--state PATH]
+[--log-level L]`"""
 
 from __future__ import annotations
 
@@ -74,7 +75,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="override one parameter of the profile (a field of aodv.params.Params, e.g. "
         "my_route_timeout_ms=11200); the section 10 constraints are checked",
     )
-    p.add_argument("--stats", metavar="PATH", help="statistics JSON, rewritten every second")
+    p.add_argument("--stats", metavar="PATH", help="statistics JSON (see --stats-period)")
+    p.add_argument(
+        "--stats-period",
+        type=number(float, "stats period", minimum=0),
+        default=1.0,
+        metavar="SECONDS",
+        help="wall seconds between rewrites of --stats (default 1); 0: written only when the "
+        "daemon is ready, on SIGUSR1 and as it stops (an idle daemon then sleeps)",
+    )
     p.add_argument(
         "--state",
         metavar="PATH",
@@ -165,7 +174,9 @@ def _serve(args: argparse.Namespace, params: Params) -> int:
             print(f"aodv: error: no directory for {option}: {parent}", file=sys.stderr)
             return EXIT_USAGE
     try:
-        return Daemon(args.robot, args.iface, params, args.stats, args.net, args.state).run()
+        return Daemon(
+            args.robot, args.iface, params, args.stats, args.net, args.state, args.stats_period
+        ).run()
     except KernelError as e:
         print(f"aodv: error: {e}", file=sys.stderr)
         return EXIT_USAGE if "no interface" in str(e) or "no IPv4" in str(e) else EXIT_FAILURE

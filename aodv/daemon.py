@@ -16,9 +16,9 @@ core's actions to `Actuator` (aodv.actuator), which carries them out:
     deadline reached  -> core.on_timer()                        DropPackets -> ICMP via TUN
 
 The control socket and its TTLs are aodv.control's (`ControlChannel`); the ICMP written
-and read, aodv.icmp's; the statistics, aodv.stats' (handed every STATS_PERIOD and on
-SIGUSR1 to aodv.statswriter's thread, which writes the file: a file written on the loop held
-its HELLO timers back behind the disk).
+and read, aodv.icmp's; the statistics, aodv.stats' (handed to aodv.statswriter's thread,
+which writes the file, as the daemon is ready, every --stats-period, on SIGUSR1 and as it
+stops: a file written on the loop held its HELLO timers back behind the disk).
 
 Routes of the daemon carry protocol number RTPROT_AODV; they are flushed at start and at
 exit. A start is a restart (RFC 6.13 reboot rule: DELETE_PERIOD without originating
@@ -69,7 +69,7 @@ log = logging.getLogger(__name__)
 # The ICMP helpers live in aodv.icmp; they are named here too (tests import them from here).
 __all__ = ["Daemon", "_checksum", "icmp_host_unreachable", "quoted_datagram"]
 
-STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file
+STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file (--stats-period's default)
 _U32 = struct.Struct("!I")
 HOSTS_REMEMBERED = 4096  # bound of the checked-address memory
 
@@ -91,8 +91,11 @@ class Daemon:
         stats_path: str | None,
         net: str = "10.0.0.0/16",
         state_path: str | None = None,
+        stats_period: float = STATS_PERIOD,
     ) -> None:
         self.robot = robot
+        # Between rewrites of the statistics file; 0: only when ready, asked, and stopping.
+        self.stats_period = stats_period if stats_period > 0 else float("inf")
         self.store = CounterStore(state_path) if state_path else None
         self.iface = iface
         self.p = params
@@ -286,7 +289,7 @@ class Daemon:
                 self._poll_use(now)
             if self._dump or now >= next_stats:
                 self._dump = False
-                next_stats = now + STATS_PERIOD
+                next_stats = now + self.stats_period
                 self._rewrite_stats()
             for key, _ in sel.select(max(0.0, min(deadline, next_poll, next_stats) - now)):
                 key.data()

@@ -104,6 +104,7 @@ def aodv_args(k: int, run_dir: str, spec) -> list[str]:
         "--time-scale", repr(spec.time_scale),
         "--profile", spec.aodv_profile,
         "--stats", aodv_stats_file(k, run_dir),
+        "--stats-period", repr(float(spec.aodv_stats_period)),
         "--state", aodv_state_file(k, run_dir),
     ]  # fmt: skip
 

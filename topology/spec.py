@@ -129,6 +129,9 @@ class NetworkSpec:
     time_scale: float = 1.0
     aodv_profile: str = "rfc"  # aodv.params.PROFILES; used only with routing "aodv"
     aodv_daemon: str = "python"  # AODV_DAEMONS; used only with routing "aodv"
+    # Wall seconds between rewrites of each AODV daemon's statistics file (its --stats-period;
+    # 0: written when ready, when asked with SIGUSR1 and as it stops, so an idle daemon sleeps).
+    aodv_stats_period: float = 1.0
     # The walls of the los range models (topology.radio.los): a PNG, metres per pixel, and the
     # loss a wall costs (None: a wall blocks).
     map_png: str | None = None
@@ -185,6 +188,8 @@ class NetworkSpec:
                 f"unknown AODV profile {self.aodv_profile!r} "
                 f"(choose from {', '.join(AODV_PROFILES)})"
             )
+        if not (math.isfinite(self.aodv_stats_period) and self.aodv_stats_period >= 0):
+            raise ValueError(f"AODV stats period {self.aodv_stats_period!r}: not a number >= 0")
         if self.aodv_daemon not in AODV_DAEMONS:
             raise ValueError(
                 f"unknown AODV daemon {self.aodv_daemon!r} (choose from {', '.join(AODV_DAEMONS)})"

@@ -177,6 +177,10 @@ def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> Netw
             positions=positions,
             map_png=os.path.abspath(cfg.map) if cfg.map else None,
             capture_dir=os.path.join(out, "pcaps") if cfg.capture else None,
+            # The daemons' statistics are read as they stop; only the live view reads them
+            # while the run goes on (an idle daemon that rewrites its file every second pays
+            # for it in wake-ups and disk writes).
+            aodv_stats_period=1.0 if cfg.view else 0.0,
             **network_fields(cfg),
         )
     except ValueError as e:

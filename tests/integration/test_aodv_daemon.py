@@ -13,6 +13,7 @@ import contextlib
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -680,3 +681,30 @@ def test_a_run_records_which_daemon_ran_and_why(aodv_daemon, tmp_path, small_map
     for k in (1, 2):
         s = DaemonStats.read(str(out / "aodv" / f"r{k}.json")).to_json()
         assert s["robot"] == f"r{k}" and s["messages_sent"].get("HELLO", 0) >= 1
+
+
+def test_stats_period_zero_writes_when_ready_asked_and_stopping(aodv_daemon):
+    """--stats-period 0 (what `testbed run` gives the daemons unless --view shows them live):
+    the statistics file is written once the daemon is ready, then only on SIGUSR1 and as it
+    stops, never on a timer of its own."""
+    name = "ta" + uuid.uuid4().hex[:6]
+    spec = NetworkSpec(name=name, positions=CHAIN5[:2], comm_range=10.0, routing="aodv",
+                       time_scale=5.0, aodv_daemon=aodv_daemon, aodv_stats_period=0.0)  # fmt: skip
+    try:
+        with Network(spec) as net:
+            wait_ready(net, 2)
+            path = stats_path(net, 1)
+            ready = os.stat(path).st_mtime_ns
+            time.sleep(2.5)  # HELLOs go out meanwhile; a period of 1 s would rewrite twice
+            assert os.stat(path).st_mtime_ns == ready
+            assert read_fresh(path, daemon(net, 1)).to_json()["robot"] == "r1"
+            asked = os.stat(path).st_mtime_ns
+            assert asked != ready
+            time.sleep(0.05)  # past the file system's timestamp granularity
+            proc = daemon(net, 1)
+            proc.send_signal(signal.SIGTERM)
+            assert proc.wait(timeout=10) == 0
+            assert os.stat(path).st_mtime_ns != asked  # the final statistics
+            assert DaemonStats.read(path).to_json()["robot"] == "r1"
+    finally:
+        destroy(name)

@@ -146,6 +146,8 @@ CASES: list[list[str]] = [
     ),  # fmt: skip
     *([*BASE, "--time-scale", n] for n in NUMBERS),
     *([*BASE, f"--time-scale={n}"] for n in ["-1", "-inf", "1e-300", "0.0"]),
+    *([*BASE, "--stats-period", n] for n in NUMBERS),
+    *([*BASE, f"--stats-period={n}"] for n in ["-0.0", "-1e-300", "0", "1e308"]),
     [*BASE, "--set"],
     [*BASE, "--set", "x"],
     [*BASE, "--set", "time_scale=2"],
@@ -193,8 +195,9 @@ def test_same_command_lines_taken(argv):
 
 _ARG = st.one_of(
     st.sampled_from(["--robot", "r1", "--time-scale", "--net", "--set", "--profile", "ns3",
-                     "--stats", "--state", "--no-local-repair", "--log-level", "info", "--iface",
-                     "--ro", "--t", "--n", "-1", "2", "10.0.0.0/16", "ttl_start=3", "--", "-"]),
+                     "--stats", "--stats-period", "--state", "--no-local-repair", "--log-level",
+                     "info", "--iface", "--ro", "--t", "--n", "-1", "2", "10.0.0.0/16",
+                     "ttl_start=3", "--", "-"]),
     st.text(alphabet="-=_.0123456789abcdefinrst/ ", max_size=12),
 )  # fmt: skip
 
@@ -210,7 +213,7 @@ def test_random_command_lines_taken_alike(argv):
 def test_help_lists_every_option():
     out = subprocess.run([str(TB_AODV), "--help"], capture_output=True, text=True, check=True)
     for flag in ("--robot", "--iface", "--time-scale", "--profile", "--no-local-repair", "--set",
-                 "--stats", "--state", "--log-level", "--net"):  # fmt: skip
+                 "--stats", "--stats-period", "--state", "--log-level", "--net"):  # fmt: skip
         assert flag in out.stdout
 
 

@@ -268,7 +268,7 @@ std::string usage_text() {
     std::string u =
         "usage: tb-aodv [-h] --robot ROBOT [--iface IFACE] [--time-scale TIME_SCALE]\n"
         "               [--profile {ns3,rfc}] [--no-local-repair] [--set NAME=VALUE]\n"
-        "               [--stats PATH] [--state PATH]\n"
+        "               [--stats PATH] [--stats-period SECONDS] [--state PATH]\n"
         "               [--log-level {debug,info,warning,error}] [--net NET]\n\n"
         "AODV (RFC 3561) routing daemon for one robot's network namespace, compiled\n"
         "(the command line of python -m aodv).\n\noptions:\n";
@@ -322,6 +322,7 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
     std::map<std::string, bool> seen;
     std::vector<std::string> extra;
     bool time_scale_given = false;
+    bool stats_period_given = false;
 
     auto check = [&](const gen::Option& o, const std::string& v) -> bool {
         std::string where = std::string("argument ") + o.flag + ": ";
@@ -352,6 +353,23 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
             }
             a.time_scale = x;
             time_scale_given = true;
+        }
+        if (strcmp(o.dest, "stats_period") == 0) {  // number(float, ..., minimum=0)
+            double x;
+            if (!py_float(v, x)) {
+                err = where + "stats period must be a number, not " + py_quote(v);
+                return false;
+            }
+            if (!std::isfinite(x)) {
+                err = where + "stats period must be finite, not " + py_quote(v);
+                return false;
+            }
+            if (x < 0) {
+                err = where + "stats period must not be negative, not " + v;
+                return false;
+            }
+            a.stats_period = x > 0 ? x : INFINITY;
+            stats_period_given = true;
         }
         if (strcmp(o.dest, "net") == 0) {
             std::string why;
@@ -451,6 +469,8 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
     a.stats = value["stats"];
     a.state = value["state"];
     if (!time_scale_given && !py_float(value["time_scale"], a.time_scale)) a.time_scale = 1.0;
+    if (!stats_period_given && !py_float(value["stats_period"], a.stats_period))
+        a.stats_period = 1.0;
     if (!seen["net"] && !network(value["net"], a, err)) return false;
     return true;
 }

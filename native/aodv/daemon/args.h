@@ -17,6 +17,9 @@ struct Args {
     std::string robot, iface, profile, stats, state, log_level, net;
     bool has_stats = false, has_state = false;
     double time_scale = 1.0;
+    // Between rewrites of the statistics file (--stats-period; 0 given: +inf, only when
+    // ready, on SIGUSR1 and at exit).
+    double stats_period = 1.0;
     bool no_local_repair = false;
     std::vector<std::string> sets;
     uint32_t net_addr = 0, net_mask = 0;  // the network, host byte order

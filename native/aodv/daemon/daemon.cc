@@ -231,7 +231,7 @@ void Daemon::loop() {
         }
         if (g_dump || now >= next_stats) {
             g_dump = 0;
-            next_stats = now + gen::STATS_PERIOD;
+            next_stats = now + args_.stats_period;  // +inf with --stats-period 0
             rewrite_stats();
         }
         double wait = std::max(0.0, std::min({deadline, next_poll, next_stats}) - now);
