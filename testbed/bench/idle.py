@@ -9,7 +9,8 @@ routing-ready in at most 10 s).
   memory at the end from /proc/PID/smaps_rollup: RSS (resident) and PSS (the Python daemons
   are forked from one fork server, so much of their RSS is pages shared with it and each
   other; PSS charges each shared page in parts). Medians, means and maxima over the daemons,
-  for each daemon of DAEMONS.
+  for each (daemon, statistics period) of IDLE_CASES: every second, as `net up` runs the
+  daemons, and 0 (only when ready, asked and stopping), as `testbed run` does without --view.
 - ready: Network.up() of a grid with routing aodv, to its return, which is once every
   daemon has written its statistics file, i.e. has its socket, TUN device and routes ready
   (topology.bringup.start_routing): the time from bring-up to routing-ready, READY_REPEATS
@@ -39,20 +40,29 @@ WARMUP_S = 5.0
 SPACING_M = 8.0
 RANGE_M = 12.0  # the diagonals too: eight neighbours inside the grid (as scale.AODV_RANGE)
 DAEMONS = ("python", "cpp")
+# (daemon, its --stats-period): 1 s as `testbed net up` and a run with --view have it, 0 as
+# `testbed run` gives the daemons otherwise (the file written when ready, asked and stopping).
+IDLE_CASES = (("python", 1.0), ("cpp", 1.0), ("python", 0.0), ("cpp", 0.0))
 READY_CASES = ((100, "python"), (100, "cpp"), (1000, "cpp"))
 READY_REPEATS = 3
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 TARGETS = {"cpu_percent_of_core": 0.02, "rss_mib": 2.0, "ready_s_at_1000": 10.0}
 
 
-def spec(n: int, daemon: str, prefix: str = "ti") -> NetworkSpec:
+def spec(n: int, daemon: str, prefix: str = "ti", stats_period: float = 1.0) -> NetworkSpec:
     return NetworkSpec(
         name=prefix + uuid.uuid4().hex[:6],
         positions=tuple(layout_positions("grid", n, SPACING_M)),
         comm_range=RANGE_M,
         routing="aodv",
         aodv_daemon=daemon,
+        aodv_stats_period=stats_period,
     )
+
+
+def case_name(daemon: str, stats_period: float) -> str:
+    """An idle case's key in the JSON: the daemon, and `-stats0` for --stats-period 0."""
+    return daemon if stats_period == 1.0 else f"{daemon}-stats{stats_period:g}"
 
 
 def cpu_s(pid: int) -> float | None:
@@ -95,10 +105,11 @@ def machine() -> dict:
     return {"load_average_1min": os.getloadavg()[0], "busiest": busiest_processes()}
 
 
-def idle(daemon: str, n: int = IDLE_ROBOTS, window_s: float = IDLE_S) -> dict:
+def idle(daemon: str, n: int = IDLE_ROBOTS, window_s: float = IDLE_S,
+         stats_period: float = 1.0) -> dict:  # fmt: skip
     """The idle daemons of one n-robot network, over window_s."""
     settle()
-    s = spec(n, daemon)
+    s = spec(n, daemon, stats_period=stats_period)
     at_start = machine()
     try:
         net = Network(s)
@@ -125,7 +136,8 @@ def idle(daemon: str, n: int = IDLE_ROBOTS, window_s: float = IDLE_S) -> dict:
     rss = [m[0] / 1024 for m in mem if m[0]]
     pss = [m[1] / 1024 for m in mem if m[0]]
     return {
-        "daemon": daemon, "robots": n, "daemons": len(pids), "daemons_alive": len(spent),
+        "daemon": daemon, "stats_period_s": stats_period, "robots": n, "daemons": len(pids),
+        "daemons_alive": len(spent),
         "machine_at_start": at_start, "ready_s": round(ready_s, 3), "window_s": round(dt, 2),
         "cpu_percent_of_core_median": round(median(cpu), 4) if cpu else None,
         "cpu_percent_of_core_max": round(max(cpu), 4) if cpu else None,
@@ -202,9 +214,10 @@ def run() -> dict:
     window = _env_number("TESTBED_IDLE_S", IDLE_S)
     repeats = int(_env_number("TESTBED_IDLE_REPEATS", READY_REPEATS))
     idles = {}
-    for daemon in DAEMONS:
-        idles[daemon] = r = idle(daemon, IDLE_ROBOTS, window)
-        print(f"  idle {daemon}: {r['cpu_percent_of_core_median']} % of a core (median, max "
+    for daemon, period in IDLE_CASES:
+        name = case_name(daemon, period)
+        idles[name] = r = idle(daemon, IDLE_ROBOTS, window, period)
+        print(f"  idle {name}: {r['cpu_percent_of_core_median']} % of a core (median, max "
               f"{r['cpu_percent_of_core_max']}), RSS {r['rss_mib_median']} MiB, PSS "
               f"{r['pss_mib_median']} MiB, ready in {r['ready_s']} s")  # fmt: skip
     readies = []
