@@ -3,9 +3,10 @@
 Theory of operation. A step is STEP_S (100 ms) of emulated time and `period` = STEP_S / time
 scale of wall time. Step k's deadline is `anchor + (k + 1) * period`, the anchor being the
 moment the first frames went out. The world misses a deadline when its own work for a step
-overruns it: the clock then moves the anchor by the overrun (one hiccup counts once, and
-the schedule does not try to catch up by running steps back to back, which would squeeze
-the robots), so the achieved time scale shows the slip. A robot misses a deadline when it
+overruns it: the clock then moves the anchor by the overrun and a period, so that the robots
+have a whole period for the frames that went out late (one hiccup counts once, and the
+schedule does not try to catch up by running steps back to back, which would squeeze the
+robots), and the achieved time scale shows the slip. A robot misses a deadline when it
 has not answered the step's frame by then; the step loop counts those and tells the clock.
 
 Every miss is counted; the ones that fall in a host stall (testbed.run.stalls: the machine
@@ -122,16 +123,19 @@ class StepClock:
         return self.step
 
     def world_done(self, now: float) -> float:
-        """The world finished its work for the current step at `now`. Past the step's
-        deadline, that is the world's miss: counted once, and the schedule moves by the
-        overrun. Returns how late (s; 0 when in time)."""
+        """The world finished its work for the current step, its frames sent, at `now`. Past
+        the step's deadline, that is the world's miss: counted once, and the schedule moves
+        by the overrun and a period, so that the robots have a whole period to answer the
+        frames that only went out now (moved by the overrun alone, the deadline would be
+        `now`: every robot would miss the step, stand still and change its path). Returns how
+        late (s; 0 when in time)."""
         late = self.late(now)
         if late <= 0:
             return 0.0
         self.missed_world += 1
         self.stalls.late(self.step, late)
         self.stalls.count(self.step, 1)
-        self.anchor += late
+        self.anchor += late + self.period
         if len(self.world_missed_steps) < MAX_MISSED_STEPS_KEPT:
             self.world_missed_steps.append((self.step, round(late * 1000, 1)))
         return late

@@ -11,6 +11,8 @@ a late plan, timer or "done" is redone, up to three runs; at least one must be c
 every clean run must be exact. Every run's finish is the step its robot decided it at (its
 events.jsonl's `finish`).
 
+The world runs its default step loop (the compiled one where make setup built it:
+tests/integration/test_step_loop_twin.py holds the Python reference loop to the same paths).
 Both robot programs are held to it (`--robot python`, the reference, and `--robot cpp`, the
 C++ robot of native/robot, which calls the same step core): one answer, two implementations.
 Each runs its own display (the C++ one draws after the run what it kept: node.displayreplay),
@@ -27,6 +29,7 @@ import numpy as np
 import pytest
 
 from node.native import unbuilt_reason
+from testbed.run import steploop
 from testbed.run.execute import RunConfig, run
 from topology.network import destroy
 
@@ -55,6 +58,7 @@ def test_lone_robot_takes_the_same_steps_and_path(tmp_path, seed, robot):
         finally:
             destroy(name)
         assert result["robot"] == robot, result["robot_reason"]
+        assert result["step_loop"] == steploop.loop_kind()  # the default: compiled where built
         assert result["robots"]["r1"]["finish_step"] == _finish_decided(out)
         m = result["fidelity"]["measures"]
         if not result["fidelity"]["ok"] or m["late_plans"] or m["late_timers"] or m["late_dones"]:
