@@ -168,7 +168,14 @@ def _flood(net, datagrams: int):
     for k in range(1, 6):
         proc = net.process(k, "aodv")
         assert proc is not None and proc.poll() is None, log_of(net, k)
-    out = ping(net, 1, "10.0.0.5", "-c", "2", "-W", "5")
+    # Routing recovers. Not at once: the flood came from robot 1's own address, so its forged
+    # RREQs may sit in robot 2's duplicate cache under the IDs robot 1 uses next (for
+    # PATH_DISCOVERY_TIME), and the route to r5 may have expired while the flood ran (on a
+    # loaded machine it ran longer); the RFC has robot 1 retry, and within 30 s it gets through.
+    deadline = time.monotonic() + 30
+    out = ping(net, 1, "10.0.0.5", "-c", "1", "-W", "5")
+    while " 0% packet loss" not in out and time.monotonic() < deadline:
+        out = ping(net, 1, "10.0.0.5", "-c", "1", "-W", "5")
     assert " 0% packet loss" in out, out
 
 
