@@ -42,3 +42,20 @@ def busiest_processes(n: int = 8) -> list[str]:
     out = subprocess.run(["ps", "-eo", "pcpu,comm", "--sort=-pcpu"], capture_output=True,
                          text=True, check=False).stdout  # fmt: skip
     return [" ".join(line.split()) for line in out.splitlines()[1 : n + 1]]
+
+
+def memory_kib(pid: int) -> tuple[int, int]:
+    """(RSS, PSS) of pid in KiB from /proc/PID/smaps_rollup; (0, 0) once it is gone. Forked
+    processes (the Python daemons, from one server) share most of their RSS; PSS charges each
+    shared page in parts."""
+    rss = pss = 0
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            for line in f:
+                if line.startswith("Rss:"):
+                    rss = int(line.split()[1])
+                elif line.startswith("Pss:"):
+                    pss = int(line.split()[1])
+    except OSError:
+        pass
+    return rss, pss

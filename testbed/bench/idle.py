@@ -29,7 +29,7 @@ import sys
 import time
 import uuid
 
-from testbed.bench.common import busiest_processes, median, write
+from testbed.bench.common import busiest_processes, median, memory_kib, write
 from testbed.bench.scale import settle
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec, layout_positions
@@ -79,21 +79,6 @@ def cpu_s(pid: int) -> float | None:
     except (OSError, ValueError, IndexError):
         return None
     return ns / 1e9 + (int(fields[13]) + int(fields[14])) / CLK_TCK
-
-
-def memory_kib(pid: int) -> tuple[int, int]:
-    """(RSS, PSS) of pid in KiB; (0, 0) once it is gone."""
-    rss = pss = 0
-    try:
-        with open(f"/proc/{pid}/smaps_rollup") as f:
-            for line in f:
-                if line.startswith("Rss:"):
-                    rss = int(line.split()[1])
-                elif line.startswith("Pss:"):
-                    pss = int(line.split()[1])
-    except OSError:
-        pass
-    return rss, pss
 
 
 def daemon_pids(net: Network) -> list[int]:

@@ -33,7 +33,7 @@ import time
 import uuid
 from typing import Any
 
-from testbed.bench.common import median, write
+from testbed.bench.common import median, memory_kib, write
 from topology import names
 from topology.inputs import feed
 from topology.kernel import netns
@@ -97,22 +97,6 @@ def settle(limit_s: float = 120.0) -> float:
     return slow_until
 
 
-def _mem_kb(pid: int) -> tuple[int, int]:
-    """(RSS, PSS) in kB. The daemons are forked from one server, so most of their RSS is
-    pages they share with it and each other; PSS charges each shared page in parts."""
-    rss = pss = 0
-    try:
-        with open(f"/proc/{pid}/smaps_rollup") as f:
-            for line in f:
-                if line.startswith("Rss:"):
-                    rss = int(line.split()[1])
-                elif line.startswith("Pss:"):
-                    pss = int(line.split()[1])
-    except (FileNotFoundError, ProcessLookupError):
-        pass
-    return rss, pss
-
-
 def _grid_hops(a: int, b: int, n: int) -> int:
     """Fewest hops from a to b on the grid when diagonal neighbours are linked."""
     cols = math.ceil(math.sqrt(n))
@@ -141,7 +125,7 @@ def aodv(n: int = 500) -> dict:
         before = sum(_cpu_ticks(p) for p in pids)
         time.sleep(IDLE_S)
         idle_cores = (sum(_cpu_ticks(p) for p in pids) - before) / hz / IDLE_S
-        mem = [_mem_kb(p) for p in pids]
+        mem = [memory_kib(p) for p in pids]
         rss, pss = [m[0] for m in mem], [m[1] for m in mem]
         rng = random.Random(23)
         reached, times, failed, hops = 0, [], [], []
