@@ -71,6 +71,17 @@ _SIGNATURES = {
 }
 
 
+def bind(lib: ctypes.CDLL, signatures: dict) -> bool:
+    """Give each function `signatures` names its (result, arguments) types; False when the
+    library lacks one of them (an older build)."""
+    for name, (res, args) in signatures.items():
+        fn = getattr(lib, name, None)
+        if fn is None:
+            return False
+        fn.restype, fn.argtypes = res, args
+    return True
+
+
 def _load() -> ctypes.CDLL | None:
     if envswitch.value("TESTBED_STEPCORE") == "numpy":
         return None
@@ -78,11 +89,8 @@ def _load() -> ctypes.CDLL | None:
         lib = ctypes.CDLL(str(LIBRARY))
     except OSError:
         return None
-    for name, (res, args) in _SIGNATURES.items():
-        fn = getattr(lib, name, None)
-        if fn is None:
-            return None
-        fn.restype, fn.argtypes = res, args
+    if not bind(lib, _SIGNATURES):
+        return None
     if lib.sc_version() != VERSION:
         return None
     return lib

@@ -89,13 +89,8 @@ _SUBNORMAL_PROBES = (
 
 def _load():
     lib = stepcore.lib
-    if lib is None:
+    if lib is None or not stepcore.bind(lib, _SIGNATURES):
         return None
-    for name, (res, args) in _SIGNATURES.items():
-        fn = getattr(lib, name, None)
-        if fn is None:
-            return None
-        fn.restype, fn.argtypes = res, args
     for mode in (0, 1):
         lib.sc_py_hypot_mode(mode)
         if all(lib.sc_py_hypot(x, y) == math.hypot(x, y) for x, y in _SUBNORMAL_PROBES):
