@@ -15,6 +15,7 @@ from dataclasses import fields, replace
 from typing import NoReturn
 
 from aodv.params import PROFILES, Params, profile
+from aodv.stats import STATS_PERIOD
 from common.argtypes import checked, number
 from common.errors import EXIT_FAILURE, EXIT_USAGE
 
@@ -79,7 +80,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--stats-period",
         type=number(float, "stats period", minimum=0),
-        default=1.0,
+        default=STATS_PERIOD,
         metavar="SECONDS",
         help="wall seconds between rewrites of --stats (default 1); 0: written only when the "
         "daemon is ready, on SIGUSR1 and as it stops (an idle daemon then sleeps)",

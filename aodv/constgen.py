@@ -148,7 +148,7 @@ def header() -> str:
         f"constexpr int AODV_PORT = {AODV_PORT};",
         f"constexpr int RECVTTL_OPTION = {IP_RECVTTL};",
         f"constexpr int PENDING_MAX = {kernel.KernelRoutes.PENDING_MAX};",
-        f"constexpr double STATS_PERIOD = {float(daemon.STATS_PERIOD)!r};",
+        f"constexpr double STATS_PERIOD = {float(stats.STATS_PERIOD)!r};",
         f"constexpr int HOSTS_REMEMBERED = {daemon.HOSTS_REMEMBERED};",
         f"constexpr int TIMER_BOUNDS_MS[] = {{{', '.join(map(str, stats.TIMER_BOUNDS_MS))}}};",
         f"constexpr int WORST_KEPT = {stats.WORST_KEPT};",

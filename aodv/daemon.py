@@ -60,7 +60,7 @@ from aodv.kernel import (
 from aodv.params import Params
 from aodv.persist import CounterStore
 from aodv.sim import warm_up
-from aodv.stats import Stats
+from aodv.stats import STATS_PERIOD, Stats
 from aodv.statswriter import StatsWriter
 from common.sched import DEADLINE_PRIORITY, deadline_priority
 
@@ -69,7 +69,6 @@ log = logging.getLogger(__name__)
 # The ICMP helpers live in aodv.icmp; they are named here too (tests import them from here).
 __all__ = ["Daemon", "_checksum", "icmp_host_unreachable", "quoted_datagram"]
 
-STATS_PERIOD = 1.0  # wall seconds between rewrites of the stats file (--stats-period's default)
 _U32 = struct.Struct("!I")
 HOSTS_REMEMBERED = 4096  # bound of the checked-address memory
 

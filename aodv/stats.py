@@ -11,6 +11,7 @@ from collections import Counter
 
 from aodv.statsfile import DaemonStats
 
+STATS_PERIOD = 1.0  # wall seconds between rewrites of the file (--stats-period's default)
 TIMER_BOUNDS_MS = (10, 25, 50, 100, 200)  # emulated ms late: histogram bounds
 WORST_KEPT = 128  # the most late firings, kept with their times
 
