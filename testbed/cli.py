@@ -16,8 +16,8 @@ from pyroute2.netlink.exceptions import NetlinkError
 
 from common import envswitch
 from common.errors import TestbedError, UsageError
+from testbed.files.resultvalues import one_line
 from testbed.net import commands
-from testbed.run.resultvalues import one_line
 
 log = logging.getLogger("testbed")
 # What --help says first: the docstring's first paragraph, whole.

@@ -34,7 +34,7 @@ from common.errors import UsageError
 from testbed.analysis import decide, decidereport, decidesweep, middlewares, tables, verdicts
 from testbed.analysis.figures import Tables
 from testbed.analysis.runs import FinishedRun, load_runs
-from testbed.run.resultvalues import one_line
+from testbed.files.resultvalues import one_line
 
 
 @dataclass

@@ -41,7 +41,7 @@ from testbed.analysis import decide, plots, verdicts
 from testbed.analysis.decide import Decision
 from testbed.analysis.decidesweep import Decided, paper_rows
 from testbed.analysis.tables import PAPER_MAX_TEAM, Fig2Row
-from testbed.run.resultvalues import one_line
+from testbed.files.resultvalues import one_line
 
 # decide's claims by the report's verdict each is set beside
 REPORT_CLAIM = {

@@ -7,7 +7,7 @@ planning, stage 2's sweep files written, and the command line
   design at other team sizes: paper-large-teams.toml), their runs through
   testbed.analysis.runs (result.json's type), the Fig. 2 points the report decides on (the
   main network, messaging and variant), each point's expected wall time from its runs'
-  `wall_time_s`, and sweep.json through testbed.sweep.state (a stage-1 run's planned
+  `wall_time_s`, and sweep.json through testbed.files.sweepstate (a stage-1 run's planned
   config at each point is the template of its stage-2 runs).
 - Writing: a sweep file holds one `runs` for a product grid, so stage 2 is several files
   (`blocks`: the points of one runs count grouped into grids), each checked by the sweep
@@ -61,11 +61,11 @@ from testbed.analysis.decide import (
 )  # fmt: skip
 from testbed.analysis.runs import FinishedRun, load_runs
 from testbed.analysis.tables import Fig2Row
-from testbed.resultfile import RESULT_NAME
-from testbed.run.config import OPTIONS, RunConfig
-from testbed.run.options import GRID, RUN
+from testbed.files import sweepstate
+from testbed.files.options import GRID, RUN
+from testbed.files.resultfile import RESULT_NAME
+from testbed.files.runconfig import OPTIONS, RunConfig
 from testbed.sweep import file as sweepfile
-from testbed.sweep import state as sweepstate
 
 # ------------------------------------------------------------------ a sweep directory
 

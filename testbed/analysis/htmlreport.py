@@ -8,7 +8,7 @@ Each run's directory is linked from a table at the end (its paths picture, its r
 
 What the page takes from the sweep's files is text, never markup: every string is escaped
 (element text and attribute values alike, run directory names in links percent-encoded
-too), and strings from result.json reach the markdown as one line (testbed.resultfile).
+too), and strings from result.json reach the markdown as one line (testbed.files.resultfile).
 The only pictures inlined are the report's own figures: an image line whose path is not
 `figures/....png`, a regular PNG inside the sweep directory, is shown as its text.
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from common import boundedfile
 from common.jsonfile import write_atomic
-from testbed.resultfile import RESULT_NAME
+from testbed.files.resultfile import RESULT_NAME
 from testbed.view import served
 
 _IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)$")

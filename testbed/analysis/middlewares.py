@@ -7,7 +7,7 @@ a fall, the whole system of robots gradually stops because of waiting a response
 other". A middleware sweep (testbed/experiments/middleware.toml) runs every point (team
 size, range) once per middleware (`--middleware`, docs/middleware.md) and per battery
 failure (`--battery-failure none|midrun`: robot rN killed at the team's mid-run step,
-testbed.run.failures), on the same seeds. Per run (`run_row`):
+testbed.files.failures), on the same seeds. Per run (`run_row`):
 
 - exploration steps: result.json's mean over the robots not stopped (the killed robot's
   exploration was cut short, not slow); a survivor that never finished counts the final
@@ -54,8 +54,8 @@ from node.messaging import MIDDLEWARES
 from testbed.analysis import stats
 from testbed.analysis.rows import INLINE, MeanCI
 from testbed.analysis.runs import FinishedRun
-from testbed.analysis.verdicts import FAILS, HOLDS, TOO_FEW
-from testbed.run.failures import MIDRUN, NONE
+from testbed.analysis.verdictwords import FAILS, HOLDS, TOO_FEW
+from testbed.files.failures import MIDRUN, NONE
 
 UNDECIDED = "undecided"
 NAIVE = "zeromq-reqrep"

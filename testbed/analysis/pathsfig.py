@@ -35,8 +35,8 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from common import boundedfile
 from testbed.analysis.plots import plt, save_figure
 from testbed.analysis.runs import FinishedRun
-from testbed.run import csvfiles
-from testbed.run.csvfiles import coordinate
+from testbed.files import csvfiles
+from testbed.files.csvfiles import coordinate
 
 MAX_POINTS = 2000
 MAX_FILE_BYTES = 256 << 20  # testbed.view.served's limit: a long run's positions.csv

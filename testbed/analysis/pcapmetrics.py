@@ -91,7 +91,7 @@ from testbed.analysis.pcapread import _int as _int
 from testbed.analysis.pcapread import _tshark_argv as _tshark_argv
 from testbed.analysis.pcapread import parse_fields as parse_fields
 from testbed.analysis.pcapread import read_pcap as read_pcap
-from testbed.run.resultconfig import DEFAULT_ROUTING
+from testbed.files.resultconfig import DEFAULT_ROUTING
 from topology.names import LAG_FILE
 
 log = logging.getLogger(__name__)

@@ -45,8 +45,8 @@ from testbed.analysis.protocols import DAEMON_AGREEMENT
 from testbed.analysis.runs import ResultError, load_run
 from testbed.analysis.tables import RoutingRow, RoutingRun
 from testbed.analysis.verdicts import HOLDS, RULES, Verdict, verdicts
-from testbed.resultfile import has_result
-from testbed.run.resultvalues import one_line
+from testbed.files.resultfile import has_result
+from testbed.files.resultvalues import one_line
 
 log = logging.getLogger(__name__)
 

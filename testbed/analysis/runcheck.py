@@ -21,8 +21,8 @@ import os
 from collections import defaultdict
 
 from node import events
-from testbed.resultfile import RunResult
-from testbed.run import csvfiles
+from testbed.files import csvfiles
+from testbed.files.resultfile import RunResult
 
 
 def link_timeline(out: str) -> dict[int, list[tuple[str, int, int]]]:

@@ -20,7 +20,7 @@ from common.jsonfile import write_atomic
 from testbed.analysis import capturefiles, pcapmetrics
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
-from testbed.run.resultvalues import one_line
+from testbed.files.resultvalues import one_line
 from topology.spec import VETH
 
 SUMMARY_NAME = "summary.md"

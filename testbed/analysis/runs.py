@@ -1,14 +1,14 @@
 """The analysis's runs: each finished run of a sweep as a `FinishedRun`, its result.json
-(testbed.resultfile's `RunResult`) with where it lies and its channel's counters.
+(testbed.files.resultfile's `RunResult`) with where it lies and its channel's counters.
 
 Theory of operation. Every module of testbed.analysis that needs what a run did (figures,
 verdicts, the ablation, the protocols comparison, the causality check, the routing metrics)
 takes a `FinishedRun`, made here once per run by `load_run`, instead of reading result.json
 itself. A `FinishedRun` is a `RunResult` (so `run.status`, `run.config.robots`,
-`run.exploration_steps` are the file's, read and checked by testbed.resultfile, with the
+`run.exploration_steps` are the file's, read and checked by testbed.files.resultfile, with the
 defaults of older files applied there) plus its run id and directory:
 
-- A result.json the analysis cannot read (testbed.resultfile's `ResultError`: one line
+- A result.json the analysis cannot read (testbed.files.resultfile's `ResultError`: one line
   naming the file and the key) makes `load_run` raise; `load_runs` (a sweep directory) logs
   that line and leaves the run out, as a sweep's report counts what it could read.
 - A run on the ns3-wifi medium also left `medium.json`, the 802.11 channel's counters
@@ -40,9 +40,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from common import boundedfile
-from testbed.resultfile import RESULT_NAME, ResultError, RunResult
-from testbed.run.resultconfig import DEFAULT_VARIANT
-from testbed.run.resultvalues import get_mapping, get_value, one_line
+from testbed.files.resultconfig import DEFAULT_VARIANT
+from testbed.files.resultfile import RESULT_NAME, ResultError, RunResult
+from testbed.files.resultvalues import get_mapping, get_value, one_line
 
 log = logging.getLogger(__name__)
 

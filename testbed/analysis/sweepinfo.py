@@ -15,8 +15,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from testbed.analysis.runs import FinishedRun
-from testbed.sweep import state as sweepstate
-from testbed.sweep.state import SweepRun, SweepState
+from testbed.files import sweepstate
+from testbed.files.sweepstate import SweepRun, SweepState
 
 
 def seconds(x: float) -> str:

@@ -51,12 +51,12 @@ import numpy as np
 
 from testbed.analysis import ablation, stats
 from testbed.analysis.tables import PAPER_MAX_TEAM, Fig2Row, PlanCauseRow
+from testbed.analysis.verdictwords import FAILS, HOLDS, NO_DATA, PARTLY, TOO_FEW
 
-if TYPE_CHECKING:  # figures imports middlewares, which imports this module
+if TYPE_CHECKING:
     from testbed.analysis.figures import Tables
 
-HOLDS, PARTLY, FAILS, NO_DATA = "holds", "partly holds", "does not hold", "not enough data"
-TOO_FEW = "too few runs to decide"
+
 WITHIN_NOISE = "undecided: within the run-to-run noise"
 MIN_RUNS = 2  # runs a point needs before its noise (and so a noise-aware test) is known
 RATIO_CV_MAX = 0.15

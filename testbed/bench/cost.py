@@ -49,9 +49,9 @@ from node import events as nodeevents
 from node.events import EVENTS_SUFFIX
 from testbed import PROJECT_ROOT
 from testbed.bench.common import busiest_processes, write
-from testbed.resultfile import RunResult
-from testbed.run import robotfile
-from testbed.run.robotfile import RobotStats
+from testbed.files import robotfile
+from testbed.files.resultfile import RunResult
+from testbed.files.robotfile import RobotStats
 
 RUNS = 3
 ROBOTS = ("default", "python", "cpp")  # `testbed run --robot` (auto: "default")

@@ -33,7 +33,7 @@ from node.grid import OccupancyGrid
 from node.planner import PlannerParams, plan
 from node.rays import _BIAS, Laser
 from testbed.bench.common import median, write
-from testbed.run import robotfile
+from testbed.files import robotfile
 from testbed.world.world import World
 from testbed.world.worldmap import empty_terrain, free_space, start_positions
 

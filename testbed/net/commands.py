@@ -3,7 +3,7 @@
 `add_parsers` adds the `net` and `clean` subcommands to the `testbed` command line (its
 parser class, a UsageError on bad input, is the one testbed.cli gives) and `run` carries
 one of them out. The trace player's and the live feed's own options and subcommands are
-testbed.net.movers'. The network options are `testbed run`'s own (testbed.run.config).
+testbed.net.movers'. The network options are `testbed run`'s own (testbed.files.runconfig).
 """
 
 import argparse
@@ -13,10 +13,11 @@ import sys
 
 from common.argtypes import checked, number
 from common.errors import UsageError
+from testbed.files import options as runoptions
+from testbed.files.runconfig import NET_OPTIONS
 from testbed.net import movers
 from testbed.run import daemonchoice
-from testbed.run import options as runoptions
-from testbed.run.config import NET_OPTIONS, network_fields
+from testbed.run.arguments import network_fields
 from topology.names import check_name, parse_robot_ref
 from topology.spec import LAYOUTS, LOS_MODELS, MAX_COORD_M
 

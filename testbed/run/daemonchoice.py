@@ -13,10 +13,10 @@ runs: the option is not used, nothing is refused, and the run says so.
 
 from __future__ import annotations
 
+from testbed.files.runconfig import AODV_DAEMON_CHOICES as CHOICES  # auto, cpp, python
 from topology import routing
 from topology.spec import AODV_DAEMONS
 
-CHOICES = ("auto", *reversed(AODV_DAEMONS))  # auto, cpp, python
 AODV = "aodv"
 
 

@@ -34,7 +34,7 @@ over steps x (robots + 1). The run ends when every robot that is still in it has
 unasked before the end is recorded with its exit status and step (status `robot_crashed`);
 one the run kills on purpose (`--kill`) is *stopped*: the others carry on and decide the
 status, and the averages over robots leave it out (testbed.run.record). `--isolate` takes a
-robot's radio out of range for a window of steps (testbed.run.isolation): the step loop tells
+robot's radio out of range for a window of steps (testbed.files.isolation): the step loop tells
 the topology controller which robots are out before it feeds the step's positions. See
 docs/architecture.md for the process tree.
 
@@ -53,7 +53,6 @@ import secrets
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from common.errors import TestbedError, UsageError
@@ -62,15 +61,17 @@ from common.sched import CLOCK_PRIORITY, deadline_priority
 from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
-from testbed.resultfile import RunResult
+from testbed.files.configfile import RunConfigFile
+from testbed.files.resultfile import RunResult
+from testbed.files.runconfig import RunConfig
 from testbed.run import daemonchoice, robotchoice
 from testbed.run import results as runresults
-from testbed.run.config import RunConfig, add_arguments, config_from_args
-from testbed.run.configfile import RunConfigFile
+from testbed.run.arguments import add_arguments, config_from_args
 from testbed.run.files import RunFiles
 from testbed.run.prepare import DEFAULT_SNAPSHOTS, PreparedRun, prepare
 from testbed.run.progress import summary_line
 from testbed.run.record import RobotRecord, RunRecord, WallParts
+from testbed.run.started import Started
 from testbed.run.stepclock import no_clock
 from testbed.run.steploop import StepLoop, loop_kind
 from testbed.world.bodylink import BodyServer
@@ -159,24 +160,6 @@ def run(
     return runresults.write(Run(prepared, progress, cpp_robots, steps_over).execute())
 
 
-@dataclass(frozen=True)
-class Started:
-    """What `Run.start()` brought up; the ExitStack it was given takes it down."""
-
-    net: Network
-    server: BodyServer
-    files: RunFiles
-    display_proc: Forked
-    live: LiveServer | None  # --view
-
-    @property
-    def network_timers(self) -> dict | None:
-        """The robot namespaces' network timers (topology.kernel.nettimers), as result.json has
-        them."""
-        timers = self.net.timers
-        return None if timers is None else timers.to_dict()
-
-
 class Run:
     """One prepared run: `execute()` starts it, steps it and returns its record."""
 
@@ -210,7 +193,7 @@ class Run:
             self.robot_reason = f"mixed: C++ robots {names}, the others Python"
         loop_kind()  # TESTBED_STEP_LOOP refused here, before the network is up, not at step 0
         # Which AODV daemon runs and why (testbed.run.daemonchoice): the spec's, which the
-        # same choice made (testbed.run.config.network_fields).
+        # same choice made (testbed.run.arguments.network_fields).
         try:
             daemon, self.aodv_daemon_reason = daemonchoice.choose(
                 self.cfg.aodv_daemon, self.cfg.routing

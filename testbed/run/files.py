@@ -24,9 +24,8 @@ import shutil
 from typing import TYPE_CHECKING, TextIO
 
 from common.errors import UsageError
-from testbed.resultfile import RESULT_NAME
-from testbed.run.configfile import CONFIG_NAME
-from testbed.run.csvfiles import (
+from testbed.files.configfile import CONFIG_NAME
+from testbed.files.csvfiles import (
     COVERAGE_HEADER,
     COVERAGE_NAME,
     LINKS_HEADER,
@@ -34,6 +33,7 @@ from testbed.run.csvfiles import (
     POSITIONS_NAME,
     positions_header,
 )
+from testbed.files.resultfile import RESULT_NAME
 
 if TYPE_CHECKING:
     import _csv

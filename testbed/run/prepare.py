@@ -26,9 +26,10 @@ import numpy as np
 from common.errors import UsageError
 from node.displaysteps import VIDEO_EVERY, DisplaySteps
 from node.rays import Laser
-from testbed.run import configfile
-from testbed.run.config import RunConfig, network_fields
-from testbed.run.failures import battery_kill
+from testbed.files import configfile
+from testbed.files.failures import battery_kill
+from testbed.files.runconfig import RunConfig
+from testbed.run.arguments import network_fields
 from testbed.run.files import claim_directory, make_directory
 from testbed.world.world import World
 from testbed.world.worldmap import (
@@ -105,7 +106,7 @@ def prepare(cfg: RunConfig, out: str, name: str, replace: bool = False) -> Prepa
                   display_pos=list(display_pos), name=name,
                   snapshots=sorted(cfg.snapshots or DEFAULT_SNAPSHOTS))  # fmt: skip
     planned = battery_kill(cfg.battery_failure, cfg.robots, cfg.laser_range)
-    if planned:  # the step the battery failure was fixed at (testbed.run.failures)
+    if planned:  # the step the battery failure was fixed at (testbed.files.failures)
         config["battery_kill"] = f"r{planned[0]}:{planned[1]}"
     prepared = PreparedRun(cfg, out, name, truth, world, phases, display_pos, spec, config)
     try:

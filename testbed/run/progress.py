@@ -12,7 +12,7 @@ import sys
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from testbed.resultfile import RunResult
+    from testbed.files.resultfile import RunResult
 
 
 class ProgressLine:

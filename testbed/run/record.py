@@ -19,11 +19,12 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, ClockSummary
+from testbed.files.resultfile import MAX_MISSED_STEPS_KEPT
+from testbed.run.stepclock import ClockSummary
 from testbed.world.world import World
 
 if TYPE_CHECKING:
-    from testbed.run.configfile import RunConfigFile
+    from testbed.files.configfile import RunConfigFile
     from topology.kernel.forkserver import Forked
 
 
@@ -150,7 +151,7 @@ class RunRecord:
     network_timers: dict | None = (
         None  # topology.kernel.nettimers' record; None: no network came up
     )
-    outages: tuple = ()  # testbed.run.isolation.Outage: the radio outages asked for (--isolate)
+    outages: tuple = ()  # testbed.files.isolation.Outage: the radio outages asked for (--isolate)
     robot: str | None = None  # the robot program: "cpp", "python" or (a test's) "mixed"
     robot_reason: str = ""  # why that one
     aodv_daemon: str | None = None  # the AODV daemon: "cpp", "python"; None: the routing has none

@@ -3,7 +3,7 @@
 `write(record)` reads what the robot processes logged (robots/rK.events.jsonl) and the
 run's frozen record (testbed.run.record: what the world and its clock saw), writes each
 robot's detailed record and the picture of the paths, and, last and atomically, result.json
-from a `RunResult` (testbed.resultfile, the file's one type; docs/run-results.md says what
+from a `RunResult` (testbed.files.resultfile, the file's one type; docs/run-results.md says what
 every key means). A picture that cannot be drawn is logged, never a reason to lose the
 results.
 """
@@ -22,8 +22,9 @@ import numpy as np
 from aodv.statsfile import DaemonStats, StatsError, run_stats_path
 from common.jsonfile import read_json
 from node import events, render, stepcore
-from testbed.resultfile import HostStalls, Plan, RobotResult, RunResult
-from testbed.run import fidelity, isolation, robotfile, twin
+from testbed.files import isolation, robotfile
+from testbed.files.resultfile import HostStalls, Plan, RobotResult, RunResult
+from testbed.run import fidelity, twin
 from testbed.world.world import World
 
 if TYPE_CHECKING:

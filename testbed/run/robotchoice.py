@@ -16,8 +16,8 @@ import os
 import subprocess
 
 from node.native import BINARY_ENV, TB_ROBOT, unbuilt_reason
+from testbed.files.runconfig import ROBOT_CHOICES as CHOICES
 
-CHOICES = ("auto", "cpp", "python")
 CPP_MAPS = ("flood",)
 
 

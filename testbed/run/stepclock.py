@@ -23,9 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from node.timing import STEP_S
+from testbed.files.resultfile import MAX_MISSED_STEPS_KEPT
 from testbed.run.stalls import StallTracker
 
-MAX_MISSED_STEPS_KEPT = 1000  # per robot, and for the world: which steps were missed
 NO_STALLS = {"events": 0, "stalled_s": 0.0, "deadlines_missed": 0, "granted_s": 0.0}
 
 

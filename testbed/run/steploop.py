@@ -36,7 +36,7 @@ import numpy as np
 
 from common.errors import UsageError
 from node import body
-from testbed.run import isolation
+from testbed.files import isolation
 from testbed.run.progress import ProgressLine
 from testbed.run.record import RobotRecord
 from testbed.run.stepclock import StepClock, StepTiming
@@ -44,8 +44,8 @@ from testbed.world import stepfast
 from topology.spec import VETH
 
 if TYPE_CHECKING:
-    from testbed.run.execute import Started
     from testbed.run.prepare import PreparedRun
+    from testbed.run.started import Started
 
 log = logging.getLogger(__name__)
 

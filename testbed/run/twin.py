@@ -69,9 +69,9 @@ from node.events import EventLog
 from node.motion import _grow_box
 from node.robot import Robot, RobotConfig
 from node.timing import RobotTimings
+from testbed.files.csvfiles import POSITIONS_NAME, positions_header
+from testbed.files.runconfig import RunConfig
 from testbed.run import prepare
-from testbed.run.config import RunConfig
-from testbed.run.csvfiles import POSITIONS_NAME, positions_header
 from testbed.run.record import RobotRecord
 from testbed.run.steploop import over
 
@@ -314,8 +314,8 @@ def main(argv: list[str]) -> int:
     """`python -m testbed.run.twin RUN_DIR...`: each finished run held against its twin
     (one line each: its fidelity.twin as the results would record it); 1 when a path differs."""
     from common.boundedfile import Refused
-    from testbed.resultfile import RunResult
-    from testbed.run import configfile
+    from testbed.files import configfile
+    from testbed.files.resultfile import RunResult
 
     differs = False
     for out in argv:

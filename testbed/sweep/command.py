@@ -24,9 +24,9 @@ from pathlib import Path
 from common.argtypes import number
 from common.errors import UsageError
 from common.jsonfile import make_dirs
-from testbed.run.config import RunConfig
+from testbed.files import sweepstate
+from testbed.files.runconfig import RunConfig
 from testbed.sweep import file as sweepfile
-from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import Plan, config_mismatch, default_jobs, jobs_cap, other_sweep, plan
 from testbed.sweep.rundir import is_done, run_dir

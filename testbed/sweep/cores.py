@@ -22,7 +22,7 @@ import statistics
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from testbed.resultfile import RunResult
+from testbed.files.resultfile import RunResult
 from testbed.sweep.slurm import CPU_MARGIN, CPU_S_PER_ROBOT_STEP, STEP_S
 
 # Cores per unit of load before any run of the sweep has finished: CPU_S_PER_ROBOT_STEP is

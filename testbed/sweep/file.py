@@ -21,7 +21,7 @@ for every run of the sweep::
     middleware = ["nanomsg", "zeromq"]  # optional: the goals' middleware as a grid dimension
     maps = ["flood", "pubsub"]    # optional: how maps are shared, as a grid dimension
     battery_failure = ["none", "midrun"]  # optional: midrun kills robot rN mid-run
-                                  # (testbed.run.failures); every team size must be 2 or more
+                                  # (testbed.files.failures); every team size must be 2 or more
     runs = 1                      # runs per point (any number), default 1
 
     [run]
@@ -50,10 +50,10 @@ for every run of the sweep::
     battery_failure = "midrun"    # none | midrun, default none
     seed = 0                      # optional base mixed into every derived seed
 
-The keys are the run options marked for sweeps (testbed.run.config: `sweep={GRID}` may be
+The keys are the run options marked for sweeps (testbed.files.runconfig: `sweep={GRID}` may be
 varied, `sweep={RUN}` fixed), and each value is checked by its option's own rules (type,
 bounds, choices), the same as `testbed run` checks the flag; each point of the grid then by
-the rule that joins options (testbed.run.config.refusal: a laser shorter than a map cell,
+the rule that joins options (testbed.files.runconfig.refusal: a laser shorter than a map cell,
 `robot = "cpp"` with a middleware the C++ robot built here does not carry, ...), the same as
 `testbed run` checks its options together. Two values of a dimension that a run's id shows
 alike (5 and 5.0000001, both `c5`) are refused: they would be two runs of one id.
@@ -94,9 +94,10 @@ from common.errors import UsageError
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 from node.messaging.maps import refusal as maps_refusal
 from node.native import TB_ROBOT
-from testbed.run import failures
-from testbed.run.config import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt, refusal
-from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
+from testbed.files import failures
+from testbed.files.options import CHANGED, GRID, NONZERO, RUN, VARIED, Option, check_value
+from testbed.files.runconfig import BY_NAME, EMPTY_MAP, OPTIONS, RunConfig, fmt
+from testbed.run.arguments import refusal
 from topology.spec import LOS_MODELS
 
 _TOP_KEYS = {"description", "grid", "run"}
@@ -387,7 +388,7 @@ def parse(data: dict, path: Path | str = "<string>") -> SweepSpec:
 
 def _check_points(path, spec: SweepSpec) -> None:
     """Each point of the grid by the rule `testbed run` checks its options with
-    (testbed.run.config.refusal: a laser shorter than a map cell, a robot program that
+    (testbed.run.arguments.refusal: a laser shorter than a map cell, a robot program that
     cannot carry the run, ...), so that no run of the sweep is refused when its turn comes.
     The robot program is checked where the C++ robot is built (as the run asks it); where it
     is not, every run that asks for it is refused at its start, as a lone run is."""

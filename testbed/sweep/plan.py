@@ -12,9 +12,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from testbed.resultfile import RunResult
-from testbed.run.config import RunConfig
-from testbed.sweep import state as sweepstate
+from testbed.files import sweepstate
+from testbed.files.resultfile import RunResult
+from testbed.files.runconfig import RunConfig
 from testbed.sweep.cores import load
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, plan_dict, run_dir

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from testbed.resultfile import RunResult, has_result
-from testbed.run.config import OPTIONS, RunConfig, to_argv
+from testbed.files.resultfile import RunResult, has_result
+from testbed.files.runconfig import OPTIONS, RunConfig, to_argv
 
 # The options a sweep's plan always names (the rest only when not the default): those of the
 # sweep file, and the seed (each run's own, derived from the file's base seed).

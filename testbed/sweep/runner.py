@@ -67,11 +67,11 @@ from pathlib import Path
 from typing import BinaryIO
 
 from common.errors import TestbedError
-from testbed.resultfile import RESULT_NAME, RunResult
-from testbed.run.config import RunConfig
+from testbed.files import sweepstate
+from testbed.files.resultfile import RESULT_NAME, RunResult
+from testbed.files.runconfig import RunConfig
 from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
-from testbed.sweep import state as sweepstate
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 from testbed.sweep.progress import Progress

@@ -20,8 +20,8 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
-from testbed.resultfile import RunResult
-from testbed.run.config import RunConfig
+from testbed.files.resultfile import RunResult
+from testbed.files.runconfig import RunConfig
 from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
 from testbed.sweep.file import PlannedRun

@@ -13,7 +13,7 @@ every task of an array the same CPUs and time limit, and those depend on the tea
 it lands on: it reads the i-th run id of LIST, finds the run's configuration in the plan,
 removes a partial directory an earlier attempt left, and runs `testbed run` in-process,
 which tears its namespaces down on SIGTERM (what `scancel` and a time limit send first).
-The job ids go to `DIR/slurm/jobs.json` (its type: testbed.sweep.slurmjobs). A task killed
+The job ids go to `DIR/slurm/jobs.json` (its type: testbed.files.slurmjobs). A task killed
 outright (SIGKILL, a node lost) leaves a directory without result.json: `--status` calls it
 failed, and the next `--resume --slurm` resubmits exactly the runs that are neither done nor
 queued, never a finished one.
@@ -37,10 +37,9 @@ from pathlib import Path
 from common.errors import TestbedError, UsageError
 from common.jsonfile import make_dirs, write_atomic
 from testbed import PROJECT_ROOT
-from testbed.resultfile import RESULT_NAME, RunResult
-from testbed.run.config import RunConfig
-from testbed.sweep import slurmjobs
-from testbed.sweep import state as sweepstate
+from testbed.files import slurmjobs, sweepstate
+from testbed.files.resultfile import RESULT_NAME, RunResult
+from testbed.files.runconfig import RunConfig
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.rundir import is_done, run_argv, run_dir
 

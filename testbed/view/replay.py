@@ -17,10 +17,10 @@ import dataclasses
 from pathlib import Path
 
 from common import boundedfile
-from testbed.resultfile import RESULT_NAME, RunResult
-from testbed.run import configfile, csvfiles
-from testbed.run.configfile import CONFIG_NAME
-from testbed.run.csvfiles import COVERAGE_NAME, LINKS_NAME, POSITIONS_NAME
+from testbed.files import configfile, csvfiles
+from testbed.files.configfile import CONFIG_NAME
+from testbed.files.csvfiles import COVERAGE_NAME, LINKS_NAME, POSITIONS_NAME
+from testbed.files.resultfile import RESULT_NAME, RunResult
 from testbed.view.served import in_run, snapshot, snapshot_steps
 
 __all__ = ["NotARun", "load", "read_config", "snapshot_path", "snapshot_steps"]
@@ -34,7 +34,7 @@ class NotARun(ValueError):
 
 
 def read_config(d: Path) -> dict:
-    """What the view takes from config.json, checked (testbed.run.configfile): robots,
+    """What the view takes from config.json, checked (testbed.files.configfile): robots,
     comm_range, map_m, map_cell, display (a position or nothing) and map (what it names,
     unchecked: testbed.view.served decides whether to serve it)."""
     path = in_run(d, CONFIG_NAME)

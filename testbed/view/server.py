@@ -25,7 +25,7 @@ from pathlib import Path
 
 from aiohttp import web
 
-from testbed.run.resultvalues import one_line
+from testbed.files.resultvalues import one_line
 from testbed.view import replay, served
 
 STATIC = Path(__file__).parent / "static"

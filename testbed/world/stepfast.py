@@ -40,7 +40,7 @@ import math
 import numpy as np
 
 from node import stepcore
-from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT
+from testbed.files.resultfile import MAX_MISSED_STEPS_KEPT
 
 _P = ctypes.c_void_p
 _L = ctypes.c_int64

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from common.errors import UsageError
+from testbed.files.runconfig import START_PLACEMENTS
 from topology.inputs import pngmap
 from topology.spec import CELL_M as CELL  # metres
 
@@ -139,9 +140,6 @@ def free_space(truth: GroundTruth, starts: list[tuple[float, float]]) -> np.ndar
         if 0 <= r < truth.shape[0] and 0 <= c < truth.shape[1] and free[r, c]:
             keep.add(int(labels[r, c]))
     return np.isin(labels, sorted(keep)) & (free > 0)
-
-
-START_PLACEMENTS = ("corner", "centre", "spread")
 
 
 def start_positions(

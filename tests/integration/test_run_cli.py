@@ -10,7 +10,7 @@ import sys
 import pytest
 
 from node.displaysteps import VIDEO_EVERY, DisplaySteps
-from testbed.run.config import RunConfig
+from testbed.files.runconfig import RunConfig
 from testbed.run.prepare import DEFAULT_SNAPSHOTS
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -21,8 +21,8 @@ import uuid
 import pytest
 
 from testbed.analysis import runcheck
+from testbed.files.isolation import Outage
 from testbed.run.execute import RunConfig, run
-from testbed.run.isolation import Outage
 from topology.network import destroy
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from testbed.run import failures
+from testbed.files import failures
 from testbed.sweep import file as sweepfile
 from tests.integration.test_sweep_short import results, run_testbed
 

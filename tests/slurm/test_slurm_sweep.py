@@ -13,7 +13,7 @@ import time
 import tomllib
 from pathlib import Path
 
-from testbed.sweep import slurmjobs
+from testbed.files import slurmjobs
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = REPO / "testbed" / "experiments" / "short.toml"

@@ -17,9 +17,10 @@ import pytest
 
 from common.errors import UsageError
 from testbed import PROJECT_ROOT, cli
-from testbed.resultfile import RunResult
+from testbed.files.resultfile import RunResult
+from testbed.files.runconfig import BY_NAME, RunConfig, to_argv
 from testbed.run import daemonchoice
-from testbed.run.config import BY_NAME, RunConfig, network_fields, refusal, to_argv
+from testbed.run.arguments import network_fields, refusal
 from tests.unit.test_run_options import net_up_parser, parse_run
 from topology import routing, state
 from topology.spec import AODV_DAEMONS, NetworkSpec

@@ -1,4 +1,4 @@
-"""--battery-failure: the mid-run kill fixed before the run (testbed.run.failures), added to the
+"""--battery-failure: the mid-run kill fixed before the run (testbed.files.failures), added to the
 run's kill list, and a sweep grid dimension whose variants share their point's seed."""
 
 import tomllib
@@ -6,8 +6,8 @@ import tomllib
 import pytest
 
 from common.errors import UsageError
-from testbed.run import failures
-from testbed.run.config import RunConfig
+from testbed.files import failures
+from testbed.files.runconfig import RunConfig
 from testbed.sweep import file as sweepfile
 from testbed.sweep.rundir import plan_dict, run_argv
 from tests.unit.test_run_options import parse_run

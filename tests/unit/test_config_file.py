@@ -1,4 +1,4 @@
-"""A run's config.json as one type (testbed.run.configfile): what prepare writes reads back
+"""A run's config.json as one type (testbed.files.configfile): what prepare writes reads back
 the same, result.json's config comes from it, the view's fields are checked with old runs'
 defaults, and a malformed file is refused naming the key."""
 
@@ -8,9 +8,9 @@ import os
 import pytest
 
 from common import boundedfile
-from testbed.run import configfile
-from testbed.run.config import RunConfig
-from testbed.run.configfile import ConfigError, RunConfigFile
+from testbed.files import configfile
+from testbed.files.configfile import ConfigError, RunConfigFile
+from testbed.files.runconfig import RunConfig
 
 
 def _written(tmp_path):

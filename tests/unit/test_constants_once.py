@@ -105,7 +105,7 @@ def test_every_robot_option_takes_its_default_and_bounds_from_the_robot():
     no default or bound of their own."""
     from node.launch import run_params
 
-    tree = SOURCES["testbed/run/config.py"]
+    tree = SOURCES["testbed/files/runconfig.py"]
     cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "RunConfig")
     fields = {s.target.id: s.value for s in cls.body
               if isinstance(s, ast.AnnAssign) and isinstance(s.target, ast.Name)}  # fmt: skip

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from testbed.analysis import decide, decidesweep, stats
+from testbed.files import sweepstate
 from testbed.sweep import file as sweepfile
-from testbed.sweep import state as sweepstate
 from testbed.sweep.rundir import plan_dict
 from tests.unit.test_decide_error_rate import fig2
 from tests.unit.test_sweep_synthetic import result_doc, write_run

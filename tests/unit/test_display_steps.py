@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from node.displaysteps import VIDEO_EVERY, DisplaySteps
 from node.launch import NodeArgs
-from testbed.run.config import RunConfig
+from testbed.files.runconfig import RunConfig
 from testbed.run.prepare import PreparedRun
 
 

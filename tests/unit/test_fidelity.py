@@ -4,7 +4,7 @@ import pytest
 
 from aodv.stats import WORST_KEPT, TimerLateness
 from node.lateness import MS_BOUNDS, Lateness
-from testbed.resultfile import ResultError, RunResult
+from testbed.files.resultfile import ResultError, RunResult
 from testbed.run import fidelity
 from testbed.run.fidelity import Measures, Thresholds, measures, verdict
 from topology.kernel import nettimers

@@ -1,7 +1,7 @@
 """Every file the testbed writes and reads again has one type (issue 41, item 1): sweep.json
-(testbed.sweep.state), a robot's events.jsonl (node.events), result.json and its config
-(testbed.resultfile, testbed.run.resultconfig), a Slurm sweep's jobs file
-(testbed.sweep.slurmjobs), an AODV daemon's statistics (aodv.statsfile). Checked here on the
+(testbed.files.sweepstate), a robot's events.jsonl (node.events), result.json and its config
+(testbed.files.resultfile, testbed.files.resultconfig), a Slurm sweep's jobs file
+(testbed.files.slurmjobs), an AODV daemon's statistics (aodv.statsfile). Checked here on the
 source of every module: no module but the type's own opens sweep.json, the jobs file or a
 daemon's statistics or parses event lines by hand, and the old files' defaults of a run's
 config are the type's; and result.json's config is made from the run's option table (its
@@ -14,15 +14,15 @@ from pathlib import Path
 
 import pytest
 
-from testbed.run.config import BY_NAME
-from testbed.run.resultconfig import CONFIG_KEYS, ResultConfig
+from testbed.files.resultconfig import CONFIG_KEYS, ResultConfig
+from testbed.files.runconfig import BY_NAME
 from tests.unit.test_result_file import _call_name, _scope, tainted_names
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("testbed", "topology", "node", "aodv", "common")
-SWEEP_OWNER = "testbed/sweep/state.py"
+SWEEP_OWNER = "testbed/files/sweepstate.py"
 EVENTS_OWNER = "node/events.py"
-JOBS_OWNER = "testbed/sweep/slurmjobs.py"
+JOBS_OWNER = "testbed/files/slurmjobs.py"
 STATS_OWNER = "aodv/statsfile.py"
 SWEEP_SPELLED = re.compile(r"(?:^|/)sweep\.json$")
 JOBS_SPELLED = re.compile(r"(?:^|/)jobs\.json$")
@@ -183,7 +183,7 @@ def test_the_checks_see_what_they_must():
     assert sweep_reads("x = read_json(out / 'sweep.json')\n")
     assert sweep_reads("p = os.path.join(d, 'sweep.json')\n")
     assert sweep_reads("p = out / sweepstate.STATE_NAME\n")
-    assert sweep_reads("from testbed.sweep.state import STATE_NAME\n")
+    assert sweep_reads("from testbed.files.sweepstate import STATE_NAME\n")
     assert sweep_reads("doc = sweepstate.check(json.load(f))\n")
     assert not sweep_reads('"""Reads sweep.json."""\ns = sweepstate.read(out)\n')
     assert event_parses('if line.startswith(b\'{"e":"send"\'):\n    pass\n')
@@ -193,7 +193,7 @@ def test_the_checks_see_what_they_must():
     assert not event_parses("d = json.loads(text)\n")  # not a module about event logs
     assert jobs_reads("jobs = read_json(out / 'slurm' / 'jobs.json')['jobs']\n")
     assert jobs_reads("p = os.path.join(out, 'slurm/jobs.json')\n")
-    assert jobs_reads("from testbed.sweep.slurmjobs import JOBS_NAME\n")
+    assert jobs_reads("from testbed.files.slurmjobs import JOBS_NAME\n")
     assert jobs_reads("d = json.loads(slurmjobs.jobs_path(out).read_text())\n")
     assert jobs_reads("j = SlurmJobs.from_json(json.load(f))\n")
     assert not jobs_reads('"""Reads slurm/jobs.json."""\njobs = slurmjobs.read(out).jobs\n')
@@ -248,7 +248,7 @@ def test_no_module_but_the_type_parses_event_lines(path):
 
 
 def test_result_configs_keys_are_run_options():
-    """result.json's config repeats options of the run's table (testbed.run.config): each of
+    """result.json's config repeats options of the run's table (testbed.files.runconfig): each of
     its keys is one, and its fields are those keys and the few it draws from `extra`."""
     assert [k for k in CONFIG_KEYS if k not in BY_NAME] == []
     fields = [f.name for f in dataclasses.fields(ResultConfig)]
@@ -259,31 +259,35 @@ def test_result_configs_keys_are_run_options():
     assert [k for k in defaulted if k not in BY_NAME] == []
 
 
-def test_result_configs_keys_come_from_the_option_table(monkeypatch):
+def test_result_configs_keys_are_the_options_marked_in_result(monkeypatch):
     """The keys are the options marked in_result, in the order result.json has always had
-    them; a marked option without a ResultConfig field, or a field whose annotation is not
-    its option's kind, stops the import."""
-    from testbed.run import resultconfig
-    from testbed.run.config import OPTIONS
+    them; the table checks itself against them as it is made (check_options): an option
+    marked in_result that is not a key, a key without a ResultConfig field, or a field whose
+    annotation is not its option's kind, stops the table's import."""
+    from testbed.files import resultconfig
+    from testbed.files.runconfig import OPTIONS
 
     assert tuple(o.name for o in OPTIONS if o.in_result) == CONFIG_KEYS
     assert CONFIG_KEYS == ("robots", "comm_range", "laser_range", "seed", "time_scale",
                            "routing", "map", "loss_pct", "delay_ms", "capture", "max_steps",
                            "coordination", "start")  # fmt: skip
-    resultconfig._check_config_fields()
-    monkeypatch.setattr(resultconfig, "CONFIG_KEYS", (*CONFIG_KEYS, "range_model"))
+    resultconfig.check_options(OPTIONS)
+    marked = [dataclasses.replace(o, in_result=o.in_result or o.name == "range_model")
+              for o in OPTIONS]  # fmt: skip
+    with pytest.raises(TypeError, match="in_result"):
+        resultconfig.check_options(marked)
+    monkeypatch.setattr(resultconfig, "CONFIG_KEYS", tuple(o.name for o in marked if o.in_result))
     with pytest.raises(TypeError, match="fields"):
-        resultconfig._check_config_fields()
+        resultconfig.check_options(marked)
     monkeypatch.setattr(resultconfig, "CONFIG_KEYS", CONFIG_KEYS)
-    kind = dataclasses.replace(BY_NAME["seed"], kind=str)
-    monkeypatch.setitem(resultconfig.BY_NAME, "seed", kind)
+    kinds = [dataclasses.replace(o, kind=str) if o.name == "seed" else o for o in OPTIONS]
     with pytest.raises(TypeError, match="ResultConfig.seed"):
-        resultconfig._check_config_fields()
+        resultconfig.check_options(kinds)
 
 
 def test_result_config_defaults_match_the_options_defaults():
     """A run that left an option at its default and an old run without it read the same."""
-    from testbed.run.config import RunConfig
+    from testbed.files.runconfig import RunConfig
 
     new = RunConfig(robots=2, comm_range=20.0).to_dict()
     new.update(map_size=[400, 400])

@@ -219,7 +219,7 @@ def test_seq_diff_is_rfc_3561s(a, b):
 
 
 def test_the_window_is_stated_once_and_covers_a_run():
-    from testbed.run.config import MAX_STEPS
+    from testbed.files.runconfig import MAX_STEPS
 
     assert MAX_STEPS < flood.SEQ_WINDOW < 2**31
     contract = (Path(PROJECT_ROOT) / "docs" / "robot-contract.md").read_text()

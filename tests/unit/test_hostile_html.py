@@ -8,8 +8,8 @@ import re
 import pytest
 
 from testbed.analysis import htmlreport
-from testbed.resultfile import RunResult
-from testbed.run.resultvalues import one_line
+from testbed.files.resultfile import RunResult
+from testbed.files.resultvalues import one_line
 from tests.unit import hostile_dirs as hd
 
 EVIL_NAME = 'x" onmouseover="alert(1)"'

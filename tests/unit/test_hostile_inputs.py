@@ -47,7 +47,7 @@ def test_every_numeric_run_option_is_bounded(capsys, args, says):
 
 
 def test_the_bounds_are_in_the_help():
-    from testbed.run.config import OPTIONS
+    from testbed.files.runconfig import OPTIONS
 
     for opt in OPTIONS:
         if opt.kind in (int, float) and opt.parse is None:

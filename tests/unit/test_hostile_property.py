@@ -4,8 +4,8 @@ traceback (an exception out of the CLI fails the test), never a hang (hostile_di
 never a write outside the directory (a file outside, linked from the names the report
 writes, stays as it was).
 
-The oracle (`acceptable`) is written here, apart from testbed.resultfile and
-testbed.analysis.resultcheck, from docs/run-results.md's ranges: the report must be refused
+The oracle (`acceptable`) is written here, apart from testbed.files.resultfile and
+testbed.files.resultcheck, from docs/run-results.md's ranges: the report must be refused
 exactly when it says no, and what a report prints must be the document's own numbers.
 """
 

@@ -100,7 +100,7 @@ def test_compare_draws_nothing_from_negative_steps(tmp_path, capsys):
     assert "within the noise" not in out
 
 
-# -- sweep.json: type-checked (testbed.sweep.state) ------------------------------------------
+# -- sweep.json: type-checked (testbed.files.sweepstate) ------------------------------------------
 
 BAD_STATES = [
     ("a list", []),

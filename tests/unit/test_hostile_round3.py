@@ -20,7 +20,7 @@ from common.paths import PROJECT_ROOT
 from node.native import unbuilt_reason
 from testbed.analysis import capturefiles, pathsfig
 from testbed.analysis.runs import load_runs
-from testbed.resultfile import ResultError, RunResult
+from testbed.files.resultfile import ResultError, RunResult
 from testbed.sweep import file as sweepfile
 from testbed.view import replay
 from tests.unit import hostile_dirs as hd
@@ -206,7 +206,7 @@ def test_a_run_that_could_do_nothing_is_refused(capsys, args, says):
 
 def test_the_largest_isolation_is_taken():
     from testbed import cli
-    from testbed.run.config import config_from_args
+    from testbed.run.arguments import config_from_args
 
     argv = [*RUN, "--isolate", "r1:10000000:10000000"]
     cfg = config_from_args(cli.build_parser(["run"]).parse_args(argv))

@@ -1,6 +1,9 @@
 """Which package may use which (docs/architecture.md, "The packages"): the robot program
 (node/) does not use the harness (testbed/); the kernel layer (topology/) and the routing
-daemon (aodv/) use neither; the shared helpers (common/) use none of the project. Checked on
+daemon (aodv/) use neither; the shared helpers (common/) use none of the project. Below
+package level: testbed/files, the testbed's own files, imports only common/ and named
+constants; testbed/analysis nothing of testbed/run; and no module imports itself through
+others. Checked on
 the source of every module with ast, so an import inside a function counts as much as one at
 the top, and so does a module named in a string for another process to run (`python -m
 testbed...`, a fork server's module, import_module).
@@ -9,6 +12,7 @@ testbed...`, a fork server's module, import_module).
 import ast
 import os
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -220,12 +224,12 @@ def test_packet_and_file_formats_are_not_netlink(tmp_path):
 
 
 def test_the_harness_is_in_named_parts():
-    """testbed/ holds the command line (`testbed`, `python -m testbed`) and the result.json
-    contract at its top; everything else is in a subpackage that says what it holds (run/,
-    sweep/, net/, analysis/, ...)."""
+    """testbed/ holds the command line (`testbed`, `python -m testbed`) at its top; everything
+    else is in a subpackage that says what it holds (files/, run/, sweep/, net/, analysis/,
+    ...)."""
     top = sorted(f for f in os.listdir(os.path.join(REPO, "testbed")) if f.endswith(".py"))
-    assert top == ["__init__.py", "__main__.py", "cli.py", "console.py", "resultfile.py"]
-    for part in ("run", "sweep", "net"):
+    assert top == ["__init__.py", "__main__.py", "cli.py", "console.py"]
+    for part in ("files", "run", "sweep", "net"):
         names = os.listdir(os.path.join(REPO, "testbed", part))
         prefixed = [n for n in names if n.startswith(part) and n.endswith(".py")]
         assert not prefixed, f"testbed/{part}/ repeats its name in {prefixed}"
@@ -268,3 +272,213 @@ def test_no_module_over_600_lines_and_no_class_over_400():
                     if n > CLASS_LINES:
                         too_long.append(f"{rel}: class {node.name} {n} lines")
     assert not too_long, "split by job: " + "; ".join(too_long)
+
+
+# ---------------------------------------------------------------- below package level
+
+PROJECT = ("common", "node", "topology", "aodv", "testbed")
+# What testbed/files, the ground floor of testbed/ (docs/architecture.md), takes from the
+# project beyond common/ and itself: named constants, and the robot's own declarations of
+# the parameters a run option sets (node.launch.bounds) and of the rule joining --maps and
+# --middleware (node.messaging.maps.refusal), and a position's check. Nothing that runs.
+FILES_MAY_IMPORT = {
+    "node.launch": {"MAX_LASER_CELLS", "bounds"},
+    "node.messaging.maps": {"refusal"},
+    "node.rays": {"MAX_RANGE_M"},
+    "node.timing": {"STEP_S"},
+    "topology.names": {"MAX_ROBOTS"},
+    "topology.spec": {
+        "AODV_DAEMONS", "AODV_PROFILES", "CELL_M", "LOS_MODELS", "MAX_COORD_M", "MEDIA",
+        "RANGE_MODELS", "ROUTINGS", "VETH", "WIFI_LOSSES", "WIFI_STANDARDS", "check_position",
+    },
+}  # fmt: skip
+# Modules of the standard library and beyond that run things, serve or draw: never in files/.
+FILES_NEVER = {"subprocess", "http", "socketserver", "cv2", "numpy", "matplotlib", "ctypes"}
+# Circles this round leaves to others (issue 56): topology's (its own item) and the decision
+# planner's (in-function import; being edited beside this round). A circle that goes must
+# leave this list too.
+KNOWN_CIRCLES = {
+    frozenset({"topology.bringup", "topology.network"}),
+    frozenset({"testbed.analysis.decide", "testbed.analysis.decidesweep"}),
+}
+
+
+def module_name(path: str) -> str:
+    rel = os.path.relpath(path, REPO)[: -len(".py")].replace(os.sep, ".")
+    return rel.removesuffix(".__init__")
+
+
+def imports(path: str) -> list[tuple[int, str, str | None]]:
+    """(line, module, name imported from it or None) for every import in `path`, those inside
+    functions and under TYPE_CHECKING included; relative imports made absolute."""
+    name = module_name(path)
+    package = name if path.endswith("__init__.py") else name.rpartition(".")[0]
+    out = []
+    for node in ast.walk(ast.parse(open(path).read(), path)):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            module = node.module or ""
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                module = ".".join(base + ([module] if module else []))
+            out += [(node.lineno, module, a.name) for a in node.names]
+    return out
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Every project module and the project modules it imports (`from p import m` counts as
+    importing the module p.m where there is one)."""
+    paths = {module_name(p): p for package in PROJECT for p in modules(package)}
+    graph: dict[str, set[str]] = {}
+    for name, path in paths.items():
+        edges = set()
+        for _, module, imported in imports(path):
+            for target in (f"{module}.{imported}", module):
+                parts = target.split(".")
+                found = next((".".join(parts[:i]) for i in range(len(parts), 0, -1)
+                              if ".".join(parts[:i]) in paths), None)  # fmt: skip
+                if found:
+                    break
+            if found and found != name:
+                edges.add(found)
+        graph[name] = edges
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[frozenset[str]]:
+    """The strongly connected parts of more than one module (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, children = work[-1]
+            w = next(children, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph.get(w, ())))))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                part = set()
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    part.add(w)
+                    if w == v:
+                        break
+                if len(part) > 1:
+                    out.append(frozenset(part))
+    return out
+
+
+def test_no_import_circles():
+    """No module imports itself through others: not at the top, not inside a function and not
+    under TYPE_CHECKING (each of those only hid a circle: resultfile -> resultcheck ->
+    resultconfig -> config -> isolation -> resultfile; figures -> middlewares -> verdicts ->
+    figures; execute <-> steploop)."""
+    found = set(circles(module_graph()))
+    new = [sorted(c) for c in found - KNOWN_CIRCLES]
+    assert not new, f"import circles: {new}"
+    gone = [sorted(c) for c in KNOWN_CIRCLES - found]
+    assert not gone, f"no longer circles, take them off KNOWN_CIRCLES: {gone}"
+
+
+@pytest.mark.parametrize(
+    "graph, found",
+    [
+        ({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}, [{"a", "b", "c"}]),
+        ({"a": {"b"}, "b": set(), "c": {"b"}}, []),
+        ({"a": {"b"}, "b": {"a"}, "c": {"d"}, "d": {"c"}}, [{"a", "b"}, {"c", "d"}]),
+    ],
+)
+def test_the_circle_check_finds_circles(graph, found):
+    assert sorted(map(sorted, circles(graph))) == sorted(map(sorted, found))
+
+
+def test_the_graph_counts_imports_in_functions_and_type_checking(tmp_path, monkeypatch):
+    pkg = tmp_path / "testbed" / "x"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("def f():\n    from testbed.x import b\n")
+    (pkg / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                              "    from .a import f\n")  # fmt: skip
+    monkeypatch.setattr(sys.modules[__name__], "REPO", str(tmp_path))
+    monkeypatch.setattr(sys.modules[__name__], "PROJECT", ("testbed",))
+    assert circles(module_graph()) == [frozenset({"testbed.x.a", "testbed.x.b"})]
+
+
+def files_may_import(module: str, name: str | None) -> bool:
+    """Whether a module of testbed/files may import `name` from `module` (None: `import
+    module`)."""
+    top = module.split(".")[0]
+    if top in FILES_NEVER:
+        return False
+    if top not in PROJECT or top == "common":
+        return True
+    if module == "testbed.files" or module.startswith("testbed.files."):
+        return True
+    return name in FILES_MAY_IMPORT.get(module, ())
+
+
+@pytest.mark.parametrize(
+    "module, name, ok",
+    [
+        ("common.boundedfile", "read", True),
+        ("testbed.files.resultvalues", "one_line", True),
+        ("topology.spec", "CELL_M", True),
+        ("topology.spec", "NetworkSpec", False),
+        ("testbed.run", "robotchoice", False),
+        ("testbed.world.worldmap", "START_PLACEMENTS", False),
+        ("subprocess", None, False),
+        ("cv2", None, False),
+        ("json", None, True),
+    ],
+)
+def test_the_files_check_knows_the_floor(module, name, ok):
+    assert files_may_import(module, name) is ok
+
+
+def test_files_import_only_common_and_named_constants():
+    """testbed/files, the testbed's own files and option table, is the ground floor of
+    testbed/: it imports common/, itself and the names FILES_MAY_IMPORT lists, and nothing
+    that serves, draws or starts processes."""
+    paths = modules(os.path.join("testbed", "files"))
+    assert len(paths) >= 10, paths
+    bad = [
+        f"{os.path.relpath(path, REPO)}:{line}: {module}" + (f".{name}" if name else "")
+        for path in paths
+        for line, module, name in imports(path)
+        if not files_may_import(module, name)
+    ]
+    assert not bad, "testbed/files imports beyond its floor:\n" + "\n".join(bad)
+
+
+def test_analysis_reads_runs_through_files_only():
+    """testbed/analysis reads what runs wrote through testbed/files' types: nothing of
+    testbed/run (which runs a testbed)."""
+    bad = [
+        f"{os.path.relpath(p, REPO)}:{line}: {module}"
+        for p in modules(os.path.join("testbed", "analysis"))
+        for line, module, name in imports(p)
+        if module == "testbed.run"
+        or module.startswith("testbed.run.")
+        or (module == "testbed" and name == "run")
+    ]
+    assert not bad, "testbed/analysis uses testbed/run:\n" + "\n".join(bad)

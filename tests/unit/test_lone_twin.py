@@ -11,9 +11,9 @@ import time
 
 import pytest
 
+from testbed.files.isolation import Outage
+from testbed.files.runconfig import RunConfig
 from testbed.run import fidelity, twin
-from testbed.run.config import RunConfig
-from testbed.run.isolation import Outage
 
 DATA = os.path.join(os.path.dirname(__file__), "..", "data", "lone-k5")
 STEPS = {1: 1901, 2: 1989, 3: 1964}

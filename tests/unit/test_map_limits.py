@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from common.errors import UsageError
-from testbed.run.config import RunConfig, config_from_args
+from testbed.files.runconfig import RunConfig
+from testbed.run.arguments import config_from_args
 from testbed.world.worldmap import empty_terrain, load_png
 from topology.radio.los import MapError, Walls
 
@@ -248,8 +249,8 @@ def test_prepare_stops_at_once_on_sigint():
 
 
 def test_a_config_records_the_laser_bound_for_sweeps():
-    from testbed.run.config import BY_NAME
-    from testbed.run.options import check_value
+    from testbed.files.options import check_value
+    from testbed.files.runconfig import BY_NAME
 
     assert (
         check_value(BY_NAME["laser_range"], 31) == "value 31 out of range (must be > 0 and <= 30)"

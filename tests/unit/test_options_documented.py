@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from testbed import PROJECT_ROOT
-from testbed.run.config import OPTIONS
+from testbed.files.runconfig import OPTIONS
 
 # Where the options are listed: the guide's section on a run by hand (the README links it).
 GUIDE = Path(PROJECT_ROOT) / "docs" / "guide.md"

@@ -1,4 +1,4 @@
-"""result.json is one type (testbed/resultfile.py's `RunResult`): what runresults writes is
+"""result.json is one type (testbed/files/resultfile.py's `RunResult`): what runresults writes is
 what every reader reads, and no module but resultfile.py reads the file by hand.
 
 The structure rule, checked on every module of the project's packages:
@@ -21,11 +21,11 @@ from pathlib import Path
 
 import pytest
 
-from testbed.resultfile import ResultConfig, ResultError, RobotResult, RunResult
+from testbed.files.resultfile import ResultConfig, ResultError, RobotResult, RunResult
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("testbed", "topology", "node", "aodv")
-OWNER = REPO / "testbed" / "resultfile.py"
+OWNER = REPO / "testbed" / "files" / "resultfile.py"
 MARKERS = {"RESULT_NAME", "result_path"}
 READERS = {"open", "load", "loads", "read_json", "read_text", "read_bytes"}
 # The name as a path (or a path's last part), not a sentence that mentions the file.

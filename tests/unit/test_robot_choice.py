@@ -14,7 +14,7 @@ from node.launch import NodeArgs
 from node.native import TB_ROBOT, unbuilt_reason
 from testbed import cli
 from testbed.run import robotchoice
-from testbed.run.config import config_from_args
+from testbed.run.arguments import config_from_args
 
 NNG = ("nanomsg",)
 BOTH = ("nanomsg", "zeromq")
@@ -129,7 +129,7 @@ def test_the_built_robot_says_what_it_carries():
 
 
 def test_robot_choice_is_recorded_in_the_result_type():
-    from testbed.resultfile import RunResult
+    from testbed.files.resultfile import RunResult
 
     names = {f.name for f in dataclasses.fields(RunResult)}
     assert {"robot", "robot_reason"} <= names

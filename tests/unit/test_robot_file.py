@@ -1,4 +1,4 @@
-"""robots/rK.json's type (testbed.run.robotfile): what the run writes reads back the same,
+"""robots/rK.json's type (testbed.files.robotfile): what the run writes reads back the same,
 a record without the optional keys reads as empty, and a malformed one is None."""
 
 import json
@@ -6,8 +6,8 @@ import os
 
 import pytest
 
-from testbed.run import robotfile
-from testbed.run.robotfile import RobotStats
+from testbed.files import robotfile
+from testbed.files.robotfile import RobotStats
 
 RECORD = {
     "name": "r1", "finish_step": 40, "plans": [[1, "start"]], "crash_step": None,

@@ -1,4 +1,4 @@
-"""A run's CSV files (testbed.run.csvfiles): what RunFiles writes reads back through the
+"""A run's CSV files (testbed.files.csvfiles): what RunFiles writes reads back through the
 one reader, and a row that is not what runs write is refused naming its line."""
 
 import os
@@ -6,8 +6,8 @@ import os
 import pytest
 
 from common import boundedfile
-from testbed.run import csvfiles
-from testbed.run.csvfiles import CsvError, LinkChange
+from testbed.files import csvfiles
+from testbed.files.csvfiles import CsvError, LinkChange
 from testbed.run.files import RunFiles
 
 

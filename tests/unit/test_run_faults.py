@@ -4,8 +4,8 @@ averages over robots leave it out; an isolated robot has no link, whatever the p
 
 import pytest
 
-from testbed.run import isolation
-from testbed.run.isolation import Outage
+from testbed.files import isolation
+from testbed.files.isolation import Outage
 from testbed.run.record import RobotRecord, RunRecord
 from testbed.run.stepclock import ClockSummary
 from testbed.run.steploop import final_status, over

@@ -1,5 +1,6 @@
-"""The run options (testbed.run.config, testbed.run.options): one table, and the command line,
-the sweep file checks and the argv a sweep hands a run all made from it, as a closed loop."""
+"""The run options (testbed.files.runconfig, testbed.files.options): one table, and the
+command line, the sweep file checks and the argv a sweep hands a run all made from it, as a
+closed loop."""
 
 import dataclasses
 import subprocess
@@ -12,8 +13,9 @@ import pytest
 from common.errors import UsageError
 from node.native import unbuilt_reason
 from testbed import cli
-from testbed.run.config import NET_OPTIONS, OPTIONS, RunConfig, config_from_args, to_argv
-from testbed.run.isolation import Outage
+from testbed.files.isolation import Outage
+from testbed.files.runconfig import NET_OPTIONS, OPTIONS, RunConfig, to_argv
+from testbed.run.arguments import config_from_args
 from testbed.sweep import file as sweepfile
 from testbed.sweep.rundir import plan_dict, run_argv
 from topology.spec import ROUTINGS
@@ -192,7 +194,7 @@ def test_a_grid_dimension_is_declared_once_on_its_option():
 
 def test_the_report_reads_both_shapes_of_a_sweeps_spec():
     from testbed.analysis.sweepinfo import _spec_lines
-    from testbed.sweep.state import SweepState
+    from testbed.files.sweepstate import SweepState
 
     spec = sweepfile.SweepSpec.of(robots=(1, 2), comm_range=(5.0, 20.0), laser_range=(2.0,),
                                   runs=2, time_scale=4.0)  # fmt: skip
@@ -211,7 +213,7 @@ def test_the_robots_parameters_are_declared_once_in_node_launch():
     bounds from NodeArgs' one declaration, so they cannot disagree."""
     from node.launch import NodeArgs, bounds, parser, run_params
     from node.robot import RobotConfig
-    from testbed.run.config import BY_NAME
+    from testbed.files.runconfig import BY_NAME
 
     robot_defaults = {f.name: f.default for f in dataclasses.fields(RobotConfig)}
     run_defaults = {f.name: f.default for f in dataclasses.fields(RunConfig)}

@@ -8,7 +8,7 @@ import os
 import pytest
 
 from common.errors import UsageError
-from testbed.resultfile import ResultConfig, RunResult
+from testbed.files.resultfile import ResultConfig, RunResult
 from testbed.run.files import RunFiles, claim_directory, holds_run, make_directory
 from testbed.run.progress import summary_line
 from testbed.run.record import RobotRecord, RunRecord

@@ -1,4 +1,4 @@
-"""The Slurm jobs file's type (testbed.sweep.slurmjobs): what submit writes reads back the
+"""The Slurm jobs file's type (testbed.files.slurmjobs): what submit writes reads back the
 same, byte for byte, no file is no jobs, and a malformed file is one line naming the key."""
 
 import json
@@ -6,8 +6,8 @@ import json
 import pytest
 
 from common.errors import UsageError
-from testbed.sweep import slurmjobs
-from testbed.sweep.slurmjobs import SlurmJob, SlurmJobs
+from testbed.files import slurmjobs
+from testbed.files.slurmjobs import SlurmJob, SlurmJobs
 
 WRITTEN = {
     "jobs": [

@@ -3,8 +3,9 @@
 import json
 from pathlib import Path
 
-from testbed.run.config import RunConfig
-from testbed.sweep import slurm, slurmjobs
+from testbed.files import slurmjobs
+from testbed.files.runconfig import RunConfig
+from testbed.sweep import slurm
 
 
 def test_resources_grow_with_team_and_time_scale_and_fit_a_node():

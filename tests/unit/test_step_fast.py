@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 
 from node import body
 from node.rays import Laser
+from testbed.files.resultfile import MAX_MISSED_STEPS_KEPT
 from testbed.run.record import RobotRecord
-from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT
 from testbed.world import stepfast
 from testbed.world.bodylink import BodyServer
 from testbed.world.world import World

@@ -3,8 +3,9 @@ with made-up times (the clock never reads the time itself)."""
 
 import pytest
 
+from testbed.files.resultfile import MAX_MISSED_STEPS_KEPT
 from testbed.run.stalls import STALL_S
-from testbed.run.stepclock import MAX_MISSED_STEPS_KEPT, StepClock, no_clock
+from testbed.run.stepclock import StepClock, no_clock
 
 T0 = 1000.0
 

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from testbed.resultfile import RunResult
+from testbed.files.resultfile import RunResult
 from testbed.sweep import cores
 from testbed.sweep.cores import PRIOR_CORES_PER_LOAD, Measured, estimate, measure
 from testbed.sweep.file import SweepSpec, expand

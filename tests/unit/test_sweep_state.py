@@ -1,4 +1,4 @@
-"""sweep.json's type (testbed.sweep.state): what the runner writes reads back the same,
+"""sweep.json's type (testbed.files.sweepstate): what the runner writes reads back the same,
 old files get their defaults, and a malformed file is refused naming the field."""
 
 import json
@@ -6,8 +6,8 @@ import json
 import pytest
 
 from common.errors import UsageError
-from testbed.sweep import state as sweepstate
-from testbed.sweep.state import SweepRun, SweepState
+from testbed.files import sweepstate
+from testbed.files.sweepstate import SweepRun, SweepState
 
 WRITTEN = {
     "format": 1,

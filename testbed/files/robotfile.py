@@ -1,7 +1,7 @@
 """robots/rK.json as one type: `RobotStats`, robot K's fuller record of a run, which
 testbed.run.results writes (`write`) and the benchmarks read (`read`).
 
-The record is robot K's entry of result.json (testbed.resultfile.RobotResult: name, finish,
+The record is robot K's entry of result.json (testbed.files.resultfile.RobotResult: name, finish,
 plans, messages sent and received, ...) with what only this file keeps: its crash step, its
 missed deadlines, collisions, final pose, every plan's details, and the keys of its summary
 event (node.events; the C++ robot writes the same) that results.SUMMARY_KEYS names (CPU

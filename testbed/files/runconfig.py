@@ -1,10 +1,15 @@
-"""What a run is asked to do: `RunConfig`, and the `testbed run` options that make one.
+"""What a run is asked to do: `RunConfig`, the option table.
 
 `RunConfig` is the whole description of a run; `config.json` is its `to_dict()` plus what
 the run derived from it (start positions, timer phases), so a run can be repeated from its
-directory. Each run option is declared once, on its field (`option(...)`, testbed.run.options):
+directory. Each run option is declared once, on its field (`option(...)`, testbed.files.options):
 `testbed run`'s flags, the `net up` flags it shares, a sweep file's keys and the argv a sweep
 hands a run are all made from these declarations. The run itself is testbed.run.execute.
+
+This module is data: it checks options against each other (`refusal`) but asks nothing of
+this machine. What only this machine can answer (is the C++ robot built and does it carry
+the middleware, is the compiled AODV daemon built, can the live view listen there) is
+testbed.run.arguments's, which `testbed run` and a sweep call.
 """
 
 from __future__ import annotations
@@ -16,18 +21,17 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from common.argtypes import checked
-from common.errors import UsageError
 from node.launch import MAX_LASER_CELLS
 from node.launch import bounds as robot
 from node.messaging.maps import refusal as maps_refusal
 from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
 from node.timing import STEP_S
-from testbed.run import daemonchoice, failures, robotchoice
-from testbed.run import options as runoptions
-from testbed.run.isolation import Outage
-from testbed.run.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
-from testbed.world.worldmap import START_PLACEMENTS
+from testbed.files import failures, resultconfig
+from testbed.files import options as runoptions
+from testbed.files.isolation import Outage
+from testbed.files.options import CHANGED, GRID, NONZERO, RUN, VARIED, GridDim, option
 from topology.spec import (
+    AODV_DAEMONS,
     AODV_PROFILES,
     CELL_M,
     LOS_MODELS,
@@ -50,6 +54,11 @@ MAX_STEPS = 10_000_000  # 11 days of emulated time at a step of 0.1 s
 MAX_TEAM = 80
 MAX_LASER_RAYS = 10_000  # a ray every 0.036 degrees; the paper's robots have 360
 MAX_SNAPSHOTS = 100
+# Where the team starts (testbed.world.worldmap places them): near a corner, as in the paper.
+START_PLACEMENTS = ("corner", "centre", "spread")
+# --robot (testbed.run.robotchoice) and --aodv-daemon (testbed.run.daemonchoice).
+ROBOT_CHOICES = ("auto", "cpp", "python")
+AODV_DAEMON_CHOICES = ("auto", *reversed(AODV_DAEMONS))  # auto, cpp, python
 
 
 def _kill(text: str) -> tuple[int, int]:
@@ -62,7 +71,7 @@ def _kill(text: str) -> tuple[int, int]:
 
 
 def _outage(text: str) -> Outage:
-    """An --isolate window (testbed.run.isolation), its steps within MAX_STEPS like every
+    """An --isolate window (testbed.files.isolation), its steps within MAX_STEPS like every
     step of the options; ValueError saying what is wrong."""
     o = Outage.parse(text)
     if o.start > MAX_STEPS or o.steps > MAX_STEPS:
@@ -121,7 +130,7 @@ SEED_HELP = (
 @dataclass(frozen=True)
 class RunConfig:
     """One run's description. Fields made with `option(...)` are the run options (see
-    testbed.run.options): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
+    testbed.files.options): `testbed run`'s flags, a sweep file's keys, `net up`'s network flags."""
 
     robots: int = option(int, "team size (exploring robots)", minimum=1, maximum=MAX_TEAM,
                          metavar="N", sweep={GRID}, in_result=True,
@@ -152,7 +161,7 @@ class RunConfig:
     aodv_daemon: str = option(
         str, "the AODV daemon (routing aodv): auto (the compiled daemon, build/tb-aodv, where "
         "make setup built it, else the Python daemon), cpp, or python (the reference); "
-        "testbed.run.daemonchoice", "auto", choices=daemonchoice.CHOICES, sweep={GRID, RUN},
+        "testbed.run.daemonchoice", "auto", choices=AODV_DAEMON_CHOICES, sweep={GRID, RUN},
         newer=True, net=True, grid=GridDim(14, lambda d: f"aodv{d}", VARIED),
     )  # fmt: skip
     map: str | None = option(
@@ -224,7 +233,7 @@ class RunConfig:
     )  # fmt: skip
     battery_failure: str = option(
         str, "one robot's battery fails: none, or midrun, robot rN killed at the team's "
-        "mid-run step (testbed.run.failures: half of a typical finishing step for the team size "
+        "mid-run step (testbed.files.failures: half of a typical finishing step for the team size "
         "and laser; docs/middleware.md)", "none", choices=failures.BATTERY_FAILURES,
         sweep={GRID, RUN}, newer=True, grid=GridDim(11, str, CHANGED),
     )  # fmt: skip
@@ -272,7 +281,7 @@ class RunConfig:
     robot: str = option(
         str, "the robot program: auto (the C++ robot where it was built and carries the "
         "run's middleware, else the Python robot), cpp, or python (the reference); "
-        "testbed.run.robotchoice", "auto", choices=robotchoice.CHOICES, sweep={GRID, RUN},
+        "testbed.run.robotchoice", "auto", choices=ROBOT_CHOICES, sweep={GRID, RUN},
         newer=True, grid=GridDim(13, str, VARIED),
     )  # fmt: skip
 
@@ -307,59 +316,18 @@ class RunConfig:
 
 
 OPTIONS = runoptions.options(RunConfig)
+resultconfig.check_options(OPTIONS)  # result.json's config repeats those marked in_result
 BY_NAME = {opt.name: opt for opt in OPTIONS}
 # What `net up` shares with `run`: the network's options, the same flags and checks.
 NET_OPTIONS = tuple(opt for opt in OPTIONS if opt.net)
-# The net options that are not a NetworkSpec field of the same name: its one Impairment.
-_IMPAIRMENT_OPTIONS = ("loss_pct", "delay_ms")
 
 
-def network_fields(values) -> dict:
-    """The NetworkSpec fields that `net up` and `run` share, from a RunConfig or from `net
-    up`'s parsed flags (both carry every net option under its name): what each caller adds
-    is only its name, positions, map path and capture directory."""
-    from topology.spec import Impairment
-
-    fields = {o.name: getattr(values, o.name) for o in NET_OPTIONS}
-    loss, delay = (fields.pop(name) for name in _IMPAIRMENT_OPTIONS)
-    # auto becomes the daemon that runs (ValueError: cpp asked for where it is not built).
-    fields["aodv_daemon"] = daemonchoice.spec_daemon(fields["aodv_daemon"], fields["routing"])
-    return dict(fields, impairment=Impairment(loss_pct=loss, delay_ms=delay))
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The `testbed run` options: the run options, then where the run goes and how it shows."""
-    runoptions.add_to_parser(parser, OPTIONS)
-    a = parser.add_argument
-    a("--out", required=True, metavar="DIR", help="run directory to write (required)")
-    a("--name", help="testbed name (default: random 'run' + 4 hex digits)")
-    a("--quiet", action="store_true", help="no progress line (default off)")
-    a("--replace", action="store_true",
-      help="--out holds an earlier run: delete it first (default: refuse)")  # fmt: skip
-    a("--steps-over", metavar="FILE",
-      help="create FILE when the last step is done, before the teardown: a sweep starts its "
-      "next run then (default: none)")  # fmt: skip
-
-
-def _view(text: str | None) -> str | None:
-    if text is None:
-        return None
-    from testbed.view.server import parse_bind
-
-    try:
-        parse_bind(text)
-    except ValueError as e:
-        raise UsageError(str(e)) from None
-    return text
-
-
-def refusal(cfg: RunConfig, program: bool = True) -> tuple[str, str] | None:
+def refusal(cfg: RunConfig) -> tuple[str, str] | None:
     """The first check joining options that `cfg` fails, as (the option it names, why in one
-    line), or None: the one rule of `testbed run` (config_from_args), of a sweep file's runs
-    (testbed.sweep.file) and of a plan in sweep.json (testbed.sweep.state). `program`: also
-    whether the robot program asked for can carry the run (testbed.run.robotchoice: it asks
-    the C++ robot built on this machine) and whether the AODV daemon asked for is built
-    (testbed.run.daemonchoice)."""
+    line), or None: the one rule of `testbed run` (testbed.run.arguments.config_from_args), of a
+    sweep file's runs (testbed.sweep.file) and of a plan in sweep.json
+    (testbed.files.sweepstate). What this machine's programs can carry is
+    testbed.run.arguments.refusal's."""
     cell = cfg.map_cell if cfg.map else CELL_M  # the empty terrain's cells are CELL_M
     if cfg.laser_range < cell:
         return "laser_range", (
@@ -388,27 +356,7 @@ def refusal(cfg: RunConfig, program: bool = True) -> tuple[str, str] | None:
     why = maps_refusal(cfg.maps, cfg.middleware)
     if why:
         return "maps", why
-    if program:
-        try:
-            robotchoice.choose(cfg.robot, cfg.middleware, cfg.maps)
-        except ValueError as e:
-            return "robot", str(e)
-        try:
-            daemonchoice.choose(cfg.aodv_daemon, cfg.routing)
-        except ValueError as e:
-            return "aodv_daemon", str(e)
     return None
-
-
-def config_from_args(args: argparse.Namespace) -> RunConfig:
-    """The RunConfig of parsed `testbed run` arguments, with the checks that join options
-    (`refusal`)."""
-    cfg = RunConfig(**runoptions.config_kwargs(args, OPTIONS))
-    why = refusal(cfg)
-    if why:
-        raise UsageError(why[1])
-    _view(cfg.view)
-    return cfg
 
 
 def to_argv(cfg: RunConfig, always: Set[str] = frozenset()) -> list[str]:

@@ -1,11 +1,11 @@
 """A run's config.json as one type: `RunConfigFile`, which testbed.run.prepare writes first
 of all a run's files and the run's results and the view's replay read.
 
-The document is the run's options (testbed.run.config.RunConfig.to_dict, the table's keys)
+The document is the run's options (testbed.files.runconfig.RunConfig.to_dict, the table's keys)
 and what preparing the run found (`map_size` [rows, cols], `starts`, `timer_phases`, the
 display robot and its `display_pos`, the testbed's `name`, the `snapshots`, a planned
 `battery_kill`), keys in the order written; `to_dict()` is the file. `result_config()` is
-the part result.json repeats (testbed.run.resultconfig.ResultConfig, the file's one description
+the part result.json repeats (testbed.files.resultconfig.ResultConfig, the file's one description
 of the run's options and of their old runs' defaults).
 
 A config.json may come from elsewhere (the view replays any run directory): `view()` checks
@@ -28,7 +28,7 @@ from typing import Any
 
 from common import boundedfile
 from common.jsonfile import write_json_atomic
-from testbed.resultfile import ResultConfig
+from testbed.files.resultfile import ResultConfig
 from topology.names import MAX_ROBOTS
 from topology.spec import CELL_M, MAX_COORD_M
 

@@ -18,12 +18,8 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-# Imported in `record` at run time: testbed.resultfile imports testbed.run.config, which imports
-# this module.
-if TYPE_CHECKING:
-    from testbed.resultfile import Isolated
+from testbed.files.resultfile import Isolated
 
 _TEXT = re.compile(r"r?([0-9]{1,4}):([0-9]{1,8}):([0-9]{1,8})")
 
@@ -68,8 +64,6 @@ def isolated_at(outages: tuple[Outage, ...], step: int) -> frozenset[int]:
 def record(outages: tuple[Outage, ...], steps_run: int) -> list[Isolated]:
     """result.json's `isolated`: each window the run reached (in start order), with the step
     its robot came back in range, or None when the run ended while it was out."""
-    from testbed.resultfile import Isolated
-
     out = []
     for o in sorted(outages, key=lambda o: (o.start, o.robot)):
         if o.start > steps_run:

@@ -1,44 +1,52 @@
-"""result.json's `config` as one type: `ResultConfig`, the run options result.json repeats,
-taken from the option table (testbed.run.config, the options marked in_result) with the
-defaults of the runs before each option was recorded.
+"""result.json's `config` as one type: `ResultConfig`, the run options result.json repeats
+(those the option table, testbed.files.runconfig, marks in_result) with the defaults of the
+runs before each option was recorded.
 
-`CONFIG_KEYS`, the keys result.json's config repeats at its top (in the table's order, the
-file's), is made from the table; every other option of config.json goes under its `extra`.
-The fields are those keys and `FROM_EXTRA`, each annotated with its option's kind and read
-against it; a check at import holds them to the table, so an option marked in_result
-cannot be left out of result.json's config. The defaults here are the only place of the old
-files' defaults (docs/run-results.md).
+`CONFIG_KEYS` are the keys result.json's config repeats at its top, in the file's order;
+every other option of config.json goes under its `extra`. The fields are those keys and
+`FROM_EXTRA`, each annotated with its option's kind and read against it. The option table
+holds itself to them as it is made (`check_options`: a TypeError at its import), so an
+option marked in_result cannot be left out of result.json's config, and this module, which
+every reader of result.json loads, needs nothing of the table. The defaults here are the
+only place of the old files' defaults (docs/run-results.md): values of the runs before the
+option (a unit test holds them equal to today's defaults).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from node import messaging
-from testbed.run.config import BY_NAME, OPTIONS
-from testbed.run.failures import NONE as NO_FAILURE
-from testbed.run.resultvalues import EMPTY, NUM, ResultError, get_mapping, get_value, plain
+from testbed.files.resultvalues import EMPTY, NUM, ResultError, get_mapping, get_value, plain
 from topology.spec import CELL_M, VETH
 
-# The keys of config.json that result.json repeats under "config", in the option table's
-# order (the run options marked in_result); the rest go under "extra".
-CONFIG_KEYS = tuple(opt.name for opt in OPTIONS if opt.in_result)
+# The keys of config.json that result.json repeats under "config", in the file's order (the
+# run options marked in_result, in the table's order); the rest go under "extra".
+CONFIG_KEYS = ("robots", "comm_range", "laser_range", "seed", "time_scale", "routing", "map",
+               "loss_pct", "delay_ms", "capture", "max_steps", "coordination",
+               "start")  # fmt: skip
 # The run options under "extra" that ResultConfig gives as fields of their own.
 FROM_EXTRA = ("medium", "wifi_standard", "wifi_rate")
-DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start) of runs that did not say
+# What runs before an option was recorded had:
+DEFAULT_VARIANT = ("ours", "corner")  # (coordination, start)
 DEFAULT_ROUTING = "aodv"
 DEFAULT_MEDIUM = VETH
+# Written out, not imported (node.messaging.DEFAULT, DEFAULT_MAPS, testbed.files.failures.NONE
+# say today's): what a run made before the option was recorded had, whatever today's is.
+DEFAULT_MIDDLEWARE = "nanomsg"
+DEFAULT_MAPS = "flood"
+DEFAULT_BATTERY_FAILURE = "none"
+DEFAULT_MAP_SIZE = (400, 400)  # the empty terrain's [rows, cols]
 
 
 @dataclass(frozen=True)
 class ResultConfig:
     """result.json's `config`: what the run was asked to do, defaults applied. The fields are
-    run options (testbed.run.config): those result.json repeats (in_result, CONFIG_KEYS)
+    run options (testbed.files.runconfig): those result.json repeats (in_result, CONFIG_KEYS)
     and FROM_EXTRA; their kinds are the options', their defaults those of the runs before
     the option was recorded (set here only)."""
 
@@ -71,15 +79,15 @@ class ResultConfig:
 
     @property
     def middleware(self) -> str:
-        return self._named("middleware", messaging.DEFAULT)
+        return self._named("middleware", DEFAULT_MIDDLEWARE)
 
     @property
     def maps(self) -> str:
-        return self._named("maps", messaging.DEFAULT_MAPS)
+        return self._named("maps", DEFAULT_MAPS)
 
     @property
     def battery_failure(self) -> str:
-        return self._named("battery_failure", NO_FAILURE)
+        return self._named("battery_failure", DEFAULT_BATTERY_FAILURE)
 
     @property
     def map_cell(self) -> Any:  # unchecked: the reader checks it
@@ -87,7 +95,7 @@ class ResultConfig:
 
     @property
     def map_size(self) -> Any:  # [rows, cols], unchecked
-        return self.extra.get("map_size") or [400, 400]  # the empty terrain's
+        return self.extra.get("map_size") or list(DEFAULT_MAP_SIZE)
 
     def to_dict(self) -> dict[str, Any]:
         out = {k: getattr(self, k) for k in CONFIG_KEYS}
@@ -113,7 +121,7 @@ class ResultConfig:
         extra = get_mapping(c, "extra")
         values: dict[str, Any] = {}
         for f in _OPTION_FIELDS:
-            kind = BY_NAME[f.name].kind
+            kind = _KIND[f.name]
             if kind is bool:  # a flag: whatever the file holds, as true or false
                 values[f.name] = bool(c.get(f.name))
                 continue
@@ -126,23 +134,30 @@ class ResultConfig:
         return cls(**values, extra=extra)
 
 
-# ResultConfig's fields but `extra`: run options, each checked against the option's kind.
+_KINDS: dict[type, tuple[type, ...]] = {int: (int,), float: NUM, str: (str,), bool: (bool,)}
+# ResultConfig's fields but `extra`: run options, each checked against its annotation's kind
+# (the option's: check_options).
 _OPTION_FIELDS = tuple(f for f in dataclasses.fields(ResultConfig) if f.name != "extra")
-_KINDS: dict[type, tuple[type, ...]] = {int: (int,), float: NUM, str: (str,)}
+_HINTS = typing.get_type_hints(ResultConfig)
+_KIND: dict[str, type] = {
+    f.name: next(a for a in (_HINTS[f.name], *typing.get_args(_HINTS[f.name])) if a in _KINDS)
+    for f in _OPTION_FIELDS
+}
 
 
-def _check_config_fields() -> None:
-    """ResultConfig's fields are the run options result.json repeats and those it draws from
-    `extra`, each annotated with its option's kind (TypeError at import otherwise, so that a
-    run option marked in_result cannot be left out of result.json's config)."""
+def check_options(options: Iterable[Any]) -> None:
+    """TypeError unless the option table `options` (testbed.files.runconfig.OPTIONS, which
+    calls this as it is made) marks in_result exactly CONFIG_KEYS, in order, and
+    ResultConfig's fields are those keys and FROM_EXTRA, each annotated with its option's
+    kind: an option marked in_result cannot be left out of result.json's config."""
+    by_name = {o.name: o for o in options}
+    marked = tuple(o.name for o in by_name.values() if o.in_result)
+    if marked != CONFIG_KEYS:
+        raise TypeError(f"the options marked in_result {marked} are not CONFIG_KEYS")
     names = [f.name for f in _OPTION_FIELDS]
     if sorted(names) != sorted([*CONFIG_KEYS, *FROM_EXTRA]):
         raise TypeError(f"ResultConfig's fields {names} are not {[*CONFIG_KEYS, *FROM_EXTRA]}")
-    hints = typing.get_type_hints(ResultConfig)
     for name in names:
-        kind, hint = BY_NAME[name].kind, hints[name]
+        kind, hint = by_name[name].kind, _HINTS[name]
         if kind not in (hint, *typing.get_args(hint)):
             raise TypeError(f"ResultConfig.{name} is {hint}, not its option's {kind.__name__}")
-
-
-_check_config_fields()

@@ -1,6 +1,6 @@
 """Run options: each declared once, on its `RunConfig` field, and everything else generated.
 
-Theory of operation. A field of `testbed.run.config.RunConfig` that the user may set is
+Theory of operation. A field of `testbed.files.runconfig.RunConfig` that the user may set is
 declared with `option(...)`: its kind, bounds, choices, unit and help ride on the dataclass
 field (its `metadata`), next to the default. `options()` reads them back as `Option`s, the
 one table from which are made:
@@ -10,7 +10,7 @@ one table from which are made:
 - a config from parsed arguments (`config_kwargs`: flags whose unit differs from the
   field's, such as `--speed` in m/s for a field in metres per step, are converted here);
 - the argv that parses back into a given config (`to_argv`), which a sweep hands each run;
-- the keys result.json repeats under `config` (`in_result`: testbed.run.resultconfig takes its
+- the keys result.json repeats under `config` (`in_result`: testbed.files.resultconfig takes its
   list of keys, and checks its fields, from these);
 - the checks of a sweep file's `[run]` values and `[grid]` lists (`check_value`), for the
   options marked `sweep`; and for those a sweep may vary, their `GridDim`: where they sit in
@@ -83,7 +83,7 @@ class Option:
     # that the plans (and the run argv) of older sweeps stay as they were.
     newer: bool = False
     net: bool = False  # `testbed net up` takes it too
-    # result.json repeats it under `config` (testbed.run.resultconfig.ResultConfig); the other
+    # result.json repeats it under `config` (testbed.files.resultconfig.ResultConfig); the other
     # options go under config's `extra`.
     in_result: bool = False
     cli: str | None = None  # the flag, when not --name-with-dashes

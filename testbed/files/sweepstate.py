@@ -12,9 +12,9 @@ checks the shape every reader relies on:
   one's); `runs` a list of objects, each with an `id` that is a run directory's name
   (letters, digits, `.`, `_`, `-`, at most 100; no two runs of one id) and, where present, a
   string `status` and `reason`, whole numbers `index` and `pid`, and a `config` whose every
-  key is a run option with a value its table allows (testbed.run.options.check_value; the
+  key is a run option with a value its table allows (testbed.files.options.check_value; the
   Slurm tasks build a run's command line from it) and which passes the rule joining options
-  that `testbed run` applies (testbed.run.config.refusal: a laser shorter than a map cell is
+  that `testbed run` applies (testbed.files.runconfig.refusal: a laser shorter than a map cell is
   no run);
 - `format`, `jobs_requested` and `jobs` whole numbers, the load and cpu limits (as asked
   and as they are now) positive numbers, `netem` true or false, `updated` a string;
@@ -32,7 +32,7 @@ was before the type existed. Nobody else spells the file's name or opens it
 (tests/unit/test_file_types.py holds this).
 
 A sweep.json that fails is one line naming the file and the field (UsageError, exit 2);
-None when there is none. Strings are made one line (testbed.run.resultvalues.one_line).
+None when there is none. Strings are made one line (testbed.files.resultvalues.one_line).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from typing import Any
 from common import boundedfile
 from common.errors import UsageError
 from common.jsonfile import write_json_atomic
-from testbed.run.resultvalues import one_line
+from testbed.files.resultvalues import one_line
 
 STATE_NAME = "sweep.json"
 STATE_FORMAT = 1
@@ -223,8 +223,8 @@ def _run(i: int, e) -> dict:
 def _config(where: str, config: dict) -> None:
     """ValueError unless every key of a run's plan is a run option with a valid value, and
     the plan makes a RunConfig (the structured options: display_pos, snapshots, kill, ...)."""
-    from testbed.run.config import BY_NAME, RunConfig, refusal
-    from testbed.run.options import check_value
+    from testbed.files.options import check_value
+    from testbed.files.runconfig import BY_NAME, RunConfig, refusal
 
     for key, value in config.items():
         opt = BY_NAME.get(key)
@@ -239,7 +239,7 @@ def _config(where: str, config: dict) -> None:
         run = RunConfig.from_dict(config)
     except (TypeError, ValueError, ArgumentTypeError) as e:
         raise ValueError(f"{where}.config: {one_line(str(e), 120)}") from None
-    joint = refusal(run, program=False)  # the run's own rule (not this machine's robot build)
+    joint = refusal(run)  # the option rule (not what this machine's programs can carry)
     if joint:
         raise ValueError(f"{where}.config.{joint[0]}: {one_line(joint[1], 160)}")
 

@@ -17,14 +17,14 @@ nested dicts (tests/unit/test_result_file.py holds this).
   without one is format 1, the only one so far): a later format's keys may mean other
   things, and are not read as this one's.
 - Keys that files written by older versions lack get their defaults here and only here
-  (the config's in its type, testbed.run.resultconfig): `routing` aodv, `map` none (the
+  (the config's in its type, testbed.files.resultconfig): `routing` aodv, `map` none (the
   empty terrain), `loss_pct` and `delay_ms` 0, `coordination` ours and `start` corner
   (before those existed, they were all there was), no robot stopped (before `--kill`
   stopped robots, `mean_finish_step_robots` and `survivors_finished` are None), no radio
   outage, no fidelity verdict; in config's `extra`, middleware nanomsg, maps flood, no
   battery failure, a 400 x 400 map of CELL_M cells.
-- The config's keys are the run options' (testbed.run.config declares which result.json
-  repeats); the checked reading of values is testbed.run.resultvalues'.
+- The config's keys are the run options' (testbed.files.runconfig declares which result.json
+  repeats); the checked reading of values is testbed.files.resultvalues'.
 - Values keep the type JSON gave them (an int stays an int), so the numbers written from
   them are those the file holds. The diagnostic records that only people and the report's
   text read whole (wall_parts_s, world_timing_s, display, cpu_s, fidelity, network_timers)
@@ -41,15 +41,18 @@ from pathlib import Path
 from typing import Any
 
 from common import boundedfile
-from testbed.analysis import resultcheck
-from testbed.run.resultconfig import ResultConfig as ResultConfig  # re-exported: its config
-from testbed.run.resultvalues import EMPTY, NUM, get_list, get_mapping, get_value, plain
-from testbed.run.resultvalues import ResultError as ResultError  # re-exported: its error
+from testbed.files import resultcheck
+from testbed.files.resultconfig import ResultConfig as ResultConfig  # re-exported: its config
+from testbed.files.resultvalues import EMPTY, NUM, get_list, get_mapping, get_value, plain
+from testbed.files.resultvalues import ResultError as ResultError  # re-exported: its error
 
 RESULT_NAME = "result.json"
 RESULT_FORMAT = 1
 # The processes whose CPU seconds cpu_s holds (testbed.run.results.cpu_seconds).
 CPU_PARTS = ("robots", "display", "world", "routing")
+# Which steps were missed, kept per robot (robots/rK.json) and for the world
+# (world_missed_steps_ms_late): at most this many.
+MAX_MISSED_STEPS_KEPT = 1000
 
 
 def result_path(run_dir: str | Path) -> Path:
@@ -165,7 +168,7 @@ class HostStalls:
 
 @dataclass(frozen=True)
 class Isolated:
-    """A radio outage the run made (--isolate, testbed.run.isolation): robot `robot` out of
+    """A radio outage the run made (--isolate, testbed.files.isolation): robot `robot` out of
     everyone's range from `from_step`, back at `back_step` (None: the run ended first)."""
 
     robot: str
@@ -384,10 +387,11 @@ class RunResult:
 
     @classmethod
     def _checked(cls, doc: object) -> RunResult:
-        """_parse, then the values' ranges (testbed.analysis.resultcheck)."""
+        """_parse, then the values' ranges (testbed.files.resultcheck)."""
         result = cls._parse(doc)
         try:
-            return resultcheck.check(result)
+            checked: RunResult = resultcheck.check(result)
+            return checked
         except ValueError as e:
             raise ResultError(str(e)) from None
 

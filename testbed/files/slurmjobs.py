@@ -20,8 +20,8 @@ from typing import Any
 from common import boundedfile
 from common.errors import UsageError
 from common.jsonfile import write_json_atomic
-from testbed.run.resultvalues import one_line
-from testbed.sweep.state import RUN_ID
+from testbed.files.resultvalues import one_line
+from testbed.files.sweepstate import RUN_ID
 
 JOBS_DIR = "slurm"
 JOBS_NAME = "jobs.json"

@@ -1,28 +1,25 @@
-"""The ranges of result.json's values: what testbed.resultfile checks after the types.
+"""The ranges of result.json's values: what testbed.files.resultfile checks after the types.
 
-A result.json from elsewhere is strict JSON of the right types (testbed.resultfile,
+A result.json from elsewhere is strict JSON of the right types (testbed.files.resultfile,
 common.boundedfile) but may still hold numbers no run can produce: -100 steps, a team of 0,
 a finish step past the run's end, more deadlines missed in host stalls than in all. A report
 drawn from those would be silently wrong ("team work beats one robot: holds" from negative
 steps), so `check(result)` refuses them: ValueError naming the field and the bound, which
-testbed.resultfile turns into its one-line ResultError naming the file.
+testbed.files.resultfile turns into its one-line ResultError naming the file.
 
 Bounds are the run's own where it has them: a finish step or a plan's step is at most one
 past the run's `steps` (a robot that finishes on the last step records the next), counts of
-robots at most the team; otherwise the limits of the options (testbed.run.options).
+robots at most the team; otherwise the limits of the options (testbed.files.options).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from testbed.resultfile import RunResult
+from typing import Any
 
 MAX_ROBOTS = 1000  # topology.names.MAX_ROBOTS
-MAX_STEPS = 10**9  # testbed.run.options' max_steps bound
+MAX_STEPS = 10**9  # testbed.files.options' max_steps bound
 MAX_COORDINATE = 10_000_000.0  # metres: docs/security.md's coordinate limit
 MAX_SECONDS = 1e9  # about 30 years
 
@@ -77,8 +74,9 @@ def _robots(r, last: int | None) -> tuple:
     return tuple(out)
 
 
-def check(r: RunResult) -> RunResult:
-    """`r` (a RunResult) with its whole numbers as ints and its -0.0s as 0.0, or ValueError
+def check(r: Any) -> Any:
+    """`r` (a testbed.files.resultfile.RunResult, whose reader calls this: typed Any, as this
+    module sits below the type) with its whole numbers as ints and its -0.0s as 0.0, or ValueError
     naming the first value out of its range (see the module's docstring)."""
     _config(r.config)
     if len(r.robots) > MAX_ROBOTS + 1:  # the team and the display robot
