@@ -35,7 +35,7 @@ from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 from common import boundedfile
 from testbed.analysis.plots import plt, save_figure
 from testbed.analysis.runs import FinishedRun
-from testbed.files import csvfiles
+from testbed.files import csvfiles, layout
 from testbed.files.csvfiles import coordinate
 
 MAX_POINTS = 2000
@@ -142,7 +142,7 @@ def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, flo
 
 def _background(ax, run: FinishedRun) -> tuple[float, float, bool]:
     """The display's map in metres; (width, height, whether there was one)."""
-    grid = read_map(run.path / "display" / "map.npy")
+    grid = read_map(layout.map_path(run.path))
     w, h = _extent(run, grid.shape if grid is not None else None)
     if grid is not None:
         img = _GREYS[np.clip(grid, 0, 2)]

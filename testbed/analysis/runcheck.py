@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import bisect
 import csv
-import os
 from collections import defaultdict
 
 from node import events
-from testbed.files import csvfiles
+from testbed.files import csvfiles, layout
 from testbed.files.resultfile import RunResult
 
 
@@ -67,7 +66,7 @@ def received(out: str, robots: int) -> list[dict]:
     """Every 'recv' event of every robot, with "to" added."""
     evs = []
     for k in range(1, robots + 1):
-        path = os.path.join(out, "robots", f"r{k}{events.EVENTS_SUFFIX}")
+        path = layout.robot_events(out, k)
         evs += [{**e.to_dict(), "to": k} for e in events.read(path, only=("recv",))]
     return evs
 
@@ -75,7 +74,7 @@ def received(out: str, robots: int) -> list[dict]:
 def step_clock(out: str) -> list[float]:
     """When each step began (clock.csv), or [] for runs without it."""
     try:
-        with open(os.path.join(out, "clock.csv")) as f:
+        with open(layout.clock_path(out)) as f:
             return [float(row["t"]) for row in csv.DictReader(f)]
     except (OSError, KeyError, ValueError):
         return []

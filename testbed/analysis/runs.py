@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from common import boundedfile
+from testbed.files import layout
 from testbed.files.resultconfig import DEFAULT_VARIANT
 from testbed.files.resultfile import RESULT_NAME, ResultError, RunResult
 from testbed.files.resultvalues import get_mapping, get_value, one_line
@@ -49,7 +50,6 @@ log = logging.getLogger(__name__)
 __all__ = ["DEFAULT_VARIANT", "FinishedRun", "ResultError", "load_run", "load_runs"]
 
 USABLE = ("complete", "step_cap")
-MEDIUM_NAME = "medium.json"
 _NUM = (int, float)
 
 
@@ -161,7 +161,7 @@ def parse_channel(doc) -> ChannelRecord:
 
 
 def _load_channel(run_dir: Path) -> ChannelRecord | None:
-    path = run_dir / MEDIUM_NAME
+    path = Path(layout.medium_path(run_dir))
     if not os.path.lexists(path):
         return None
     try:

@@ -27,8 +27,8 @@ from typing import Any
 
 from common import boundedfile
 from common.jsonfile import write_json_atomic
+from testbed.files.layout import ROBOTS_DIR
 
-ROBOTS_DIR = "robots"
 _NUM = (int, float)
 
 

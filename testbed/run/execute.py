@@ -61,6 +61,7 @@ from common.sched import CLOCK_PRIORITY, deadline_priority
 from node import body, messaging
 from node.launch import NodeArgs, run_params
 from node.messaging.maps import MODULES as MAP_TOPIC_MODULES
+from testbed.files import layout
 from testbed.files.configfile import RunConfigFile
 from testbed.files.resultfile import RunResult
 from testbed.files.runconfig import RunConfig
@@ -277,7 +278,7 @@ class Run:
             return proc
 
         for k, r in self.robots.items():
-            events = prep.path("robots", f"r{k}.events.jsonl")
+            events = layout.robot_events(prep.out, k)
             args = self._node_args(k, server, timer_phase=prep.phases[k - 1], events=events)
             r.proc = spawn(k, "robot", args, prep.path("robots", f"r{k}.log"))
         display = spawn(prep.display_k, "display", self._display_args(server),
@@ -307,7 +308,7 @@ class Run:
 
                 stats = [aodv_stats_file(k, net.state_dir) for k in range(1, self.n + 2)]
             events = RobotEvents(
-                {k: prep.path("robots", f"r{k}.events.jsonl") for k in range(1, self.n + 1)}
+                {k: layout.robot_events(prep.out, k) for k in range(1, self.n + 1)}
             )
             feed = LiveFeed(meta, routes, prep.out, stats, events)
             assert self.cfg.view is not None  # called only with --view
@@ -331,7 +332,7 @@ class Run:
         prep = self.prep
         return self._node_args(
             prep.display_k, server, role="display", out_dir=prep.path("display"),
-            events=prep.path("display", "events.jsonl"), snapshots=frozenset(prep.snapshots),
+            events=layout.display_events(prep.out), snapshots=frozenset(prep.snapshots),
         )  # fmt: skip
 
     def _wait_connected(self, server: BodyServer, display: Forked, timeout: float) -> None:
@@ -400,7 +401,7 @@ class Run:
         self.parts.mark("routing_stopped")
         counters = getattr(net.medium, "counters", None)  # the ns3-wifi channel's, if any
         if counters is not None:
-            write_json_atomic(self.prep.path("medium.json"), counters())
+            write_json_atomic(layout.medium_path(self.prep.out), counters())
             from topology.radio.ns3wifi import LAG_FILE
 
             # Each frame's relay lag, which the analysis takes out of the delays.

@@ -24,6 +24,7 @@ import shutil
 from typing import TYPE_CHECKING, TextIO
 
 from common.errors import UsageError
+from testbed.files import layout
 from testbed.files.configfile import CONFIG_NAME
 from testbed.files.csvfiles import (
     COVERAGE_HEADER,
@@ -40,7 +41,7 @@ if TYPE_CHECKING:
 
 # What makes a directory a run's: written first (config.json), last (result.json), or by
 # the robot processes (robots/).
-RUN_MARKERS = (CONFIG_NAME, RESULT_NAME, "robots")
+RUN_MARKERS = (CONFIG_NAME, RESULT_NAME, layout.ROBOTS_DIR)
 
 
 def holds_run(out: str) -> bool:
@@ -72,8 +73,10 @@ def make_directory(out: str, capture: bool, replace: bool) -> None:
     try:
         if replace and holds_run(out):
             shutil.rmtree(out)
-        for sub in ("robots", "display") + (("pcaps",) if capture else ()):
-            os.makedirs(os.path.join(out, sub), exist_ok=True)
+        for sub in (layout.robots_dir, layout.display_dir) + (
+            (layout.pcaps_dir,) if capture else ()
+        ):
+            os.makedirs(sub(out), exist_ok=True)
     except OSError as e:
         raise UsageError(f"--out {out}: cannot write there: {e.strerror}") from None
 
@@ -103,7 +106,7 @@ class RunFiles:
         self._links = writer(LINKS_NAME, list(LINKS_HEADER))
         self._coverage = writer(COVERAGE_NAME, list(COVERAGE_HEADER))
         self._positions = writer(POSITIONS_NAME, positions_header(self.robots))
-        self._events = open(os.path.join(self.out, "events.jsonl"), "w")  # noqa: SIM115
+        self._events = open(layout.run_events(self.out), "w")  # noqa: SIM115
         self._files.append(self._events)
         return self
 
@@ -140,7 +143,7 @@ class RunFiles:
     def _write_clock(self) -> None:
         """clock.csv: when (CLOCK_MONOTONIC, the clock robots log receipts with) each step
         began; what lets testbed.analysis.runcheck place a receipt at the world's step."""
-        with open(os.path.join(self.out, "clock.csv"), "w", newline="") as f:
+        with open(layout.clock_path(self.out), "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(["step", "t"])
             w.writerows(enumerate(self._frames))

@@ -26,7 +26,7 @@ import numpy as np
 from common.errors import UsageError
 from node.displaysteps import VIDEO_EVERY, DisplaySteps
 from node.rays import Laser
-from testbed.files import configfile
+from testbed.files import configfile, layout
 from testbed.files.failures import battery_kill
 from testbed.files.runconfig import RunConfig
 from testbed.run.arguments import network_fields
@@ -177,7 +177,7 @@ def _network_spec(cfg: RunConfig, name: str, positions: tuple, out: str) -> Netw
             name=name,
             positions=positions,
             map_png=os.path.abspath(cfg.map) if cfg.map else None,
-            capture_dir=os.path.join(out, "pcaps") if cfg.capture else None,
+            capture_dir=layout.pcaps_dir(out) if cfg.capture else None,
             # The daemons' statistics are read as they stop; only the live view reads them
             # while the run goes on (an idle daemon that rewrites its file every second pays
             # for it in wake-ups and disk writes).

@@ -22,7 +22,7 @@ import numpy as np
 from aodv.statsfile import DaemonStats, StatsError, run_stats_path
 from common.jsonfile import read_json
 from node import events, render, stepcore
-from testbed.files import isolation, robotfile
+from testbed.files import isolation, layout, robotfile
 from testbed.files.resultfile import HostStalls, Plan, RobotResult, RunResult
 from testbed.run import fidelity, twin
 from testbed.world.world import World
@@ -53,7 +53,7 @@ PLAN_DETAIL_KEYS = ("step", "cause", "status", "goal", "cost", "ms")
 def robot_result(rec: RunRecord, r: RobotOutcome) -> tuple[RobotResult, dict]:
     """Robot r's entry in result.json, and its summary event ({} when it left none: its
     lateness, node.lateness, and CPU); its fuller record goes to robots/rK.json."""
-    ev = events.read(os.path.join(rec.out, "robots", f"r{r.k}{events.EVENTS_SUFFIX}"))
+    ev = events.read(layout.robot_events(rec.out, r.k))
     plans = tuple(Plan(e.step, e.fields["cause"]) for e in ev if e.e == "plan")
     sent: dict[str, int] = {}
     received: dict[str, int] = {}
@@ -238,13 +238,13 @@ def cpu_seconds(
 
 def channel_relay_lag(out: str) -> dict | None:
     """The ns3-wifi channel's `relay_lag` counters (medium.json), None without that channel."""
-    counters = read_json(os.path.join(out, "medium.json"))
+    counters = read_json(layout.medium_path(out))
     return counters.get("relay_lag") if isinstance(counters, dict) else None
 
 
 def display_summary(out: str) -> dict:
     """The display's summary event ({} when it wrote none)."""
-    ev = events.read(os.path.join(out, "display", "events.jsonl"), only=("summary",))
+    ev = events.read(layout.display_events(out), only=("summary",))
     return ev[-1].to_dict() if ev else {}
 
 
@@ -263,7 +263,7 @@ def daemon_stats(out: str, n: int) -> list[DaemonStats]:
 def snapshot_steps(out: str) -> list[int]:
     """The steps of the display's snapshots that were written (display/step-NNNNN.png)."""
     try:
-        names = os.listdir(os.path.join(out, "display"))
+        names = os.listdir(layout.display_dir(out))
     except OSError:
         return []
     stems = (n.removeprefix("step-").removesuffix(".png") for n in names if n.endswith(".png"))
@@ -273,7 +273,7 @@ def snapshot_steps(out: str) -> list[int]:
 def display_coverage(out: str, world: World) -> float | None:
     """The share of the free space the display's merged map knows (display/map.npy)."""
     try:
-        t = np.load(os.path.join(out, "display", "map.npy"))
+        t = np.load(layout.map_path(out))
     except (OSError, ValueError):
         return None
     if t.shape != world.free_space.shape:

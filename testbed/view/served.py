@@ -22,6 +22,7 @@ import struct
 from pathlib import Path
 
 from testbed import PACKAGE_DIR
+from testbed.files import layout
 
 PACKAGED_MAPS = PACKAGE_DIR / "experiments" / "maps"
 # The largest file the view reads or serves: a 50-robot run of 100000 steps writes a
@@ -103,7 +104,7 @@ def snapshot_steps(run_dir: Path) -> list[int]:
     """The steps at which the display robot saved its merged map (display/step-NNNNN.png)."""
     steps = []
     try:
-        entries = list((Path(run_dir) / "display").glob("step-*.png"))
+        entries = list(Path(layout.display_dir(run_dir)).glob("step-*.png"))
     except OSError:
         return []
     for p in entries:

@@ -282,6 +282,7 @@ PROJECT = ("common", "node", "topology", "aodv", "testbed")
 # the parameters a run option sets (node.launch.bounds) and of the rule joining --maps and
 # --middleware (node.messaging.maps.refusal), and a position's check. Nothing that runs.
 FILES_MAY_IMPORT = {
+    "node.events": {"EVENTS_SUFFIX"},
     "node.launch": {"MAX_LASER_CELLS", "bounds"},
     "node.messaging.maps": {"refusal"},
     "node.rays": {"MAX_RANGE_M"},
