@@ -12,11 +12,11 @@ defaults of older files applied there) plus its run id and directory:
   naming the file and the key) makes `load_run` raise; `load_runs` (a sweep directory) logs
   that line and leaves the run out, as a sweep's report counts what it could read.
 - A run on the ns3-wifi medium also left `medium.json`, the 802.11 channel's counters
-  (docs/ns3-medium.md, "Counters"): read into `FinishedRun.channel` (`ChannelRecord`), None
-  for a veth run or a run made before the file existed. A medium.json that is there but
-  not what the channel writes makes the run malformed, as a bad result.json does; so does
-  a relay-lag file (the channel's per-frame lag, testbed.analysis.relaylag) without its
-  header.
+  (docs/ns3-medium.md, "Counters"): read into `FinishedRun.channel` (a `ChannelRecord`,
+  testbed.files.mediumfile), None for a veth run or a run made before the file existed. A
+  medium.json that is there but not what the channel writes makes the run malformed, as a
+  bad result.json does; so does a relay-lag file (the channel's per-frame lag,
+  testbed.analysis.relaylag) without its header.
 
 Which runs count (`FinishedRun.usable`): status `complete` or `step_cap`, and faithful to
 its time scale (result.json's `fidelity`, testbed.run.fidelity; a run written before verdicts
@@ -35,15 +35,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from common import boundedfile
-from testbed.files import layout
+from testbed.files import mediumfile
+from testbed.files.mediumfile import ChannelRecord
 from testbed.files.resultconfig import DEFAULT_VARIANT
 from testbed.files.resultfile import RESULT_NAME, ResultError, RunResult
-from testbed.files.resultvalues import get_mapping, get_value, one_line
+from testbed.files.resultvalues import one_line
 
 log = logging.getLogger(__name__)
 
@@ -51,57 +51,6 @@ __all__ = ["DEFAULT_VARIANT", "FinishedRun", "ResultError", "load_run", "load_ru
 
 USABLE = ("complete", "step_cap")
 _NUM = (int, float)
-
-
-@dataclass(frozen=True)
-class ChannelRobot:
-    """One robot's counters on the 802.11 channel (ns3-wifi's medium.json)."""
-
-    name: str  # "rK"; the display robot is the last
-    frames_sent: int  # frames the robot handed to the channel (from_linux)
-    frames_delivered: int  # frames the channel delivered to it (to_linux)
-    mac_tx: int  # MSDUs handed to its WiFi MAC
-    retries: int  # data transmissions not acknowledged
-    retry_drops: int  # MSDUs given up after the retry limit
-    queue_drops: int  # MSDUs refused by a full MAC queue
-    queue_expired: int  # MSDUs that waited longer than the queue's limit
-    phy_tx_drops: int
-    phy_rx_drops: int  # receptions lost: collisions, half duplex, preamble missed
-    airtime_s: float  # emulated seconds its PHY spent transmitting
-
-
-@dataclass(frozen=True)
-class ChannelRecord:
-    """The 802.11 channel's counters at the end of a run (medium.json)."""
-
-    duration_s: float  # emulated seconds the channel ran (now_s)
-    robots: tuple[ChannelRobot, ...]
-    relay_lag_mean_ms: float | None = None  # emulated ms; how late frames were relayed
-    relay_lag_over_1ms: float | None = None  # share of relayed frames over 1 ms late
-    lateness_max_ms: float | None = None
-
-    def total(self, key: str) -> float:
-        """The sum over robots of one ChannelRobot field."""
-        return sum(getattr(r, key) for r in self.robots)
-
-    @property
-    def airtime_share(self) -> float | None:
-        """Transmitting time of all robots over the channel's duration: the share of the
-        air in use where every robot hears every other (more than 1 is possible when robots
-        out of each other's range transmit at once)."""
-        return self.total("airtime_s") / self.duration_s if self.duration_s > 0 else None
-
-    @property
-    def retry_rate(self) -> float | None:
-        """Unacknowledged transmissions per MSDU handed to the MACs."""
-        mac_tx = self.total("mac_tx")
-        return self.total("retries") / mac_tx if mac_tx else None
-
-    @property
-    def drops(self) -> int:
-        """MSDUs the MACs lost: retry limit, full queue, expired in the queue."""
-        return int(self.total("retry_drops") + self.total("queue_drops")
-                   + self.total("queue_expired"))  # fmt: skip
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -121,57 +70,6 @@ class FinishedRun(RunResult):
     def of(cls, result: RunResult, run_dir: Path, channel: ChannelRecord | None = None):
         fields = {f.name: getattr(result, f.name) for f in dataclasses.fields(RunResult)}
         return cls(**fields, run_id=one_line(run_dir.name), path=run_dir, channel=channel)
-
-
-_CHANNEL_COUNTS = {
-    "frames_sent": "from_linux", "frames_delivered": "to_linux", "mac_tx": "mac_tx",
-    "retries": "retries", "retry_drops": "retry_drops", "queue_drops": "queue_drops",
-    "queue_expired": "queue_expired", "phy_tx_drops": "phy_tx_drops",
-    "phy_rx_drops": "phy_rx_drops",
-}  # fmt: skip
-
-
-def parse_channel(doc) -> ChannelRecord:
-    """The ChannelRecord of a medium.json's contents; ResultError when malformed."""
-    if not isinstance(doc, Mapping):
-        raise ResultError("not a JSON object")
-    robots = doc.get("robots")
-    if not isinstance(robots, list):
-        raise ResultError("'robots' is not a list")
-    out = []
-    for k, r in enumerate(robots, start=1):
-        if not isinstance(r, Mapping):
-            raise ResultError(f"robot {k} is not an object")
-        try:
-            counts = {f: get_value(r, key, (int,), 0) for f, key in _CHANNEL_COUNTS.items()}
-            airtime = get_value(r, "airtime_s", _NUM, 0.0)
-        except ResultError as e:
-            raise ResultError(f"robot {k}: {e}") from None
-        out.append(ChannelRobot(name=f"r{k}", airtime_s=airtime, **counts))
-    lag, late = get_mapping(doc, "relay_lag"), get_mapping(doc, "lateness")
-    frames = get_value(lag, "frames", (int,), 0)
-    over = get_value(lag, "over_1ms", (int,), 0)
-    return ChannelRecord(
-        duration_s=get_value(doc, "now_s", _NUM, required=True),
-        robots=tuple(out),
-        relay_lag_mean_ms=get_value(lag, "mean_ms", _NUM),
-        relay_lag_over_1ms=over / frames if frames else None,
-        lateness_max_ms=get_value(late, "max_ms", _NUM),
-    )
-
-
-def _load_channel(run_dir: Path) -> ChannelRecord | None:
-    path = Path(layout.medium_path(run_dir))
-    if not os.path.lexists(path):
-        return None
-    try:
-        doc = boundedfile.load_json(path)
-    except boundedfile.Refused as r:
-        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
-    try:
-        return parse_channel(doc)
-    except ResultError as e:
-        raise ResultError(f"{path}: {e}") from None
 
 
 def _check_lag_file(run_dir: Path) -> None:
@@ -195,7 +93,7 @@ def load_run(run_dir: str | Path) -> FinishedRun:
     result.json is missing, not JSON or lacks what the analysis needs, or its medium.json
     or relay-lag file is there but unreadable."""
     run_dir = Path(run_dir)
-    channel = _load_channel(run_dir)
+    channel = mediumfile.read(run_dir)
     _check_lag_file(run_dir)
     return FinishedRun.of(RunResult.from_json(run_dir), run_dir, channel)
 
