@@ -142,7 +142,7 @@ def _extent(run: FinishedRun, shape: tuple[int, int] | None) -> tuple[float, flo
 
 def _background(ax, run: FinishedRun) -> tuple[float, float, bool]:
     """The display's map in metres; (width, height, whether there was one)."""
-    grid = read_map(layout.map_path(run.path))
+    grid = read_map(Path(layout.map_path(run.path)))
     w, h = _extent(run, grid.shape if grid is not None else None)
     if grid is not None:
         img = _GREYS[np.clip(grid, 0, 2)]
