@@ -10,8 +10,8 @@ one table from which are made:
 - a config from parsed arguments (`config_kwargs`: flags whose unit differs from the
   field's, such as `--speed` in m/s for a field in metres per step, are converted here);
 - the argv that parses back into a given config (`to_argv`), which a sweep hands each run;
-- the keys result.json repeats under `config` (`in_result`: testbed.files.resultconfig takes its
-  list of keys, and checks its fields, from these);
+- the keys result.json repeats under `config` (`in_result`: the table is held to
+  testbed.files.resultconfig's keys and fields as it is made);
 - the checks of a sweep file's `[run]` values and `[grid]` lists (`check_value`), for the
   options marked `sweep`; and for those a sweep may vary, their `GridDim`: where they sit in
   the grid, their part of a run's id and whether they feed its seed (testbed.sweep.file

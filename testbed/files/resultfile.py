@@ -23,8 +23,9 @@ nested dicts (tests/unit/test_result_file.py holds this).
   stopped robots, `mean_finish_step_robots` and `survivors_finished` are None), no radio
   outage, no fidelity verdict; in config's `extra`, middleware nanomsg, maps flood, no
   battery failure, a 400 x 400 map of CELL_M cells.
-- The config's keys are the run options' (testbed.files.runconfig declares which result.json
-  repeats); the checked reading of values is testbed.files.resultvalues'.
+- The config's keys are run options (those testbed.files.runconfig marks in_result, held to
+  testbed.files.resultconfig's keys as the table is made); the checked reading of values
+  is testbed.files.resultvalues'.
 - Values keep the type JSON gave them (an int stays an int), so the numbers written from
   them are those the file holds. The diagnostic records that only people and the report's
   text read whole (wall_parts_s, world_timing_s, display, cpu_s, fidelity, network_timers)
