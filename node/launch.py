@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from common import timescale
 from common.argtypes import number
 from node import coordination
 from node.displaysteps import VIDEO_EVERY
@@ -143,9 +144,9 @@ class NodeArgs:
                         above=0, maximum=MAX_RADIUS_M, run=True)  # fmt: skip
     plan_period: int = arg(20, "steps between plans on the timer", kind=int, above=0, run=True)
     map_period: int = arg(10, "steps between map floods", kind=int, minimum=1, run=True)
-    # A step of 10 s to one of 100 microseconds.
-    time_scale: float = arg(1.0, "emulated time over wall time", kind=float, minimum=0.01,
-                            maximum=1000.0, run=True)  # fmt: skip
+    # A step of 10 s to one of 100 microseconds (common.timescale).
+    time_scale: float = arg(1.0, "emulated time over wall time", kind=float,
+                            minimum=timescale.MIN, maximum=timescale.MAX, run=True)  # fmt: skip
     timer_phase: int = arg(0, "steps added to the first timer", kind=int)
     iface: str = arg("wlan0", "'' to not bind floods to a device")
     flood_port: int = arg(5100, "UDP port of the map floods", kind=int, above=0,

@@ -18,6 +18,8 @@ import dataclasses
 import math
 from typing import TYPE_CHECKING
 
+from common import timescale
+
 if TYPE_CHECKING:
     from testbed.resultfile import RunResult
 
@@ -48,8 +50,10 @@ def _config(c) -> None:
         _bounded(f"config.{name}", value, 0, MAX_COORDINATE)
         if not value > 0:
             raise ValueError(f"'config.{name}' is {value:g}, not greater than 0")
-    if c.time_scale is not None and not (math.isfinite(c.time_scale) and c.time_scale > 0):
-        raise ValueError(f"'config.time_scale' is {c.time_scale}, not a positive number")
+    if c.time_scale is not None and not timescale.valid(c.time_scale):
+        raise ValueError(
+            f"'config.time_scale' is {c.time_scale}: {timescale.refusal(c.time_scale)}"
+        )
     _bounded("config.loss_pct", c.loss_pct, 0, 100)
     _bounded("config.delay_ms", c.delay_ms, 0, 1e7)
     _bounded("config.max_steps", c.max_steps, 0, MAX_STEPS, whole=True)
