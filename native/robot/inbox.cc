@@ -12,8 +12,9 @@
 namespace tb {
 
 namespace {
-constexpr int REACH_STEPS = 30;
-constexpr float THRESHOLD = 0.2f, MERGED = 1.0f;
+using gen::MERGED;
+using gen::REACH_STEPS;
+using gen::THRESHOLD;
 constexpr char FLOOD = 'F', MESSAGE = 'M', STOP = 'S';
 
 // planner.goal_priority: the shorter path wins, then the lower robot number.

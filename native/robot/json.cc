@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "robot_consts.h"
+
 namespace tb {
 
 const Json* Json::get(const std::string& key) const {
@@ -19,7 +21,7 @@ namespace {
 
 // Objects and arrays one inside another, at most (node.wire.MAX_DEPTH): a text nesting
 // deeper is refused where its 65th opens, before any recursion past it.
-constexpr int MAX_DEPTH = 64;
+using gen::MAX_DEPTH;
 
 struct Reader {
     const std::string& t;

@@ -6,7 +6,7 @@
 namespace tb {
 
 namespace {
-constexpr int64_t TABLE_BUDGET_BYTES = 64LL << 20;
+using gen::TABLE_BUDGET_BYTES;
 }
 
 Laser::Laser(double max_range_, int n_rays_, double cell_)

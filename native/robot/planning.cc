@@ -14,8 +14,10 @@
 namespace tb {
 
 namespace {
-constexpr int FULL_PERIOD = 500, REACH_STEPS = 30, GOAL_FRESH_STEPS = 40;
-constexpr float THRESHOLD = 0.2f;
+using gen::FULL_PERIOD;
+using gen::GOAL_FRESH_STEPS;
+using gen::REACH_STEPS;
+using gen::THRESHOLD;
 
 std::string goal_text(const Plan& p) {  // as Python prints [round(x, 3), round(y, 3)]
     if (!p.has_goal) return "null";

@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
+#include <iterator>
 
 #include "json.h"
 
 namespace tb {
 
-const std::vector<double> MS_BOUNDS = {10, 25, 50, 100, 200};
+const std::vector<double> STEP_BOUNDS(std::begin(gen::STEP_BOUNDS), std::end(gen::STEP_BOUNDS));
+const std::vector<double> MS_BOUNDS(std::begin(gen::MS_BOUNDS), std::end(gen::MS_BOUNDS));
 
 namespace {
 double clock_s(clockid_t id) {
@@ -148,7 +150,7 @@ void Arrivals::note(int sender, int64_t n, int64_t sent_step, int64_t step) {
     ++messages;
     int64_t delay = step - sent_step;
     delay_steps_max = std::max(delay_steps_max, delay);
-    if (delay > 1) ++late;
+    if (delay > gen::LATE_STEPS) ++late;
     if (n <= 0) return;
     if (!seen[sender].insert(n).second) ++duplicates;
 }

@@ -12,9 +12,9 @@ namespace tb {
 
 namespace {
 const char MAGIC[4] = {'R', 'M', 'F', '2'};
-constexpr size_t MAP_HDR = 16;
-constexpr int64_t MAX_CELLS = 4000000;
-constexpr size_t MAX_NEIGHBOURS = 255;
+using gen::MAP_HDR;
+using gen::MAX_CELLS;
+using gen::MAX_NEIGHBOURS;
 
 void copy_part(std::string& o, uint16_t sender, std::vector<uint16_t> nb) {
     std::sort(nb.begin(), nb.end());

@@ -8,10 +8,13 @@
 #include <string>
 #include <vector>
 
+#include "robot_consts.h"
+
 namespace tb {
 
-constexpr uint8_t KIND_MAP = 1, KIND_BEACON = 2;
-constexpr size_t FLOOD_FIXED = 19;  // header (16) + sender (2) + neighbour count (1)
+using gen::KIND_BEACON;
+using gen::KIND_MAP;
+using gen::FLOOD_FIXED;  // header + sender (2) + neighbour count (1)
 
 struct FloodHeader {
     uint8_t kind = 0, ttl = 0;
