@@ -43,19 +43,19 @@ struct Reader {
     }
     static void put_utf8(std::string& o, uint32_t cp) {
         if (cp < 0x80) {
-            o += (char)cp;
+            o += static_cast<char>(cp);
         } else if (cp < 0x800) {
-            o += (char)(0xC0 | (cp >> 6));
-            o += (char)(0x80 | (cp & 0x3F));
+            o += static_cast<char>(0xC0 | (cp >> 6));
+            o += static_cast<char>(0x80 | (cp & 0x3F));
         } else if (cp < 0x10000) {
-            o += (char)(0xE0 | (cp >> 12));
-            o += (char)(0x80 | ((cp >> 6) & 0x3F));
-            o += (char)(0x80 | (cp & 0x3F));
+            o += static_cast<char>(0xE0 | (cp >> 12));
+            o += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+            o += static_cast<char>(0x80 | (cp & 0x3F));
         } else {
-            o += (char)(0xF0 | (cp >> 18));
-            o += (char)(0x80 | ((cp >> 12) & 0x3F));
-            o += (char)(0x80 | ((cp >> 6) & 0x3F));
-            o += (char)(0x80 | (cp & 0x3F));
+            o += static_cast<char>(0xF0 | (cp >> 18));
+            o += static_cast<char>(0x80 | ((cp >> 12) & 0x3F));
+            o += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+            o += static_cast<char>(0x80 | (cp & 0x3F));
         }
     }
     bool hex4(uint32_t& v) {
@@ -135,7 +135,7 @@ struct Reader {
                 continue;
             }
             if (c < 0x80) {
-                o += (char)c;
+                o += static_cast<char>(c);
                 ++p;
             } else if (!utf8(o)) {
                 return false;
@@ -300,14 +300,14 @@ std::string py_float(double v) {
         if (isdigit((unsigned char)c)) digits += c;
     std::string out = neg ? "-" : "";
     if (exp10 >= 0) {
-        size_t ip = (size_t)exp10 + 1;
+        size_t ip = static_cast<size_t>(exp10) + 1;
         if (digits.size() <= ip) {
             out += digits + std::string(ip - digits.size(), '0') + ".0";
         } else {
             out += digits.substr(0, ip) + "." + digits.substr(ip);
         }
     } else {
-        out += "0." + std::string((size_t)(-exp10 - 1), '0') + digits;
+        out += "0." + std::string(static_cast<size_t>(-exp10 - 1), '0') + digits;
     }
     return out;
 }
@@ -337,7 +337,7 @@ std::string json_quote(const std::string& s) {
                     snprintf(esc, sizeof esc, "\\u%04x", c);
                     o += esc;
                 } else {
-                    o += (char)c;
+                    o += static_cast<char>(c);
                 }
         }
     }

@@ -33,7 +33,9 @@ double RobotTimings::flood_linger_s() const {
 
 Robot::Robot(const Args& a, const RobotTimings& timing, BodyClient& link, Flooder& flooder,
              Messenger& goals, EventLog& events)
-    : a_(a), timing_(timing), link_(link), flooder_(flooder), goals_(goals), events_(events),
+    : a_(a),
+      coordination_(a.coordination == "ours" ? Coordination::ours : Coordination::paper),
+      timing_(timing), link_(link), flooder_(flooder), goals_(goals), events_(events),
       laser_(a.laser_range, a.laser_rays, a.cell) {
     params_.cell = a.cell;
     params_.factor = gen::PLANNER_FACTOR;

@@ -58,6 +58,9 @@ struct RobotTimings {
     double flood_linger_s() const;
 };
 
+// How goals are agreed (node/coordination.py's MODES; --coordination, checked by args.cc).
+enum class Coordination { paper, ours };
+
 struct Teammate {
     int64_t heard = -1000000000;
     std::optional<std::pair<double, double>> goal;
@@ -142,6 +145,7 @@ private:
     void guarded(const char* name, void (Robot::*part)());
 
     const Args a_;
+    const Coordination coordination_;
     const RobotTimings timing_;
     BodyClient& link_;
     Flooder& flooder_;

@@ -81,8 +81,9 @@ int decode(const std::string& kind, int robots, int rows, int cols) {
     } else if (kind == "msg") {
         GoalMsg m;
         if (!parse_msg(in, robots, m, err)) return refused(err);
-        o.str("k", m.k).num("from", m.from).num("step", m.step).raw("goal", real_list({m.gx, m.gy}));
-        if (m.k == "goal") o.real("cost", m.cost).boolean("fallback", m.fallback);
+        o.str("k", msg_kind_name(m.k)).num("from", m.from).num("step", m.step);
+        o.raw("goal", real_list({m.gx, m.gy}));
+        if (m.k == MsgKind::goal) o.real("cost", m.cost).boolean("fallback", m.fallback);
         o.raw("n", m.n ? std::to_string(m.n) : "null");
     } else {
         fprintf(stderr, "node: --decode %s: one of body, flood, map, msg\n", kind.c_str());
@@ -215,7 +216,8 @@ int timings(const std::vector<std::string>& argv) {
     t.time_scale = scale;
     t.map_period = static_cast<int>(period);
     JsonObj o;
-    o.real("step_order_wait_s", t.step_order_wait_s()).real("neighbour_hold_s", t.neighbour_hold_s());
+    o.real("step_order_wait_s", t.step_order_wait_s());
+    o.real("neighbour_hold_s", t.neighbour_hold_s());
     o.num("goal_send_timeout_ms", t.goal_send_timeout_ms());
     o.num("goal_reconnect_min_ms", t.goal_reconnect_min_ms());
     o.num("goal_reconnect_max_ms", t.goal_reconnect_max_ms());

@@ -51,8 +51,11 @@ bool unpack_beacon(const uint8_t* d, size_t n, double& x, double& y, std::string
 std::string pack_beacon(double x, double y);
 
 // Goals and re-plan requests. `n` 0: none (older senders).
+enum class MsgKind { goal, replan };
+const char* msg_kind_name(MsgKind k);  // "goal", "replan": the message's "k"
+
 struct GoalMsg {
-    std::string k;  // "goal" or "replan"
+    MsgKind k = MsgKind::goal;
     int from = 0;
     int64_t step = 0;
     double gx = 0, gy = 0;
