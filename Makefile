@@ -54,7 +54,8 @@ TB_ROBOT_ARGS_FROM := node/argsgen.py node/launch.py node/rays.py node/messaging
 TB_ROBOT_CONSTS := build/gen/robot_consts.h
 TB_ROBOT_CONSTS_FROM := node/constgen.py node/timing.py node/robotcore.py node/motion.py \
 	node/grid.py node/flood.py node/wire.py node/body.py node/rays.py node/lateness.py \
-	node/messaging/arrivals.py common/sched.py common/timescale.py common/cliterals.py
+	node/messaging/__init__.py node/messaging/arrivals.py common/sched.py common/timescale.py \
+	common/cliterals.py
 TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h \
 	$(TB_ROBOT_ARGS) $(TB_ROBOT_CONSTS)
 TB_ROBOT_UNBUILT := build/tb-robot.unbuilt

@@ -34,7 +34,7 @@ import numpy as np
 
 from common import sched, timescale
 from common.cliterals import c_real
-from node import body, flood, grid, lateness, motion, rays, robotcore, timing, wire
+from node import body, flood, grid, lateness, messaging, motion, rays, robotcore, timing, wire
 from node.messaging import arrivals
 
 # (C++ type, name, value, where it comes from), in the header's order.
@@ -99,6 +99,7 @@ def constants() -> list[Const]:
         ("int", "BUCKETS", rays._BUCKETS, "node.rays._BUCKETS"),
         ("int64_t", "TABLE_BUDGET_BYTES", rays._TABLE_BUDGET_BYTES, "node.rays"),
         ("int64_t", "LATE_STEPS", arrivals.LATE_STEPS, "node.messaging.arrivals"),
+        ("int", "SEND_QUEUE", messaging.SEND_QUEUE, "node.messaging"),
         ("int", "DEADLINE_RT", sched.DEADLINE_PRIORITY[0], "common.sched.DEADLINE_PRIORITY"),
         ("int", "DEADLINE_NICE", sched.DEADLINE_PRIORITY[1], "common.sched.DEADLINE_PRIORITY"),
     ]
