@@ -5,11 +5,12 @@ clock, K in [MIN, MAX] (a step of 10 s to one of 100 microseconds, node.timing.S
 Every layer that takes a time scale checks it with `valid` (or `refusal` for the one-line
 reason): the robot's command line (node.launch.NodeArgs, and so `testbed run`'s option and
 the C++ robot through build/gen/node_args.h), the robot's timings (node.timing), a network's
-description (topology.spec) and its timers (topology.kernel.nettimers), the AODV daemon's
-parameters (aodv.params) and the metrics a `net` run left (testbed.net.movers); the C++
-robot's own timings (native/robot, `tb-robot --timings`) take MIN and MAX from
-build/gen/robot_consts.h (node.constgen). It lives in common/ because topology/ and aodv/,
-below node/, check it too.
+description (topology.spec) and its timers (topology.kernel.nettimers), the result.json
+checks (testbed.analysis.resultcheck) and the metrics a `net` run left (testbed.net.movers);
+the C++ robot's own timings (native/robot, `tb-robot --timings`) take MIN and MAX from
+build/gen/robot_consts.h (node.constgen). It lives in common/ because topology/, below node/,
+checks it too. The AODV daemon (`python -m aodv --time-scale`, aodv.params) keeps its own
+rule, any number above 0, which its compiled twin (native/aodv) is held equal to.
 """
 
 from __future__ import annotations
