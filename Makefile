@@ -46,10 +46,18 @@ TB_ROBOT_SRC := $(wildcard native/robot/*.cc) native/stepcore/stepcore.cc
 # Its command line is NodeArgs' (node/launch.py): node/argsgen.py writes the flags, bounds,
 # defaults and help as a table that native/robot/args.cc reads (rewritten only when it changes).
 TB_ROBOT_ARGS := build/gen/node_args.h
-TB_ROBOT_ARGS_FROM := node/argsgen.py node/launch.py node/rays.py node/messaging/maps.py \
+TB_ROBOT_ARGS_FROM := node/argsgen.py node/launch.py node/rays.py node/messaging/maps.py common/timescale.py \
 	node/messaging/__init__.py node/wire.py topology/names.py topology/spec.py
+# Its shared numbers (the timings' constants, the time scale's bounds, the robot's rules, the
+# wire's sizes, ...): node/constgen.py writes them from the Python robot (rewritten only when
+# they change), so that each is written once.
+TB_ROBOT_CONSTS := build/gen/robot_consts.h
+TB_ROBOT_CONSTS_FROM := node/constgen.py node/timing.py node/robotcore.py node/motion.py \
+	node/grid.py node/flood.py node/wire.py node/body.py node/rays.py node/lateness.py \
+	node/messaging/__init__.py node/messaging/arrivals.py common/sched.py common/timescale.py \
+	common/cliterals.py
 TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h \
-	$(TB_ROBOT_ARGS)
+	$(TB_ROBOT_ARGS) $(TB_ROBOT_CONSTS)
 TB_ROBOT_UNBUILT := build/tb-robot.unbuilt
 # Warnings are shown, not fatal: a newer g++ (Debian 13's 14, say) may warn where 12 did not,
 # and a user's setup must not stop on that.
@@ -125,6 +133,9 @@ $(TB_ROBOT): $(TB_ROBOT_DEPS)
 
 $(TB_ROBOT_ARGS): $(TB_ROBOT_ARGS_FROM) | venv
 	$(PY) -m node.argsgen $@
+
+$(TB_ROBOT_CONSTS): $(TB_ROBOT_CONSTS_FROM) | venv
+	$(PY) -m node.constgen $@
 
 build/asan/tb-robot: $(TB_ROBOT_DEPS)
 	@$(TB_ROBOT_CAN) || { echo "C++ robot not built: needs g++, libnng-dev and zlib1g-dev"; exit 2; }

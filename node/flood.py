@@ -57,6 +57,8 @@ WINDOW = 256  # sequence numbers remembered per origin below its highest
 # space, so that wrap-around comparison stays meaningful.
 SEQ_WINDOW = 1 << 24
 MODES = ("pruned", "blind")
+TTL = 16  # hops a flood travels at most
+SOCKET_BUFFER = 4 << 20  # the flood socket's receive and send buffers, bytes
 NEW, DUPLICATE, FORGED = "new", "duplicate", "forged"
 
 
@@ -101,7 +103,7 @@ class Flooder:
         me: int,
         port: int,
         iface: str | None = "wlan0",
-        ttl: int = 16,
+        ttl: int = TTL,
         mode: str = "pruned",
         hold: float = 1.5,
         clock=time.monotonic,
@@ -123,8 +125,8 @@ class Flooder:
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 << 20)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_BUFFER)
         if iface:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_BINDTODEVICE, iface.encode())
         s.bind(("0.0.0.0", port))

@@ -28,6 +28,7 @@ from topology.spec import CELL_M
 UNKNOWN = np.uint8(0)
 FREE = np.uint8(1)
 OCC = np.uint8(2)
+MAX_CELLS = 4_000_000  # the largest map a flood may carry (rows x cols)
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,7 @@ class OccupancyGrid:
         return n
 
 
-def classify(logodds: np.ndarray, threshold: float = 0.2) -> np.ndarray:
+def classify(logodds: np.ndarray, threshold: float = LogOdds.threshold) -> np.ndarray:
     """Ternary view of a log-odds array: UNKNOWN, FREE or OCC (uint8)."""
     t = np.zeros(logodds.shape, dtype=np.uint8)
     t[logodds < -threshold] = FREE
@@ -151,7 +152,7 @@ def encode_ternary(t: np.ndarray) -> tuple[int, int, int, int, bytes]:
     return r0, c0, r1 - r0, c1 - c0, zlib.compress(packed.tobytes(), 1)
 
 
-def decode_ternary(h: int, w: int, data: bytes, max_cells: int = 4_000_000) -> np.ndarray:
+def decode_ternary(h: int, w: int, data: bytes, max_cells: int = MAX_CELLS) -> np.ndarray:
     """Inverse of encode_ternary's payload; raises ValueError on malformed input."""
     if h < 0 or w < 0 or h * w > max_cells:
         raise ValueError("bad ternary map size")

@@ -30,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from common import timescale
 from common.argtypes import number
 from node import coordination
 from node.displaysteps import VIDEO_EVERY
@@ -50,7 +51,7 @@ HELP_FLAGS = ("-h", "--help")
 CHECK_FLAG = "--check-args"
 CHECK_HELP = "parse and check the arguments, then exit 0 (nothing runs)"
 # Every whole number is within +-10^9: the C++ robot holds them in 32-bit ints, and no step
-# count of a run comes near (testbed.run.config.MAX_STEPS is 10^7).
+# count of a run comes near (testbed.files.runconfig.MAX_STEPS is 10^7).
 WHOLE_MAX = 10**9
 WHOLE = re.compile(r"-?[0-9]+")
 REAL = re.compile(r"-?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?")
@@ -113,7 +114,7 @@ def arg(
     """A NodeArgs field and its flag: the default, the help, how the text is read (`parse`, or a
     number of `kind` within `above`/`minimum`/`maximum`, or one of `choices`), and whether a run
     passes its RunConfig field of the same name through (`run`: testbed.run.execute does, and
-    testbed.run.config takes the default and bounds of that option from here). No default:
+    testbed.files.runconfig takes the default and bounds of that option from here). No default:
     the flag is required."""  # fmt: skip
     meta = {"help": help, "kind": kind, "parse": parse, "above": above, "minimum": minimum,
             "maximum": maximum, "choices": choices, "run": run}  # fmt: skip
@@ -143,9 +144,9 @@ class NodeArgs:
                         above=0, maximum=MAX_RADIUS_M, run=True)  # fmt: skip
     plan_period: int = arg(20, "steps between plans on the timer", kind=int, above=0, run=True)
     map_period: int = arg(10, "steps between map floods", kind=int, minimum=1, run=True)
-    # A step of 10 s to one of 100 microseconds.
-    time_scale: float = arg(1.0, "emulated time over wall time", kind=float, minimum=0.01,
-                            maximum=1000.0, run=True)  # fmt: skip
+    # A step of 10 s to one of 100 microseconds (common.timescale).
+    time_scale: float = arg(1.0, "emulated time over wall time", kind=float,
+                            minimum=timescale.MIN, maximum=timescale.MAX, run=True)  # fmt: skip
     timer_phase: int = arg(0, "steps added to the first timer", kind=int)
     iface: str = arg("wlan0", "'' to not bind floods to a device")
     flood_port: int = arg(5100, "UDP port of the map floods", kind=int, above=0,

@@ -29,6 +29,10 @@ from node.robotcore import PRIORITY, STUCK_FRAMES, RobotCore
 # the C++ robot writes the same name).
 log = logging.getLogger("node.robot")
 
+# A waypoint is reached within WAYPOINT_TOL_M plus this share of a step's move.
+WAYPOINT_TOL_M = 1e-3
+WAYPOINT_TOL_SPEEDS = 0.01
+
 
 def _grow_box(a, b):
     if a is None:
@@ -193,7 +197,7 @@ class MotionControl(RobotCore):
         if s.finished or s.plan is None:
             return None
         path = s.plan.path
-        tol = 1e-3 + 0.01 * self.cfg.speed
+        tol = WAYPOINT_TOL_M + WAYPOINT_TOL_SPEEDS * self.cfg.speed
         while s.wp < len(path) and math.dist(s.pose, path[s.wp]) <= tol:
             s.wp += 1
         self.stuck = 0 if moved or s.wp >= len(path) else self.stuck + 1

@@ -46,6 +46,7 @@ import time
 
 import numpy as np
 
+from node import summary
 from node.motion import MotionControl
 from node.planning import Planning
 from node.receiving import Receiving
@@ -137,9 +138,7 @@ class Robot(MotionControl, Planning, TimerPart, Receiving):
         parts = sum(THREAD_CPU.values())
         thread_cpu = {k: round(v, 3) for k, v in THREAD_CPU.items()}
         thread_cpu["other"] = round(time.process_time() - parts, 3)  # nng's threads, start-up
-        self.events.write(
-            "summary",
-            self.s.step,
+        fields = summary.ordered(
             sent=dict(self.sent),
             received=dict(self.received),
             send_failed=dict(self.failed),
@@ -172,3 +171,4 @@ class Robot(MotionControl, Planning, TimerPart, Receiving):
             events_failed=self.events.failed,
             robot_impl="python",
         )
+        self.events.write("summary", self.s.step, **fields)

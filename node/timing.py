@@ -12,8 +12,9 @@ verdict) imports STEP_S from this module.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+
+from common import timescale
 
 STEP_S = 0.1  # emulated seconds per step: the one definition of the project
 NEIGHBOUR_HOLD_MAP_PERIODS = 1.5  # a flood neighbour is forgotten after this many map periods
@@ -35,8 +36,8 @@ class RobotTimings:
     map_period: int = 10  # steps between a robot's map floods
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.time_scale) and self.time_scale > 0):
-            raise ValueError(f"time_scale must be a finite number > 0, not {self.time_scale}")
+        if timescale.refusal(self.time_scale):
+            raise ValueError(timescale.refusal(self.time_scale))
         if self.map_period < 1:
             raise ValueError(f"map_period must be >= 1, not {self.map_period}")
 

@@ -8,6 +8,7 @@ import math
 import random
 from dataclasses import dataclass, field
 
+from common import timescale
 from topology import names
 
 ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")  # the first is the default
@@ -170,8 +171,8 @@ class NetworkSpec:
             raise ValueError(
                 f"unknown range model {self.range_model!r} (choose from {', '.join(RANGE_MODELS)})"
             )
-        if not (_number(self.time_scale, "time scale") > 0 and math.isfinite(self.time_scale)):
-            raise ValueError(f"time scale must be a positive number, not {self.time_scale}")
+        if timescale.refusal(_number(self.time_scale, "time scale")):
+            raise ValueError(timescale.refusal(self.time_scale))
         if not (_number(self.map_cell, "map cell size") > 0 and math.isfinite(self.map_cell)):
             raise ValueError(f"map cell size must be a positive number, not {self.map_cell}")
         if (

@@ -109,7 +109,7 @@ std::string quoted(const std::string& t) {
         char buf[8];
         if (c == '\\' || c == '\'') {
             out += '\\';
-            out += (char)c;
+            out += static_cast<char>(c);
         } else if (c == '\n') {
             out += "\\n";
         } else if (c == '\t') {
@@ -120,7 +120,7 @@ std::string quoted(const std::string& t) {
             snprintf(buf, sizeof buf, "\\x%02x", c);
             out += buf;
         } else {
-            out += (char)c;
+            out += static_cast<char>(c);
         }
     }
     return out + "'";
@@ -213,8 +213,8 @@ bool set(int at, const std::string& t, Args& a, std::string& err) {
             return false;
         }
         if (t[0] == '-') v = -v;
-        if (!within(f, (double)v, t, err)) return false;
-        a.*b.whole = (int)v;
+        if (!within(f, static_cast<double>(v), t, err)) return false;
+        a.*b.whole = static_cast<int>(v);
         return true;
     }
     case Kind::Real: {

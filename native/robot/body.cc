@@ -10,12 +10,14 @@
 #include <unistd.h>
 
 #include "json.h"
+#include "robot_consts.h"
 #include "wirebytes.h"
 
 namespace tb {
 
 namespace {
-constexpr size_t HELLO = 4, FRAME = 27, CMD = 14, DONE = 5;
+constexpr size_t HELLO = gen::BODY_HELLO, FRAME = gen::BODY_FRAME, CMD = gen::BODY_CMD,
+                 DONE = gen::BODY_DONE;
 }
 
 const char* body_kind_name(BodyKind k) {

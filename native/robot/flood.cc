@@ -14,7 +14,7 @@
 namespace tb {
 
 namespace {
-constexpr int64_t WINDOW = 256;
+using gen::WINDOW;
 }
 
 DuplicateCache::Verdict DuplicateCache::check(int origin, uint32_t seq) {
@@ -58,7 +58,7 @@ Flooder::Flooder(int me, int port, std::string iface, const std::string& mode, d
 bool Flooder::open(std::string& err) {
     fd_.reset(socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
     const int fd = fd_.get();
-    int one = 1, buf = 4 << 20;
+    int one = 1, buf = gen::FLOOD_SOCKET_BUFFER;
     if (fd < 0 || setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) ||
         setsockopt(fd, SOL_SOCKET, SO_BROADCAST, &one, sizeof one) ||
         setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &buf, sizeof buf) ||

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "fd.h"
+#include "robot_consts.h"
 #include "stats.h"
 #include "wire.h"
 
@@ -21,7 +22,7 @@ namespace tb {
 
 // node.flood.SEQ_WINDOW: how far from the highest sequence number believed from an origin (0
 // before any) another is believed.
-constexpr int64_t SEQ_WINDOW = int64_t(1) << 24;
+using gen::SEQ_WINDOW;
 
 // a - b as a signed 32-bit number (RFC 3561, 6.1): > 0 when a is the newer.
 inline int64_t seq_diff(uint32_t a, uint32_t b) { return static_cast<int32_t>(a - b); }
@@ -70,7 +71,7 @@ private:
     std::string iface_;
     bool blind_;  // --flood blind, not self-pruning
     double hold_;
-    uint8_t ttl_ = 16;
+    uint8_t ttl_ = gen::FLOOD_TTL;
     Fd fd_;
     uint32_t seq_ = 0;  // the timer's alone
     std::mutex cache_lock_;  // guards cache_ and heard_ (the inbox relays, the timer originates)

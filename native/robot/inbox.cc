@@ -12,8 +12,9 @@
 namespace tb {
 
 namespace {
-constexpr int REACH_STEPS = 30;
-constexpr float THRESHOLD = 0.2f, MERGED = 1.0f;
+using gen::MERGED;
+using gen::REACH_STEPS;
+using gen::THRESHOLD;
 constexpr char FLOOD = 'F', MESSAGE = 'M', STOP = 'S';
 
 // planner.goal_priority: the shorter path wins, then the lower robot number.
@@ -131,16 +132,17 @@ bool Robot::on_message(const std::string& data, std::string& err) {
         Teammate& tm = teammates_.at(j);
         tm.goal = std::make_pair(m.gx, m.gy);
         tm.goal_step = step;
-        if (m.k == "goal") tm.cost = m.cost;
+        if (m.k == MsgKind::goal) tm.cost = m.cost;
         if (plan_ && !finished_ && plan_->has_goal) mine = std::make_pair(plan_->gx, plan_->gy);
         my_cost = plan_ ? plan_->cost : 0.0;
     }
-    count(received_, m.k);
+    count(received_, msg_kind_name(m.k));
     arrivals_.note(j, m.n, m.step, step);
-    events_.write("recv", step, JsonObj().str("kind", m.k).num("frm", j).num("sent", m.step)
+    events_.write("recv", step, JsonObj().str("kind", msg_kind_name(m.k)).num("frm", j)
+                                    .num("sent", m.step)
                                     .real("t", py_round(monotonic_s(), 4)));
-    const bool ours = a_.coordination == "ours";
-    if (m.k == "goal") {
+    const bool ours = coordination_ == Coordination::ours;
+    if (m.k == MsgKind::goal) {
         // coordination.on_goal: the higher priority detects the conflict and asks.
         if (ours && m.fallback) return true;
         if (!mine || !goals_conflict(mine->first, mine->second, m.gx, m.gy, a_.laser_range))

@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "robot_consts.h"
+
 namespace tb {
 
 const Json* Json::get(const std::string& key) const {
@@ -19,7 +21,7 @@ namespace {
 
 // Objects and arrays one inside another, at most (node.wire.MAX_DEPTH): a text nesting
 // deeper is refused where its 65th opens, before any recursion past it.
-constexpr int MAX_DEPTH = 64;
+using gen::MAX_DEPTH;
 
 struct Reader {
     const std::string& t;
@@ -41,19 +43,19 @@ struct Reader {
     }
     static void put_utf8(std::string& o, uint32_t cp) {
         if (cp < 0x80) {
-            o += (char)cp;
+            o += static_cast<char>(cp);
         } else if (cp < 0x800) {
-            o += (char)(0xC0 | (cp >> 6));
-            o += (char)(0x80 | (cp & 0x3F));
+            o += static_cast<char>(0xC0 | (cp >> 6));
+            o += static_cast<char>(0x80 | (cp & 0x3F));
         } else if (cp < 0x10000) {
-            o += (char)(0xE0 | (cp >> 12));
-            o += (char)(0x80 | ((cp >> 6) & 0x3F));
-            o += (char)(0x80 | (cp & 0x3F));
+            o += static_cast<char>(0xE0 | (cp >> 12));
+            o += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+            o += static_cast<char>(0x80 | (cp & 0x3F));
         } else {
-            o += (char)(0xF0 | (cp >> 18));
-            o += (char)(0x80 | ((cp >> 12) & 0x3F));
-            o += (char)(0x80 | ((cp >> 6) & 0x3F));
-            o += (char)(0x80 | (cp & 0x3F));
+            o += static_cast<char>(0xF0 | (cp >> 18));
+            o += static_cast<char>(0x80 | ((cp >> 12) & 0x3F));
+            o += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+            o += static_cast<char>(0x80 | (cp & 0x3F));
         }
     }
     bool hex4(uint32_t& v) {
@@ -133,7 +135,7 @@ struct Reader {
                 continue;
             }
             if (c < 0x80) {
-                o += (char)c;
+                o += static_cast<char>(c);
                 ++p;
             } else if (!utf8(o)) {
                 return false;
@@ -298,14 +300,14 @@ std::string py_float(double v) {
         if (isdigit((unsigned char)c)) digits += c;
     std::string out = neg ? "-" : "";
     if (exp10 >= 0) {
-        size_t ip = (size_t)exp10 + 1;
+        size_t ip = static_cast<size_t>(exp10) + 1;
         if (digits.size() <= ip) {
             out += digits + std::string(ip - digits.size(), '0') + ".0";
         } else {
             out += digits.substr(0, ip) + "." + digits.substr(ip);
         }
     } else {
-        out += "0." + std::string((size_t)(-exp10 - 1), '0') + digits;
+        out += "0." + std::string(static_cast<size_t>(-exp10 - 1), '0') + digits;
     }
     return out;
 }
@@ -335,7 +337,7 @@ std::string json_quote(const std::string& s) {
                     snprintf(esc, sizeof esc, "\\u%04x", c);
                     o += esc;
                 } else {
-                    o += (char)c;
+                    o += static_cast<char>(c);
                 }
         }
     }

@@ -26,7 +26,9 @@ struct Json {
 
     const Json* get(const std::string& key) const;
     bool is_number() const { return kind == INT || kind == REAL || kind == BOOL; }
-    double number() const { return kind == INT ? (double)i : kind == BOOL ? (b ? 1 : 0) : d; }
+    double number() const {
+        return kind == INT ? static_cast<double>(i) : kind == BOOL ? (b ? 1 : 0) : d;
+    }
 };
 
 // Parses `text` into `out`; false (and why in `err`) when it is not one JSON value.

@@ -6,37 +6,37 @@
 namespace tb {
 
 namespace {
-constexpr int64_t TABLE_BUDGET_BYTES = 64LL << 20;
+using gen::TABLE_BUDGET_BYTES;
 }
 
 Laser::Laser(double max_range_, int n_rays_, double cell_)
     : max_range(max_range_), cell(cell_), step(cell_ / 2.0), n_rays(n_rays_) {
-    step32 = (float)step;
-    n_samples = (int)std::floor(max_range / step + 1e-9);
-    pad = (int)std::ceil(max_range / cell) + 2;
+    step32 = static_cast<float>(step);
+    n_samples = static_cast<int>(std::floor(max_range / step + 1e-9));
+    pad = static_cast<int>(std::ceil(max_range / cell)) + 2;
     window = 2 * pad + 1;
     const double two_pi = 2.0 * M_PI;
     double per_ray = two_pi / n_rays;
     double per_sample = step / cell;
-    size_t n = (size_t)n_rays * n_samples;
+    size_t n = static_cast<size_t>(n_rays) * n_samples;
     dx.resize(n);
     dy.resize(n);
     mark.resize(n);
     std::vector<int64_t> m(n_samples);
     for (int s = 0; s < n_samples; ++s) {
-        double rr = (double)(s + 1) * step;
-        double v = std::floor((double)n_rays * 0.8 * cell / (two_pi * rr));
+        double rr = static_cast<double>(s + 1) * step;
+        double v = std::floor(static_cast<double>(n_rays) * 0.8 * cell / (two_pi * rr));
         v = std::max(1.0, v);
-        m[s] = (int64_t)std::pow(2.0, std::floor(std::log2(v)));
+        m[s] = static_cast<int64_t>(std::pow(2.0, std::floor(std::log2(v))));
     }
     for (int k = 0; k < n_rays; ++k) {
-        double a = (double)k * per_ray;
+        double a = static_cast<double>(k) * per_ray;
         double c = std::cos(a), sn = std::sin(a);
         for (int s = 0; s < n_samples; ++s) {
-            double r = (double)(s + 1) * per_sample;
-            size_t i = (size_t)k * n_samples + s;
-            dx[i] = (float)(c * r);
-            dy[i] = (float)(sn * r);
+            double r = static_cast<double>(s + 1) * per_sample;
+            size_t i = static_cast<size_t>(k) * n_samples + s;
+            dx[i] = static_cast<float>(c * r);
+            dy[i] = static_cast<float>(sn * r);
             mark[i] = (k % m[s]) == 0;
             if (mark[i]) {
                 mark_dx.push_back(dx[i]);
@@ -44,7 +44,7 @@ Laser::Laser(double max_range_, int n_rays_, double cell_)
             }
         }
     }
-    tabled = (int64_t)BUCKETS * BUCKETS * window * window <= TABLE_BUDGET_BYTES;
+    tabled = static_cast<int64_t>(BUCKETS) * BUCKETS * window * window <= TABLE_BUDGET_BYTES;
 }
 
 MarkTable Laser::build(int bx, int by) const {
@@ -52,7 +52,8 @@ MarkTable Laser::build(int bx, int by) const {
     const int base = BIAS + pad + 2;
     size_t n = mark_dx.size();
     auto rel = [&](const std::vector<float>& d, int code, std::vector<int32_t>& out) {
-        float add = (float)((double)base + (double)code / FRAC);
+        float add =
+            static_cast<float>(static_cast<double>(base) + static_cast<double>(code) / FRAC);
         out.resize(n);
         for (size_t i = 0; i < n; ++i) out[i] = (int32_t)(d[i] + add) - base;
     };
@@ -64,7 +65,7 @@ MarkTable Laser::build(int bx, int by) const {
     const int w = window;
     const int at = pad * (w + 1);
     MarkTable t;
-    t.sure.assign((size_t)w * w, 0);
+    t.sure.assign(static_cast<size_t>(w) * w, 0);
     std::vector<uint8_t> sure(n);
     for (size_t i = 0; i < n; ++i) {
         sure[i] = col[i] == col1[i] && row[i] == row1[i];
@@ -91,13 +92,13 @@ void Laser::prepare_tables() {
 
 const MarkTable* Laser::table_for(float fx, float fy) const {
     if (!tabled || tables.empty()) return nullptr;
-    int cb = (int)fx, rb = (int)fy;
+    int cb = static_cast<int>(fx), rb = static_cast<int>(fy);
     int lo = std::min(cb, rb) - pad - 1, hi = std::max(cb, rb) + pad + 1;
     if (!(BIAS <= lo && lo < hi && hi < 2 * BIAS)) return nullptr;
     const int size = FRAC / BUCKETS;
-    int bx = (int)(((double)fx - cb) * FRAC) / size;
-    int by = (int)(((double)fy - rb) * FRAC) / size;
-    return &tables[(size_t)bx * BUCKETS + by];
+    int bx = static_cast<int>((static_cast<double>(fx) - cb) * FRAC) / size;
+    int by = static_cast<int>((static_cast<double>(fy) - rb) * FRAC) / size;
+    return &tables[static_cast<size_t>(bx) * BUCKETS + by];
 }
 
 }  // namespace tb

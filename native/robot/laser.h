@@ -7,11 +7,15 @@
 #include <cstdint>
 #include <vector>
 
+#include "node_args.h"
+#include "robot_consts.h"
+
 namespace tb {
 
-constexpr int BIAS = 4096;  // node.rays._BIAS
-constexpr int FRAC = 2048, BUCKETS = 16;
-constexpr double MAX_RANGE_M = 30.0;  // node.rays.MAX_RANGE_M: the longest laser of a run
+using gen::BIAS;  // node.rays._BIAS
+using gen::BUCKETS;
+using gen::FRAC;
+using gen::MAX_RANGE_M;  // node.rays.MAX_RANGE_M: the longest laser of a run
 
 struct MarkTable {
     std::vector<uint8_t> sure;     // window x window

@@ -28,8 +28,8 @@ void log_line(const char* level, const char* name, const char* fmt, ...) {
     char when[32];
     strftime(when, sizeof when, "%Y-%m-%d %H:%M:%S", &tm);
     std::lock_guard<std::mutex> g(g_log_lock);
-    fprintf(stderr, "%s,%03d r%d %s %s: %s\n", when, (int)(tv.tv_usec / 1000), g_robot, level,
-            name, msg);
+    fprintf(stderr, "%s,%03d r%d %s %s: %s\n", when, static_cast<int>(tv.tv_usec / 1000),
+            g_robot, level, name, msg);
     fflush(stderr);
 }
 

@@ -11,10 +11,12 @@
 namespace tb {
 
 namespace {
-constexpr int STUCK_FRAMES = 5;
-// node.grid.LogOdds
-constexpr float L_FREE = -0.4f, L_OCC = 0.85f, L_MAX = 5.0f;
-constexpr uint8_t FREE = 1, OCC = 2;
+using gen::FREE;
+using gen::L_FREE;
+using gen::L_MAX;
+using gen::L_OCC;
+using gen::OCC;
+using gen::STUCK_FRAMES;
 
 Box grow(const std::optional<Box>& a, const Box& b) {
     if (!a) return b;
@@ -195,7 +197,7 @@ Box Robot::footprint(double x, double y) const {
 std::optional<std::pair<double, double>> Robot::follow(bool moved) {
     if (finished_ || !plan_) return std::nullopt;
     const auto& path = plan_->path;
-    double tol = 1e-3 + 0.01 * a_.speed;
+    double tol = gen::WAYPOINT_TOL_M + gen::WAYPOINT_TOL_SPEEDS * a_.speed;
     while (wp_ < path.size() &&
            std::hypot(pose_.first - path[wp_].first, pose_.second - path[wp_].second) <= tol)
         ++wp_;

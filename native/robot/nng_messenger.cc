@@ -12,6 +12,7 @@
 
 #include "log.h"
 #include "messenger.h"
+#include "robot_consts.h"
 
 namespace tb {
 
@@ -19,7 +20,7 @@ std::unique_ptr<Messenger> make_zmq_messenger(int me, const MessengerTimings& t)
 
 namespace {
 
-constexpr int SEND_BUFFER = 8;  // messages queued per teammate (pynng's send_buffer_size)
+constexpr int SEND_BUFFER = gen::SEND_QUEUE;  // messages queued per teammate (pynng's)
 
 class NngMessenger : public Messenger {
 public:

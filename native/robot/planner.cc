@@ -1,13 +1,15 @@
 #include "planner.h"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include "../stepcore/stepcore.h"
 
 namespace tb {
 
 int PlannerParams::inflate_cells() const {
-    return (int)std::ceil(robot_radius / plan_cell() - 1e-9);
+    return static_cast<int>(std::ceil(robot_radius / plan_cell() - 1e-9));
 }
 
 double numpy_sum(const double* a, size_t n) {
@@ -32,10 +34,19 @@ double numpy_sum(const double* a, size_t n) {
     return numpy_sum(a, n2) + numpy_sum(a + n2, n - n2);
 }
 
+const char* plan_status_name(PlanStatus s) {
+    switch (s) {
+        case PlanStatus::done: return "done";
+        case PlanStatus::ok: return "ok";
+        case PlanStatus::fallback: return "fallback";
+        case PlanStatus::blocked: return "blocked";
+    }
+    return "?";
+}
+
 Plan plan(const std::vector<uint8_t>& t, int rows, int cols, double px, double py,
           const std::vector<std::pair<double, double>>& goals, double exclusion_radius,
           const PlannerParams& prm, bool fallback) {
-    static const char* STATUS[] = {"done", "ok", "fallback", "blocked"};
     std::vector<double> g;
     for (const auto& p : goals) {
         g.push_back(p.first);
@@ -46,15 +57,18 @@ Plan plan(const std::vector<uint8_t>& t, int rows, int cols, double px, double p
     std::vector<int> cells;
     int n;
     while (true) {
-        cells.resize(2 * (size_t)cap);
+        cells.resize(2 * static_cast<size_t>(cap));
         n = sc_plan(t.data(), rows, cols, prm.factor, prm.inflate_cells(), px, py, pc,
-                    g.empty() ? nullptr : g.data(), (int)goals.size(), exclusion_radius,
+                    g.empty() ? nullptr : g.data(), static_cast<int>(goals.size()),
+                    exclusion_radius,
                     fallback ? 1 : 0, &status, cells.data(), cap);
         if (n >= 0) break;
         cap = -n;
     }
     Plan out;
-    out.status = STATUS[status];
+    if (status < 0 || status > static_cast<int>(PlanStatus::blocked))
+        throw std::runtime_error("the step core's planner gave status " + std::to_string(status));
+    out.status = static_cast<PlanStatus>(status);
     if (n == 0) return out;
     for (int i = 0; i < n; ++i) {
         int r = cells[2 * i], c = cells[2 * i + 1];
@@ -66,8 +80,8 @@ Plan plan(const std::vector<uint8_t>& t, int rows, int cols, double px, double p
     // path_length: np.hypot of the cell differences, summed, times the plan cell.
     std::vector<double> seg;
     for (int i = 1; i < n; ++i)
-        seg.push_back(std::hypot((double)(cells[2 * i] - cells[2 * i - 2]),
-                                 (double)(cells[2 * i + 1] - cells[2 * i - 1])));
+        seg.push_back(std::hypot(static_cast<double>(cells[2 * i] - cells[2 * i - 2]),
+                                 static_cast<double>(cells[2 * i + 1] - cells[2 * i - 1])));
     out.cost = n < 2 ? 0.0 : numpy_sum(seg.data(), seg.size()) * pc;
     return out;
 }

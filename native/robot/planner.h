@@ -9,8 +9,12 @@
 
 namespace tb {
 
+// What a plan found (node.planner.Plan.status): the step core's sc_plan codes, in order.
+enum class PlanStatus { done, ok, fallback, blocked };
+const char* plan_status_name(PlanStatus s);  // "done", "ok", "fallback", "blocked"
+
 struct Plan {
-    std::string status;  // "ok", "fallback", "blocked" or "done"
+    PlanStatus status = PlanStatus::done;
     bool has_goal = false;
     double gx = 0, gy = 0;
     std::vector<std::pair<double, double>> path;

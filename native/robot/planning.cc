@@ -14,8 +14,10 @@
 namespace tb {
 
 namespace {
-constexpr int FULL_PERIOD = 500, REACH_STEPS = 30, GOAL_FRESH_STEPS = 40;
-constexpr float THRESHOLD = 0.2f;
+using gen::FULL_PERIOD;
+using gen::GOAL_FRESH_STEPS;
+using gen::REACH_STEPS;
+using gen::THRESHOLD;
 
 std::string goal_text(const Plan& p) {  // as Python prints [round(x, 3), round(y, 3)]
     if (!p.has_goal) return "null";
@@ -51,8 +53,8 @@ void Robot::planning() {
         std::lock_guard<std::mutex> g(count_lock_);
         priority_["planner"] = got;
     }
-    const bool fallback = a_.coordination == "ours";
-    std::vector<uint8_t> t((size_t)a_.rows * a_.cols);
+    const bool fallback = coordination_ == Coordination::ours;
+    std::vector<uint8_t> t(static_cast<size_t>(a_.rows) * a_.cols);
     const int pad = laser_.pad;
     while (!stopping) {
         std::string cause;
@@ -64,7 +66,8 @@ void Robot::planning() {
         std::vector<std::pair<double, double>> goals;
         {
             std::lock_guard<std::mutex> g(lock_);
-            sc_classify(lp_.data() + (size_t)pad * stride_ + pad, a_.rows, a_.cols, stride_,
+            sc_classify(lp_.data() + static_cast<size_t>(pad) * stride_ + pad, a_.rows, a_.cols,
+                        stride_,
                         THRESHOLD, t.data());
             pose = pose_;
             step = step_;
@@ -83,7 +86,7 @@ void Robot::planning() {
         if (delay > 0) std::this_thread::sleep_for(std::chrono::duration<double>(delay));
         // "done" goes out before the plan is installed: motion control answers no later frame
         // before it, so the world has it by the deadline the robot's answers meet.
-        if (p.status == "done") link_.send(body_done((uint32_t)step));
+        if (p.status == PlanStatus::done) link_.send(body_done(static_cast<uint32_t>(step)));
         {
             std::lock_guard<std::mutex> g(lock_);
             plan_ = p;
@@ -92,25 +95,27 @@ void Robot::planning() {
             plan_fresh_waited_ = plan_asked_while_sending_;
             last_plan_step_ = step;
             plan_pending_ = false;
-            if (p.status == "done") finished_ = true;
+            if (p.status == PlanStatus::done) finished_ = true;
         }
         caught_up_cv_.notify_all();
         std::string goal = goal_text(p);
         events_.write("plan", step,
-                      JsonObj().str("cause", cause).str("status", p.status).raw("goal", goal)
+                      JsonObj().str("cause", cause).str("status", plan_status_name(p.status))
+                          .raw("goal", goal)
                           .real("cost", py_round(p.cost, 3)).real("ms", py_round(ms, 2))
-                          .num("avoided", (int64_t)goals.size()));
+                          .num("avoided", static_cast<int64_t>(goals.size())));
         LOG_INFO("node.robot", "plan at step %lld (%s): %s goal %s cost %.2f m, %.1f ms",
-                 (long long)step, cause.c_str(), p.status.c_str(),
+                 static_cast<long long>(step), cause.c_str(), plan_status_name(p.status),
                  p.has_goal ? goal.c_str() : "None", p.cost, ms);
-        if (p.status == "done") {
+        if (p.status == PlanStatus::done) {
             events_.write("finish", step);
             LOG_INFO("node.robot", "finished at step %lld: no reachable frontier left",
-                     (long long)step);
+                     static_cast<long long>(step));
             continue;
         }
-        if (p.status == "blocked") continue;  // no goal: it waits (coordination)
-        std::string data = goal_msg(a_.robot, step, p.gx, p.gy, p.cost, p.status == "fallback",
+        if (p.status == PlanStatus::blocked) continue;  // no goal: it waits (coordination)
+        std::string data = goal_msg(a_.robot, step, p.gx, p.gy, p.cost,
+                                    p.status == PlanStatus::fallback,
                                     ++msg_numbers_);
         {
             std::lock_guard<std::mutex> g(lock_);
@@ -157,7 +162,7 @@ std::optional<TimerWork> Robot::timer_rule(int64_t step) {
     bool started = last_plan_step_ >= 0;
     if (started && !timer_next_tick_) timer_next_tick_ = last_plan_step_ + period;
     // coordination.timer_due_step; before the first plan there is no tick (and no plan due).
-    int64_t due_step = a_.coordination != "paper" ? last_plan_step_ + period
+    int64_t due_step = coordination_ != Coordination::paper ? last_plan_step_ + period
                        : timer_next_tick_        ? *timer_next_tick_
                                                  : 0;
     bool plan = step >= 0 && started && !finished_ && !plan_pending_ && step >= due_step;
@@ -200,13 +205,14 @@ void Robot::timer() {
             timer_busy_ = true;
             now = step_;
             if (work && work->plan)
-                lateness_.at("plan_timer_steps").add((double)(now - work->due_step));
+                lateness_.at("plan_timer_steps").add(static_cast<double>(now - work->due_step));
         }
         if (work && work->plan) request("timer");
         if (work && work->flood) {
             if (work->map_late) {
                 std::lock_guard<std::mutex> g(lock_);
-                lateness_.at("map_timer_steps").add((double)(*work->map_late + now - step));
+                lateness_.at("map_timer_steps")
+                    .add(static_cast<double>(*work->map_late + now - step));
             }
             share_map(step);
         }
@@ -233,19 +239,20 @@ void Robot::share_map(int64_t step) {
         dirty_.reset();
         t.h = std::max(0, b.r1 - b.r0);
         t.w = std::max(0, b.c1 - b.c0);
-        t.cells.resize((size_t)t.h * t.w);
+        t.cells.resize(static_cast<size_t>(t.h) * t.w);
         for (int r = 0; r < t.h; ++r)
-            std::copy_n(&own_[(size_t)(p + b.r0 + r) * stride_ + p + b.c0], t.w,
-                        &t.cells[(size_t)r * t.w]);
+            std::copy_n(&own_[static_cast<size_t>(p + b.r0 + r) * stride_ + p + b.c0], t.w,
+                        &t.cells[static_cast<size_t>(r) * t.w]);
         x = pose_.first;
         y = pose_.second;
     }
     if (full) last_full_ = step;
     std::string payload = pack_map(x, y, t, b.r0, b.c0);
-    uint32_t seq = flooder_.originate(KIND_MAP, (uint32_t)step, payload);
+    uint32_t seq = flooder_.originate(KIND_MAP, static_cast<uint32_t>(step), payload);
     count(sent_, "map");
     events_.write("send", step, JsonObj().str("kind", "map").num("seq", seq)
-                                    .num("bytes", (int64_t)payload.size()).boolean("full", full));
+                                    .num("bytes", static_cast<int64_t>(payload.size()))
+                                    .boolean("full", full));
     count(busy_, "share", thread_cpu_s() - t_cpu);
 }
 

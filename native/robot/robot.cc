@@ -12,23 +12,33 @@
 
 namespace tb {
 
+// Python's round(): to the nearest whole number, half to even (nearbyint's default mode).
+namespace {
+int round_ms(double ms) { return static_cast<int>(std::nearbyint(ms)); }
+}  // namespace
+
 int RobotTimings::goal_send_timeout_ms() const {
-    return std::max(2, static_cast<int>(std::nearbyint(50 / time_scale)));
+    return std::max(gen::GOAL_SEND_TIMEOUT_MIN_MS,
+                    round_ms(gen::GOAL_SEND_TIMEOUT_EMULATED_MS / time_scale));
 }
 int RobotTimings::goal_reconnect_min_ms() const {
-    return std::max(1, static_cast<int>(std::nearbyint(50 / time_scale)));
+    return std::max(gen::NNG_MIN_MS, round_ms(gen::GOAL_RECONNECT_MIN_EMULATED_MS / time_scale));
 }
 int RobotTimings::goal_reconnect_max_ms() const {
-    return std::max(1, static_cast<int>(std::nearbyint(500 / time_scale)));
+    return std::max(gen::NNG_MIN_MS, round_ms(gen::GOAL_RECONNECT_MAX_EMULATED_MS / time_scale));
 }
-double RobotTimings::flood_linger_s() const { return std::min(0.001, 0.01 / time_scale); }
+double RobotTimings::flood_linger_s() const {
+    return std::min(gen::FLOOD_LINGER_MAX_S, gen::FLOOD_LINGER_EMULATED_S / time_scale);
+}
 
 Robot::Robot(const Args& a, const RobotTimings& timing, BodyClient& link, Flooder& flooder,
              Messenger& goals, EventLog& events)
-    : a_(a), timing_(timing), link_(link), flooder_(flooder), goals_(goals), events_(events),
+    : a_(a),
+      coordination_(a.coordination == "ours" ? Coordination::ours : Coordination::paper),
+      timing_(timing), link_(link), flooder_(flooder), goals_(goals), events_(events),
       laser_(a.laser_range, a.laser_rays, a.cell) {
     params_.cell = a.cell;
-    params_.factor = 2;
+    params_.factor = gen::PLANNER_FACTOR;
     params_.robot_radius = a.radius;
     stride_ = a.cols + 2 * laser_.pad;
     size_t cells = static_cast<size_t>(a.rows + 2 * laser_.pad) * stride_;

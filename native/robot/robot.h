@@ -35,20 +35,31 @@
 #include "laser.h"
 #include "messenger.h"
 #include "planner.h"
+#include "robot_consts.h"
 #include "stats.h"
 
 namespace tb {
 
-struct RobotTimings {  // node/timing.py: every wall duration, from the time scale
+// node/timing.py's RobotTimings: every wall duration, from the time scale, by the same
+// formulas on the same numbers (build/gen/robot_consts.h, generated from node.timing;
+// `tb-robot --timings SCALE MAP_PERIOD` prints them for tests/unit/test_robot_consts.py).
+struct RobotTimings {
     double time_scale = 1.0;
     int map_period = 10;
-    double step_order_wait_s() const { return 0.75 * 0.1 / time_scale; }
-    double neighbour_hold_s() const { return 1.5 * map_period * 0.1 / time_scale; }
+    double step_order_wait_s() const {
+        return gen::STEP_ORDER_WAIT_STEPS * gen::STEP_S / time_scale;
+    }
+    double neighbour_hold_s() const {
+        return gen::NEIGHBOUR_HOLD_MAP_PERIODS * map_period * gen::STEP_S / time_scale;
+    }
     int goal_send_timeout_ms() const;
     int goal_reconnect_min_ms() const;
     int goal_reconnect_max_ms() const;
     double flood_linger_s() const;
 };
+
+// How goals are agreed (node/coordination.py's MODES; --coordination, checked by args.cc).
+enum class Coordination { paper, ours };
 
 struct Teammate {
     int64_t heard = -1000000000;
@@ -134,6 +145,7 @@ private:
     void guarded(const char* name, void (Robot::*part)());
 
     const Args a_;
+    const Coordination coordination_;
     const RobotTimings timing_;
     BodyClient& link_;
     Flooder& flooder_;
@@ -185,7 +197,7 @@ private:
     std::map<int, int64_t> last_heard_;   // processing's
 
     Queue<std::string> requests_;
-    Queue<std::pair<char, std::string>> inbox_q_{10000};
+    Queue<std::pair<char, std::string>> inbox_q_{gen::INBOX_LIMIT};
     Fd wake_r_, wake_w_;  // stop() wakes the inbox's poll
     std::vector<std::thread> threads_;
 };

@@ -5,9 +5,12 @@
 
 #include <string>
 
+#include "robot_consts.h"
+
 namespace tb {
 
-constexpr int DEADLINE_RT = 1, DEADLINE_NICE = -5;
+using gen::DEADLINE_NICE;
+using gen::DEADLINE_RT;
 
 // Raises the calling thread's priority; returns what it got ("SCHED_RR 1", "nice -5", "normal").
 std::string raise_priority(int rt_priority, int nice);

@@ -4,6 +4,7 @@
 //   tb-robot --decode KIND [--robots N] [--map-size RxC]   bytes on stdin -> one JSON line
 //   tb-robot --encode KIND                                 one JSON object on stdin -> bytes
 //   tb-robot --laser-tables RANGE RAYS CELL                the laser's tables, raw, on stdout
+//   tb-robot --timings SCALE MAP_PERIOD                    RobotTimings' durations, one JSON line
 //
 // KIND: body, flood, map (a flood's map payload), msg (a goal or re-plan message). A decoder
 // prints the decoded form, or "refused: <why>" and exits 1; never a crash.
@@ -19,6 +20,7 @@
 #include "flood.h"
 #include "json.h"
 #include "laser.h"
+#include "robot.h"
 #include "wire.h"
 
 namespace tb {
@@ -79,8 +81,9 @@ int decode(const std::string& kind, int robots, int rows, int cols) {
     } else if (kind == "msg") {
         GoalMsg m;
         if (!parse_msg(in, robots, m, err)) return refused(err);
-        o.str("k", m.k).num("from", m.from).num("step", m.step).raw("goal", real_list({m.gx, m.gy}));
-        if (m.k == "goal") o.real("cost", m.cost).boolean("fallback", m.fallback);
+        o.str("k", msg_kind_name(m.k)).num("from", m.from).num("step", m.step);
+        o.raw("goal", real_list({m.gx, m.gy}));
+        if (m.k == MsgKind::goal) o.real("cost", m.cost).boolean("fallback", m.fallback);
         o.raw("n", m.n ? std::to_string(m.n) : "null");
     } else {
         fprintf(stderr, "node: --decode %s: one of body, flood, map, msg\n", kind.c_str());
@@ -138,7 +141,7 @@ int encode(const std::string& kind) {
         t.h = field<int>(o, "h");
         t.w = field<int>(o, "w");
         if (t.h < 0 || t.w < 0 || t.h > 65535 || t.w > 65535 ||
-            static_cast<int64_t>(t.h) * t.w > 4000000) {
+            static_cast<int64_t>(t.h) * t.w > gen::MAX_CELLS) {
             fprintf(stderr, "node: --encode map: h and w in 0..65535, at most 4,000,000 cells\n");
             return 2;
         }
@@ -197,9 +200,36 @@ int laser_tables(double range, int rays, double cell) {
     return 0;
 }
 
+// RobotTimings' durations at this time scale and map period, named as node.timing's
+// properties (tests/unit/test_robot_consts.py holds them equal to the Python robot's).
+int timings(const std::vector<std::string>& argv) {
+    char *e1 = nullptr, *e2 = nullptr;
+    double scale = argv.size() == 3 ? strtod(argv[1].c_str(), &e1) : NAN;
+    long period = argv.size() == 3 ? strtol(argv[2].c_str(), &e2, 10) : 0;
+    if (argv.size() != 3 || *e1 || *e2 || !(scale >= gen::TIME_SCALE_MIN) ||
+        !(scale <= gen::TIME_SCALE_MAX) || period < 1 || period > gen::WHOLE_MAX) {
+        fprintf(stderr, "node: --timings SCALE MAP_PERIOD: SCALE in [%g, %g], MAP_PERIOD >= 1\n",
+                gen::TIME_SCALE_MIN, gen::TIME_SCALE_MAX);
+        return 2;
+    }
+    RobotTimings t;
+    t.time_scale = scale;
+    t.map_period = static_cast<int>(period);
+    JsonObj o;
+    o.real("step_order_wait_s", t.step_order_wait_s());
+    o.real("neighbour_hold_s", t.neighbour_hold_s());
+    o.num("goal_send_timeout_ms", t.goal_send_timeout_ms());
+    o.num("goal_reconnect_min_ms", t.goal_reconnect_min_ms());
+    o.num("goal_reconnect_max_ms", t.goal_reconnect_max_ms());
+    o.real("flood_linger_s", t.flood_linger_s());
+    printf("%s\n", o.text().c_str());
+    return 0;
+}
+
 }  // namespace
 
 int selftest_main(const std::vector<std::string>& argv) {
+    if (argv[0] == "--timings") return timings(argv);
     if (argv[0] == "--laser-tables") {
         if (argv.size() != 4) {
             fprintf(stderr, "node: --laser-tables RANGE RAYS CELL\n");

@@ -3,21 +3,23 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
+#include <iterator>
 
 #include "json.h"
 
 namespace tb {
 
-const std::vector<double> MS_BOUNDS = {10, 25, 50, 100, 200};
+const std::vector<double> STEP_BOUNDS(std::begin(gen::STEP_BOUNDS), std::end(gen::STEP_BOUNDS));
+const std::vector<double> MS_BOUNDS(std::begin(gen::MS_BOUNDS), std::end(gen::MS_BOUNDS));
 
 namespace {
 double clock_s(clockid_t id) {
     timespec t;
     clock_gettime(id, &t);
-    return (double)t.tv_sec + t.tv_nsec * 1e-9;
+    return static_cast<double>(t.tv_sec) + t.tv_nsec * 1e-9;
 }
 std::string label(double b) {
-    return b == std::floor(b) ? std::to_string((int64_t)b) : py_float(b);
+    return b == std::floor(b) ? std::to_string(static_cast<int64_t>(b)) : py_float(b);
 }
 }  // namespace
 
@@ -48,7 +50,8 @@ std::string Lateness::json() const {
     o.num("n", n_).num("late", late_);
     // round(max, 3): an int stays an int in Python (steps), a float is a float.
     double m = py_round(max_, 3);
-    o.raw("max", m > 0 && m == std::floor(m) && bounds_[0] == 0 ? std::to_string((int64_t)m) : py_float(m));
+    bool whole = m > 0 && m == std::floor(m) && bounds_[0] == 0;
+    o.raw("max", whole ? std::to_string(static_cast<int64_t>(m)) : py_float(m));
     o.raw("hist", hist.text());
     return o.text();
 }
@@ -70,7 +73,7 @@ double Counter::get(const std::string& key) const {
 
 std::string Counter::json_int() const {
     JsonObj o;
-    for (const auto& kv : items_) o.num(kv.first, (int64_t)kv.second);
+    for (const auto& kv : items_) o.num(kv.first, static_cast<int64_t>(kv.second));
     return o.text();
 }
 
@@ -84,7 +87,7 @@ void MapStats::note_publish(size_t size, bool ok, double seconds) {
     std::lock_guard<std::mutex> g(lock);
     if (ok) {
         ++published;
-        bytes_published += (int64_t)size;
+        bytes_published += static_cast<int64_t>(size);
     } else {
         ++failed;
     }
@@ -95,7 +98,7 @@ void MapStats::note_publish(size_t size, bool ok, double seconds) {
 void MapStats::note_receive(int origin, size_t size) {
     std::lock_guard<std::mutex> g(lock);
     ++received;
-    bytes_received += (int64_t)size;
+    bytes_received += static_cast<int64_t>(size);
     ++received_from[origin];
 }
 
@@ -140,7 +143,7 @@ std::string MessengerStats::json() {
     JsonObj o;
     o.num("sent", sent).num("failed", failed).num("received", received);
     o.real("blocked_s", py_round(blocked, 6)).real("blocked_max_s", py_round(longest, 6));
-    o.num("sending", (int64_t)open.size());
+    o.num("sending", static_cast<int64_t>(open.size()));
     return o.text();
 }
 
@@ -148,7 +151,7 @@ void Arrivals::note(int sender, int64_t n, int64_t sent_step, int64_t step) {
     ++messages;
     int64_t delay = step - sent_step;
     delay_steps_max = std::max(delay_steps_max, delay);
-    if (delay > 1) ++late;
+    if (delay > gen::LATE_STEPS) ++late;
     if (n <= 0) return;
     if (!seen[sender].insert(n).second) ++duplicates;
 }
@@ -162,10 +165,10 @@ std::string Arrivals::json() const {
 
 double percentile(std::vector<double> v, double q) {
     std::sort(v.begin(), v.end());
-    double pos = (q / 100.0) * (double)(v.size() - 1);
-    size_t lo = (size_t)std::floor(pos);
+    double pos = (q / 100.0) * static_cast<double>(v.size() - 1);
+    size_t lo = static_cast<size_t>(std::floor(pos));
     size_t hi = std::min(lo + 1, v.size() - 1);
-    double frac = pos - (double)lo;
+    double frac = pos - static_cast<double>(lo);
     return v[lo] + (v[hi] - v[lo]) * frac;
 }
 

@@ -12,15 +12,19 @@
 #include <utility>
 #include <vector>
 
+#include "robot_consts.h"
+
 namespace tb {
 
 double monotonic_s();   // time.monotonic()
 double thread_cpu_s();  // time.thread_time()
 double process_cpu_s(); // time.process_time()
 
+extern const std::vector<double> STEP_BOUNDS;  // node.lateness's, in steps
+
 class Lateness {
 public:
-    explicit Lateness(std::vector<double> bounds = {0, 1, 2, 4, 8});
+    explicit Lateness(std::vector<double> bounds = STEP_BOUNDS);
     void add(double late);
     std::string json() const;
 
@@ -30,7 +34,7 @@ private:
     int64_t n_ = 0, late_ = 0;
     double max_ = 0;
 };
-extern const std::vector<double> MS_BOUNDS;
+extern const std::vector<double> MS_BOUNDS;  // node.lateness's, in emulated ms
 
 // A Counter: keys in the order first counted; only counted keys appear.
 class Counter {

@@ -12,15 +12,15 @@ namespace tb {
 
 namespace {
 const char MAGIC[4] = {'R', 'M', 'F', '2'};
-constexpr size_t MAP_HDR = 16;
-constexpr int64_t MAX_CELLS = 4000000;
-constexpr size_t MAX_NEIGHBOURS = 255;
+using gen::MAP_HDR;
+using gen::MAX_CELLS;
+using gen::MAX_NEIGHBOURS;
 
 void copy_part(std::string& o, uint16_t sender, std::vector<uint16_t> nb) {
     std::sort(nb.begin(), nb.end());
     if (nb.size() > MAX_NEIGHBOURS) nb.resize(MAX_NEIGHBOURS);
     put16(o, sender);
-    put8(o, (uint8_t)nb.size());
+    put8(o, static_cast<uint8_t>(nb.size()));
     for (uint16_t k : nb) put16(o, k);
 }
 }  // namespace
@@ -74,7 +74,7 @@ bool unpack_flood(const uint8_t* d, size_t n, FloodHeader& h, std::string& err) 
 std::string relayed(const uint8_t* d, size_t n, const FloodHeader& h, uint8_t ttl,
                     uint16_t sender, const std::vector<uint16_t>& neighbours) {
     std::string o((const char*)d, 16);
-    o[5] = (char)ttl;
+    o[5] = static_cast<char>(ttl);
     copy_part(o, sender, neighbours);
     o.append((const char*)d + h.payload_at, n - h.payload_at);
     return o;
@@ -84,15 +84,15 @@ std::string pack_map(double x, double y, const Ternary& t, int r_off, int c_off)
     int r0 = -1, r1 = -1, c0 = t.w, c1 = -1;
     for (int r = 0; r < t.h; ++r)
         for (int c = 0; c < t.w; ++c)
-            if (t.cells[(size_t)r * t.w + c]) {
+            if (t.cells[static_cast<size_t>(r) * t.w + c]) {
                 if (r0 < 0) r0 = r;
                 r1 = r;
                 c0 = std::min(c0, c);
                 c1 = std::max(c1, c);
             }
     std::string o;
-    putf32(o, (float)x);
-    putf32(o, (float)y);
+    putf32(o, static_cast<float>(x));
+    putf32(o, static_cast<float>(y));
     if (r0 < 0) {  // nothing known: an empty window
         put16(o, 0);
         put16(o, 0);
@@ -101,16 +101,17 @@ std::string pack_map(double x, double y, const Ternary& t, int r_off, int c_off)
         return o;
     }
     int h = r1 - r0 + 1, w = c1 - c0 + 1;
-    put16(o, (uint16_t)(r0 + r_off));
-    put16(o, (uint16_t)(c0 + c_off));
-    put16(o, (uint16_t)h);
-    put16(o, (uint16_t)w);
-    size_t cells = (size_t)h * w;
+    put16(o, static_cast<uint16_t>(r0 + r_off));
+    put16(o, static_cast<uint16_t>(c0 + c_off));
+    put16(o, static_cast<uint16_t>(h));
+    put16(o, static_cast<uint16_t>(w));
+    size_t cells = static_cast<size_t>(h) * w;
     std::vector<uint8_t> packed((cells + 3) / 4, 0);
     size_t i = 0;
     for (int r = r0; r <= r1; ++r)
         for (int c = c0; c <= c1; ++c, ++i)
-            packed[i / 4] |= (uint8_t)(t.cells[(size_t)r * t.w + c] << (2 * (i % 4)));
+            packed[i / 4] |=
+                static_cast<uint8_t>(t.cells[static_cast<size_t>(r) * t.w + c] << (2 * (i % 4)));
     uLongf len = compressBound(packed.size());
     std::string blob(len, '\0');
     compress2((Bytef*)&blob[0], &len, packed.data(), packed.size(), 1);
@@ -119,15 +120,15 @@ std::string pack_map(double x, double y, const Ternary& t, int r_off, int c_off)
 }
 
 bool decode_ternary(int h, int w, const uint8_t* d, size_t n, Ternary& out, std::string& err) {
-    if (h < 0 || w < 0 || (int64_t)h * w > MAX_CELLS) {
+    if (h < 0 || w < 0 || static_cast<int64_t>(h) * w > MAX_CELLS) {
         err = "bad ternary map size";
         return false;
     }
     out.h = h;
     out.w = w;
-    out.cells.assign((size_t)h * w, 0);
+    out.cells.assign(static_cast<size_t>(h) * w, 0);
     if (h * w == 0) return true;
-    size_t want = ((size_t)h * w + 3) / 4;
+    size_t want = (static_cast<size_t>(h) * w + 3) / 4;
     std::vector<uint8_t> raw(want + 1);
     z_stream z{};
     if (inflateInit(&z) != Z_OK) {
@@ -197,12 +198,14 @@ bool unpack_beacon(const uint8_t* d, size_t n, double& x, double& y, std::string
 
 std::string pack_beacon(double x, double y) {
     std::string o;
-    putf32(o, (float)x);
-    putf32(o, (float)y);
+    putf32(o, static_cast<float>(x));
+    putf32(o, static_cast<float>(y));
     return o;
 }
 
 // json.dumps' default separators (", " and ": "), so the bytes are the Python robot's.
+const char* msg_kind_name(MsgKind k) { return k == MsgKind::goal ? "goal" : "replan"; }
+
 std::string goal_msg(int sender, int64_t step, double gx, double gy, double cost, bool fallback,
                      int64_t n) {
     std::string o = "{\"k\": \"goal\", \"from\": " + std::to_string(sender) +
@@ -245,13 +248,13 @@ bool parse_msg(const std::string& data, int n_robots, GoalMsg& out, std::string&
         return false;
     }
     out = GoalMsg();
-    out.k = k->s;
+    out.k = k->s == "goal" ? MsgKind::goal : MsgKind::replan;
     int64_t from, step;
     if (!as_int(m.get("from"), from) || from < 1 || from > n_robots) {
         err = "message sender is not a robot of this team";
         return false;
     }
-    out.from = (int)from;
+    out.from = static_cast<int>(from);
     if (!as_int(m.get("step"), step) || step < 0) {
         err = "message step is not a step";
         return false;
@@ -274,7 +277,7 @@ bool parse_msg(const std::string& data, int n_robots, GoalMsg& out, std::string&
         }
         out.n = n->i;
     }
-    if (out.k == "goal") {
+    if (out.k == MsgKind::goal) {
         const Json* c = m.get("cost");
         if (!c || !c->is_number() || !std::isfinite(c->number()) || c->number() < 0) {
             err = "goal message has no valid cost";

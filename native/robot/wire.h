@@ -8,10 +8,13 @@
 #include <string>
 #include <vector>
 
+#include "robot_consts.h"
+
 namespace tb {
 
-constexpr uint8_t KIND_MAP = 1, KIND_BEACON = 2;
-constexpr size_t FLOOD_FIXED = 19;  // header (16) + sender (2) + neighbour count (1)
+using gen::KIND_BEACON;
+using gen::KIND_MAP;
+using gen::FLOOD_FIXED;  // header + sender (2) + neighbour count (1)
 
 struct FloodHeader {
     uint8_t kind = 0, ttl = 0;
@@ -48,8 +51,11 @@ bool unpack_beacon(const uint8_t* d, size_t n, double& x, double& y, std::string
 std::string pack_beacon(double x, double y);
 
 // Goals and re-plan requests. `n` 0: none (older senders).
+enum class MsgKind { goal, replan };
+const char* msg_kind_name(MsgKind k);  // "goal", "replan": the message's "k"
+
 struct GoalMsg {
-    std::string k;  // "goal" or "replan"
+    MsgKind k = MsgKind::goal;
     int from = 0;
     int64_t step = 0;
     double gx = 0, gy = 0;

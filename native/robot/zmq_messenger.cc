@@ -15,6 +15,7 @@
 // Built only where make setup found libzmq3-dev (TB_WITH_ZMQ); elsewhere the C++ robot carries
 // nanomsg alone and `--robot auto` runs the Python robot for --middleware zeromq.
 #include "messenger.h"
+#include "robot_consts.h"
 
 #ifdef TB_WITH_ZMQ
 
@@ -32,7 +33,7 @@ namespace tb {
 
 namespace {
 
-constexpr int SEND_HWM = 8;  // messages queued per teammate (nanomsg's send buffer)
+constexpr int SEND_HWM = gen::SEND_QUEUE;  // messages queued per teammate (pyzmq's)
 
 struct Sock {
     void* sock = nullptr;

@@ -51,6 +51,8 @@ REGISTRY: dict[str, Entry] = {
 MIDDLEWARES = tuple(REGISTRY)
 DEFAULT = "nanomsg"
 DEFAULT_MAPS = "flood"  # how maps are shared (node.messaging.maps.DEFAULT)
+# Messages queued per teammate: nanomsg's send_buffer_size, ZeroMQ's SNDHWM (both robots).
+SEND_QUEUE = 8
 
 
 class MiddlewareUnavailable(Exception):

@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 
 import pynng
 
+from node.messaging import SEND_QUEUE
 from node.messaging.stats import MessengerStats
 
 log = logging.getLogger(__name__)
@@ -64,7 +65,7 @@ class NanomsgMessenger:
                 send_timeout=self.send_timeout_ms,
                 reconnect_time_min=self.reconnect_ms[0],
                 reconnect_time_max=self.reconnect_ms[1],
-                send_buffer_size=8,
+                send_buffer_size=SEND_QUEUE,
             )
             s.dial(f"tcp://{self.addr_of(j)}:{self.port}", block=False)
             self.push[j] = s

@@ -28,9 +28,10 @@ from __future__ import annotations
 
 import zmq
 
+from node.messaging import SEND_QUEUE
 from node.messaging.zmqsockets import ZmqSockets
 
-SEND_HWM = 8  # messages queued per teammate (nanomsg's send_buffer_size)
+SEND_HWM = SEND_QUEUE  # messages queued per teammate (nanomsg's send_buffer_size)
 
 
 class ZeroMQMessenger(ZmqSockets):

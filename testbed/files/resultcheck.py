@@ -18,6 +18,8 @@ import dataclasses
 import math
 from typing import Any
 
+from common import timescale
+
 MAX_ROBOTS = 1000  # topology.names.MAX_ROBOTS
 MAX_STEPS = 10**9  # testbed.files.options' max_steps bound
 MAX_COORDINATE = 10_000_000.0  # metres: docs/security.md's coordinate limit
@@ -45,8 +47,10 @@ def _config(c) -> None:
         _bounded(f"config.{name}", value, 0, MAX_COORDINATE)
         if not value > 0:
             raise ValueError(f"'config.{name}' is {value:g}, not greater than 0")
-    if c.time_scale is not None and not (math.isfinite(c.time_scale) and c.time_scale > 0):
-        raise ValueError(f"'config.time_scale' is {c.time_scale}, not a positive number")
+    if c.time_scale is not None and not timescale.valid(c.time_scale):
+        raise ValueError(
+            f"'config.time_scale' is {c.time_scale}: {timescale.refusal(c.time_scale)}"
+        )
     _bounded("config.loss_pct", c.loss_pct, 0, 100)
     _bounded("config.delay_ms", c.delay_ms, 0, 1e7)
     _bounded("config.max_steps", c.max_steps, 0, MAX_STEPS, whole=True)

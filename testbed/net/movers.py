@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 
+from common import timescale
 from common.argtypes import number
 from common.errors import TestbedError, UsageError
 from topology.inputs.mobility import LIMITS_TEXT, MIN_TICK_S
@@ -278,9 +279,8 @@ def network_of(path: str) -> tuple[str, float | None]:
     routing, scale = net.get("routing", "aodv"), net.get("time_scale")
     if routing not in ROUTINGS:
         raise UsageError(f"metrics: {path}: 'routing' is not one of {', '.join(ROUTINGS)}")
-    ok = isinstance(scale, int | float) and not isinstance(scale, bool) and 0 < scale <= 1000
-    if scale is not None and not ok:
-        raise UsageError(f"metrics: {path}: 'time_scale' is not a number in (0, 1000]")
+    if scale is not None and not timescale.valid(scale):
+        raise UsageError(f"metrics: {path}: 'time_scale': {timescale.refusal(scale)}")
     return routing, scale
 
 

@@ -229,3 +229,22 @@ def test_the_command_line_exits_as_parse_does(argv, status):
                        timeout=120, cwd=PROJECT_ROOT)  # fmt: skip
     assert p.returncode == status, p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_every_field_and_bound_is_exercised():
+    """Every NodeArgs field's flag is in some case, each declared bound with a value at it and
+    one just beyond it, and the time scale's bounds are common.timescale's."""
+    from common import timescale
+
+    given = {a.split("=")[0] for _, argv in CASES for a in argv if a.startswith("--")}
+    assert {_flag(f.name) for f in dataclasses.fields(NodeArgs)} <= given
+    for f in dataclasses.fields(NodeArgs):
+        meta = f.metadata["arg"]
+        for bound in ("above", "minimum", "maximum"):
+            if meta[bound] is not None:
+                at = _beyond({**dict.fromkeys(("above", "minimum", "maximum")), bound: meta[bound]},
+                             meta["kind"] is int)  # fmt: skip
+                cases = {(argv[-2], argv[-1]) for _, argv in CASES if len(argv) >= 2}
+                assert all((_flag(f.name), v) in cases for v in at), (f.name, bound)
+    time_scale = {f.name: f for f in dataclasses.fields(NodeArgs)}["time_scale"].metadata["arg"]
+    assert (time_scale["minimum"], time_scale["maximum"]) == (timescale.MIN, timescale.MAX)

@@ -23,9 +23,10 @@ import time
 import numpy as np
 import pytest
 
-from node import body
+from node import body, summary
 from node.events import EventLog
 from node.native import TB_ROBOT, unbuilt_reason
+from testbed.run.results import SUMMARY_KEYS
 from tests.unit.test_robot_body_link import RAYS, REPO, drive, free_port
 
 # The summary's counters: each the kinds it may count, a key only once one happened.
@@ -59,6 +60,48 @@ def key_differences(py: dict, cc: dict, where: str = "summary") -> list[str]:
     return out
 
 
+def type_differences(py, cc, where: str = "summary") -> list[str]:
+    """Where the two summaries' values differ in JSON type (int, float, str, bool, None,
+    list, dict) under a key both have, looking into every dict and list both hold; []
+    when nowhere."""
+    pairs: list[tuple[str, object, object]] = []
+    if isinstance(py, dict) and isinstance(cc, dict):
+        pairs = [(f"{where}.{k}", py[k], cc[k]) for k in sorted(set(py) & set(cc))]
+    elif isinstance(py, list) and isinstance(cc, list):
+        pairs = [(f"{where}[{i}]", a, b) for i, (a, b) in enumerate(zip(py, cc, strict=False))]
+    elif type(py) is not type(cc):
+        return [f"{where}: {type(py).__name__} in python, {type(cc).__name__} in C++"]
+    return [d for w, a, b in pairs for d in type_differences(a, b, w)]
+
+
+def fields_of(event: dict) -> dict:
+    """A summary event's fields (without its "e" and "step")."""
+    return {k: v for k, v in event.items() if k not in ("e", "step")}
+
+
+def test_type_differences_names_each_differing_value():
+    py = {"a": 1, "b": {"c": 1.0, "d": [1, "x"]}, "e": None, "only": 1}
+    cc = {"a": 1.0, "b": {"c": 1.0, "d": [1, 2]}, "e": None}
+    assert type_differences(py, cc) == [
+        "summary.a: int in python, float in C++", "summary.b.d[1]: str in python, int in C++",
+    ]  # fmt: skip
+
+
+def test_the_summary_keys_are_declared_once():
+    """node.summary holds the keys; what rK.json keeps of them (testbed.run.results) is among
+    them, and a summary that misses, adds or mistypes one is refused by name."""
+    assert set(SUMMARY_KEYS) <= set(summary.KEYS)
+    good = {k: (0.0 if float in t else t[0]()) for k, t in summary.FIELDS.items()}
+    assert summary.problems(good) == [] and list(summary.ordered(**good)) == list(summary.KEYS)
+    with pytest.raises(ValueError, match=r"missing \['robot_impl'\], unknown \['extra'\]"):
+        summary.ordered(**{k: v for k, v in good.items() if k != "robot_impl"}, extra=1)
+    assert summary.problems(dict(good, frames=True)) == ["frames: bool, not int"]
+    assert summary.problems(dict(good, cpu_s=1)) == ["cpu_s: int, not float"]
+    assert summary.problems(dict(reversed(good.items()))) == [
+        "keys: not in node.summary.KEYS' order"
+    ]
+
+
 def test_key_differences_names_each_missing_key():
     py = {"a": 1, "lateness": {"x": {"n": 1}}, "sent": {"map": 1}}
     cc = {"b": 1, "lateness": {"x": {"m": 1}}, "sent": {"goal": 1, "mop": 1}}
@@ -75,6 +118,8 @@ def test_both_robots_write_the_same_summary_keys(tmp_path):
     assert py["robot_impl"] == "python" and cc["robot_impl"] == "cpp"
     assert py["events_failed"] == 0 and cc["events_failed"] == 0
     assert key_differences(py, cc) == []
+    assert summary.problems(fields_of(py)) == [] and summary.problems(fields_of(cc)) == []
+    assert type_differences(py, cc) == []
 
 
 def test_a_full_disk_is_counted_and_said_once(caplog):

@@ -42,6 +42,8 @@ import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, replace
 
+from common import timescale
+
 TOLERANCE = 0.25  # an emulated value within 25% of the default counts as dilated
 RTO_OVERHEAD_JIFFIES = 2  # how much later than its floor TCP's retransmission timer fires
 UNIT_US = {"ns": 0.001, "us": 1.0, "ms": 1000.0, "s": 1_000_000.0}
@@ -244,8 +246,8 @@ def dilate(knob: Knob, default: int, time_scale: float, jiffy_us: int) -> tuple[
     """(the value to write, what it lasts in emulated time), both in the knob's unit: the
     default divided by the time scale, on the kernel's granularity, within its limits. A timer
     that fires `overhead_jiffies` after its value is dilated as value + overhead."""
-    if not (time_scale > 0 and math.isfinite(time_scale)):
-        raise ValueError(f"time scale must be a positive number, not {time_scale}")
+    if timescale.refusal(time_scale):
+        raise ValueError(timescale.refusal(time_scale))
     step = granularity(knob, jiffy_us)
     over = knob.overhead_jiffies * jiffy_us / UNIT_US[knob.unit]
     target = (default + over) / time_scale - over
@@ -316,8 +318,8 @@ def plan(
     """What to write in a robot namespace at this time scale. `defaults` maps each sysctl the
     namespace has to its value there (a key it lacks is missing); `jiffy_us` is the kernel's
     jiffy (topology.radio.veth probes it)."""
-    if not (time_scale > 0 and math.isfinite(time_scale)):
-        raise ValueError(f"time scale must be a positive number, not {time_scale}")
+    if timescale.refusal(time_scale):
+        raise ValueError(timescale.refusal(time_scale))
     if jiffy_us <= 0:
         raise ValueError(f"a jiffy lasts a positive time, not {jiffy_us} us")
     settings = tuple(
