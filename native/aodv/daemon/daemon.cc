@@ -226,8 +226,12 @@ void Daemon::loop() {
             actuator_->execute(core_->on_timer(now), now);
             deadline = core_->next_deadline();
         }
+        // The route-use poll has something to ask only while a route is valid: without one
+        // its deadline is none (an idle daemon sleeps through it), and it is set again, due
+        // now, by the first event after which a route is valid.
+        if (std::isinf(next_poll) && has_routes()) next_poll = now;
         if (now >= next_poll) {
-            next_poll = now + poll_period();
+            next_poll = has_routes() || reader_->busy ? now + poll_period() : INFINITY;
             poll_use(now);
         }
         if (g_dump || now >= next_stats) {
