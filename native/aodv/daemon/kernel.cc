@@ -583,17 +583,19 @@ void nft_batch(int fd, std::vector<Msg>& messages, const std::string& what) {
     std::string failure;
     if (::send(fd, batch.data(), batch.size(), 0) < 0) failure = strerror(errno);
     size_t answered = 0;
-    std::vector<uint8_t> buf(1 << 16);
+    // The answers are acknowledgements, one a datagram, each with at most the message it
+    // answers: on the stack, so no page of the heap is made resident for them.
+    uint8_t buf[8192];
     double deadline = mono() + 5.0;
     while (failure.empty() && answered < hi - lo && mono() < deadline) {
         pollfd p{fd, POLLIN, 0};
         if (poll(&p, 1, 50) <= 0) continue;
-        ssize_t n = recv(fd, buf.data(), buf.size(), 0);
+        ssize_t n = recv(fd, buf, sizeof buf, 0);
         if (n <= 0) continue;
-        each_message(buf.data(), size_t(n), [&](int type, uint32_t mseq, size_t s, size_t e) {
+        each_message(buf, size_t(n), [&](int type, uint32_t mseq, size_t s, size_t e) {
             if (type != NLMSG_ERROR || e - s < 4 || mseq < lo || mseq >= hi) return;
             ++answered;
-            int code = error_code(buf.data(), s);
+            int code = error_code(buf, s);
             if (code && failure.empty()) failure = strerror(code);
         });
     }
