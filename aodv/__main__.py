@@ -1,6 +1,12 @@
 """`python -m aodv --robot r3 --iface wlan0 [--time-scale K] [--profile rfc|ns3]
 [--no-local-repair] [--set NAME=VALUE ...] [--stats PATH] [--stats-period S] [--state PATH]
-[--log-level L]`"""
+[--log-level L] [--net NET] [--netns NAME]`
+
+`--netns NAME`: the daemon enters the named network namespace (/run/netns/NAME, as `ip netns`
+names it) itself before it makes any socket, so that it can be started without `ip netns exec`
+(a fork and exec of ip, and a mount namespace per daemon, for nothing the daemon needs: it
+reads no /sys). build/tb-aodv takes the same option.
+"""
 
 from __future__ import annotations
 
@@ -41,6 +47,14 @@ class _Parser(argparse.ArgumentParser):
 @checked
 def _network(text: str) -> str:
     return str(ipaddress.IPv4Network(text))
+
+
+@checked
+def _netns_name(text: str) -> str:
+    """A name under /run/netns, as `ip netns` takes it: not empty, not . or .., no slash."""
+    if text in ("", ".", "..") or "/" in text:
+        raise ValueError(f"not a network namespace name: {text!r}")
+    return text
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -103,6 +117,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         type=_network,
         default="10.0.0.0/16",
         help="the ad hoc network (default 10.0.0.0/16)",
+    )
+    p.add_argument(
+        "--netns",
+        type=_netns_name,
+        metavar="NAME",
+        help="enter the network namespace NAME (/run/netns/NAME) before anything else; "
+        "without it the daemon runs in the namespace it was started in",
     )
     return p.parse_args(argv)
 
@@ -173,6 +194,17 @@ def _serve(args: argparse.Namespace, params: Params) -> int:
         parent = os.path.dirname(os.path.abspath(path)) if path else None
         if parent and not os.path.isdir(parent):
             print(f"aodv: error: no directory for {option}: {parent}", file=sys.stderr)
+            return EXIT_USAGE
+    if args.netns:
+        # Before the daemon makes any socket or thread: a socket belongs to the namespace
+        # it was made in, a thread starts in its creator's.
+        from topology.kernel import netns
+
+        try:
+            netns.enter(args.netns)
+        except OSError as e:
+            why = os.strerror(e.errno) if e.errno else str(e)
+            print(f"aodv: error: network namespace {args.netns}: {why}", file=sys.stderr)
             return EXIT_USAGE
     try:
         return Daemon(

@@ -9,9 +9,9 @@ one Python place that defines it, so that a change there reaches the compiled da
 next build instead of drifting:
 
 - the kernel side: RTPROT_AODV, the TUN device's and the nftables table's names, the UDP
-  port, IP_RECVTTL, the pending-request bound of rtnetlink, the route-use poll's nftables
-  ruleset (aodv.kernel.UseMonitor's text, with @IFACE@, @NET@ and @MS@ where it takes the
-  interface, the network and the set's timeout);
+  port, IP_RECVTTL, the pending-request bound of rtnetlink (the route-use poll's nftables
+  ruleset, aodv.kernel.UseMonitor's text, tb-aodv sends as the netlink messages nft makes of
+  it; tests/integration/test_aodv_cpp_daemon.py holds the two tables equal);
 - the loop and its files: STATS_PERIOD, HOSTS_REMEMBERED, the timer-lateness histogram's
   bounds and how many late firings are kept (aodv.stats), the counter file's block
   (aodv.persist), the deadline priority (common.sched);
@@ -40,28 +40,6 @@ from aodv.packet import AODV_PORT
 from aodv.params import MAX_TTL, PROFILES, Params
 from common.cliterals import c_real, c_string
 from common.sched import DEADLINE_PRIORITY
-
-
-class _DryMonitor(kernel.UseMonitor):
-    """UseMonitor that only builds its ruleset (no nft is run)."""
-
-    def remove(self) -> None:
-        pass
-
-    @staticmethod
-    def _nft(args: list[str], stdin: str | None = None) -> str:
-        return ""
-
-
-_MS_MARK = 987654321  # a set timeout no real period gives: replaced by @MS@
-
-
-def ruleset() -> str:
-    """UseMonitor's ruleset with @IFACE@, @NET@ and @MS@ for what it takes."""
-    text = _DryMonitor("@IFACE@", "@NET@", _MS_MARK / 1000).ruleset
-    if f"{_MS_MARK}ms" not in text:
-        raise SystemExit("aodv.constgen: UseMonitor's ruleset no longer names its timeout in ms")
-    return text.replace(f"{_MS_MARK}ms", "@MS@ms")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -155,7 +133,6 @@ def header() -> str:
         f"constexpr int COUNTER_BLOCK = {persist.CounterStore.block};",
         f"constexpr int DEADLINE_RT_PRIORITY = {DEADLINE_PRIORITY[0]};",
         f"constexpr int DEADLINE_NICE = {DEADLINE_PRIORITY[1]};",
-        f"constexpr const char* USE_RULESET = {c_string(ruleset())};",
         f"constexpr const char* PROFILES[] = {{{', '.join(c_string(p) for p in PROFILES)}}};",
         f"constexpr int N_PROFILES = {len(PROFILES)};",
         *unicode_rows(),

@@ -274,3 +274,39 @@ def test_sanitized_daemons_carry_an_exploring_team(build, small_map, tmp_path):
     found = sorted(glob.glob(f"{reports}/*"))
     assert not found, "\n".join(Path(f).read_text()[:3000] for f in found)
     assert not any(ns.startswith(f"tb-{name}-") for ns in netns.list_names())
+
+
+def _sleeps(pid: int) -> int:
+    """How often the daemon's loop (its main thread) has gone to sleep so far."""
+    with open(f"/proc/{pid}/task/{pid}/status") as f:
+        return int(next(ln for ln in f if ln.startswith("voluntary_ctxt_switches")).split()[1])
+
+
+def test_idle_daemon_without_routes_sleeps_through_the_route_use_poll(tmp_path):
+    """With no valid route the route-use poll has nothing to ask: the loop does not wake for
+    it (ACTIVE_ROUTE_TIMEOUT / 3, 1 s), only for the core's deadlines, here a HELLO check
+    every 10 s; so over 5 idle seconds it sleeps about once, not five times."""
+    binary = _binary("plain")
+    name = "tcd" + uuid.uuid4().hex[:6]
+    spec = NetworkSpec(name=name, positions=CHAIN5[:1], comm_range=10.0, routing="none")
+    stats_file = tmp_path / "r1.json"
+    try:
+        with Network(spec) as net:
+            argv = [str(binary), "--netns", net.robot_ns(1), "--robot", "r1", "--stats",
+                    str(stats_file), "--stats-period", "0",
+                    "--set", "hello_interval_ms=10000"]  # fmt: skip
+            proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+            try:
+                deadline = time.monotonic() + 30
+                while not stats_file.exists():
+                    assert proc.poll() is None and time.monotonic() < deadline, proc.stderr
+                    time.sleep(0.02)
+                time.sleep(0.5)  # past the start-up's hand-offs
+                before = _sleeps(proc.pid)
+                time.sleep(5.0)
+                assert _sleeps(proc.pid) - before <= 2
+            finally:
+                proc.terminate()
+                assert proc.wait(timeout=10) == 0
+    finally:
+        destroy(name)

@@ -22,9 +22,11 @@ import time
 import uuid
 
 from aodv import packet as wire
+from aodv.kernel import UseMonitor
 from aodv.stats import read_fresh
 from aodv.statsfile import DaemonStats
 from topology import routing, state
+from topology.names import ROBOT_IFACE
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 
@@ -708,3 +710,60 @@ def test_stats_period_zero_writes_when_ready_asked_and_stopping(aodv_daemon):
             assert DaemonStats.read(path).to_json()["robot"] == "r1"
     finally:
         destroy(name)
+
+
+def test_netns_option_enters_the_namespace_before_anything_else(aodv_daemon, tmp_path):
+    """`--netns NAME`: started in the host's namespace (no `ip netns exec`), the daemon makes
+    its TUN device, routes and nftables table in robot 1's namespace, exactly the table
+    aodv.kernel.UseMonitor's ruleset gives (tb-aodv sends it over netlink, not through nft),
+    and nothing in the host's; a namespace that is not there is one line and status 2."""
+    name = "ta" + uuid.uuid4().hex[:6]
+    spec = NetworkSpec(name=name, positions=CHAIN5[:1], comm_range=10.0, routing="none")
+    stats_file = tmp_path / "r1.json"
+    try:
+        with Network(spec) as net:
+            ns = net.robot_ns(1)
+            argv = daemon_argv(aodv_daemon, "--netns", ns, "--robot", "r1", "--stats",
+                               str(stats_file), "--stats-period", "0")  # fmt: skip
+            bad = subprocess.run(daemon_argv(aodv_daemon, "--netns", name + "-gone", "--robot",
+                                             "r1"),
+                                 capture_output=True, text=True, timeout=30, cwd=REPO)  # fmt: skip
+            assert bad.returncode == 2, bad.stderr
+            assert bad.stderr.count("\n") == 1 and f"{name}-gone" in bad.stderr, bad.stderr
+            proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, cwd=REPO)
+            try:
+                deadline = time.monotonic() + 30
+                while not stats_file.exists():
+                    assert proc.poll() is None and time.monotonic() < deadline, proc.stderr
+                    time.sleep(0.02)
+                links = net.exec(1, ["ip", "-o", "link"], capture_output=True, text=True)
+                assert "aodv0" in links.stdout
+                host = subprocess.run(["ip", "-o", "link"], capture_output=True, text=True)
+                assert "aodv0" not in host.stdout
+                got = net.exec(1, ["nft", "list", "table", "ip", "aodv"],
+                               capture_output=True, text=True, check=True).stdout  # fmt: skip
+            finally:
+                proc.terminate()
+                assert proc.wait(timeout=10) == 0
+            assert "aodv" not in net.exec(1, ["nft", "list", "tables"], capture_output=True,
+                                          text=True).stdout  # fmt: skip
+            # The reference: the Python daemon's ruleset through nft, in the same namespace.
+            ruleset = _DryUseMonitor(ROBOT_IFACE, "10.0.0.0/16", 1.0).ruleset
+            net.exec(1, ["nft", "-f", "-"], input=ruleset, text=True, check=True)
+            want = net.exec(1, ["nft", "list", "table", "ip", "aodv"],
+                            capture_output=True, text=True, check=True).stdout  # fmt: skip
+            net.exec(1, ["nft", "delete", "table", "ip", "aodv"], check=True)
+            assert got == want
+    finally:
+        destroy(name)
+
+
+class _DryUseMonitor(UseMonitor):
+    """aodv.kernel.UseMonitor's ruleset, without running nft."""
+
+    def remove(self) -> None:
+        pass
+
+    @staticmethod
+    def _nft(args: list[str], stdin: str | None = None) -> str:
+        return ""

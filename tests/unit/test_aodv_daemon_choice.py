@@ -22,7 +22,8 @@ from testbed.files.runconfig import BY_NAME, RunConfig, to_argv
 from testbed.run import daemonchoice
 from testbed.run.arguments import network_fields, refusal
 from tests.unit.test_run_options import net_up_parser, parse_run
-from topology import routing, state
+from topology import names, routing, state
+from topology.kernel import netns
 from topology.spec import AODV_DAEMONS, NetworkSpec
 
 MISSING = "/nonexistent/tb-aodv"
@@ -191,7 +192,10 @@ def test_both_daemons_get_the_same_arguments(built):
     py = routing.argv_for(spec("python"), 2, "/run/x")
     assert cpp is not None and py is not None
     assert cpp[0] == "/bin/true" and py[:3] == [sys.executable, "-m", "aodv"]
-    assert cpp[1:] == py[3:] == routing.aodv_args(2, "/run/x", spec("cpp"))
+    # the compiled daemon enters robot 2's namespace itself: no `ip netns exec` before it
+    assert cpp[1:3] == ["--netns", names.robot_ns("n1", 2)]
+    assert netns.popen_argv(names.robot_ns("n1", 2), cpp) == cpp
+    assert cpp[3:] == py[3:] == routing.aodv_args(2, "/run/x", spec("cpp"))
     assert routing.aodv_command("cpp") == ["/bin/true"]
     assert routing.aodv_command("python") == routing.aodv_command() == py[:3]
 

@@ -269,7 +269,8 @@ std::string usage_text() {
         "usage: tb-aodv [-h] --robot ROBOT [--iface IFACE] [--time-scale TIME_SCALE]\n"
         "               [--profile {ns3,rfc}] [--no-local-repair] [--set NAME=VALUE]\n"
         "               [--stats PATH] [--stats-period SECONDS] [--state PATH]\n"
-        "               [--log-level {debug,info,warning,error}] [--net NET]\n\n"
+        "               [--log-level {debug,info,warning,error}] [--net NET]\n"
+        "               [--netns NAME]\n\n"
         "AODV (RFC 3561) routing daemon for one robot's network namespace, compiled\n"
         "(the command line of python -m aodv).\n\noptions:\n";
     for (const auto& o : gen::OPTIONS) {
@@ -378,6 +379,11 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
                 return false;
             }
         }
+        if (strcmp(o.dest, "netns") == 0 && (v.empty() || v == "." || v == ".." ||
+                                             v.find('/') != std::string::npos)) {
+            err = where + "not a network namespace name: " + py_quote(v);  // aodv.__main__
+            return false;
+        }
         return true;
     };
 
@@ -468,6 +474,7 @@ bool parse_args(int argc, char** argv, Args& a, std::string& err, bool& help) {
     a.has_state = !value["state"].empty();
     a.stats = value["stats"];
     a.state = value["state"];
+    a.netns = value["netns"];
     if (!time_scale_given && !py_float(value["time_scale"], a.time_scale)) a.time_scale = 1.0;
     if (!stats_period_given && !py_float(value["stats_period"], a.stats_period))
         a.stats_period = 1.0;

@@ -15,6 +15,9 @@ namespace aodv {
 
 struct Args {
     std::string robot, iface, profile, stats, state, log_level, net;
+    // --netns: the namespace (/run/netns/NAME) the daemon enters before it makes any socket;
+    // empty: it stays where it was started.
+    std::string netns;
     bool has_stats = false, has_state = false;
     double time_scale = 1.0;
     // Between rewrites of the statistics file (--stats-period; 0 given: +inf, only when

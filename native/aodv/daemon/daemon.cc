@@ -26,8 +26,9 @@
 //
 // Start-up makes each kernel object followed by what undoes it; teardown undoes them in the
 // reverse order, each failure logged and the rest still run: the kernel thread's last
-// batches, the sockets (after reading the last ICMP errors), the route-use reader and the
-// nftables table, the TUN device, our routes, the last statistics (indented), rtnetlink.
+// batches, the sockets (after reading the last ICMP errors), the nftables table and the
+// route-use reader (whose socket made and removes it), the TUN device, our routes, the last
+// statistics (indented), rtnetlink.
 #include "daemon.h"
 
 #include <arpa/inet.h>
@@ -170,10 +171,10 @@ void Daemon::start(Undo& undo) {
     tun_ = std::make_unique<Tun>(gen::TUN_NAME);
     undo.push("close the TUN device", [this] { tun_->close(); });
     routes_->catch_all(tun_->ifindex(), args_.net_addr, args_.net_prefix, addr_);
-    UseMonitor(args_.iface, args_.net, poll_period());
-    undo.push("remove the route-use set", [] { UseMonitor::remove(); });
     reader_ = std::make_unique<SetReader>();
     undo.push("close the route-use reader", [this] { reader_->close(); });
+    UseMonitor(reader_->fd(), args_.iface, args_.net_addr, args_.net_prefix, poll_period());
+    undo.push("remove the route-use set", [this] { UseMonitor::remove(reader_->fd()); });
     sock_ = open_control_socket(args_.iface, addr_);
     undo.push("close the control socket", [this] { close(sock_); });
     raw_ = raw_socket(IPPROTO_RAW, false);
@@ -225,8 +226,12 @@ void Daemon::loop() {
             actuator_->execute(core_->on_timer(now), now);
             deadline = core_->next_deadline();
         }
+        // The route-use poll has something to ask only while a route is valid: without one
+        // its deadline is none (an idle daemon sleeps through it), and it is set again, due
+        // now, by the first event after which a route is valid.
+        if (std::isinf(next_poll) && has_routes()) next_poll = now;
         if (now >= next_poll) {
-            next_poll = now + poll_period();
+            next_poll = has_routes() || reader_->busy ? now + poll_period() : INFINITY;
             poll_use(now);
         }
         if (g_dump || now >= next_stats) {

@@ -2,12 +2,14 @@
 #include "kernel.h"
 
 #include <algorithm>
+#include <cstddef>
 #include <arpa/inet.h>
 #include <cerrno>
 #include <cstring>
 #include <fcntl.h>
 #include <linux/filter.h>
 #include <linux/if_tun.h>
+#include <linux/netfilter.h>
 #include <linux/netfilter/nf_tables.h>
 #include <linux/netfilter/nfnetlink.h>
 #include <linux/netlink.h>
@@ -15,10 +17,8 @@
 #include <net/if.h>
 #include <netinet/in.h>
 #include <poll.h>
-#include <signal.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
-#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -64,6 +64,22 @@ struct Msg {
         attr(type, &n, 4);
     }
     void str(uint16_t type, const std::string& s) { attr(type, s.c_str(), s.size() + 1); }
+    void be32(uint16_t type, uint32_t v) { u32(type, htonl(v)); }
+    void be64(uint16_t type, uint64_t v) {
+        uint32_t w[2] = {htonl(uint32_t(v >> 32)), htonl(uint32_t(v))};
+        attr(type, w, 8);
+    }
+    // A nested attribute: begin() before its members, end() with what begin() returned.
+    size_t begin(uint16_t type) {
+        size_t at = b.size();
+        uint16_t hdr[2] = {0, uint16_t(type | NLA_F_NESTED)};
+        put(hdr, 4);
+        return at;
+    }
+    void end(size_t at) {
+        uint16_t len = uint16_t(b.size() - at);
+        memcpy(b.data() + at, &len, 2);
+    }
     std::vector<uint8_t>& done() {
         uint32_t len = uint32_t(b.size());
         memcpy(b.data(), &len, 4);
@@ -137,73 +153,6 @@ int ioctl_socket() {
     int s = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
     if (s < 0) throw KernelError(std::string("socket: ") + strerror(errno));
     return s;
-}
-
-// Run `nft ARGS` with `input` on its stdin; its exit status and stderr.
-int run_nft(const std::vector<std::string>& args, const std::string& input, std::string& err) {
-    int in[2], errp[2];
-    if (pipe2(in, O_CLOEXEC) != 0) return -1;
-    if (pipe2(errp, O_CLOEXEC) != 0) {
-        ::close(in[0]);
-        ::close(in[1]);
-        return -1;
-    }
-    std::vector<std::string> argv_s = {"nft"};
-    argv_s.insert(argv_s.end(), args.begin(), args.end());
-    std::vector<char*> argv;
-    for (auto& s : argv_s) argv.push_back(const_cast<char*>(s.c_str()));
-    argv.push_back(nullptr);
-    pid_t pid = fork();
-    if (pid == 0) {
-        // The child: signals as they were, stdin from the pipe, stdout dropped.
-        sigset_t none;
-        sigemptyset(&none);
-        sigprocmask(SIG_SETMASK, &none, nullptr);
-        dup2(in[0], 0);
-        dup2(errp[1], 2);
-        int devnull = open("/dev/null", O_WRONLY);
-        if (devnull >= 0) dup2(devnull, 1);
-        execvp("nft", argv.data());
-        const char msg[] = "nft not found\n";
-        ssize_t ignored = ::write(2, msg, sizeof msg - 1);
-        (void)ignored;
-        _exit(127);
-    }
-    ::close(in[0]);
-    ::close(errp[1]);
-    if (pid < 0) {
-        ::close(in[1]);
-        ::close(errp[0]);
-        return -1;
-    }
-    // The ruleset is small (well under a pipe's buffer): written whole, then closed.
-    size_t off = 0;
-    while (off < input.size()) {
-        ssize_t w = ::write(in[1], input.data() + off, input.size() - off);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) break;
-        off += size_t(w);
-    }
-    ::close(in[1]);
-    char buf[512];
-    ssize_t r;
-    while ((r = ::read(errp[0], buf, sizeof buf)) != 0) {
-        if (r < 0 && errno == EINTR) continue;
-        if (r < 0) break;
-        err.append(buf, size_t(r));
-    }
-    ::close(errp[0]);
-    int status = 0;
-    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-    }
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-}
-
-std::string trimmed(std::string s) {
-    while (!s.empty() && isspace((unsigned char)s.back())) s.pop_back();
-    size_t a = 0;
-    while (a < s.size() && isspace((unsigned char)s[a])) ++a;
-    return s.substr(a);
 }
 
 uint16_t checksum(const uint8_t* p, size_t n) {
@@ -496,24 +445,253 @@ bool Tun::write(const std::string& packet) {
 }
 
 // -- UseMonitor ----------------------------------------------------------------------------
-UseMonitor::UseMonitor(const std::string& ifname, const std::string& net, double period) {
-    long ms = std::max(1L, long(period * 1000));
-    std::string text = gen::USE_RULESET;
-    auto subst = [&text](const std::string& mark, const std::string& v) {
-        for (size_t at; (at = text.find(mark)) != std::string::npos;) text.replace(at, mark.size(), v);
-    };
-    subst("@IFACE@", ifname);
-    subst("@NET@", net);
-    subst("@MS@", std::to_string(ms));
-    remove();
-    std::string err;
-    int rc = run_nft({"-f", "-"}, text, err);
-    if (rc != 0) throw KernelError("nft -f -: " + trimmed(err));
+// aodv.kernel.UseMonitor's ruleset (the Python daemon gives it to `nft -f`), as the netlink
+// messages nft makes of it (`nft --debug=netlink -f` lists them), sent as one nftables batch:
+// no nft is forked (an exec of nft, its libraries and its parser were half of a daemon's
+// start-up CPU). The batch first adds and deletes the table, so that a table a previous daemon
+// left is replaced and a missing one is no error (a failed batch costs the kernel an RCU grace
+// period). tests/integration/test_aodv_cpp_daemon.py holds `nft list table` of the two equal.
+namespace {
+constexpr uint16_t NFT_TYPE(int msg) { return uint16_t((NFNL_SUBSYS_NFTABLES << 8) | msg); }
+constexpr uint32_t REG = 1;    // NFT_REG_1, as nft 1.0 writes it
+constexpr uint32_t SET_ID = 1;  // the set, within the batch
+constexpr uint32_t TYPE_IPADDR = 7;  // nft's datatype of ipv4_addr (informational)
+
+Msg nft_message(int msg, uint16_t flags, uint32_t seq, uint8_t family = NFPROTO_IPV4,
+                uint16_t res_id = 0) {
+    Msg m(NFT_TYPE(msg), uint16_t(NLM_F_REQUEST | flags), seq);
+    nfgenmsg g{};
+    g.nfgen_family = family;
+    g.version = NFNETLINK_V0;
+    g.res_id = htons(res_id);
+    m.put(&g, sizeof g);
+    return m;
 }
 
-void UseMonitor::remove() {
-    std::string err;
-    run_nft({"delete", "table", "ip", gen::NFT_TABLE}, "", err);
+class Rule {
+  public:
+    Rule(Msg& m) : m_(m), list_(m.begin(NFTA_RULE_EXPRESSIONS)) {}
+    ~Rule() { m_.end(list_); }
+    void payload(uint32_t base, uint32_t offset, uint32_t len) {
+        expr("payload", [&] {
+            m_.be32(NFTA_PAYLOAD_DREG, REG);
+            m_.be32(NFTA_PAYLOAD_BASE, base);
+            m_.be32(NFTA_PAYLOAD_OFFSET, offset);
+            m_.be32(NFTA_PAYLOAD_LEN, len);
+        });
+    }
+    void meta(uint32_t key) {
+        expr("meta", [&] {
+            m_.be32(NFTA_META_DREG, REG);
+            m_.be32(NFTA_META_KEY, key);
+        });
+    }
+    void cmp_eq(const void* data, size_t n) {
+        expr("cmp", [&] {
+            m_.be32(NFTA_CMP_SREG, REG);
+            m_.be32(NFTA_CMP_OP, NFT_CMP_EQ);
+            value(NFTA_CMP_DATA, data, n);
+        });
+    }
+    void mask(uint32_t mask_be) {
+        uint32_t zero = 0;
+        expr("bitwise", [&] {
+            m_.be32(NFTA_BITWISE_SREG, REG);
+            m_.be32(NFTA_BITWISE_DREG, REG);
+            m_.be32(NFTA_BITWISE_LEN, 4);
+            value(NFTA_BITWISE_MASK, &mask_be, 4);
+            value(NFTA_BITWISE_XOR, &zero, 4);
+        });
+    }
+    void ret() {
+        expr("immediate", [&] {
+            m_.be32(NFTA_IMMEDIATE_DREG, NFT_REG_VERDICT);
+            size_t d = m_.begin(NFTA_IMMEDIATE_DATA);
+            size_t v = m_.begin(NFTA_DATA_VERDICT);
+            m_.be32(NFTA_VERDICT_CODE, uint32_t(NFT_RETURN));
+            m_.end(v);
+            m_.end(d);
+        });
+    }
+    void update_used() {
+        expr("dynset", [&] {
+            m_.str(NFTA_DYNSET_SET_NAME, "used");
+            m_.be32(NFTA_DYNSET_SET_ID, SET_ID);
+            m_.be32(NFTA_DYNSET_OP, NFT_DYNSET_OP_UPDATE);
+            m_.be32(NFTA_DYNSET_SREG_KEY, REG);
+        });
+    }
+    // `ip daddr|saddr NET`, as nft compiles it: the prefix's whole bytes compared, or all
+    // four under a mask where it does not end on a byte.
+    void in_net(uint32_t offset, Addr net, int plen) {
+        uint32_t be = htonl(net);
+        if (plen > 0 && plen % 8 == 0) {
+            payload(NFT_PAYLOAD_NETWORK_HEADER, offset, uint32_t(plen / 8));
+            cmp_eq(&be, size_t(plen / 8));
+        } else {
+            payload(NFT_PAYLOAD_NETWORK_HEADER, offset, 4);
+            mask(htonl(plen == 0 ? 0 : ~uint32_t(0) << (32 - plen)));
+            cmp_eq(&be, 4);
+        }
+    }
+
+  private:
+    template <class F>
+    void expr(const char* name, F&& data) {
+        size_t e = m_.begin(NFTA_LIST_ELEM);
+        m_.str(NFTA_EXPR_NAME, name);
+        size_t d = m_.begin(NFTA_EXPR_DATA);
+        data();
+        m_.end(d);
+        m_.end(e);
+    }
+    void value(uint16_t type, const void* data, size_t n) {
+        size_t at = m_.begin(type);
+        m_.attr(NFTA_DATA_VALUE, data, n);
+        m_.end(at);
+    }
+    Msg& m_;
+    size_t list_;
+};
+
+// Send one nftables batch over `fd` (its messages between BEGIN and END, each asking for an
+// acknowledgement) and wait up to 5 s for every answer; the first refusal is thrown. The
+// socket is the route-use reader's, kept open: closing a NETLINK_NETFILTER socket that sent a
+// batch waits for the kernel to finish destroying the batch's transaction (an RCU grace
+// period, 15 ms of a daemon's start-up). Its sequence numbers are apart from the reader's.
+void nft_batch(int fd, std::vector<Msg>& messages, const std::string& what) {
+    std::vector<uint8_t> batch;
+    uint32_t seq = 0x80000000u;
+    auto append = [&batch](Msg& m) {
+        auto& b = m.done();
+        batch.insert(batch.end(), b.begin(), b.end());
+    };
+    auto control = [&](uint16_t type) {  // BATCH_BEGIN and _END: not nftables messages
+        Msg c = nft_message(0, 0, seq++, AF_UNSPEC, NFNL_SUBSYS_NFTABLES);
+        memcpy(c.b.data() + offsetof(nlmsghdr, nlmsg_type), &type, 2);
+        append(c);
+    };
+    control(NFNL_MSG_BATCH_BEGIN);
+    uint32_t lo = seq;
+    for (auto& m : messages) {
+        uint32_t n = seq++;
+        memcpy(m.b.data() + offsetof(nlmsghdr, nlmsg_seq), &n, 4);
+        append(m);
+    }
+    uint32_t hi = seq;
+    control(NFNL_MSG_BATCH_END);
+    std::string failure;
+    if (::send(fd, batch.data(), batch.size(), 0) < 0) failure = strerror(errno);
+    size_t answered = 0;
+    // The answers are acknowledgements, one a datagram, each with at most the message it
+    // answers: on the stack, so no page of the heap is made resident for them.
+    uint8_t buf[8192];
+    double deadline = mono() + 5.0;
+    while (failure.empty() && answered < hi - lo && mono() < deadline) {
+        pollfd p{fd, POLLIN, 0};
+        if (poll(&p, 1, 50) <= 0) continue;
+        ssize_t n = recv(fd, buf, sizeof buf, 0);
+        if (n <= 0) continue;
+        each_message(buf, size_t(n), [&](int type, uint32_t mseq, size_t s, size_t e) {
+            if (type != NLMSG_ERROR || e - s < 4 || mseq < lo || mseq >= hi) return;
+            ++answered;
+            int code = error_code(buf, s);
+            if (code && failure.empty()) failure = strerror(code);
+        });
+    }
+    if (failure.empty() && answered < hi - lo) failure = "no answer from the kernel";
+    if (!failure.empty()) throw KernelError(what + ": " + failure);
+}
+
+// Add, then delete, table aodv: replaces a table left behind, and is no error without one.
+void replace_table(std::vector<Msg>& out) {
+    for (int msg : {NFT_MSG_NEWTABLE, NFT_MSG_DELTABLE}) {
+        out.push_back(nft_message(msg, msg == NFT_MSG_NEWTABLE ? NLM_F_CREATE | NLM_F_ACK
+                                                               : NLM_F_ACK, 0));
+        out.back().str(NFTA_TABLE_NAME, gen::NFT_TABLE);
+    }
+}
+}  // namespace
+
+UseMonitor::UseMonitor(int fd, const std::string& ifname, Addr net, int plen, double period) {
+    long ms = std::max(1L, long(period * 1000));
+    std::vector<Msg> m;
+    replace_table(m);
+    m.push_back(nft_message(NFT_MSG_NEWTABLE, NLM_F_CREATE | NLM_F_ACK, 0));
+    m.back().str(NFTA_TABLE_NAME, gen::NFT_TABLE);
+    // set used { type ipv4_addr; flags dynamic,timeout; timeout <ms>ms; }
+    m.push_back(nft_message(NFT_MSG_NEWSET, NLM_F_CREATE | NLM_F_ACK, 0));
+    m.back().str(NFTA_SET_TABLE, gen::NFT_TABLE);
+    m.back().str(NFTA_SET_NAME, "used");
+    m.back().be32(NFTA_SET_FLAGS, NFT_SET_TIMEOUT | NFT_SET_EVAL);
+    m.back().be32(NFTA_SET_KEY_TYPE, TYPE_IPADDR);
+    m.back().be32(NFTA_SET_KEY_LEN, 4);
+    m.back().be32(NFTA_SET_ID, SET_ID);
+    m.back().be64(NFTA_SET_TIMEOUT, uint64_t(ms));
+    // chain NAME { type filter hook HOOK priority 0; policy accept; }
+    struct {
+        const char* name;
+        uint32_t hook;
+    } chains[] = {{"use_forward", NF_INET_FORWARD},
+                  {"use_output", NF_INET_LOCAL_OUT},
+                  {"use_input", NF_INET_LOCAL_IN}};
+    for (auto& c : chains) {
+        m.push_back(nft_message(NFT_MSG_NEWCHAIN, NLM_F_CREATE | NLM_F_ACK, 0));
+        Msg& x = m.back();
+        x.str(NFTA_CHAIN_TABLE, gen::NFT_TABLE);
+        x.str(NFTA_CHAIN_NAME, c.name);
+        size_t h = x.begin(NFTA_CHAIN_HOOK);
+        x.be32(NFTA_HOOK_HOOKNUM, c.hook);
+        x.be32(NFTA_HOOK_PRIORITY, 0);
+        x.end(h);
+        x.be32(NFTA_CHAIN_POLICY, NF_ACCEPT);
+        x.str(NFTA_CHAIN_TYPE, "filter");
+    }
+    char name[IFNAMSIZ] = {};
+    strncpy(name, ifname.c_str(), IFNAMSIZ - 1);
+    uint8_t udp = IPPROTO_UDP;
+    uint16_t port = htons(uint16_t(gen::AODV_PORT));
+    constexpr uint32_t SADDR = 12, DADDR = 16;
+    // (chain, the interface's meta key or 0, the address's offset, the port rule first)
+    struct {
+        const char* chain;
+        uint32_t ifkey;
+        uint32_t addr;
+    } rules[] = {{"use_forward", 0, DADDR},
+                 {"use_forward", 0, SADDR},
+                 {"use_output", NFT_META_OIFNAME, 0},  // oifname IF udp dport 654 return
+                 {"use_output", NFT_META_OIFNAME, DADDR},
+                 {"use_input", NFT_META_IIFNAME, 0},
+                 {"use_input", NFT_META_IIFNAME, SADDR}};
+    for (auto& r : rules) {
+        m.push_back(nft_message(NFT_MSG_NEWRULE, NLM_F_CREATE | NLM_F_APPEND | NLM_F_ACK, 0));
+        Msg& x = m.back();
+        x.str(NFTA_RULE_TABLE, gen::NFT_TABLE);
+        x.str(NFTA_RULE_CHAIN, r.chain);
+        Rule rule(x);
+        if (r.ifkey) {
+            rule.meta(r.ifkey);
+            rule.cmp_eq(name, IFNAMSIZ);
+        }
+        if (r.addr == 0) {
+            rule.meta(NFT_META_L4PROTO);
+            rule.cmp_eq(&udp, 1);
+            rule.payload(NFT_PAYLOAD_TRANSPORT_HEADER, 2, 2);
+            rule.cmp_eq(&port, 2);
+            rule.ret();
+        } else {
+            rule.in_net(r.addr, net, plen);
+            rule.payload(NFT_PAYLOAD_NETWORK_HEADER, r.addr, 4);
+            rule.update_used();
+        }
+    }
+    nft_batch(fd, m, "nftables table " + std::string(gen::NFT_TABLE));
+}
+
+void UseMonitor::remove(int fd) {
+    std::vector<Msg> m;
+    replace_table(m);
+    nft_batch(fd, m, "remove nftables table " + std::string(gen::NFT_TABLE));
 }
 
 // -- SetReader -------------------------------------------------------------------------------

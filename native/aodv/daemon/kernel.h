@@ -7,8 +7,8 @@
 //   reads with read_acks); start-up and teardown requests ask and wait (up to 5 s).
 // - `Tun`: the TUN device (no packet info) that catches packets with no route.
 // - `UseMonitor`: the nftables table whose dynamic set collects the addresses data packets
-//   crossed; made and removed by running `nft` (start and teardown only), its ruleset the
-//   Python daemon's (generated into aodv_consts.h).
+//   crossed; made and removed with one nftables batch over NETLINK_NETFILTER each (start and
+//   teardown only; no `nft` forked), the Python daemon's ruleset as nft compiles it.
 // - `SetReader`: reads that set over NETLINK_NETFILTER without blocking, no `nft` forked.
 //
 // Every failure is a KernelError whose what() is the one line the daemon prints.
@@ -103,8 +103,11 @@ class Tun {
 
 class UseMonitor {
   public:
-    UseMonitor(const std::string& ifname, const std::string& net, double period);
-    static void remove();
+    // The table for data on `ifname` to and from net/plen (host order), its set's entries
+    // living `period` seconds; a table of that name left behind is replaced. `fd`: a
+    // NETLINK_NETFILTER socket (the SetReader's) to send the batch over.
+    UseMonitor(int fd, const std::string& ifname, Addr net, int plen, double period);
+    static void remove(int fd);
 };
 
 class SetReader {

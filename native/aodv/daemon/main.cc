@@ -3,10 +3,15 @@
 // around the C++ protocol core (native/aodv/core.cc). docs/aodv.md, "The compiled daemon".
 //
 // Exit statuses: 0 after SIGTERM or SIGINT; 2 for a usage error (the command line, the
-// parameters, not root, a missing directory, no such interface or no IPv4 address on it);
+// parameters, not root, a missing directory, a --netns it cannot enter, no such interface or
+// no IPv4 address on it);
 // 1 for any other failure at start-up.
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
+#include <fcntl.h>
+#include <sched.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -16,6 +21,8 @@
 #include "log.h"
 
 namespace {
+const char* NETNS_DIR = "/run/netns";  // where `ip netns` and topology/kernel/netns.py name them
+
 int usage_error(const std::string& line) {
     fprintf(stderr, "tb-aodv: error: %s\n", line.c_str());
     return 2;
@@ -60,6 +67,18 @@ int main(int argc, char** argv) {
         std::string parent = parent_dir(path);
         if (stat(parent.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
             return usage_error(std::string("no directory for ") + option + ": " + parent);
+    }
+    if (!args.netns.empty()) {
+        // Before any socket or thread: a socket belongs to the namespace it was made in, and
+        // a thread starts in its creator's. Only the network namespace changes: the daemon
+        // reads no /sys (interfaces by ioctl and rtnetlink, sysctls through /proc/sys/net,
+        // which is the caller's namespace's), so it needs none of what `ip netns exec` adds.
+        std::string path = std::string(NETNS_DIR) + "/" + args.netns;
+        int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+        int rc = fd < 0 ? -1 : setns(fd, CLONE_NEWNET);
+        int e = errno;
+        if (fd >= 0) close(fd);
+        if (rc != 0) return usage_error("network namespace " + args.netns + ": " + strerror(e));
     }
     aodv::log::start(args.robot, args.log_level);
     int status;
