@@ -10,7 +10,9 @@ from dataclasses import dataclass, field
 
 from topology import names
 
-ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")  # the first is the default
+# The routing protocols, from topology.protocols' registry; the first is the default.
+from topology.protocols import ROUTINGS as ROUTINGS
+
 RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
 LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.radio.los)
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).

@@ -24,9 +24,11 @@ from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
 from testbed.analysis.rows import INLINE
 from testbed.analysis.runs import FinishedRun
+from topology.protocols import REGISTRY
 from topology.spec import ROUTINGS, VETH
 
-PROACTIVE = ("babel", "batman")
+# The proactive protocols, which the rule sets against AODV (topology.protocols).
+PROACTIVE = tuple(p.name for p in REGISTRY.values() if p.proactive)
 # How far the AODV control packets counted in the captures may be from the daemons' own
 # counters and still agree (here and in the report's check of every run).
 DAEMON_AGREEMENT = 0.01
@@ -249,7 +251,7 @@ def _control_check(rows: list[ProtocolPoint]) -> list[str]:
             lines.append(
                 f"- {p}: its daemon keeps no count of what it sends, so its captured control "
                 "traffic cannot be checked against the daemon; it is counted on its port "
-                f"({'UDP 6696' if p == 'babel' else 'UDP 4305'}) at each transmitter."
+                f"(UDP {REGISTRY[p].control_port}) at each transmitter."
             )
     oracle = [
         x
@@ -261,7 +263,8 @@ def _control_check(rows: list[ProtocolPoint]) -> list[str]:
             "- oracle: no control packet in its captures, as there must be none."
             if not any(oracle)
             else f"- oracle: its captures hold up to {max(oracle):.2f} packets per robot per "
-            "second on UDP 654, which nothing of the oracle sends: check the runs."
+            f"second on UDP {REGISTRY['oracle'].control_port}, which nothing of the oracle "
+            "sends: check the runs."
         )
     return ["Control traffic in the captures against what the protocols sent:", "", *lines]
 
