@@ -39,7 +39,7 @@ import statistics
 from dataclasses import dataclass, field, fields
 
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE, MeanCI
+from testbed.analysis.rows import INLINE, MeanCI, named
 from testbed.analysis.runs import FinishedRun
 from topology.spec import NS3_WIFI as WIFI
 from topology.spec import VETH
@@ -149,10 +149,7 @@ class MediaCompared:
 
     def of(self, key: str) -> MeanCI:
         """One measure, by a name of COMPARED."""
-        if key not in COMPARED_KEYS:
-            raise KeyError(key)
-        value: MeanCI = getattr(self, key)
-        return value
+        return named(self, key, COMPARED_KEYS)
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field, fields
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE, MeanCI
+from testbed.analysis.rows import INLINE, MeanCI, named
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.verdicts import FAILS, HOLDS, TOO_FEW
 from testbed.run.failures import MIDRUN, NONE
@@ -134,10 +134,7 @@ class MiddlewareMeans:
 
     def of(self, key: str) -> MeanCI:
         """One measure, by a name of MEANS."""
-        if key not in MEANS_KEYS:
-            raise KeyError(key)
-        value: MeanCI = getattr(self, key)
-        return value
+        return named(self, key, MEANS_KEYS)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE
+from testbed.analysis.rows import INLINE, named
 from testbed.analysis.runs import FinishedRun
 from topology.protocols import REGISTRY
 from topology.spec import ROUTINGS, VETH
@@ -99,10 +99,7 @@ class ProtocolPoint:
 
     def measure(self, key: str) -> float | None:
         """One of METRICS, by name."""
-        if key not in METRICS:
-            raise KeyError(key)
-        value: float | None = getattr(self.measures, key)
-        return value
+        return named(self.measures, key, METRICS)
 
 
 def _map_delivery(run: FinishedRun) -> float | None:
