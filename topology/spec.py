@@ -32,6 +32,12 @@ WIFI_STANDARDS = ("80211a", "80211b", "80211g")
 CELL_M = 0.05
 
 
+def _choice(value, choices: tuple[str, ...], what: str) -> None:
+    """ValueError naming the choices unless `value` is one of them."""
+    if value not in choices:
+        raise ValueError(f"unknown {what} {value!r} (choose from {', '.join(choices)})")
+
+
 def _number(value, what: str) -> float:
     """`value` if it is a number (an int or a float, not a bool), else ValueError saying
     so: a string "5" is refused in one sentence, not compared into a TypeError."""
@@ -164,14 +170,8 @@ class NetworkSpec:
             raise ValueError(
                 f"communication range must be a positive number, not {self.comm_range}"
             )
-        if self.routing not in ROUTINGS:
-            raise ValueError(
-                f"unknown routing {self.routing!r} (choose from {', '.join(ROUTINGS)})"
-            )
-        if self.range_model not in RANGE_MODELS:
-            raise ValueError(
-                f"unknown range model {self.range_model!r} (choose from {', '.join(RANGE_MODELS)})"
-            )
+        _choice(self.routing, ROUTINGS, "routing")
+        _choice(self.range_model, RANGE_MODELS, "range model")
         if not (_number(self.time_scale, "time scale") > 0 and math.isfinite(self.time_scale)):
             raise ValueError(f"time scale must be a positive number, not {self.time_scale}")
         if not (_number(self.map_cell, "map cell size") > 0 and math.isfinite(self.map_cell)):
@@ -181,21 +181,13 @@ class NetworkSpec:
             and not 0 <= _number(self.wall_loss_pct, "wall loss") <= 100
         ):
             raise ValueError(f"wall loss {self.wall_loss_pct}% is not in 0..100")
-        if self.medium not in MEDIA:
-            raise ValueError(f"unknown medium {self.medium!r} (choose from {', '.join(MEDIA)})")
+        _choice(self.medium, MEDIA, "medium")
         if self.medium == "ns3-wifi":
             _check_wifi(self)
-        if self.aodv_profile not in AODV_PROFILES:
-            raise ValueError(
-                f"unknown AODV profile {self.aodv_profile!r} "
-                f"(choose from {', '.join(AODV_PROFILES)})"
-            )
+        _choice(self.aodv_profile, AODV_PROFILES, "AODV profile")
         if not (math.isfinite(self.aodv_stats_period) and self.aodv_stats_period >= 0):
             raise ValueError(f"AODV stats period {self.aodv_stats_period!r}: not a number >= 0")
-        if self.aodv_daemon not in AODV_DAEMONS:
-            raise ValueError(
-                f"unknown AODV daemon {self.aodv_daemon!r} (choose from {', '.join(AODV_DAEMONS)})"
-            )
+        _choice(self.aodv_daemon, AODV_DAEMONS, "AODV daemon")
 
     @property
     def robots(self) -> int:
@@ -208,15 +200,8 @@ class NetworkSpec:
 def _check_wifi(spec: NetworkSpec) -> None:
     """What the ns3-wifi medium can do: its propagation replaces the range model (the disc,
     for the links the view and the oracle see), and it has no per-link impairments yet."""
-    if spec.wifi_loss not in WIFI_LOSSES:
-        raise ValueError(
-            f"unknown wifi loss model {spec.wifi_loss!r} (choose from {', '.join(WIFI_LOSSES)})"
-        )
-    if spec.wifi_standard not in WIFI_STANDARDS:
-        raise ValueError(
-            f"unknown wifi standard {spec.wifi_standard!r} "
-            f"(choose from {', '.join(WIFI_STANDARDS)})"
-        )
+    _choice(spec.wifi_loss, WIFI_LOSSES, "wifi loss model")
+    _choice(spec.wifi_standard, WIFI_STANDARDS, "wifi standard")
     if not (spec.wifi_rate.isascii() and all(c.isalnum() for c in spec.wifi_rate)):
         raise ValueError(f"wifi rate {spec.wifi_rate!r} is not an ns-3 WifiMode name")
     if spec.range_model != "disc":
@@ -245,4 +230,5 @@ def layout_positions(
         return [
             (round(rng.uniform(0, side), 3), round(rng.uniform(0, side), 3)) for _ in range(robots)
         ]
-    raise ValueError(f"unknown layout {layout!r} (choose from {', '.join(LAYOUTS)})")
+    _choice(layout, LAYOUTS, "layout")
+    raise AssertionError(layout)  # every layout is handled above
