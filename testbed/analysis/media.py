@@ -249,6 +249,13 @@ def point_rows(per_run: list[MediaRun]) -> list[MediaPoint]:
     return out
 
 
+def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[MediaRun], list[MediaPoint]]:
+    """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
+    id's pcapmetrics (or None)."""
+    per_run = [run_row(r, metrics.get(r.run_id)) for r in runs if r.usable]
+    return per_run, point_rows(per_run)
+
+
 def ci(row: MediaPoint, key: str) -> tuple[float, float, float] | None:
     """(mean, low, high) of a point row's measure, None without an interval."""
     return row.compared.of(key).ci

@@ -180,6 +180,13 @@ def point_rows(per_run: list[ProtocolRun]) -> list[ProtocolPoint]:
     return out
 
 
+def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[ProtocolRun], list[ProtocolPoint]]:
+    """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
+    id's pcapmetrics (or None)."""
+    per_run = [run_row(r, r.exploration_steps, metrics.get(r.run_id)) for r in runs if r.usable]
+    return per_run, point_rows(per_run)
+
+
 def choice_holds(point: dict[str, ProtocolPoint]) -> tuple[bool | None, str]:
     """CHOICE_RULE at one point ({routing: row}); None when AODV or no proactive protocol ran."""
     a = point.get("aodv")
