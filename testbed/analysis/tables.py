@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from common.jsonfile import write_atomic
-from testbed.analysis.rows import INLINE, MeanRange, Spread, columns
+from testbed.analysis.rows import INLINE, MeanRange, Spread, columns, named
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 from topology.spec import VETH
 
@@ -153,10 +153,7 @@ class RoutingMeans:
 
     def of(self, metric: str) -> MeanRange:
         """One metric's record, by a name of ROUTING_METRICS."""
-        if metric not in ROUTING_FIELDS:
-            raise KeyError(metric)
-        value: MeanRange = getattr(self, metric)
-        return value
+        return named(self, metric, ROUTING_FIELDS)
 
 
 @dataclass(frozen=True)
@@ -197,10 +194,7 @@ class ImpairmentRow:
 
     def of(self, metric: str) -> MeanRange:
         """`steps` or `pdf`."""
-        if metric not in IMPAIRMENT_METRICS:
-            raise KeyError(metric)
-        value: MeanRange = getattr(self, metric)
-        return value
+        return named(self, metric, IMPAIRMENT_METRICS)
 
 
 ROUTING_FIELDS = tuple(f.name for f in fields(RoutingMeans))
