@@ -39,7 +39,7 @@ import statistics
 from dataclasses import dataclass, field, fields
 
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE, MeanCI, named
+from testbed.analysis.rows import INLINE, MeanCI, Measures
 from testbed.analysis.runs import FinishedRun
 from topology.spec import NS3_WIFI as WIFI
 from topology.spec import VETH
@@ -137,7 +137,7 @@ class MediaRun:
 
 
 @dataclass(frozen=True)
-class MediaCompared:
+class MediaCompared(Measures):
     """The COMPARED measures of a point: each one's mean and 95% interval."""
 
     steps: MeanCI
@@ -146,10 +146,6 @@ class MediaCompared:
     control_pkts_per_robot_s: MeanCI
     control_bytes_per_robot_s: MeanCI
     control_airtime_share: MeanCI
-
-    def of(self, key: str) -> MeanCI:
-        """One measure, by a name of COMPARED."""
-        return named(self, key, COMPARED_KEYS)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE, named
+from testbed.analysis.rows import INLINE, Measures
 from testbed.analysis.runs import FinishedRun
 from topology.protocols import REGISTRY
 from topology.spec import ROUTINGS, VETH
@@ -42,7 +42,7 @@ CHOICE_RULE = (
 
 
 @dataclass(frozen=True)
-class ProtocolMeasures:
+class ProtocolMeasures(Measures):
     """What the comparison measures of a run, or averages over a point's runs (METRICS)."""
 
     steps: float | None
@@ -99,7 +99,7 @@ class ProtocolPoint:
 
     def measure(self, key: str) -> float | None:
         """One of METRICS, by name."""
-        return named(self.measures, key, METRICS)
+        return self.measures.of(key)
 
 
 def _map_delivery(run: FinishedRun) -> float | None:

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from common.jsonfile import write_atomic
-from testbed.analysis.rows import INLINE, MeanRange, Spread, columns, named
+from testbed.analysis.rows import INLINE, MeanRange, Measures, Spread, columns, named
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 from topology.spec import VETH
 
@@ -141,7 +141,7 @@ class RoutingRun:
 
 
 @dataclass(frozen=True)
-class RoutingMeans:
+class RoutingMeans(Measures):
     """Each routing metric's mean and range over a point's runs (ROUTING_METRICS, then the
     emulated delay)."""
 
@@ -150,10 +150,6 @@ class RoutingMeans:
     delay_ms_median: MeanRange
     throughput_bps: MeanRange
     delay_ms_median_emulated: MeanRange
-
-    def of(self, metric: str) -> MeanRange:
-        """One metric's record, by a name of ROUTING_METRICS."""
-        return named(self, metric, ROUTING_FIELDS)
 
 
 @dataclass(frozen=True)

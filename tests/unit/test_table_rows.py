@@ -141,8 +141,10 @@ def test_the_measure_records_hold_the_measures_they_are_named_by():
 
 
 def test_a_row_gives_a_measure_by_name_and_refuses_any_other():
-    """`named`, the one accessor the comparison rows' of()/measure() share: a measure by its
-    table's name, KeyError for a name that is no measure (a field such as `n` included)."""
+    """`named` and `Measures.of`, the one accessor the rows' of()/measure() share: a measure
+    by its table's name, KeyError for a name that is no measure (a field such as `n`, a
+    method's name)."""
+    from testbed.analysis.media import MediaCompared
     from testbed.analysis.rows import named
 
     mc = MeanCI(2.0, 1.0, 3.0)
@@ -150,3 +152,8 @@ def test_a_row_gives_a_measure_by_name_and_refuses_any_other():
     for wrong in ("ci_high", "nope"):
         with pytest.raises(KeyError):
             named(mc, wrong, ("mean", "ci_low"))
+    compared = MediaCompared(*(MeanCI(float(i)) for i in range(6)))
+    assert compared.of("pdf") == MeanCI(1.0)
+    for wrong in ("of", "nope", "__class__"):
+        with pytest.raises(KeyError):
+            compared.of(wrong)
