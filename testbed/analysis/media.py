@@ -193,10 +193,6 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
     c = run.config
     m = metrics or {}
     scale = run.time_scale_ran
-
-    def per_robot_s(key: str) -> float | None:  # the display robot transmits too
-        return run.per_robot_second(m.get(key), m.get("duration_s"), c.robots + 1)
-
     ch = run.channel
     raw = m.get("delay_raw_ms_median")
     return MediaRun(
@@ -208,8 +204,8 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
         steps=run.exploration_steps,
         pdf=m.get("pdf"),
         delay_ms=m["delay_ms_median"] * scale if m.get("delay_ms_median") is not None else None,
-        control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
-        control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+        control_pkts_per_robot_s=run.captured_per_robot_s(m, "control_tx_packets"),
+        control_bytes_per_robot_s=run.captured_per_robot_s(m, "control_tx_bytes"),
         control_airtime_share=_control_airtime_share(run, m) if metrics else None,
         channel_airtime_share=ch.airtime_share if ch else None,
         channel_retry_rate=ch.retry_rate if ch else None,

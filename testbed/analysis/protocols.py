@@ -130,10 +130,6 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> Prot
     """One run's numbers (`metrics`: its pcapmetrics, or None)."""
     c = run.config
     m = metrics or {}
-
-    def per_robot_s(key: str) -> float | None:  # the display robot transmits too
-        return run.per_robot_second(m.get(key), m.get("duration_s"), c.robots + 1)
-
     return ProtocolRun(
         run=run.run_id,
         routing=c.routing,
@@ -143,8 +139,8 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> Prot
         robots=c.robots,
         measures=ProtocolMeasures(
             steps=steps,
-            control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
-            control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+            control_pkts_per_robot_s=run.captured_per_robot_s(m, "control_tx_packets"),
+            control_bytes_per_robot_s=run.captured_per_robot_s(m, "control_tx_bytes"),
             pdf=m.get("pdf"),
             delay_ms=m.get("delay_ms_median"),
             map_delivery=_map_delivery(run),
