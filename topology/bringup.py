@@ -30,8 +30,9 @@ from topology.spec import NetworkSpec
 if TYPE_CHECKING:
     from topology.network import Network
 
-# The Debian/Ubuntu package of each tool preflight asks for.
-TOOL_PACKAGES = {"ip": "iproute2", "unshare": "util-linux"}
+# The Debian/Ubuntu package of each tool preflight asks for (a routing daemon's: its entry in
+# topology.protocols).
+TOOL_PACKAGES = {"ip": "iproute2", "tcpdump": "tcpdump"}
 
 
 def preflight(spec: NetworkSpec) -> None:
@@ -43,7 +44,8 @@ def preflight(spec: NetworkSpec) -> None:
         missing.append("tcpdump")
     missing += routing.missing_tools(spec.routing)
     if missing:
-        pkgs = ", ".join(dict.fromkeys(TOOL_PACKAGES.get(t, t) for t in missing))
+        packages = {**TOOL_PACKAGES, **routing.tool_packages(spec.routing)}
+        pkgs = ", ".join(dict.fromkeys(packages.get(t, t) for t in missing))
         raise UsageError(
             f"missing tool(s): {', '.join(missing)} (package(s) {pkgs}: `sudo make setup` "
             "installs those the distribution has)"
@@ -113,7 +115,7 @@ def start_routing(net: Network, forks: ForkServer | None) -> None:
         proc: Forked | subprocess.Popen
         if forkable is not None and forks is not None:  # started iff forkable
             open(logp, "w").close()  # the child appends
-            args = forkable.args(k, net.state_dir, net.spec)
+            args = routing.fork_args(net.spec, k, net.state_dir)
             try:
                 proc = forks.spawn(
                     net.robot_ns(k), forkable.module, args, logp,

@@ -1,8 +1,10 @@
 """The routing choice, behind one small interface: what to run in each robot's namespace.
 
-A routing protocol is an argv per robot (or none). The Network starts it with the other
-per-robot processes, records its pid and stops it at teardown, so adding a protocol means
-adding one function here.
+A routing protocol is an entry of topology.protocols' registry (its data: port, tools, files,
+fork server) and, when it has a daemon, an argv per robot built by the function here that the
+entry names. The Network starts it with the other per-robot processes, records its pid and
+stops it at teardown; every table below is read from the registry, so adding a protocol is
+its entry and its argv builder (docs/architecture.md, "Adding a routing protocol").
 
 - none:  nothing; routes are the user's business (only direct neighbours on a /32 need none
          either: they still need a route, so with `none` even one hop needs `ip route add`).
@@ -43,12 +45,12 @@ import os
 import shutil
 import sys
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from pathlib import Path
 
 from common.paths import PROJECT_ROOT
 from topology import names
 from topology.kernel import netns
+from topology.protocols import REGISTRY, Forkable, Protocol
 
 BABEL_HELLO_S = 1.0  # babeld's wireless default is 4 s; 1 s converges a 5-hop chain in ~5 s
 
@@ -90,7 +92,9 @@ def log_file(routing: str, k: int, run_dir: str) -> str:
 
 def aodv_stats_file(k: int, run_dir: str) -> str:
     """Where robot k's AODV daemon writes its statistics (aodv/stats.py)."""
-    return os.path.join(run_dir, f"r{k}.aodv.json")
+    stats = stats_file("aodv", k, run_dir)
+    assert stats is not None  # the registry's aodv entry names it
+    return stats
 
 
 def aodv_state_file(k: int, run_dir: str) -> str:
@@ -164,43 +168,55 @@ def aodv_argv(k: int, run_dir: str, spec) -> list[str]:
 ArgvBuilder = Callable[[int, str, object], list[str]]
 
 
-@dataclass(frozen=True)
-class Forkable:
-    """A daemon that is a Python module with main(argv): how to fork it from a fork server."""
+def _builder(p: Protocol, name: str) -> ArgvBuilder:
+    """The function of this module an entry of the registry names; a name that is not here
+    fails at import."""
+    f = globals().get(name)
+    if not callable(f):
+        raise ImportError(
+            f"routing protocol {p.name!r} names {name!r}, not a function of {__name__}"
+        )
+    return f
 
-    module: str  # whose main(args) runs the daemon
-    args: ArgvBuilder  # its arguments (argv without the interpreter and -m)
-    preload: tuple[str, ...]  # what the server imports for every daemon
-    warm: tuple[tuple[str, str, tuple], ...]  # (module, function, args) the server calls once
 
-
-FORKABLE: dict[str, Forkable] = {
-    "aodv": Forkable(
-        module="aodv.__main__",
-        args=aodv_args,
-        preload=("aodv.__main__", "aodv.daemon", "aodv.params", "aodv.sim"),
-        warm=(("aodv.sim", "warm_up", ()),),
-    ),
-}
-
+# Each protocol's argv builder (None: no daemon), from the registry.
 PROTOCOLS: dict[str, ArgvBuilder | None] = {
-    "none": None,
-    "babel": babel_argv,
-    "batman": batman_argv,
-    "aodv": aodv_argv,
-    "oracle": None,  # routes come from the topology controller (topology.oracle)
+    p.name: _builder(p, p.daemon.argv) if p.daemon else None for p in REGISTRY.values()
 }
-
-REQUIRED_TOOLS = {
-    "none": [], "babel": ["babeld"], "batman": ["batmand", "unshare"], "aodv": [], "oracle": [],
-}  # fmt: skip
-
-# A file whose appearance says the daemon is up. The AODV daemon first writes its statistics
-# once its socket, TUN device and routes are ready; babeld says nothing we can wait for.
-READY_FILES: dict[str, Callable[[int, str], str]] = {"aodv": aodv_stats_file}
-# The statistics a protocol's daemons write, if any.
-STATS_FILES: dict[str, Callable[[int, str], str]] = {"aodv": aodv_stats_file}
+# The arguments of each forkable daemon (its Forkable.args), from the registry.
+FORK_ARGS: dict[str, ArgvBuilder] = {
+    p.name: _builder(p, p.daemon.forkable.args)
+    for p in REGISTRY.values()
+    if p.daemon and p.daemon.forkable
+}
+FORKABLE: dict[str, Forkable] = {
+    p.name: p.daemon.forkable for p in REGISTRY.values() if p.daemon and p.daemon.forkable
+}
+REQUIRED_TOOLS: dict[str, list[str]] = {
+    p.name: list(p.daemon.tools) if p.daemon else [] for p in REGISTRY.values()
+}
 READY_TIMEOUT_S = 30.0
+
+
+def has_daemon(routing: str) -> bool:
+    """Whether the protocol runs a daemon in each robot's namespace (none and the oracle do not)."""
+    return REGISTRY[routing].daemon is not None
+
+
+def tool_packages(routing: str) -> dict[str, str]:
+    """The Debian package of each program the protocol's daemon needs."""
+    daemon = REGISTRY[routing].daemon
+    return dict(daemon.tools) if daemon else {}
+
+
+def _run_file(pattern: str | None, k: int, run_dir: str) -> str | None:
+    return os.path.join(run_dir, pattern.format(k=k)) if pattern else None
+
+
+def stats_file(routing: str, k: int, run_dir: str) -> str | None:
+    """Where robot k's daemon writes its statistics, or None: the protocol's daemons write none."""
+    daemon = REGISTRY[routing].daemon
+    return _run_file(daemon.stats_file if daemon else None, k, run_dir)
 
 
 def forkable(spec) -> Forkable | None:
@@ -221,8 +237,9 @@ def preflight_refusal(spec) -> str | None:
 
 
 def ready_file(routing: str, k: int, run_dir: str) -> str | None:
-    f = READY_FILES.get(routing)
-    return f(k, run_dir) if f else None
+    """A file whose appearance says robot k's daemon is up, or None: nothing to wait for."""
+    daemon = REGISTRY[routing].daemon
+    return _run_file(daemon.ready_file if daemon else None, k, run_dir)
 
 
 def missing_tools(routing: str) -> list[str]:
@@ -235,16 +252,23 @@ def keep_daemon_files(
     """Copy what each robot's routing daemon left in the testbed's run dir: its log into
     `logs_dir` (same name, rK.<routing>.log) and its statistics, for a protocol whose daemons
     write any, into `stats_dir` as rK.json. Files a daemon did not write are skipped."""
-    stats = STATS_FILES.get(routing) if stats_dir else None
-    for d in (logs_dir, stats_dir if stats else None):
+    if stats_file(routing, 0, run_dir) is None:
+        stats_dir = None  # its daemons write none
+    for d in (logs_dir, stats_dir):
         if d:
             os.makedirs(d, exist_ok=True)
     for k in robots:
         src = log_file(routing, k, run_dir)
         if os.path.exists(src):
             shutil.copy(src, os.path.join(logs_dir, os.path.basename(src)))
-        if stats and stats_dir and os.path.exists(stats(k, run_dir)):
-            shutil.copy(stats(k, run_dir), os.path.join(stats_dir, f"r{k}.json"))
+        stats = stats_file(routing, k, run_dir)
+        if stats and stats_dir and os.path.exists(stats):
+            shutil.copy(stats, os.path.join(stats_dir, f"r{k}.json"))
+
+
+def fork_args(spec, k: int, run_dir: str) -> list[str]:
+    """Robot k's daemon arguments when it is forked (forkable(spec) is not None)."""
+    return FORK_ARGS[spec.routing](k, run_dir, spec)
 
 
 def argv_for(spec, k: int, run_dir: str) -> list[str] | None:

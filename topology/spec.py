@@ -11,7 +11,9 @@ from dataclasses import dataclass, field
 from common import timescale
 from topology import names
 
-ROUTINGS = ("aodv", "babel", "batman", "oracle", "none")  # the first is the default
+# The routing protocols, from topology.protocols' registry; the first is the default.
+from topology.protocols import ROUTINGS as ROUTINGS
+
 RANGE_MODELS = ("disc", "lossy", "los", "los-lossy")
 LOS_MODELS = ("los", "los-lossy")  # the models that need a map's walls (topology.radio.los)
 # aodv.params.PROFILES (topology imports nothing of aodv; a unit test keeps the two equal).
@@ -29,6 +31,12 @@ WIFI_STANDARDS = ("80211a", "80211b", "80211g")
 # Metres per map cell: the robots' and the world's grid, and a pixel of the shipped maps (the
 # default of --map-cell). Declared here, the lowest layer that needs it (the los walls' map).
 CELL_M = 0.05
+
+
+def _choice(value, choices: tuple[str, ...], what: str) -> None:
+    """ValueError naming the choices unless `value` is one of them."""
+    if value not in choices:
+        raise ValueError(f"unknown {what} {value!r} (choose from {', '.join(choices)})")
 
 
 def _number(value, what: str) -> float:
@@ -163,14 +171,8 @@ class NetworkSpec:
             raise ValueError(
                 f"communication range must be a positive number, not {self.comm_range}"
             )
-        if self.routing not in ROUTINGS:
-            raise ValueError(
-                f"unknown routing {self.routing!r} (choose from {', '.join(ROUTINGS)})"
-            )
-        if self.range_model not in RANGE_MODELS:
-            raise ValueError(
-                f"unknown range model {self.range_model!r} (choose from {', '.join(RANGE_MODELS)})"
-            )
+        _choice(self.routing, ROUTINGS, "routing")
+        _choice(self.range_model, RANGE_MODELS, "range model")
         if timescale.refusal(_number(self.time_scale, "time scale")):
             raise ValueError(timescale.refusal(self.time_scale))
         if not (_number(self.map_cell, "map cell size") > 0 and math.isfinite(self.map_cell)):
@@ -180,21 +182,13 @@ class NetworkSpec:
             and not 0 <= _number(self.wall_loss_pct, "wall loss") <= 100
         ):
             raise ValueError(f"wall loss {self.wall_loss_pct}% is not in 0..100")
-        if self.medium not in MEDIA:
-            raise ValueError(f"unknown medium {self.medium!r} (choose from {', '.join(MEDIA)})")
+        _choice(self.medium, MEDIA, "medium")
         if self.medium == "ns3-wifi":
             _check_wifi(self)
-        if self.aodv_profile not in AODV_PROFILES:
-            raise ValueError(
-                f"unknown AODV profile {self.aodv_profile!r} "
-                f"(choose from {', '.join(AODV_PROFILES)})"
-            )
+        _choice(self.aodv_profile, AODV_PROFILES, "AODV profile")
         if not (math.isfinite(self.aodv_stats_period) and self.aodv_stats_period >= 0):
             raise ValueError(f"AODV stats period {self.aodv_stats_period!r}: not a number >= 0")
-        if self.aodv_daemon not in AODV_DAEMONS:
-            raise ValueError(
-                f"unknown AODV daemon {self.aodv_daemon!r} (choose from {', '.join(AODV_DAEMONS)})"
-            )
+        _choice(self.aodv_daemon, AODV_DAEMONS, "AODV daemon")
 
     @property
     def robots(self) -> int:
@@ -207,15 +201,8 @@ class NetworkSpec:
 def _check_wifi(spec: NetworkSpec) -> None:
     """What the ns3-wifi medium can do: its propagation replaces the range model (the disc,
     for the links the view and the oracle see), and it has no per-link impairments yet."""
-    if spec.wifi_loss not in WIFI_LOSSES:
-        raise ValueError(
-            f"unknown wifi loss model {spec.wifi_loss!r} (choose from {', '.join(WIFI_LOSSES)})"
-        )
-    if spec.wifi_standard not in WIFI_STANDARDS:
-        raise ValueError(
-            f"unknown wifi standard {spec.wifi_standard!r} "
-            f"(choose from {', '.join(WIFI_STANDARDS)})"
-        )
+    _choice(spec.wifi_loss, WIFI_LOSSES, "wifi loss model")
+    _choice(spec.wifi_standard, WIFI_STANDARDS, "wifi standard")
     if not (spec.wifi_rate.isascii() and all(c.isalnum() for c in spec.wifi_rate)):
         raise ValueError(f"wifi rate {spec.wifi_rate!r} is not an ns-3 WifiMode name")
     if spec.range_model != "disc":
@@ -244,4 +231,5 @@ def layout_positions(
         return [
             (round(rng.uniform(0, side), 3), round(rng.uniform(0, side), 3)) for _ in range(robots)
         ]
-    raise ValueError(f"unknown layout {layout!r} (choose from {', '.join(LAYOUTS)})")
+    _choice(layout, LAYOUTS, "layout")
+    raise AssertionError(layout)  # every layout is handled above

@@ -4,13 +4,16 @@ The robot (node.robot) holds one messenger and never asks which middleware it is
 connects to its teammates, sends each a message with a bounded wait, receives what is
 waiting when the messenger's descriptor is readable, and closes it at the end. The class of
 each middleware (node.messaging's registry) has exactly these members; this Protocol is
-for type checking and for the reader, nothing inherits from it. The Zenoh and DDS
-messengers also offer `map_topic()`, the robots' maps on their session (node.messaging.maps).
+for type checking and for the reader. Every class is made with the same arguments (me,
+bind_addr, port, addr_of, team, send_timeout_ms, reconnect_ms), which it takes from
+node.messaging.base.MessengerBase, its base: that keeps them bounded, counts `send` and
+`receive` in `stats`, and for a stack that delivers on its own thread (InboxMessenger) gives
+`fileno` and `receive`. The Zenoh and DDS messengers also offer `map_topic()`, the robots'
+maps on their session (node.messaging.maps).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from node.messaging.stats import MessengerStats
@@ -19,17 +22,6 @@ from node.messaging.stats import MessengerStats
 class Messenger(Protocol):
     name: str  # the middleware: "nanomsg", "zeromq", "zeromq-reqrep", "zenoh", "dds"
     stats: MessengerStats  # updated by send() and receive()
-
-    def __init__(
-        self,
-        me: int,
-        bind_addr: str,
-        port: int,
-        addr_of: Callable[[int], str],
-        team: Sequence[int],
-        send_timeout_ms: int,
-        reconnect_ms: tuple[int, int],
-    ) -> None: ...
 
     def fileno(self) -> int:
         """A descriptor that is readable when receive() may return something."""

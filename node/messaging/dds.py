@@ -41,6 +41,7 @@ send timeout is 50 ms and the redial ceiling 500 ms, scaled with them.
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 from xml.sax.saxutils import quoteattr
 
 from cyclonedds.core import DDSException, Listener, Policy, Qos
@@ -51,9 +52,8 @@ from cyclonedds.pub import DataWriter, Publisher
 from cyclonedds.sub import DataReader, Subscriber
 from cyclonedds.topic import Topic
 
+from node.messaging.base import InboxMessenger
 from node.messaging.dds_common import has_readers, samples
-from node.messaging.inbox import Inbox
-from node.messaging.stats import MessengerStats
 
 log = logging.getLogger(__name__)
 
@@ -196,47 +196,34 @@ def cyclone_config(
 </Domain></CycloneDDS>"""
 
 
-class DdsMessenger:
+class DdsMessenger(InboxMessenger):
     name = "dds"
 
-    def __init__(
-        self,
-        me: int,
-        bind_addr: str,
-        port: int,
-        addr_of: Callable[[int], str],
-        team: Sequence[int],
-        send_timeout_ms: int,
-        reconnect_ms: tuple[int, int],
-        *,
-        shared_stack: int = 1,
-    ):
-        self.me = me
-        self.stats = MessengerStats()
+    def __init__(self, *args: Any, shared_stack: int = 1, **kwargs: Any) -> None:
+        """The contract's arguments (node.messaging.base.MessengerBase), and how many robots
+        share one process's Cyclone stack (`shared_stack`, cyclone_config)."""
+        super().__init__(*args, **kwargs)
         self.misaddressed = 0  # samples that reached this reader with another dst
-        send_timeout_ms = max(1, int(send_timeout_ms))
-        reconnect_max_ms = max(
-            1, *(int(v) for v in reconnect_ms)
-        )  # DDS has no backoff: the ceiling
-        self.timers = CycloneTimers(send_timeout_ms, reconnect_max_ms)
-        self.config = cyclone_config(me, bind_addr, port, addr_of, team, self.timers, shared_stack)
+        send_timeout_ms = self.send_timeout_ms
+        # DDS has no backoff: the reconnect ceiling
+        self.timers = CycloneTimers(send_timeout_ms, self.reconnect_ms[1])
+        self.config = cyclone_config(self.me, self.bind_addr, self.port, self.addr_of,
+                                     self.team, self.timers, shared_stack)  # fmt: skip
         reliable = Policy.Reliability.Reliable(max_blocking_time=send_timeout_ms * 1_000_000)
         self._writer_qos = Qos(reliable, Policy.History.KeepLast(HISTORY_DEPTH))
         # The reader keeps all: the listener takes every sample as it comes, and a burst that
         # arrives while it waits for the interpreter must not overwrite its own beginning.
         self._reader_qos = Qos(reliable, Policy.History.KeepAll)
-        self._inbox = Inbox()
         self._writers: dict[int, tuple[Publisher, DataWriter]] = {}
         self._entities: list = []  # made here, deleted in reverse order by close()
-        self._send_timeout_ms = send_timeout_ms
         self._maps = None  # the map topic in this participant (map_topic())
         self._closed = False
         try:
-            self._domain = self._made(Domain(me, self.config))
-            self._participant = self._made(DomainParticipant(me))
+            self._domain = self._made(Domain(self.me, self.config))
+            self._participant = self._made(DomainParticipant(self.me))
             self._topic = self._made(Topic(self._participant, TOPIC, GoalSample))
             sub = self._made(
-                Subscriber(self._participant, qos=Qos(Policy.Partition([partition_of(me)])))
+                Subscriber(self._participant, qos=Qos(Policy.Partition([partition_of(self.me)])))
             )
             self._reader = self._made(
                 DataReader(
@@ -260,9 +247,6 @@ class DdsMessenger:
             else:
                 self.misaddressed += 1
 
-    def fileno(self) -> int:
-        return self._inbox.fileno()
-
     def _writer(self, j: int) -> DataWriter:
         w = self._writers.get(j)
         if w is None:
@@ -278,7 +262,9 @@ class DdsMessenger:
         if not self._closed:
             self._writer(j)
 
-    def _write(self, j: int, data: bytes) -> bool:
+    def _send(self, j: int, data: bytes) -> bool:
+        """Write `data` for teammate j; False if its reader is not matched or the write gave
+        up after the send timeout (max_blocking_time)."""
         if self._closed:
             return False
         try:
@@ -292,26 +278,13 @@ class DdsMessenger:
             log.debug("r%d: write to r%d failed: %s", self.me, j, e)
             return False
 
-    def send(self, j: int, data: bytes) -> bool:
-        """Write `data` for teammate j; False if its reader is not matched or the write gave
-        up after the send timeout (max_blocking_time)."""
-        token = self.stats.send_started()
-        ok = self._write(j, data)
-        self.stats.send_ended(token, ok)
-        return ok
-
-    def receive(self) -> list[bytes]:
-        out = self._inbox.take_all()
-        self.stats.received += len(out)
-        return out
-
     def map_topic(self):
         """The robots' maps in this participant (node.messaging.dds_maps), made on the first
         call; its entities are deleted with this messenger's, and close() closes it."""
         if self._maps is None:
             from node.messaging.dds_maps import DdsMapTopic
 
-            self._maps = DdsMapTopic(self._participant, self.me, self._send_timeout_ms,
+            self._maps = DdsMapTopic(self._participant, self.me, self.send_timeout_ms,
                                      self._made)  # fmt: skip
         return self._maps
 

@@ -20,39 +20,24 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Callable, Sequence
+from typing import Any
 
 import pynng
 
 from node.messaging import SEND_QUEUE
-from node.messaging.stats import MessengerStats
+from node.messaging.base import MessengerBase
 
 log = logging.getLogger(__name__)
 
 
-class NanomsgMessenger:
+class NanomsgMessenger(MessengerBase):
     name = "nanomsg"
 
-    def __init__(
-        self,
-        me: int,
-        bind_addr: str,
-        port: int,
-        addr_of: Callable[[int], str],
-        team: Sequence[int] = (),
-        send_timeout_ms: int = 20,
-        reconnect_ms: tuple[int, int] = (50, 500),
-    ):
-        self.me = me
-        self.team = tuple(team)
-        self.stats = MessengerStats()
-        self.port = port
-        self.addr_of = addr_of
-        self.send_timeout_ms = max(1, int(send_timeout_ms))
-        lo, hi = (max(1, int(v)) for v in reconnect_ms)
-        self.reconnect_ms = (lo, max(lo, hi))
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """The contract's arguments (node.messaging.base.MessengerBase)."""
+        super().__init__(*args, **kwargs)
         self.pull = pynng.Pull0()
-        self.pull.listen(f"tcp://{bind_addr}:{port}")
+        self.pull.listen(f"tcp://{self.bind_addr}:{self.port}")
         self.push: dict[int, pynng.Push0] = {}
 
     def fileno(self) -> int:
@@ -75,14 +60,8 @@ class NanomsgMessenger:
         """Start dialling teammate j (so its connection is up before the first send)."""
         self._socket(j)
 
-    def send(self, j: int, data: bytes) -> bool:
-        """Send to teammate j; False if it could not be handed over within the timeout."""
-        token = self.stats.send_started()
-        ok = self._send(j, data)
-        self.stats.send_ended(token, ok)
-        return ok
-
     def _send(self, j: int, data: bytes) -> bool:
+        """Send to teammate j; False if it could not be handed over within the timeout."""
         try:
             self._socket(j).send(data)
             return True
@@ -99,8 +78,7 @@ class NanomsgMessenger:
             try:
                 out.append(_recv(self.pull))
             except pynng.TryAgain:
-                self.stats.received += len(out)
-                return out
+                return self._counted(out)
 
     def close(self) -> None:
         for s in [self.pull, *self.push.values()]:

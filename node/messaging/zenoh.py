@@ -45,11 +45,11 @@ import contextlib
 import json
 import logging
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import zenoh
 
-from node.messaging.inbox import Inbox
-from node.messaging.stats import MessengerStats
+from node.messaging.base import InboxMessenger
 
 log = logging.getLogger(__name__)
 
@@ -135,40 +135,28 @@ def zenoh_config(
     }
 
 
-class ZenohMessenger:
+class ZenohMessenger(InboxMessenger):
     name = "zenoh"
 
-    def __init__(
-        self,
-        me: int,
-        bind_addr: str,
-        port: int,
-        addr_of: Callable[[int], str],
-        team: Sequence[int],
-        send_timeout_ms: int,
-        reconnect_ms: tuple[int, int],
-    ):
-        self.me = me
-        self.stats = MessengerStats()
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """The contract's arguments (node.messaging.base.MessengerBase)."""
+        super().__init__(*args, **kwargs)
         self.config = zenoh_config(
-            me, bind_addr, port, addr_of, team, send_timeout_ms, reconnect_ms
-        )
-        self._inbox = Inbox()
+            self.me, self.bind_addr, self.port, self.addr_of, self.team,
+            self.send_timeout_ms, self.reconnect_ms,
+        )  # fmt: skip
         self._publishers: dict[int, zenoh.Publisher] = {}
         self._maps = None  # the map topic on this session (map_topic())
         self._closed = False
         try:
             self._session = zenoh.open(zenoh.Config.from_json5(json.dumps(self.config)))
-            self._subscriber = self._session.declare_subscriber(key_of(me), self._on_sample)
+            self._subscriber = self._session.declare_subscriber(key_of(self.me), self._on_sample)
         except BaseException:
             self._inbox.close()
             raise
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         self._inbox.put(sample.payload.to_bytes())
-
-    def fileno(self) -> int:
-        return self._inbox.fileno()
 
     def _publisher(self, j: int) -> zenoh.Publisher:
         p = self._publishers.get(j)
@@ -187,7 +175,9 @@ class ZenohMessenger:
         if not self._closed:
             self._publisher(j)
 
-    def _put(self, j: int, data: bytes) -> bool:
+    def _send(self, j: int, data: bytes) -> bool:
+        """Hand `data` to Zenoh for teammate j; False if no subscriber of j is known or the
+        put failed. Never waits longer than the send timeout (congestion control DROP)."""
         if self._closed:
             return False
         try:
@@ -200,19 +190,6 @@ class ZenohMessenger:
         except zenoh.ZError as e:
             log.debug("r%d: put to r%d failed: %s", self.me, j, e)
             return False
-
-    def send(self, j: int, data: bytes) -> bool:
-        """Hand `data` to Zenoh for teammate j; False if no subscriber of j is known or the
-        put failed. Never waits longer than the send timeout (congestion control DROP)."""
-        token = self.stats.send_started()
-        ok = self._put(j, data)
-        self.stats.send_ended(token, ok)
-        return ok
-
-    def receive(self) -> list[bytes]:
-        out = self._inbox.take_all()
-        self.stats.received += len(out)
-        return out
 
     def map_topic(self):
         """The robots' maps on this session (node.messaging.zenoh_maps), made on the first

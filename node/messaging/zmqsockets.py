@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import contextlib
 import threading
-from collections.abc import Callable, Sequence
+from typing import Any
 
 import zmq
 
-from node.messaging.stats import MessengerStats
+from node.messaging.base import MessengerBase
 
 CLOSE_WAIT_S = 5.0  # close() waits this long at most for ZeroMQ's own threads to end
 
@@ -32,33 +32,18 @@ class _Socket:
         self.lock = threading.Lock()
 
 
-class ZmqSockets:
+class ZmqSockets(MessengerBase):
     """The base of the ZeroMQ messengers: a subclass says which socket types they are and
     how a socket is set up (`_peer_options`), and how one message is handed over
     (`_hand_over`) and answered (`_answer`)."""
 
-    name = ""
     LISTEN_TYPE = zmq.PULL
     PEER_TYPE = zmq.PUSH
 
-    def __init__(
-        self,
-        me: int,
-        bind_addr: str,
-        port: int,
-        addr_of: Callable[[int], str],
-        team: Sequence[int] = (),
-        send_timeout_ms: int = 20,
-        reconnect_ms: tuple[int, int] = (50, 500),
-    ):
-        self.me = me
-        self.port = port
-        self.addr_of = addr_of
-        self.team = tuple(team)
-        self.send_timeout_ms = max(1, int(send_timeout_ms))
-        lo, hi = (max(1, int(v)) for v in reconnect_ms)
-        self.reconnect_ms = (lo, max(lo, hi))
-        self.stats = MessengerStats()
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """The contract's arguments (node.messaging.base.MessengerBase)."""
+        super().__init__(*args, **kwargs)
+        bind_addr, port = self.bind_addr, self.port
         self.ctx = zmq.Context(io_threads=1)
         self._closed = False
         self._lock = threading.Lock()  # the peers dict
@@ -112,20 +97,16 @@ class ZmqSockets:
         """Start connecting to teammate j (ZeroMQ connects and reconnects in the background)."""
         self._peer(j)
 
-    def send(self, j: int, data: bytes) -> bool:
-        token = self.stats.send_started()
-        ok = False
+    def _send(self, j: int, data: bytes) -> bool:
         try:
             p = self._peer(j)
             if p is not None:
                 with p.lock:
                     if not p.sock.closed:
-                        ok = self._hand_over(p.sock, data)
+                        return self._hand_over(p.sock, data)
         except zmq.ZMQError:  # ETERM: closed meanwhile
-            ok = False
-        finally:
-            self.stats.send_ended(token, ok)
-        return ok
+            pass
+        return False
 
     def receive(self) -> list[bytes]:
         out: list[bytes] = []
@@ -141,8 +122,7 @@ class ZmqSockets:
                 pass
             except zmq.ZMQError:  # ETERM: closed meanwhile
                 pass
-        self.stats.received += len(out)
-        return out
+        return self._counted(out)
 
     def close(self) -> None:
         with self._lock:

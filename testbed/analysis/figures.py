@@ -5,6 +5,9 @@ Theory of operation. `make_all` reads a sweep directory's finished runs once
 writes each table as CSV and JSON into `DIR/figures/` and draws it as PNG and PDF
 (testbed.analysis.plots), so a test (or a reader) can check a figure against the runs' own
 results. It returns the runs and the tables, which the report decides its verdicts on.
+The comparisons a sweep makes when it varies one choice (routing protocols, media,
+middlewares) are `STUDIES`, one entry each: its sweep file, what it compares, its tables and
+its report section; a new one is an entry there and its two fields in `Tables`.
 
 Which runs count: runs whose status is `complete` or `step_cap` (a run that hit the step cap
 counts its unfinished robots at the final step, as the contract says). Runs that crashed or
@@ -36,6 +39,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,6 +95,29 @@ class Tables:
     routing_runs: list[RoutingRun] = field(default_factory=list)
     routing: list[RoutingRow] = field(default_factory=list)
     impairments: list[ImpairmentRow] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A comparison a sweep makes when it varies one choice (its sweep file in
+    testbed/experiments/): its tables, written as figures/NAME_runs and figures/NAME and kept
+    in Tables' fields of the same names, and its section of the report."""
+
+    name: str
+    sweep: str  # the sweep file that runs it (testbed/experiments/)
+    varies: Callable[[FinishedRun], object]  # what it compares (the study is made for 2 or more)
+    # (the sweep's runs, each run id's capture metrics) -> (per-run rows, point rows)
+    tables: Callable[[list[FinishedRun], dict], tuple[list, list]]
+    section: Callable[[list], list[str]]  # the report's section, from the point rows
+
+
+STUDIES = (
+    Study("protocols", "protocols.toml", lambda r: r.config.routing, protocols.tables,
+          protocols.section),
+    Study("media", "media.toml", lambda r: r.config.medium, media.tables, media.section),
+    Study("middlewares", "middleware.toml", middlewares.middleware_of, middlewares.tables,
+          middlewares.section),
+)  # fmt: skip
 
 
 @dataclass
@@ -183,41 +210,17 @@ def _all_metrics(runs: list[FinishedRun], metrics_of: MetricsOf) -> dict[str, di
         return dict(zip((r.run_id for r in runs), pool.map(metrics_of, runs), strict=True))
 
 
-def _protocol_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
-    """The protocols comparison's tables, when the sweep ran more than one routing."""
-    if len({r.config.routing for r in all_runs if r.usable}) < 2:
-        return
-    t = made.tables
-    t.protocols_runs = [
-        protocols.run_row(r, r.exploration_steps, metrics[r.run_id]) for r in all_runs if r.usable
-    ]
-    write_table(t.protocols_runs, figdir / "protocols_runs")
-    t.protocols = protocols.point_rows(t.protocols_runs)
-    write_table(t.protocols, figdir / "protocols")
-
-
-def _media_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
-    """The media comparison's tables, when the sweep ran more than one medium."""
+def _study_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
+    """Each study's tables (STUDIES), when the sweep ran more than one of what it compares."""
     usable = [r for r in all_runs if r.usable]
-    if len({r.config.medium for r in usable}) < 2:
-        return
-    t = made.tables
-    t.media_runs = [media.run_row(r, metrics[r.run_id]) for r in usable]
-    write_table(t.media_runs, figdir / "media_runs")
-    t.media = media.point_rows(t.media_runs)
-    write_table(t.media, figdir / "media")
-
-
-def _middleware_tables(all_runs: list[FinishedRun], metrics: dict, figdir: Path,
-                       made: Made) -> None:  # fmt: skip
-    """The middlewares' comparison (the paper's Section 3), when the sweep ran more than
-    one middleware."""
-    if len({middlewares.middleware_of(r) for r in all_runs if r.usable}) < 2:
-        return
-    t = made.tables
-    t.middlewares_runs, t.middlewares = middlewares.tables(all_runs, metrics)
-    write_table(t.middlewares_runs, figdir / "middlewares_runs")
-    write_table(t.middlewares, figdir / "middlewares")
+    for s in STUDIES:
+        if len({s.varies(r) for r in usable}) < 2:
+            continue
+        per_run, points = s.tables(all_runs, metrics)
+        setattr(made.tables, f"{s.name}_runs", per_run)
+        setattr(made.tables, s.name, points)
+        write_table(per_run, figdir / f"{s.name}_runs")
+        write_table(points, figdir / s.name)
 
 
 def _routing_figures(runs: list[FinishedRun], metrics: dict, figdir: Path, made: Made) -> None:
@@ -252,9 +255,7 @@ def make_all(
     made = Made(runs=all_runs, left_out=left_out)
     _paper_figures(runs, figdir, made)
     metrics = _all_metrics(all_runs, metrics_of or capture_metrics)
-    _protocol_tables(all_runs, metrics, figdir, made)
-    _media_tables(all_runs, metrics, figdir, made)
-    _middleware_tables(all_runs, metrics, figdir, made)
+    _study_tables(all_runs, metrics, figdir, made)
     _routing_figures(runs, metrics, figdir, made)
     made.files += collect_paths(runs, figdir / "paths")
     return made

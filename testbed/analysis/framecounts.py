@@ -23,9 +23,11 @@ from dataclasses import dataclass, field
 
 from testbed.analysis import relaylag
 from testbed.analysis.pcapread import Frame
+from topology.protocols import AODV_PORT, REGISTRY
 
-# none and oracle send no control traffic: anything on the AODV port would be counted.
-CONTROL_PORTS = {"aodv": 654, "babel": 6696, "batman": 4305, "none": 654, "oracle": 654}
+# Each protocol's control port (topology.protocols; none and oracle send no control traffic:
+# anything on the AODV port would be counted).
+CONTROL_PORTS = {p.name: p.control_port for p in REGISTRY.values()}
 AODV_TYPES = {1: "RREQ", 2: "RREP", 3: "RERR", 4: "RREP-ACK"}
 BROADCAST = "255.255.255.255"
 
@@ -123,7 +125,7 @@ def _robot_counts(frames: list[Frame], addr: str, port: int, traffic: _Traffic) 
                 r["control_tx_packets"] += 1
                 r["control_tx_bytes"] += f.length
                 r["control_tx_payload_bytes"] += max(0, (f.udp_len or 8) - 8)
-                if port == CONTROL_PORTS["aodv"]:
+                if port == AODV_PORT:
                     r["aodv_tx_by_type"][_aodv_kind(f)] += 1
             segment = f.tcp_len and f.tcp_seq is not None and f.ip_proto == 6  # (seq: a match)
             if f.ip_src == addr and segment and f.ip_dst != addr:

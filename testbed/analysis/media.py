@@ -39,7 +39,7 @@ import statistics
 from dataclasses import dataclass, field, fields
 
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE, MeanCI
+from testbed.analysis.rows import INLINE, MeanCI, Measures
 from testbed.analysis.runs import FinishedRun
 from topology.spec import NS3_WIFI as WIFI
 from topology.spec import VETH
@@ -137,7 +137,7 @@ class MediaRun:
 
 
 @dataclass(frozen=True)
-class MediaCompared:
+class MediaCompared(Measures):
     """The COMPARED measures of a point: each one's mean and 95% interval."""
 
     steps: MeanCI
@@ -146,13 +146,6 @@ class MediaCompared:
     control_pkts_per_robot_s: MeanCI
     control_bytes_per_robot_s: MeanCI
     control_airtime_share: MeanCI
-
-    def of(self, key: str) -> MeanCI:
-        """One measure, by a name of COMPARED."""
-        if key not in COMPARED_KEYS:
-            raise KeyError(key)
-        value: MeanCI = getattr(self, key)
-        return value
 
 
 @dataclass(frozen=True)
@@ -200,10 +193,6 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
     c = run.config
     m = metrics or {}
     scale = run.time_scale_ran
-
-    def per_robot_s(key: str) -> float | None:  # the display robot transmits too
-        return run.per_robot_second(m.get(key), m.get("duration_s"), c.robots + 1)
-
     ch = run.channel
     raw = m.get("delay_raw_ms_median")
     return MediaRun(
@@ -215,8 +204,8 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
         steps=run.exploration_steps,
         pdf=m.get("pdf"),
         delay_ms=m["delay_ms_median"] * scale if m.get("delay_ms_median") is not None else None,
-        control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
-        control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+        control_pkts_per_robot_s=run.captured_per_robot_s(m, "control_tx_packets"),
+        control_bytes_per_robot_s=run.captured_per_robot_s(m, "control_tx_bytes"),
         control_airtime_share=_control_airtime_share(run, m) if metrics else None,
         channel_airtime_share=ch.airtime_share if ch else None,
         channel_retry_rate=ch.retry_rate if ch else None,
@@ -250,6 +239,13 @@ def point_rows(per_run: list[MediaRun]) -> list[MediaPoint]:
         out.append(MediaPoint(*key, len(items), compared, ChannelMeans(**means),
                               sum(bool(i.delay_lag_corrected) for i in items)))  # fmt: skip
     return out
+
+
+def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[MediaRun], list[MediaPoint]]:
+    """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
+    id's pcapmetrics (or None)."""
+    per_run = [run_row(r, metrics.get(r.run_id)) for r in runs if r.usable]
+    return per_run, point_rows(per_run)
 
 
 def ci(row: MediaPoint, key: str) -> tuple[float, float, float] | None:

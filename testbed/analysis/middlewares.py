@@ -52,7 +52,7 @@ from dataclasses import dataclass, field, fields
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
 from node.messaging import MIDDLEWARES
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE, MeanCI
+from testbed.analysis.rows import INLINE, MeanCI, Measures
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.verdictwords import FAILS, HOLDS, TOO_FEW
 from testbed.files.failures import MIDRUN, NONE
@@ -119,7 +119,7 @@ class MiddlewareRun:
 
 
 @dataclass(frozen=True)
-class MiddlewareMeans:
+class MiddlewareMeans(Measures):
     """The MEANS of a point: each one's mean over its runs with its 95% interval."""
 
     steps: MeanCI
@@ -131,13 +131,6 @@ class MiddlewareMeans:
     blocked_max_s: MeanCI
     air_bytes_per_robot_s: MeanCI
     air_own_share: MeanCI
-
-    def of(self, key: str) -> MeanCI:
-        """One measure, by a name of MEANS."""
-        if key not in MEANS_KEYS:
-            raise KeyError(key)
-        value: MeanCI = getattr(self, key)
-        return value
 
 
 @dataclass(frozen=True)

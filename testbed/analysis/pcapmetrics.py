@@ -10,9 +10,10 @@ were *transmitted* by the robot (its own traffic and what it forwards); the rest
 
 `compute` is pure (frames in, numbers out) and defines the metrics:
 
-- routing overhead: routing control packets transmitted (UDP port 654 for AODV, 6696 for
-  babel), counted once per transmission at the transmitter, so a rebroadcast RREQ counts at
-  every robot that rebroadcasts it; as a fraction of all frames transmitted, and in bytes
+- routing overhead: routing control packets transmitted (on the protocol's UDP port in
+  topology.protocols: 654 for AODV, 6696 for babel, 4305 for batman), counted once per
+  transmission at the transmitter, so a rebroadcast RREQ counts at every robot that
+  rebroadcasts it; as a fraction of all frames transmitted, and in bytes
   (frame bytes against all frame bytes). AODV messages are also counted by type (RREQ, RREP,
   HELLO = RREP broadcast with IP TTL 1, RERR, RREP-ACK) and in UDP payload bytes, the unit
   the daemon's own counters use.
@@ -245,8 +246,12 @@ def run_metrics(
     middleware = run.config.middleware if run is not None else DEFAULT_MIDDLEWARE
     rtps_read = MIDDLEWARE_FRAMING.get(middleware) in DATAGRAM_FRAMINGS
     captures = read_pcaps(pcaps, udp_payload=True) if rtps_read else read_pcaps(pcaps)
+    port = CONTROL_PORTS.get(routing)
+    if port is None:  # not AODV's port in silence: a routing no entry of topology.protocols has
+        log.warning("%s: routing %r is not a registered protocol: no control traffic counted",
+                    run_dir, routing)  # fmt: skip
     metrics = compute(
-        captures, {k: robot_address(k) for k in pcaps}, CONTROL_PORTS.get(routing, 654),
+        captures, {k: robot_address(k) for k in pcaps}, port or 0,
         lags=lags, middleware=middleware,
     )  # fmt: skip
     metrics["pcaps"] = stamp

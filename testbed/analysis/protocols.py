@@ -22,11 +22,13 @@ from pathlib import Path
 
 from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
-from testbed.analysis.rows import INLINE
+from testbed.analysis.rows import INLINE, Measures
 from testbed.analysis.runs import FinishedRun
+from topology.protocols import REGISTRY
 from topology.spec import ROUTINGS, VETH
 
-PROACTIVE = ("babel", "batman")
+# The proactive protocols, which the rule sets against AODV (topology.protocols).
+PROACTIVE = tuple(p.name for p in REGISTRY.values() if p.proactive)
 # How far the AODV control packets counted in the captures may be from the daemons' own
 # counters and still agree (here and in the report's check of every run).
 DAEMON_AGREEMENT = 0.01
@@ -40,7 +42,7 @@ CHOICE_RULE = (
 
 
 @dataclass(frozen=True)
-class ProtocolMeasures:
+class ProtocolMeasures(Measures):
     """What the comparison measures of a run, or averages over a point's runs (METRICS)."""
 
     steps: float | None
@@ -97,10 +99,7 @@ class ProtocolPoint:
 
     def measure(self, key: str) -> float | None:
         """One of METRICS, by name."""
-        if key not in METRICS:
-            raise KeyError(key)
-        value: float | None = getattr(self.measures, key)
-        return value
+        return self.measures.of(key)
 
 
 def _map_delivery(run: FinishedRun) -> float | None:
@@ -131,10 +130,6 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> Prot
     """One run's numbers (`metrics`: its pcapmetrics, or None)."""
     c = run.config
     m = metrics or {}
-
-    def per_robot_s(key: str) -> float | None:  # the display robot transmits too
-        return run.per_robot_second(m.get(key), m.get("duration_s"), c.robots + 1)
-
     return ProtocolRun(
         run=run.run_id,
         routing=c.routing,
@@ -144,8 +139,8 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> Prot
         robots=c.robots,
         measures=ProtocolMeasures(
             steps=steps,
-            control_pkts_per_robot_s=per_robot_s("control_tx_packets"),
-            control_bytes_per_robot_s=per_robot_s("control_tx_bytes"),
+            control_pkts_per_robot_s=run.captured_per_robot_s(m, "control_tx_packets"),
+            control_bytes_per_robot_s=run.captured_per_robot_s(m, "control_tx_bytes"),
             pdf=m.get("pdf"),
             delay_ms=m.get("delay_ms_median"),
             map_delivery=_map_delivery(run),
@@ -179,6 +174,13 @@ def point_rows(per_run: list[ProtocolRun]) -> list[ProtocolPoint]:
             steps_ci_low=ci[1] if ci else None, steps_ci_high=ci[2] if ci else None,
         ))  # fmt: skip
     return out
+
+
+def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[ProtocolRun], list[ProtocolPoint]]:
+    """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
+    id's pcapmetrics (or None)."""
+    per_run = [run_row(r, r.exploration_steps, metrics.get(r.run_id)) for r in runs if r.usable]
+    return per_run, point_rows(per_run)
 
 
 def choice_holds(point: dict[str, ProtocolPoint]) -> tuple[bool | None, str]:
@@ -249,7 +251,7 @@ def _control_check(rows: list[ProtocolPoint]) -> list[str]:
             lines.append(
                 f"- {p}: its daemon keeps no count of what it sends, so its captured control "
                 "traffic cannot be checked against the daemon; it is counted on its port "
-                f"({'UDP 6696' if p == 'babel' else 'UDP 4305'}) at each transmitter."
+                f"(UDP {REGISTRY[p].control_port}) at each transmitter."
             )
     oracle = [
         x
@@ -261,7 +263,8 @@ def _control_check(rows: list[ProtocolPoint]) -> list[str]:
             "- oracle: no control packet in its captures, as there must be none."
             if not any(oracle)
             else f"- oracle: its captures hold up to {max(oracle):.2f} packets per robot per "
-            "second on UDP 654, which nothing of the oracle sends: check the runs."
+            f"second on UDP {REGISTRY['oracle'].control_port}, which nothing of the oracle "
+            "sends: check the runs."
         )
     return ["Control traffic in the captures against what the protocols sent:", "", *lines]
 

@@ -33,10 +33,7 @@ from testbed.analysis import (
     decidesweep,
     figures,
     htmlreport,
-    media,
-    middlewares,
     pcapmetrics,
-    protocols,
     runreport,
     sweepinfo,
 )
@@ -113,9 +110,8 @@ def render(sweep_dir: Path, made: Made, vs: list[Verdict], stage2: list[str] | N
     out += [f"- {rule}" for rule in RULES] + [""]
     out += stage2 or []
     out += ablation.section(tables.fig2_all, tables.ablation_thirds)
-    out += protocols.section(tables.protocols)
-    out += media.section(tables.media)
-    out += middlewares.section(tables.middlewares)
+    for study in figures.STUDIES:
+        out += study.section(getattr(tables, study.name))
     out += ["## Figures", ""]
     for name, data, caption in (
         ("fig2a", "fig2", "Fig. 2(a): exploration steps against team size, first laser range"),

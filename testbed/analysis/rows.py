@@ -7,12 +7,14 @@ the records several tables share are here: `Spread` (a set of runs' n, mean, ran
 deviation and 95% interval of the mean, as Fig. 2, the ablation and the verdicts read it),
 `MeanRange` (mean, min and max over a point's runs, as the routing and impairment figures
 draw it) and `MeanCI` (a measure's mean and its 95% interval, as the media and middleware
-comparisons judge it). `columns(row)` names a row's cells in its fields' declared order: a
-field holding a record is spelled out as the record's own columns, prefixed with the
-field's name (`pdf` -> `pdf_mean`, `pdf_min`, `pdf_max`) unless it is declared `INLINE` (no
-prefix); a record's field declared `BARE` is named by the prefix alone (`steps`,
-`steps_ci_low`, `steps_ci_high`); a mapping declared inline adds its items as they are (the
-plan causes a run had beyond the usual three).
+comparisons judge it); `named` is how a row gives one of its measures by name, and
+`Measures` a record of them all.
+`columns(row)` names a row's cells in its fields' declared order: a field holding a record
+is spelled out as the record's own columns, prefixed with the field's name (`pdf` ->
+`pdf_mean`, `pdf_min`, `pdf_max`) unless it is declared `INLINE` (no prefix); a record's
+field declared `BARE` is named by the prefix alone (`steps`, `steps_ci_low`,
+`steps_ci_high`); a mapping declared inline adds its items as they are (the plan causes a
+run had beyond the usual three).
 """
 
 from __future__ import annotations
@@ -106,6 +108,23 @@ class MeanCI:
         if self.mean is None or self.ci_low is None or self.ci_high is None:
             return None
         return self.mean, self.ci_low, self.ci_high
+
+
+class Measures:
+    """A frozen record whose fields are a row's measures: `of(key)` gives one by its name
+    (KeyError for any other)."""
+
+    def of(self, key: str) -> Any:
+        record: Any = self  # a dataclass: every subclass is one
+        return named(self, key, [f.name for f in dataclasses.fields(record)])
+
+
+def named(record: Any, key: str, keys: Sequence[str]) -> Any:
+    """The record's field `key`, one of `keys` (a row's measures, as a table names them);
+    KeyError for any other name, a field that is no measure included."""
+    if key not in keys:
+        raise KeyError(key)
+    return getattr(record, key)
 
 
 def columns(row: Any, prefix: str = "") -> dict[str, Any]:

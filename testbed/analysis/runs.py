@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -65,6 +66,12 @@ class FinishedRun(RunResult):
     @property
     def usable(self) -> bool:
         return self.status in USABLE and (self.faithful is not False or self.count_unfaithful)
+
+    def captured_per_robot_s(self, metrics: Mapping, key: str) -> float | None:
+        """A count of the run's capture metrics (pcapmetrics' `key`) per transmitting robot
+        (the display robot transmits too) per second of robot time; None when missing."""
+        total, wall = metrics.get(key), metrics.get("duration_s")
+        return self.per_robot_second(total, wall, self.config.robots + 1)
 
     @classmethod
     def of(cls, result: RunResult, run_dir: Path, channel: ChannelRecord | None = None):

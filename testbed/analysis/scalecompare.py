@@ -45,6 +45,7 @@ from pathlib import Path
 from common.errors import UsageError
 from common.jsonfile import write_atomic
 from testbed.analysis import claimcompare, media, pcapmetrics, stats
+from testbed.analysis.rows import named
 from testbed.analysis.runs import FinishedRun, ResultError, load_runs
 
 # (key, name, format)
@@ -95,10 +96,7 @@ class ScaleRun:
 
     def measure(self, key: str) -> float | None:
         """One of MEASURES, by name."""
-        if key not in MEASURE_KEYS:
-            raise KeyError(key)
-        value: float | None = getattr(self, key)
-        return value
+        return named(self, key, MEASURE_KEYS)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from common.jsonfile import write_atomic
-from testbed.analysis.rows import INLINE, MeanRange, Spread, columns
+from testbed.analysis.rows import INLINE, MeanRange, Measures, Spread, columns, named
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
 from topology.spec import VETH
 
@@ -141,7 +141,7 @@ class RoutingRun:
 
 
 @dataclass(frozen=True)
-class RoutingMeans:
+class RoutingMeans(Measures):
     """Each routing metric's mean and range over a point's runs (ROUTING_METRICS, then the
     emulated delay)."""
 
@@ -150,13 +150,6 @@ class RoutingMeans:
     delay_ms_median: MeanRange
     throughput_bps: MeanRange
     delay_ms_median_emulated: MeanRange
-
-    def of(self, metric: str) -> MeanRange:
-        """One metric's record, by a name of ROUTING_METRICS."""
-        if metric not in ROUTING_FIELDS:
-            raise KeyError(metric)
-        value: MeanRange = getattr(self, metric)
-        return value
 
 
 @dataclass(frozen=True)
@@ -197,10 +190,7 @@ class ImpairmentRow:
 
     def of(self, metric: str) -> MeanRange:
         """`steps` or `pdf`."""
-        if metric not in IMPAIRMENT_METRICS:
-            raise KeyError(metric)
-        value: MeanRange = getattr(self, metric)
-        return value
+        return named(self, metric, IMPAIRMENT_METRICS)
 
 
 ROUTING_FIELDS = tuple(f.name for f in fields(RoutingMeans))

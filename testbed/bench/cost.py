@@ -52,12 +52,15 @@ from testbed.bench.common import busiest_processes, write
 from testbed.files import robotfile
 from testbed.files.resultfile import RunResult
 from testbed.files.robotfile import RobotStats
+from topology.protocols import REGISTRY
 
 RUNS = 3
 ROBOTS = ("default", "python", "cpp")  # `testbed run --robot` (auto: "default")
 DAEMONS = ("default", "python", "cpp")  # `testbed run --aodv-daemon`
-# The routing daemons started as programs (the Python AODV daemons are forked, titled "rK aodv").
-ROUTING_PROGRAMS = ("babeld", "batmand", "tb-aodv")
+# The routing daemons started as programs (the Python AODV daemons are forked, titled "rK aodv"),
+# and the titles of forked ones: from topology.protocols.
+ROUTING_PROGRAMS = tuple(x for p in REGISTRY.values() if p.daemon for x in p.daemon.programs)
+ROUTING_TITLES = tuple(f" {p.name}" for p in REGISTRY.values() if p.daemon)
 ROUTING_TARGET_MS = 0.02  # issue 53: the routing daemons' CPU per robot-step, ten robots
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 SAMPLE_S = 0.05
@@ -131,7 +134,7 @@ def _kind(pid: int, tid: int, pcomm: str, root: int) -> str:
         return "robots"
     if pcomm.endswith(" display"):
         return "display"
-    if pcomm.endswith((" aodv", " babel", " batman")) or pcomm in ROUTING_PROGRAMS:
+    if pcomm.endswith(ROUTING_TITLES) or pcomm in ROUTING_PROGRAMS:
         return "routing"
     if pcomm == "forkserver" or pcomm.startswith("python"):
         return "fork servers"

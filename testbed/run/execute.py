@@ -302,11 +302,10 @@ class Run:
         routes = KernelRoutes(net.name, self.n)
         stack.callback(routes.close)
         try:
-            stats = []
-            if self.cfg.routing == "aodv":
-                from topology.routing import aodv_stats_file
+            from topology.routing import stats_file
 
-                stats = [aodv_stats_file(k, net.state_dir) for k in range(1, self.n + 2)]
+            files = (stats_file(self.cfg.routing, k, net.state_dir) for k in range(1, self.n + 2))
+            stats = [f for f in files if f]  # its daemons' statistics (topology.protocols)
             events = RobotEvents(
                 {k: layout.robot_events(prep.out, k) for k in range(1, self.n + 1)}
             )
@@ -391,10 +390,10 @@ class Run:
     def _keep_routing_files(self, net) -> None:
         """Stop the routing daemons (they write their final statistics and logs as they stop)
         and copy those into the run directory before the testbed goes away."""
-        from topology.routing import keep_daemon_files
+        from topology.routing import has_daemon, keep_daemon_files
 
         routing = self.cfg.routing
-        if routing not in ("none", "oracle"):  # oracle: no daemon (topology.oracle)
+        if has_daemon(routing):  # none and the oracle run none (topology.protocols)
             net.stop(routing)
             keep_daemon_files(routing, range(1, self.n + 2), net.state_dir,
                               self.prep.path("routing"), self.prep.path(routing))  # fmt: skip

@@ -248,3 +248,23 @@ def test_path_pictures_have_start_markers_a_scale_bar_and_names_inside_the_frame
     pathsfig.plt.close(fig)
     figures.collect_paths([rec], tmp_path / "out")
     assert (tmp_path / "out" / f"{run.run_id}.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_every_study_has_its_sweep_its_tables_and_its_section():
+    """figures.STUDIES, the one list of the comparisons: each names a shipped sweep file,
+    has the two Tables fields it fills, and the report renders its section from them."""
+    import dataclasses
+    import inspect
+    from pathlib import Path
+
+    from testbed.analysis import figures, report
+
+    fields = {f.name for f in dataclasses.fields(figures.Tables)}
+    experiments = Path(figures.__file__).resolve().parents[1] / "experiments"
+    for s in figures.STUDIES:
+        assert (experiments / s.sweep).is_file(), s.sweep
+        assert {s.name, f"{s.name}_runs"} <= fields
+        assert s.section([]) == []  # nothing compared, no section
+        assert s.tables([], {}) == ([], [])
+    assert "figures.STUDIES" in inspect.getsource(report)
+    assert len({s.name for s in figures.STUDIES}) == len(figures.STUDIES)

@@ -16,9 +16,9 @@ from testbed.files.resultfile import RunResult
 PROJECT = ("common", "node", "topology", "aodv", "testbed")
 # Project modules loaded, packages' __init__ not counted (they hold a docstring or a path):
 # the type's four, common's bounded reader, paths and time-scale bounds, topology's constants
-# (spec, names); the analysis adds its run reader and the relay-lag file's, and the types of
-# medium.json and of the run directory's layout.
-BUDGET = {"resultfile": 9, "analysis.runs": 13}
+# (spec, names, the routing protocols' registry: data only); the analysis adds its run reader
+# and the relay-lag file's, and the types of medium.json and of the run directory's layout.
+BUDGET = {"resultfile": 10, "analysis.runs": 14}
 HEAVY = ("cv2", "numpy", "matplotlib", "http.server", "subprocess")
 
 # Prints the project modules loaded and the heavy ones, as JSON.

@@ -138,3 +138,22 @@ def test_the_measure_records_hold_the_measures_they_are_named_by():
     assert {k for k, _, _ in protocols.BESIDE_THE_RULE} <= set(protocols.METRICS)
     runs = {f.name for f in dataclasses.fields(scalecompare.ScaleRun)}
     assert set(scalecompare.MEASURE_KEYS) <= runs
+
+
+def test_a_row_gives_a_measure_by_name_and_refuses_any_other():
+    """`named` and `Measures.of`, the one accessor the rows' of()/measure() share: a measure
+    by its table's name, KeyError for a name that is no measure (a field such as `n`, a
+    method's name)."""
+    from testbed.analysis.media import MediaCompared
+    from testbed.analysis.rows import named
+
+    mc = MeanCI(2.0, 1.0, 3.0)
+    assert named(mc, "mean", ("mean", "ci_low")) == 2.0
+    for wrong in ("ci_high", "nope"):
+        with pytest.raises(KeyError):
+            named(mc, wrong, ("mean", "ci_low"))
+    compared = MediaCompared(*(MeanCI(float(i)) for i in range(6)))
+    assert compared.of("pdf") == MeanCI(1.0)
+    for wrong in ("of", "nope", "__class__"):
+        with pytest.raises(KeyError):
+            compared.of(wrong)
