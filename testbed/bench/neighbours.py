@@ -5,11 +5,13 @@ Theory of operation
 -------------------
 A shared machine (a CI virtual machine, a lab server) runs other work beside the testbed. Three
 neighbours stand for the usual kinds, each started before the run and stopped after it, each
-at a lower priority than the run's, as a polite neighbour would be:
+niced (NICE), as a polite neighbour would be:
 
 - `disk`: a writer that writes DISK_MB and syncs it, in a loop (dd with conv=fsync, niced);
 - `churn`: another testbed's network of CHURN_ROBOTS robots brought up and torn down in a
-  loop (`testbed net up` / `down`, niced: namespaces, veths, AODV daemons, their deletion);
+  loop (`testbed net up` / `down`, niced: namespaces, veths, AODV daemons, their deletion).
+  Its daemons' loops and kernel threads still take SCHED_RR 1, as every testbed's do (nice
+  does not reach a real-time policy): the run's own daemons share their priority with them;
 - `busy`: two niced busy loops, one a core.
 
 `none` is the same run with no neighbour. The run is a lone robot of seed S at time scale 5
@@ -17,8 +19,10 @@ at a lower priority than the run's, as a polite neighbour would be:
 steps and positions.csv as tests/data/lone-k5. The benchmark (`python -m testbed.bench
 neighbours`) runs each neighbour RUNS times and writes results/bench/neighbours.json: per
 neighbour, how many runs were exact and faithful, and the worst lateness of each kind of
-process (the world's step loop, the robot's plans and plan timers, the AODV daemons' HELLO
-and expiry timers, the display's frames) with the host stalls the world saw.
+process (the world's step loop, the robot's plans, plan timers and frame answers, each AODV
+daemon's HELLO and expiry timers while the robots stepped, the robot's daemon and the
+display's apart, the display's frames) with the host stalls the world saw; `worst` per
+neighbour. TESTBED_NEIGHBOURS_KINDS, _SEEDS, _DAEMON and _NAME measure a part (`run`).
 tests/integration/test_neighbours.py runs each neighbour once, at one seed, and asks for exact
 and faithful.
 """
@@ -52,6 +56,7 @@ TIME_SCALE = 5.0
 DATA = os.path.join(PROJECT_ROOT, "tests", "data", "lone-k5")
 STEPS = {1: 1901, 2: 1989, 3: 1964}  # a lone robot's steps at time scale 5 (the exactness test)
 RUNS = 3
+DAEMONS = ("auto", "cpp", "python")  # --aodv-daemon
 
 
 def _loop(argv_lines: list[str]) -> subprocess.Popen:
@@ -105,15 +110,16 @@ def neighbour(kind: str, scratch: str) -> Iterator[None]:
             subprocess.run([*testbed, "down", name], capture_output=True, check=False)
 
 
-def lone_run(seed: int, out: str, robot: str = "auto") -> dict:
-    """A lone robot of `seed` at TIME_SCALE into `out`: result.json's numbers that say how
-    late each kind of process was, and whether the run was exact."""
+def lone_run(seed: int, out: str, robot: str = "auto", aodv_daemon: str = "auto") -> dict:
+    """A lone robot of `seed` at TIME_SCALE into `out` (`robot`, `aodv_daemon`: the run's
+    --robot and --aodv-daemon): result.json's numbers that say how late each kind of process
+    was, and whether the run was exact."""
     from testbed.run.execute import RunConfig, run
     from topology.network import destroy
 
     name = "nr" + uuid.uuid4().hex[:6]
     cfg = RunConfig(robots=1, comm_range=20.0, laser_range=2.0, seed=seed,
-                    time_scale=TIME_SCALE, robot=robot)  # fmt: skip
+                    time_scale=TIME_SCALE, robot=robot, aodv_daemon=aodv_daemon)  # fmt: skip
     try:
         r = run(cfg, out, name, progress=False).to_json()
     finally:
@@ -200,15 +206,19 @@ def _expected(seed: int) -> str | None:
         return f.read()
 
 
-def measure(kinds: tuple[str, ...] = KINDS, seeds: tuple[int, ...] = (1, 2, 3)) -> dict:
-    out: dict = {"time_scale": TIME_SCALE, "loadavg_before": os.getloadavg(), "neighbours": {}}
+def measure(
+    kinds: tuple[str, ...] = KINDS, seeds: tuple[int, ...] = (1, 2, 3), aodv_daemon: str = "auto"
+) -> dict:
+    out: dict = {"time_scale": TIME_SCALE, "loadavg_before": os.getloadavg(),
+                 "aodv_daemon_asked": aodv_daemon, "neighbours": {}}  # fmt: skip
     for kind in kinds:
         runs = []
         for seed in seeds[:RUNS]:
             scratch = tempfile.mkdtemp(prefix="bench-nb-")
             try:
                 with neighbour(kind, scratch):
-                    runs.append(lone_run(seed, os.path.join(scratch, "run")))
+                    runs.append(lone_run(seed, os.path.join(scratch, "run"),
+                                         aodv_daemon=aodv_daemon))  # fmt: skip
             finally:
                 shutil.rmtree(scratch, ignore_errors=True)
             print(f"  {kind} seed {seed}: {_line(runs[-1])}", flush=True)
@@ -279,15 +289,21 @@ def _env_list(name: str, default: tuple, known: tuple) -> tuple:
 def run() -> None:
     """`python -m testbed.bench neighbours`; TESTBED_NEIGHBOURS_KINDS (e.g. "disk,busy") and
     TESTBED_NEIGHBOURS_SEEDS (e.g. "2,3") choose fewer, TESTBED_NEIGHBOURS_NAME another file
-    name than neighbours (results/bench/NAME.json), so that a measurement in parts keeps each."""
+    name than neighbours (results/bench/NAME.json), so that a measurement in parts keeps each;
+    TESTBED_NEIGHBOURS_DAEMON (auto, cpp or python) the AODV daemon, for a comparison."""
     kinds = _env_list("TESTBED_NEIGHBOURS_KINDS", KINDS, KINDS)
     seeds = _env_list("TESTBED_NEIGHBOURS_SEEDS", tuple(STEPS), tuple(STEPS))
+    daemon = os.environ.get("TESTBED_NEIGHBOURS_DAEMON", "auto")
+    if daemon not in DAEMONS:
+        print(f"bench neighbours: TESTBED_NEIGHBOURS_DAEMON={daemon[:40]!r}: one of "
+              f"{', '.join(DAEMONS)}", file=sys.stderr)  # fmt: skip
+        sys.exit(2)
     name = os.environ.get("TESTBED_NEIGHBOURS_NAME", "neighbours")
     if not (name.replace("-", "").replace("_", "").isalnum() and name.isascii()):
         print(f"bench neighbours: TESTBED_NEIGHBOURS_NAME={name[:40]!r}: letters, digits, - "
               "and _ only", file=sys.stderr)  # fmt: skip
         sys.exit(2)
-    result = measure(kinds, seeds)
+    result = measure(kinds, seeds, daemon)
     print(f"bench neighbours: {write(name, result)}")
     print(json.dumps({k: {x: v[x] for x in v if x != "each"}
                       for k, v in result["neighbours"].items()}, indent=1))  # fmt: skip

@@ -22,6 +22,6 @@ SEED = 2
 def test_a_lone_robot_is_exact_and_faithful_beside_a_neighbour(tmp_path, kind):
     with neighbour(kind, str(tmp_path)):
         r = lone_run(SEED, str(tmp_path / "run"))
-    detail = {k: r[k] for k in ("steps", "world", "robot_process", "aodv", "display")}
+    detail = {k: r[k] for k in ("steps", "reason", "world", "robot_process", "aodv", "display")}
     assert r["faithful"], f"not faithful beside {kind}: {detail}"
     assert r["exact"], f"not exact beside {kind}: {detail}"

@@ -81,7 +81,8 @@ def test_worst_of_each_kind_over_runs():
 @pytest.mark.parametrize(
     "var, value",
     [("TESTBED_NEIGHBOURS_KINDS", "disk,floods"), ("TESTBED_NEIGHBOURS_KINDS", ","),
-     ("TESTBED_NEIGHBOURS_SEEDS", "2,7"), ("TESTBED_NEIGHBOURS_NAME", "../x")],
+     ("TESTBED_NEIGHBOURS_SEEDS", "2,7"), ("TESTBED_NEIGHBOURS_NAME", "../x"),
+     ("TESTBED_NEIGHBOURS_DAEMON", "cpp,python"), ("TESTBED_NEIGHBOURS_DAEMON", "rust")],
 )  # fmt: skip
 def test_bad_environment_exits_2(monkeypatch, capsys, var, value):
     monkeypatch.setenv(var, value)
@@ -93,13 +94,17 @@ def test_bad_environment_exits_2(monkeypatch, capsys, var, value):
     assert err.startswith(f"bench neighbours: {var}=") and "\n" not in err
 
 
-def test_environment_chooses_kinds_and_seeds(monkeypatch):
+def test_environment_chooses_kinds_seeds_and_daemon(monkeypatch):
     monkeypatch.setenv("TESTBED_NEIGHBOURS_KINDS", "busy, disk")
     monkeypatch.setenv("TESTBED_NEIGHBOURS_SEEDS", "3")
+    monkeypatch.setenv("TESTBED_NEIGHBOURS_DAEMON", "python")
     asked = []
-    monkeypatch.setattr(
-        nb, "measure", lambda kinds, seeds: asked.append((kinds, seeds)) or {"neighbours": {}}
-    )
+
+    def measure(kinds, seeds, daemon):
+        asked.append((kinds, seeds, daemon))
+        return {"neighbours": {}}
+
+    monkeypatch.setattr(nb, "measure", measure)
     monkeypatch.setattr(nb, "write", lambda name, data: name)
     nb.run()
-    assert asked == [(("busy", "disk"), (3,))]
+    assert asked == [(("busy", "disk"), (3,), "python")]
