@@ -38,12 +38,33 @@ that tail instead of waiting for it (about a second a run: a quarter of a run's 
 cost). A run that was late while it overlapped a tail turns the overlap off for its team
 size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 9); with
 --view there is none (the live page's run holds its port to its exit), and while more than
---jobs tails go on, tails count as in flight again. The queue is served first-fit: the
-first waiting run that fits starts. What happens when a run misses step deadlines (the
-concurrency backs off, a team size's time scale goes down and up again, a run is redone) is
-decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only applies them. The
-limits, the time scales and which run fits next are the sweep's schedule
-(testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops the runs.
+--jobs tails go on, tails count as in flight again.
+
+Pre-start: while exactly one run steps, the next run that would fit once that one is in its
+tail starts beside it already (Schedule.prestart_next) with `--start-when DIR/logs/R.gate`:
+it prepares, brings its network up, starts and connects its processes and then waits, its
+step clock not started, until the sweep creates that file, which it does when the stepping
+run's steps are over (its steps-over file) or it exited. Its set-up (about 1.2 s a run in the
+paper sweep: the child's start, prepare(), network up, processes ready) is then off the
+critical path, and its lateness and fidelity mean what they always did: its clock starts at
+the gate (result.json's wall_parts_s.gate_wait says how long it waited). A run that stepped
+while the next one pre-started beside it and was late turns pre-start off beside its team
+size until enough of its runs came out clean (testbed.sweep.policy, rules 3a and 9a); with
+--view or --no-prestart there is none. A gate that stays shut for --start-timeout (set from
+the stepping run's own step budget: it hangs) ends the waiting run with status
+`gate_timeout`; the sweep redoes it, not counted as an attempt, and pre-starts no other run
+beside the hung one. On SIGINT a waiting run tears its testbed down as any run does. A run
+pre-started at a time scale that the outcome of the run before it changed (that run exited
+before its steps-over file, so the gate was still shut) is stopped at its gate and started
+again at the new scale, not counted as an attempt; once its gate is open it keeps its scale,
+as a run started during a tail does.
+
+The queue is served first-fit: the first waiting run that fits starts. What happens when a
+run misses step deadlines (the concurrency backs off, a team size's time scale goes down and
+up again, a run is redone) is decided by the pure rules of testbed.sweep.policy;
+`Sweep._finish` only applies them. The limits, the time scales and which run fits next are
+the sweep's schedule (testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops
+the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -95,6 +116,11 @@ RUN_PRELOAD = [
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
 GRACE_INT = 30.0
 GRACE_TERM = 10.0
+# Seconds a pre-started run waits at its start gate beyond the step budget of the run before
+# it (its steps at its time scale, GATE_SLACK times over): then that run hangs.
+GATE_MARGIN_S = 120.0
+GATE_SLACK = 3.0
+GATE_TIMEOUT_STATUS = "gate_timeout"  # result.json's status of a run whose gate timed out
 CALIBRATION_STEPS = 300  # steps of each --calibrate trial (30 s of robot time)
 _PR_SET_PDEATHSIG = 1
 
@@ -151,6 +177,13 @@ class _Child:
     cpu_seen: float = 0.0  # the most estimated cores in flight while this one ran
     tail: bool = False  # its steps are done (it created its --steps-over file)
     overlapped: bool = False  # another run's tail overlapped its set-up or steps
+    gated: bool = False  # pre-started: its steps wait for the sweep to create its gate
+    awaits: str = ""  # pre-started: the run whose steps' end opens its gate
+    gate_wait: float = 0.0  # pre-started: seconds from its start to its gate's opening
+    prestarted_beside: bool = False  # the next run was pre-started beside its steps
+    no_prestart_beside: bool = False  # a run pre-started beside it timed out at its gate
+    config: RunConfig | None = None  # what it was started with (its time scale)
+    cancelled: bool = False  # pre-started at a time scale the policy changed since: stopped
 
 
 class Sweep:
@@ -168,6 +201,7 @@ class Sweep:
         progress_stream=None,
         calibrate: bool = False,
         view: str | None = None,
+        prestart: bool = True,
     ):
         self.spec = spec
         self.runs = runs
@@ -181,6 +215,8 @@ class Sweep:
         # its exit: no run starts during another's tail then).
         self.view = view
         self.schedule.tails_wait = view is not None
+        self.schedule.prestart = prestart  # --no-prestart: no run is pre-started
+        self.children: dict[str, _Child] = {}  # the runs in flight, by id (run())
         self.view_owner: str | None = None
         self.netem = netem
         self.sweep_file = sweep_file
@@ -286,11 +322,13 @@ class Sweep:
         log_path: Path,
         title: str,
         steps_over: Path | None = None,
+        gate: tuple[Path, float] | None = None,
     ) -> tuple[subprocess.Popen | Forked, BinaryIO]:
         """Start one `testbed run` of `config` into `rdir` (removed first if there): from
         the run server, or the stand-in command with the death signal towards the sweep;
-        with `--steps-over steps_over` when given (removed first if there). Returns
-        (process, its open log file, which the caller closes)."""
+        with `--steps-over steps_over` when given (removed first if there), and pre-started
+        with `--start-when FILE --start-timeout S` when `gate` is (FILE, S) (FILE removed
+        first). Returns (process, its open log file, which the caller closes)."""
         if rdir.exists():
             shutil.rmtree(rdir)
         log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -298,6 +336,9 @@ class Sweep:
         if steps_over is not None:
             steps_over.unlink(missing_ok=True)
             extra = ["--steps-over", str(steps_over)]
+        if gate is not None:
+            gate[0].unlink(missing_ok=True)
+            extra += ["--start-when", str(gate[0]), "--start-timeout", f"{gate[1]:.0f}"]
         flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC
         log_file = os.fdopen(os.open(log_path, flags, 0o644), "wb")  # the caller closes it
         proc: subprocess.Popen | Forked
@@ -323,7 +364,9 @@ class Sweep:
         if result:
             self.schedule.learn(result)
 
-    def _start(self, run: PlannedRun) -> _Child:
+    def _start(self, run: PlannedRun, after: _Child | None = None) -> _Child:
+        """Start `run`; pre-started, its gate opening when `after`'s steps are over, when
+        `after` is given."""
         config = self.schedule.scaled(run)
         estimate = self.schedule.estimate(run)
         if self.view and self.view_owner is None:
@@ -332,6 +375,7 @@ class Sweep:
         proc, log_file = self._spawn(
             config, run_dir(self.out, run.run_id), self.out / "logs" / f"{run.run_id}.log",
             run.run_id, self._steps_over_file(run.run_id),
+            None if after is None else (self._gate_file(run.run_id), self._gate_timeout(after)),
         )  # fmt: skip
         self.status[run.run_id] = {
             "status": "running",
@@ -343,7 +387,55 @@ class Sweep:
         child = _Child(run, proc, time.monotonic(), self.jobs, log_file, load=run_load(run),
                        cores=estimate)  # fmt: skip
         child.load_seen, child.cpu_seen = child.load, child.cores
+        child.config = config
+        if after is not None:
+            child.gated, child.awaits = True, after.run.run_id
+            after.prestarted_beside = True
+            self.status[run.run_id]["prestarted"] = True
         return child
+
+    def _gate_file(self, run_id: str) -> Path:
+        """The file that opens pre-started run `run_id`'s steps (`testbed run --start-when`)."""
+        return self.out / "logs" / f"{run_id}.gate"
+
+    def _gate_timeout(self, after: _Child) -> float:
+        """How long a run pre-started beside `after` waits at its gate: `after`'s step budget
+        (its steps at its time scale) GATE_SLACK times over, plus GATE_MARGIN_S."""
+        config = self.schedule.scaled(after.run)
+        steps_s = config.max_steps * 0.1 / max(config.time_scale, 1e-3)
+        return GATE_SLACK * steps_s + GATE_MARGIN_S
+
+    def _open_gates(self, children: dict[str, _Child]) -> None:
+        """Create the gate of each pre-started run whose awaited run's steps are over (or it
+        exited): its steps start now, beside the runs in flight then, as a run started now
+        would (`shared`, the loads seen; `overlapped` by the tail that opened it)."""
+        for child in children.values():
+            ahead = children.get(child.awaits)
+            if not child.gated or (ahead is not None and not ahead.tail):
+                continue
+            if ahead is None and child.config != self.schedule.scaled(child.run):
+                # What the run before it came to changed its time scale: it is stopped (its
+                # testbed torn down) and started again at the new one (`_finish`).
+                if not child.cancelled:
+                    child.cancelled = True
+                    with contextlib.suppress(ProcessLookupError):
+                        child.proc.send_signal(signal.SIGINT)
+                continue
+            try:
+                self._gate_file(child.run.run_id).touch()
+            except OSError as e:
+                log.warning("cannot open the start gate of %s: %s", child.run.run_id, e)
+                continue
+            child.gated = False
+            child.gate_wait = time.monotonic() - child.started
+            flying = [c for c in self.schedule.beside(child.run, children) if not c.gated]
+            load = sum(c.load for c in flying)
+            cores = sum(c.cores for c in flying)
+            for c in flying:
+                c.shared = c.shared or len(flying) > 1
+                c.load_seen = max(c.load_seen, load)
+                c.cpu_seen = max(c.cpu_seen, cores)
+            self._write_state()
 
     def _steps_over_file(self, run_id: str) -> Path:
         """The file run `run_id` creates when its steps are done (`testbed run --steps-over`)."""
@@ -353,6 +445,7 @@ class Sweep:
         """Record a child that exited; returns the event line for the progress display."""
         child.log_file.close()
         self._steps_over_file(child.run.run_id).unlink(missing_ok=True)
+        self._gate_file(child.run.run_id).unlink(missing_ok=True)
         if self.view_owner == child.run.run_id:
             self.view_owner = None
         run = child.run
@@ -362,7 +455,19 @@ class Sweep:
         st["exit_status"] = child.proc.returncode
         if child.overlapped:  # another run's tail overlapped its set-up or steps
             st["overlapped"] = True
+        if child.prestarted_beside:  # the next run was pre-started beside its steps
+            st["prestarted_beside"] = True
         st["wall_time_s"] = round(wall, 1)
+        if child.cancelled:
+            # Stopped at its gate (`_open_gates`): not an attempt; it goes next, after the run
+            # it waited for if that one is redone.
+            st.pop("prestarted", None)
+            st["status"], st["attempts"] = "pending", st["attempts"] - 1
+            first = queue and queue[0].run_id == child.awaits
+            queue.insert(1 if first else 0, run)
+            return f"{run.run_id}: pre-started at a time scale changed since, starting it again"
+        if st.get("prestarted"):
+            st["gate_wait_s"] = round(child.gate_wait, 2)
         if not is_done(self.out, run.run_id):
             st["status"] = "failed"
             st["reason"] = _last_line(self.out / "logs" / f"{run.run_id}.log") or (
@@ -371,6 +476,15 @@ class Sweep:
             return f"{run.run_id}: FAILED ({st['reason']})"
         # None: unreadable, counted as saying nothing (the report names it)
         result = RunResult.read(run_dir(self.out, run.run_id))
+        if result is not None and result.status == GATE_TIMEOUT_STATUS:
+            # Its gate stayed shut: the run before it hangs. Redone, not counted as an
+            # attempt; no run is pre-started beside the hung one again.
+            ahead = self.children.get(child.awaits)
+            if ahead is not None:
+                ahead.no_prestart_beside = True
+            st["status"], st["attempts"] = "pending", st["attempts"] - 1
+            queue.appendleft(run)
+            return f"{run.run_id}: its start gate stayed shut ({result.status_detail}), redoing it"
         st["status"] = "done"
         st["result_status"] = result.status if result else None
         miss = result.deadline_miss_fraction if result else None
@@ -380,7 +494,7 @@ class Sweep:
             st["faithful"] = faithful
         self._measure(result, st)
         n = run.config.robots
-        self.progress.record(n, wall)
+        self.progress.record(n, wall - child.gate_wait)
         outcome = sweeppolicy.Outcome(
             robots=n,
             miss=miss,
@@ -388,6 +502,7 @@ class Sweep:
             miss_outside_stalls=result.deadline_miss_fraction_outside_stalls if result else None,
             shared=child.shared,
             overlapped=child.overlapped,
+            prestarted_beside=child.prestarted_beside,
             load_seen=child.load_seen,
             cpu_seen=child.cpu_seen,
             jobs_at_start=child.jobs_at_start,
@@ -481,7 +596,7 @@ class Sweep:
             self.status[rid] = {"status": "skipped", "reason": reason}
         self.progress.total = len(self.runs) - len(skipped)
         queue = deque(todo)
-        children: dict[str, _Child] = {}
+        children = self.children
         old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         if self.command is None and queue:
             self.forker = RunForker(label=str(self.out.resolve()))
@@ -492,6 +607,7 @@ class Sweep:
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
                 self.schedule.mark_tails(children, self._steps_over_file)
+                self._open_gates(children)  # before any other start: it was first in line
                 while queue and self.stop_signal is None:
                     run = self.schedule.next_fitting(queue, children)
                     if run is None:
@@ -509,13 +625,22 @@ class Sweep:
                         c.cpu_seen = max(c.cpu_seen, cores)
                     self._write_state()
                     self._show(queue)
+                pre = None
+                if self.stop_signal is None:
+                    pre = self.schedule.prestart_next(queue, children)
+                if pre is not None:
+                    run, ahead = pre
+                    children[run.run_id] = self._start(run, after=ahead)
+                    self._write_state()
+                    self._show(queue)
                 exited = [rid for rid, c in children.items() if c.proc.poll() is not None]
                 for rid in exited:
                     event = self._finish(children.pop(rid), queue)
                     self._write_state()
                     self._show(queue, event)
                 if not exited:
-                    time.sleep(0.1)
+                    # A shut gate is on the critical path: its opening is looked for sooner.
+                    time.sleep(0.01 if any(c.gated for c in children.values()) else 0.1)
             if self.stop_signal is not None:
                 self._stop_children(children, queue)
                 self._write_state()
