@@ -40,24 +40,8 @@ size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 
 --view there is none (the live page's run holds its port to its exit), and while more than
 --jobs tails go on, tails count as in flight again.
 
-Pre-start: while exactly one run steps, the next run that would fit once that one is in its
-tail starts beside it already (Schedule.prestart_next) with `--start-when DIR/logs/R.gate`:
-it prepares, brings its network up, starts and connects its processes and then waits, its
-step clock not started, until the sweep creates that file, which it does when the stepping
-run's steps are over (its steps-over file) or it exited. Its set-up (about 1.2 s a run in the
-paper sweep: the child's start, prepare(), network up, processes ready) is then off the
-critical path, and its lateness and fidelity mean what they always did: its clock starts at
-the gate (result.json's wall_parts_s.gate_wait says how long it waited). A run that stepped
-while the next one pre-started beside it and was late turns pre-start off beside its team
-size until enough of its runs came out clean (testbed.sweep.policy, rules 3a and 9a); with
---view or --no-prestart there is none. A gate that stays shut for --start-timeout (set from
-the stepping run's own step budget: it hangs) ends the waiting run with status
-`gate_timeout`; the sweep redoes it, not counted as an attempt, and pre-starts no other run
-beside the hung one. On SIGINT a waiting run tears its testbed down as any run does. A run
-pre-started at a time scale that the outcome of the run before it changed (that run exited
-before its steps-over file, so the gate was still shut) is stopped at its gate and started
-again at the new scale, not counted as an attempt; once its gate is open it keeps its scale,
-as a run started during a tail does.
+Pre-start: while exactly one run steps, the next one sets up beside it and waits at a start
+gate until that run's steps are over (testbed.sweep.prestart).
 
 The queue is served first-fit: the first waiting run that fits starts. What happens when a
 run misses step deadlines (the concurrency backs off, a team size's time scale goes down and
@@ -91,13 +75,16 @@ from common.errors import TestbedError
 from testbed.files import sweepstate
 from testbed.files.resultfile import RESULT_NAME, RunResult
 from testbed.files.runconfig import RunConfig
+from testbed.sweep import calibrate as sweepcalibrate
 from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
+from testbed.sweep import prestart
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
+from testbed.sweep.prestart import gate_file, gate_timeout
 from testbed.sweep.progress import Progress
 from testbed.sweep.rundir import is_done, plan_dict, run_argv, run_dir
-from testbed.sweep.schedule import Schedule
+from testbed.sweep.schedule import Schedule, note_sharing
 from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.state import is_alive, proc_start_time
 
@@ -116,12 +103,6 @@ RUN_PRELOAD = [
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
 GRACE_INT = 30.0
 GRACE_TERM = 10.0
-# Seconds a pre-started run waits at its start gate beyond the step budget of the run before
-# it (its steps at its time scale, GATE_SLACK times over): then that run hangs.
-GATE_MARGIN_S = 120.0
-GATE_SLACK = 3.0
-GATE_TIMEOUT_STATUS = "gate_timeout"  # result.json's status of a run whose gate timed out
-CALIBRATION_STEPS = 300  # steps of each --calibrate trial (30 s of robot time)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -375,7 +356,8 @@ class Sweep:
         proc, log_file = self._spawn(
             config, run_dir(self.out, run.run_id), self.out / "logs" / f"{run.run_id}.log",
             run.run_id, self._steps_over_file(run.run_id),
-            None if after is None else (self._gate_file(run.run_id), self._gate_timeout(after)),
+            None if after is None else (gate_file(self.out, run.run_id),
+                                        gate_timeout(self.schedule.scaled(after.run))),
         )  # fmt: skip
         self.status[run.run_id] = {
             "status": "running",
@@ -394,49 +376,6 @@ class Sweep:
             self.status[run.run_id]["prestarted"] = True
         return child
 
-    def _gate_file(self, run_id: str) -> Path:
-        """The file that opens pre-started run `run_id`'s steps (`testbed run --start-when`)."""
-        return self.out / "logs" / f"{run_id}.gate"
-
-    def _gate_timeout(self, after: _Child) -> float:
-        """How long a run pre-started beside `after` waits at its gate: `after`'s step budget
-        (its steps at its time scale) GATE_SLACK times over, plus GATE_MARGIN_S."""
-        config = self.schedule.scaled(after.run)
-        steps_s = config.max_steps * 0.1 / max(config.time_scale, 1e-3)
-        return GATE_SLACK * steps_s + GATE_MARGIN_S
-
-    def _open_gates(self, children: dict[str, _Child]) -> None:
-        """Create the gate of each pre-started run whose awaited run's steps are over (or it
-        exited): its steps start now, beside the runs in flight then, as a run started now
-        would (`shared`, the loads seen; `overlapped` by the tail that opened it)."""
-        for child in children.values():
-            ahead = children.get(child.awaits)
-            if not child.gated or (ahead is not None and not ahead.tail):
-                continue
-            if ahead is None and child.config != self.schedule.scaled(child.run):
-                # What the run before it came to changed its time scale: it is stopped (its
-                # testbed torn down) and started again at the new one (`_finish`).
-                if not child.cancelled:
-                    child.cancelled = True
-                    with contextlib.suppress(ProcessLookupError):
-                        child.proc.send_signal(signal.SIGINT)
-                continue
-            try:
-                self._gate_file(child.run.run_id).touch()
-            except OSError as e:
-                log.warning("cannot open the start gate of %s: %s", child.run.run_id, e)
-                continue
-            child.gated = False
-            child.gate_wait = time.monotonic() - child.started
-            flying = [c for c in self.schedule.beside(child.run, children) if not c.gated]
-            load = sum(c.load for c in flying)
-            cores = sum(c.cores for c in flying)
-            for c in flying:
-                c.shared = c.shared or len(flying) > 1
-                c.load_seen = max(c.load_seen, load)
-                c.cpu_seen = max(c.cpu_seen, cores)
-            self._write_state()
-
     def _steps_over_file(self, run_id: str) -> Path:
         """The file run `run_id` creates when its steps are done (`testbed run --steps-over`)."""
         return self.out / "logs" / f"{run_id}.steps-over"
@@ -445,7 +384,7 @@ class Sweep:
         """Record a child that exited; returns the event line for the progress display."""
         child.log_file.close()
         self._steps_over_file(child.run.run_id).unlink(missing_ok=True)
-        self._gate_file(child.run.run_id).unlink(missing_ok=True)
+        gate_file(self.out, child.run.run_id).unlink(missing_ok=True)
         if self.view_owner == child.run.run_id:
             self.view_owner = None
         run = child.run
@@ -458,14 +397,8 @@ class Sweep:
         if child.prestarted_beside:  # the next run was pre-started beside its steps
             st["prestarted_beside"] = True
         st["wall_time_s"] = round(wall, 1)
-        if child.cancelled:
-            # Stopped at its gate (`_open_gates`): not an attempt; it goes next, after the run
-            # it waited for if that one is redone.
-            st.pop("prestarted", None)
-            st["status"], st["attempts"] = "pending", st["attempts"] - 1
-            first = queue and queue[0].run_id == child.awaits
-            queue.insert(1 if first else 0, run)
-            return f"{run.run_id}: pre-started at a time scale changed since, starting it again"
+        if child.cancelled:  # stopped at its gate (testbed.sweep.prestart.open_gates)
+            return prestart.redo_cancelled(child, st, queue)
         if st.get("prestarted"):
             st["gate_wait_s"] = round(child.gate_wait, 2)
         if not is_done(self.out, run.run_id):
@@ -476,15 +409,8 @@ class Sweep:
             return f"{run.run_id}: FAILED ({st['reason']})"
         # None: unreadable, counted as saying nothing (the report names it)
         result = RunResult.read(run_dir(self.out, run.run_id))
-        if result is not None and result.status == GATE_TIMEOUT_STATUS:
-            # Its gate stayed shut: the run before it hangs. Redone, not counted as an
-            # attempt; no run is pre-started beside the hung one again.
-            ahead = self.children.get(child.awaits)
-            if ahead is not None:
-                ahead.no_prestart_beside = True
-            st["status"], st["attempts"] = "pending", st["attempts"] - 1
-            queue.appendleft(run)
-            return f"{run.run_id}: its start gate stayed shut ({result.status_detail}), redoing it"
+        if result is not None and result.status == prestart.GATE_TIMEOUT_STATUS:
+            return prestart.redo_shut(child, result.status_detail, st, queue, self.children)
         st["status"] = "done"
         st["result_status"] = result.status if result else None
         miss = result.deadline_miss_fraction if result else None
@@ -520,42 +446,6 @@ class Sweep:
         if d.redo:
             st["status"] = "pending"
             queue.appendleft(run)
-
-    def _calibrate(self, todo: list[PlannedRun]) -> None:
-        """Find each team size's time scale on this machine before its first run: short
-        runs alone (CALIBRATION_STEPS steps) at the file's scale times a factor, up while
-        they run clean and faithful, down while they miss or are not faithful
-        (sweeppolicy.calibration_next)."""
-        firsts: dict[int, PlannedRun] = {}
-        for run in todo:
-            firsts.setdefault(run.config.robots, run)
-        for robots, run in sorted(firsts.items()):
-            trials: list[tuple[float, float, bool]] = []
-            factor = sweeppolicy.calibration_next(trials)
-            while factor is not None and self.stop_signal is None:
-                miss, faithful = self._trial(run, factor, len(trials) + 1)
-                trials.append((round(factor, 3), miss, faithful))
-                factor = sweeppolicy.calibration_next(trials)
-            found = self.schedule.calibrated(robots, trials)
-            scale = run.config.time_scale * found
-            self.progress.update(0, 0, 0, None, f"calibrated teams of {robots}: time scale "
-                                 f"{scale:.3g} ({found:.0%} of the file's), {len(trials)} "
-                                 "trial(s)")  # fmt: skip
-
-    def _trial(self, run: PlannedRun, factor: float, k: int) -> tuple[float, bool]:
-        """One calibration run: the fraction of its step deadlines missed outside stalls,
-        and whether it was faithful (testbed.run.fidelity; a run without a verdict is)."""
-        c = run.config
-        config = replace(c, max_steps=CALIBRATION_STEPS,
-                      time_scale=round(c.time_scale * factor, 3))  # fmt: skip
-        rdir = self.out / "calibration" / f"n{c.robots:02d}-{k}"
-        proc, log_file = self._spawn(config, rdir, rdir.with_suffix(".log"), f"calibrate {k}")
-        proc.wait()
-        log_file.close()
-        res = RunResult.read(rdir)
-        if res is None:  # no result: as bad as can be
-            return 1.0, True
-        return float(res.deadline_miss_fraction_outside_stalls), res.faithful is not False
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
         for child in children.values():
@@ -602,12 +492,14 @@ class Sweep:
             self.forker = RunForker(label=str(self.out.resolve()))
         try:
             if self.calibrate:
-                self._calibrate(list(queue))
+                sweepcalibrate.calibrate(self, list(queue))
             self._write_state()
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
                 self.schedule.mark_tails(children, self._steps_over_file)
-                self._open_gates(children)  # before any other start: it was first in line
+                # Before any other start: a pre-started run was first in line.
+                if prestart.open_gates(children, self.schedule, self.out):
+                    self._write_state()
                 while queue and self.stop_signal is None:
                     run = self.schedule.next_fitting(queue, children)
                     if run is None:
@@ -617,12 +509,7 @@ class Sweep:
                     child.overlapped = len(flying) < len(children)
                     children[run.run_id] = child
                     flying.append(child)
-                    load = sum(c.load for c in flying)
-                    cores = sum(c.cores for c in flying)
-                    for c in flying:
-                        c.shared = c.shared or len(flying) > 1
-                        c.load_seen = max(c.load_seen, load)
-                        c.cpu_seen = max(c.cpu_seen, cores)
+                    note_sharing(flying)
                     self._write_state()
                     self._show(queue)
                 pre = None

@@ -30,6 +30,17 @@ from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
 
 
+def note_sharing(flying: list) -> None:
+    """Runs (testbed.sweep.runner._Child) that step at once now: each notes whether it shared
+    the machine and the most load and estimated cores it saw in flight."""
+    load = sum(c.load for c in flying)
+    cores = sum(c.cores for c in flying)
+    for c in flying:
+        c.shared = c.shared or len(flying) > 1
+        c.load_seen = max(c.load_seen, load)
+        c.cpu_seen = max(c.cpu_seen, cores)
+
+
 class Schedule:
     """The sweep's concurrency and time scales, and which run fits next (module docstring)."""
 
