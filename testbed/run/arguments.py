@@ -23,6 +23,7 @@ from testbed.run import daemonchoice, robotchoice
 
 # The net options that are not a NetworkSpec field of the same name: its one Impairment.
 _IMPAIRMENT_OPTIONS = ("loss_pct", "delay_ms")
+GATE_TIMEOUT_S = 3600.0  # --start-timeout's default: how long a run waits at --start-when
 
 
 def network_fields(values) -> dict:
@@ -50,6 +51,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     a("--steps-over", metavar="FILE",
       help="create FILE when the last step is done, before the teardown: a sweep starts its "
       "next run then (default: none)")  # fmt: skip
+    a("--start-when", metavar="FILE",
+      help="set up, then wait until FILE exists before the first step (the step clock starts "
+      "then): a sweep pre-starts its next run so (default: none)")  # fmt: skip
+    a("--start-timeout", metavar="S", type=_gate_timeout, default=GATE_TIMEOUT_S,
+      help=f"with --start-when: end the run (status gate_timeout) when FILE is not there "
+      f"after S seconds (default: {GATE_TIMEOUT_S:g})")  # fmt: skip
+
+
+def _gate_timeout(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, not {text!r}")
+    return value
 
 
 def _view(text: str | None) -> str | None:

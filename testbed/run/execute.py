@@ -22,6 +22,13 @@ takes:
 - `Run.finish()` freezes what the run saw into a `RunRecord` (testbed.run.record), from
   which testbed.run.results writes robots/rK.json, paths.png and, last, result.json.
 
+With `--start-when FILE` (a sweep's pre-started run, testbed.sweep.runner) the run waits
+between `start()` and the step loop, its processes connected and idle, until FILE exists
+(looked for every GATE_POLL_S): its step clock starts then, so its deadlines and fidelity
+mean what they do in any run, and wall_parts_s.gate_wait records the wait. When FILE is
+not there after `--start-timeout` seconds, the run ends with status `gate_timeout`; SIGINT
+while it waits tears it down as at any other time.
+
 `Run.execute()` starts, steps and finishes, and turns a failure into a recorded status:
 whatever happens after `prepare()`, result.json is written (docs/run-results.md: config.json
 first, result.json last, atomically), and the network is torn down (the ExitStack that
@@ -96,6 +103,8 @@ NODE_PRELOAD = [
 ]
 CONNECT_TIMEOUT_S = 60.0  # plus 3 s per robot: every process must have said hello by then
 END_GRACE_S = 15.0  # for the processes to write their logs after END
+GATE_POLL_S = 0.003  # how often a run at its start gate looks for the gate's file
+GATE_TIMEOUT = "gate_timeout"  # the status of a run whose start gate stayed shut
 __all__ = [
     "DEFAULT_SNAPSHOTS", "PreparedRun", "Run", "RunConfig", "add_arguments",
     "main", "prepare", "run",
@@ -108,8 +117,10 @@ def main(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     name = args.name or "run" + secrets.token_hex(2)
     replace = getattr(args, "replace", False)
+    gate = getattr(args, "start_when", None)
     result = run(cfg, args.out, name, progress=not args.quiet, replace=replace,
-                 steps_over=getattr(args, "steps_over", None))  # fmt: skip
+                 steps_over=getattr(args, "steps_over", None),
+                 gate=None if gate is None else (gate, args.start_timeout))  # fmt: skip
     print(summary_line(result, args.out), flush=True)
     for line in (fidelity_warning(result), network_note(result)):
         if line:
@@ -151,14 +162,20 @@ def run(
     replace: bool = False,
     cpp_robots: frozenset[int] | None = None,
     steps_over: str | None = None,
+    gate: tuple[str, float] | None = None,
 ) -> RunResult:
     """Do one run into directory `out`; returns its RunResult (also in out/result.json).
     UsageError, before anything is made, for a run that cannot be done or a directory that
     holds a run (unless `replace`). `cpp_robots` (tests of the robots' contract): a mixed
     team, those robots the C++ robot and the others the Python robot, whatever cfg.robot.
-    `steps_over`: a file created when the last step is done (`Run.execute`)."""
+    `steps_over`: a file created when the last step is done (`Run.execute`); `gate`:
+    (file, timeout s), the steps start once that file exists (the module docstring)."""
     prepared = prepare(cfg, out, name, replace)
-    return runresults.write(Run(prepared, progress, cpp_robots, steps_over).execute())
+    return runresults.write(Run(prepared, progress, cpp_robots, steps_over, gate).execute())
+
+
+class GateTimeout(TestbedError):
+    """The start gate (--start-when) stayed shut for --start-timeout seconds."""
 
 
 class Run:
@@ -170,9 +187,11 @@ class Run:
         progress: bool = True,
         cpp_robots: frozenset[int] | None = None,
         steps_over: str | None = None,
+        gate: tuple[str, float] | None = None,
     ) -> None:
         self.prep = prepared
         self.steps_over = steps_over
+        self.gate = gate
         self.cfg = prepared.cfg
         self.n = prepared.robots
         self.progress = progress
@@ -215,6 +234,7 @@ class Run:
             with contextlib.ExitStack() as stack:  # routing logs kept, network down, closed
                 started = self.start(stack)
                 network_timers = started.network_timers
+                self._wait_at_gate()
                 with deadline_priority(*CLOCK_PRIORITY) as priority:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
@@ -224,6 +244,8 @@ class Run:
                 self._say_steps_over()
                 self._end_processes(started)
             self.parts.mark("network_down")
+        except GateTimeout as e:
+            status = (GATE_TIMEOUT, str(e))
         except (TestbedError, ForkServerError) as e:
             status = ("error", str(e).splitlines()[0] if str(e) else type(e).__name__)
             log.info("run failed: %s", status[1])  # `testbed run` prints the status
@@ -232,6 +254,19 @@ class Run:
         return self.finish(status, loop, priority, network_timers)
 
     # -- start --------------------------------------------------------------------------------
+
+    def _wait_at_gate(self) -> None:
+        """--start-when FILE: set up and idle until FILE exists (the step clock is not
+        started yet); GateTimeout after --start-timeout seconds."""
+        if self.gate is None:
+            return
+        path, timeout = self.gate
+        deadline = time.monotonic() + timeout
+        while not os.path.exists(path):
+            if time.monotonic() > deadline:
+                raise GateTimeout(f"the start gate {path} stayed shut for {timeout:g} s")
+            time.sleep(GATE_POLL_S)
+        self.parts.mark("gate_wait")
 
     def start(self, stack: contextlib.ExitStack) -> Started:
         """The network up and every robot process connected to its body, or TestbedError;

@@ -82,6 +82,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the run in progress serves its live view there (one run at a time)",
     )
     parser.add_argument(
+        "--no-prestart",
+        action="store_true",
+        help="start each run only when it may step (default: the next run sets up while the "
+        "last one steps, its steps held until that one's are over)",
+    )
+    parser.add_argument(
         "--calibrate",
         action="store_true",
         help="before each team size's first run, find the time scale this machine sustains "
@@ -286,7 +292,8 @@ def main(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     sweep = Sweep(spec, runs, out, jobs, netem, sweep_file=str(args.file),
-                  calibrate=args.calibrate, view=args.view)  # fmt: skip
+                  calibrate=args.calibrate, view=args.view,
+                  prestart=not args.no_prestart)  # fmt: skip
     return sweep.run(p.todo, p.done, p.skipped)
 
 

@@ -53,6 +53,18 @@ The rules, in the order they are tried (each is cited at its branch below):
    gave up the overlap for 7 of 10 team sizes); this way a false blame costs a few runs, and
    a true one, tried again ever more rarely, a redo each time.
 
+Pre-start (testbed.sweep.runner: the next run prepared, its network up and its processes
+connected while this one steps, its own steps held at a start gate) has two rules of the same
+pattern, tried right after their namesakes:
+
+3a. Over the limit outside stalls (or not faithful, as in rule 7) while the next run was
+   pre-starting beside its steps: no run is pre-started beside a run of this team size any
+   more; redo (2 attempts). Tried after rule 3 (a run that had both gives up the overlap
+   first) and before rules 4 to 6.
+9a. A clean run of a team size that gave up pre-start counts towards taking it up again,
+   with rule 9's counts (CLEAN_RUNS_TO_SPEED_UP, doubled for each time rule 3a fired for it
+   before).
+
 Calibration (`testbed sweep --calibrate`, for a machine the file's scales were not made
 for): before a team size's first run, short runs alone at the file's scale times a factor;
 `calibration_next` says which factor to try next from the trials so far, and
@@ -86,6 +98,7 @@ class Outcome:
     miss_outside_stalls: float | None
     shared: bool = False  # another run was in flight at some time during this one
     overlapped: bool = False  # another run's tail overlapped its set-up or steps
+    prestarted_beside: bool = False  # the next run was pre-started beside its steps
     load_seen: float = 0.0  # the most load in flight while it ran (testbed.sweep.plan.run_load)
     cpu_seen: float = 0.0  # the most estimated cores in flight while it ran (testbed.sweep.cores)
     jobs_at_start: int = 1  # the concurrency allowed when it started
@@ -107,6 +120,9 @@ class State:
     no_overlap: frozenset[int] = frozenset()  # team sizes that wait for others' tails
     overlap_clean: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
     overlap_strikes: dict[int, int] = field(default_factory=dict)  # robots -> rule 3 firings
+    no_prestart: frozenset[int] = frozenset()  # team sizes no run is pre-started beside
+    prestart_clean: dict[int, int] = field(default_factory=dict)  # robots -> clean runs since
+    prestart_strikes: dict[int, int] = field(default_factory=dict)  # robots -> rule 3a firings
 
     def factor(self, robots: int) -> float:
         return self.scale_factors.get(robots, 1.0)
@@ -152,9 +168,9 @@ def _lower_limits(o: Outcome, state: State) -> Decision:
 
 
 def _relieve(o: Outcome, state: State) -> Decision:
-    """Rules 3 to 6: no overlap of tails, less load (a lower load or cpu limit, fewer jobs)
-    or, alone, a lower time scale for this team size; an unfaithful run is redone at least
-    once."""
+    """Rules 3 to 6: no overlap of tails, no pre-start beside it (3a), less load (a lower
+    load or cpu limit, fewer jobs) or, alone, a lower time scale for this team size; an
+    unfaithful run is redone at least once."""
     n, miss = o.robots, o.miss
     limited = state.load_limit is not None or state.cpu_limit is not None
     if o.overlapped and n not in state.no_overlap:
@@ -168,6 +184,18 @@ def _relieve(o: Outcome, state: State) -> Decision:
         return _back_off(
             o, alone, {"robots": n, "overlap": False},
             f"teams of {n} no longer start during another run's teardown", attempts=2,
+        )  # fmt: skip
+    if o.prestarted_beside and n not in state.no_prestart:
+        # Rule 3a: the next run was pre-started beside its steps: none beside this team size.
+        alone = replace(
+            state,
+            no_prestart=state.no_prestart | {n},
+            prestart_clean={**state.prestart_clean, n: 0},
+            prestart_strikes={**state.prestart_strikes, n: state.prestart_strikes.get(n, 0) + 1},
+        )
+        return _back_off(
+            o, alone, {"robots": n, "prestart": False},
+            f"no run is pre-started beside teams of {n} any more", attempts=2,
         )  # fmt: skip
     if limited and o.shared:
         # Rule 4: shared under a load or cpu limit: the limits fall below what this run saw.
@@ -220,7 +248,7 @@ def decide(o: Outcome, state: State) -> Decision:
         d = replace(d, words=words + d.words)
     clean = _number(ours) and ours <= CLEAN_MISS and o.faithful is not False
     if clean:
-        d = _overlap_again(n, _speed_up(n, d))
+        d = _prestart_again(n, _overlap_again(n, _speed_up(n, d)))
     return d
 
 
@@ -260,6 +288,24 @@ def _overlap_again(n: int, d: Decision) -> Decision:
         state=again,
         backoffs=d.backoffs + ({"robots": n, "overlap": True},),
         words=d.words + f"; teams of {n} start during another run's teardown again",
+    )
+
+
+def _prestart_again(n: int, d: Decision) -> Decision:
+    """Rule 9a, after a clean run of team size n: enough of them since rule 3a fired for it
+    (more each time it fired) and runs are pre-started beside its runs again."""
+    s = d.state
+    if n not in s.no_prestart:
+        return d
+    runs = s.prestart_clean.get(n, 0) + 1
+    if runs < CLEAN_RUNS_TO_SPEED_UP * 2 ** (s.prestart_strikes.get(n, 1) - 1):
+        return replace(d, state=replace(s, prestart_clean={**s.prestart_clean, n: runs}))
+    again = replace(s, no_prestart=s.no_prestart - {n}, prestart_clean={**s.prestart_clean, n: 0})
+    return replace(
+        d,
+        state=again,
+        backoffs=d.backoffs + ({"robots": n, "prestart": True},),
+        words=d.words + f"; runs are pre-started beside teams of {n} again",
     )
 
 

@@ -38,12 +38,17 @@ that tail instead of waiting for it (about a second a run: a quarter of a run's 
 cost). A run that was late while it overlapped a tail turns the overlap off for its team
 size until enough of its runs came out clean (testbed.sweep.policy, rules 3 and 9); with
 --view there is none (the live page's run holds its port to its exit), and while more than
---jobs tails go on, tails count as in flight again. The queue is served first-fit: the
-first waiting run that fits starts. What happens when a run misses step deadlines (the
-concurrency backs off, a team size's time scale goes down and up again, a run is redone) is
-decided by the pure rules of testbed.sweep.policy; `Sweep._finish` only applies them. The
-limits, the time scales and which run fits next are the sweep's schedule
-(testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops the runs.
+--jobs tails go on, tails count as in flight again.
+
+Pre-start: while exactly one run steps, the next one sets up beside it and waits at a start
+gate until that run's steps are over (testbed.sweep.prestart).
+
+The queue is served first-fit: the first waiting run that fits starts. What happens when a
+run misses step deadlines (the concurrency backs off, a team size's time scale goes down and
+up again, a run is redone) is decided by the pure rules of testbed.sweep.policy;
+`Sweep._finish` only applies them. The limits, the time scales and which run fits next are
+the sweep's schedule (testbed.sweep.schedule.Schedule); `Sweep` starts, watches and stops
+the runs.
 `DIR/sweep.json` holds the expanded plan and each run's status, rewritten atomically whenever
 something changes; a lock file keeps two sweeps out of one directory.
 """
@@ -70,13 +75,16 @@ from common.errors import TestbedError
 from testbed.files import sweepstate
 from testbed.files.resultfile import RESULT_NAME, RunResult
 from testbed.files.runconfig import RunConfig
+from testbed.sweep import calibrate as sweepcalibrate
 from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
+from testbed.sweep import prestart
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
+from testbed.sweep.prestart import gate_file, gate_timeout
 from testbed.sweep.progress import Progress
 from testbed.sweep.rundir import is_done, plan_dict, run_argv, run_dir
-from testbed.sweep.schedule import Schedule
+from testbed.sweep.schedule import Schedule, note_sharing
 from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.state import is_alive, proc_start_time
 
@@ -95,7 +103,6 @@ RUN_PRELOAD = [
 # Seconds a child gets after SIGINT, then after SIGTERM, before its group is SIGKILLed.
 GRACE_INT = 30.0
 GRACE_TERM = 10.0
-CALIBRATION_STEPS = 300  # steps of each --calibrate trial (30 s of robot time)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -151,6 +158,13 @@ class _Child:
     cpu_seen: float = 0.0  # the most estimated cores in flight while this one ran
     tail: bool = False  # its steps are done (it created its --steps-over file)
     overlapped: bool = False  # another run's tail overlapped its set-up or steps
+    gated: bool = False  # pre-started: its steps wait for the sweep to create its gate
+    awaits: str = ""  # pre-started: the run whose steps' end opens its gate
+    gate_wait: float = 0.0  # pre-started: seconds from its start to its gate's opening
+    prestarted_beside: bool = False  # the next run was pre-started beside its steps
+    no_prestart_beside: bool = False  # a run pre-started beside it timed out at its gate
+    config: RunConfig | None = None  # what it was started with (its time scale)
+    cancelled: bool = False  # pre-started at a time scale the policy changed since: stopped
 
 
 class Sweep:
@@ -168,6 +182,7 @@ class Sweep:
         progress_stream=None,
         calibrate: bool = False,
         view: str | None = None,
+        prestart: bool = True,
     ):
         self.spec = spec
         self.runs = runs
@@ -181,6 +196,8 @@ class Sweep:
         # its exit: no run starts during another's tail then).
         self.view = view
         self.schedule.tails_wait = view is not None
+        self.schedule.prestart = prestart  # --no-prestart: no run is pre-started
+        self.children: dict[str, _Child] = {}  # the runs in flight, by id (run())
         self.view_owner: str | None = None
         self.netem = netem
         self.sweep_file = sweep_file
@@ -286,11 +303,13 @@ class Sweep:
         log_path: Path,
         title: str,
         steps_over: Path | None = None,
+        gate: tuple[Path, float] | None = None,
     ) -> tuple[subprocess.Popen | Forked, BinaryIO]:
         """Start one `testbed run` of `config` into `rdir` (removed first if there): from
         the run server, or the stand-in command with the death signal towards the sweep;
-        with `--steps-over steps_over` when given (removed first if there). Returns
-        (process, its open log file, which the caller closes)."""
+        with `--steps-over steps_over` when given (removed first if there), and pre-started
+        with `--start-when FILE --start-timeout S` when `gate` is (FILE, S) (FILE removed
+        first). Returns (process, its open log file, which the caller closes)."""
         if rdir.exists():
             shutil.rmtree(rdir)
         log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -298,6 +317,9 @@ class Sweep:
         if steps_over is not None:
             steps_over.unlink(missing_ok=True)
             extra = ["--steps-over", str(steps_over)]
+        if gate is not None:
+            gate[0].unlink(missing_ok=True)
+            extra += ["--start-when", str(gate[0]), "--start-timeout", f"{gate[1]:.0f}"]
         flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC
         log_file = os.fdopen(os.open(log_path, flags, 0o644), "wb")  # the caller closes it
         proc: subprocess.Popen | Forked
@@ -323,7 +345,9 @@ class Sweep:
         if result:
             self.schedule.learn(result)
 
-    def _start(self, run: PlannedRun) -> _Child:
+    def _start(self, run: PlannedRun, after: _Child | None = None) -> _Child:
+        """Start `run`; pre-started, its gate opening when `after`'s steps are over, when
+        `after` is given."""
         config = self.schedule.scaled(run)
         estimate = self.schedule.estimate(run)
         if self.view and self.view_owner is None:
@@ -332,6 +356,8 @@ class Sweep:
         proc, log_file = self._spawn(
             config, run_dir(self.out, run.run_id), self.out / "logs" / f"{run.run_id}.log",
             run.run_id, self._steps_over_file(run.run_id),
+            None if after is None else (gate_file(self.out, run.run_id),
+                                        gate_timeout(self.schedule.scaled(after.run))),
         )  # fmt: skip
         self.status[run.run_id] = {
             "status": "running",
@@ -343,6 +369,11 @@ class Sweep:
         child = _Child(run, proc, time.monotonic(), self.jobs, log_file, load=run_load(run),
                        cores=estimate)  # fmt: skip
         child.load_seen, child.cpu_seen = child.load, child.cores
+        child.config = config
+        if after is not None:
+            child.gated, child.awaits = True, after.run.run_id
+            after.prestarted_beside = True
+            self.status[run.run_id]["prestarted"] = True
         return child
 
     def _steps_over_file(self, run_id: str) -> Path:
@@ -353,6 +384,7 @@ class Sweep:
         """Record a child that exited; returns the event line for the progress display."""
         child.log_file.close()
         self._steps_over_file(child.run.run_id).unlink(missing_ok=True)
+        gate_file(self.out, child.run.run_id).unlink(missing_ok=True)
         if self.view_owner == child.run.run_id:
             self.view_owner = None
         run = child.run
@@ -362,7 +394,13 @@ class Sweep:
         st["exit_status"] = child.proc.returncode
         if child.overlapped:  # another run's tail overlapped its set-up or steps
             st["overlapped"] = True
+        if child.prestarted_beside:  # the next run was pre-started beside its steps
+            st["prestarted_beside"] = True
         st["wall_time_s"] = round(wall, 1)
+        if child.cancelled:  # stopped at its gate (testbed.sweep.prestart.open_gates)
+            return prestart.redo_cancelled(child, st, queue)
+        if st.get("prestarted"):
+            st["gate_wait_s"] = round(child.gate_wait, 2)
         if not is_done(self.out, run.run_id):
             st["status"] = "failed"
             st["reason"] = _last_line(self.out / "logs" / f"{run.run_id}.log") or (
@@ -371,6 +409,8 @@ class Sweep:
             return f"{run.run_id}: FAILED ({st['reason']})"
         # None: unreadable, counted as saying nothing (the report names it)
         result = RunResult.read(run_dir(self.out, run.run_id))
+        if result is not None and result.status == prestart.GATE_TIMEOUT_STATUS:
+            return prestart.redo_shut(child, result.status_detail, st, queue, self.children)
         st["status"] = "done"
         st["result_status"] = result.status if result else None
         miss = result.deadline_miss_fraction if result else None
@@ -380,7 +420,7 @@ class Sweep:
             st["faithful"] = faithful
         self._measure(result, st)
         n = run.config.robots
-        self.progress.record(n, wall)
+        self.progress.record(n, wall - child.gate_wait)
         outcome = sweeppolicy.Outcome(
             robots=n,
             miss=miss,
@@ -388,6 +428,7 @@ class Sweep:
             miss_outside_stalls=result.deadline_miss_fraction_outside_stalls if result else None,
             shared=child.shared,
             overlapped=child.overlapped,
+            prestarted_beside=child.prestarted_beside,
             load_seen=child.load_seen,
             cpu_seen=child.cpu_seen,
             jobs_at_start=child.jobs_at_start,
@@ -405,42 +446,6 @@ class Sweep:
         if d.redo:
             st["status"] = "pending"
             queue.appendleft(run)
-
-    def _calibrate(self, todo: list[PlannedRun]) -> None:
-        """Find each team size's time scale on this machine before its first run: short
-        runs alone (CALIBRATION_STEPS steps) at the file's scale times a factor, up while
-        they run clean and faithful, down while they miss or are not faithful
-        (sweeppolicy.calibration_next)."""
-        firsts: dict[int, PlannedRun] = {}
-        for run in todo:
-            firsts.setdefault(run.config.robots, run)
-        for robots, run in sorted(firsts.items()):
-            trials: list[tuple[float, float, bool]] = []
-            factor = sweeppolicy.calibration_next(trials)
-            while factor is not None and self.stop_signal is None:
-                miss, faithful = self._trial(run, factor, len(trials) + 1)
-                trials.append((round(factor, 3), miss, faithful))
-                factor = sweeppolicy.calibration_next(trials)
-            found = self.schedule.calibrated(robots, trials)
-            scale = run.config.time_scale * found
-            self.progress.update(0, 0, 0, None, f"calibrated teams of {robots}: time scale "
-                                 f"{scale:.3g} ({found:.0%} of the file's), {len(trials)} "
-                                 "trial(s)")  # fmt: skip
-
-    def _trial(self, run: PlannedRun, factor: float, k: int) -> tuple[float, bool]:
-        """One calibration run: the fraction of its step deadlines missed outside stalls,
-        and whether it was faithful (testbed.run.fidelity; a run without a verdict is)."""
-        c = run.config
-        config = replace(c, max_steps=CALIBRATION_STEPS,
-                      time_scale=round(c.time_scale * factor, 3))  # fmt: skip
-        rdir = self.out / "calibration" / f"n{c.robots:02d}-{k}"
-        proc, log_file = self._spawn(config, rdir, rdir.with_suffix(".log"), f"calibrate {k}")
-        proc.wait()
-        log_file.close()
-        res = RunResult.read(rdir)
-        if res is None:  # no result: as bad as can be
-            return 1.0, True
-        return float(res.deadline_miss_fraction_outside_stalls), res.faithful is not False
 
     def _stop_children(self, children: dict[str, _Child], queue: deque) -> None:
         for child in children.values():
@@ -481,17 +486,20 @@ class Sweep:
             self.status[rid] = {"status": "skipped", "reason": reason}
         self.progress.total = len(self.runs) - len(skipped)
         queue = deque(todo)
-        children: dict[str, _Child] = {}
+        children = self.children
         old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         if self.command is None and queue:
             self.forker = RunForker(label=str(self.out.resolve()))
         try:
             if self.calibrate:
-                self._calibrate(list(queue))
+                sweepcalibrate.calibrate(self, list(queue))
             self._write_state()
             self._show(queue)
             while (queue or children) and self.stop_signal is None:
                 self.schedule.mark_tails(children, self._steps_over_file)
+                # Before any other start: a pre-started run was first in line.
+                if prestart.open_gates(children, self.schedule, self.out):
+                    self._write_state()
                 while queue and self.stop_signal is None:
                     run = self.schedule.next_fitting(queue, children)
                     if run is None:
@@ -501,12 +509,15 @@ class Sweep:
                     child.overlapped = len(flying) < len(children)
                     children[run.run_id] = child
                     flying.append(child)
-                    load = sum(c.load for c in flying)
-                    cores = sum(c.cores for c in flying)
-                    for c in flying:
-                        c.shared = c.shared or len(flying) > 1
-                        c.load_seen = max(c.load_seen, load)
-                        c.cpu_seen = max(c.cpu_seen, cores)
+                    note_sharing(flying)
+                    self._write_state()
+                    self._show(queue)
+                pre = None
+                if self.stop_signal is None:
+                    pre = self.schedule.prestart_next(queue, children)
+                if pre is not None:
+                    run, ahead = pre
+                    children[run.run_id] = self._start(run, after=ahead)
                     self._write_state()
                     self._show(queue)
                 exited = [rid for rid, c in children.items() if c.proc.poll() is not None]
@@ -515,7 +526,8 @@ class Sweep:
                     self._write_state()
                     self._show(queue, event)
                 if not exited:
-                    time.sleep(0.1)
+                    # A shut gate is on the critical path: its opening is looked for sooner.
+                    time.sleep(0.01 if any(c.gated for c in children.values()) else 0.1)
             if self.stop_signal is not None:
                 self._stop_children(children, queue)
                 self._write_state()

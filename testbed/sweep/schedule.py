@@ -9,8 +9,9 @@ expected to keep `estimate` cores busy (testbed.sweep.cores, learnt from what th
 finished runs measured: `learn`), and starts when it fits beside the runs in flight
 (`next_fitting`: first fit). After a run, testbed.sweep.policy decides from `policy_state`,
 and `apply` takes up its decision. Which runs are in their tail (their steps done, their
-teardown going on) it reads from the files the runs create (`mark_tails`). Nothing here
-starts a process.
+teardown going on) it reads from the files the runs create (`mark_tails`). While exactly
+one run steps, the next may be pre-started beside it (`prestart_next`: it fits once that run
+is in its tail), to hold its steps at a start gate until then. Nothing here starts a process.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from testbed.files.resultfile import RunResult
 from testbed.files.runconfig import RunConfig
@@ -26,6 +28,17 @@ from testbed.sweep import cores as sweepcores
 from testbed.sweep import policy as sweeppolicy
 from testbed.sweep.file import PlannedRun
 from testbed.sweep.plan import run_load
+
+
+def note_sharing(flying: list) -> None:
+    """Runs (testbed.sweep.runner._Child) that step at once now: each notes whether it shared
+    the machine and the most load and estimated cores it saw in flight."""
+    load = sum(c.load for c in flying)
+    cores = sum(c.cores for c in flying)
+    for c in flying:
+        c.shared = c.shared or len(flying) > 1
+        c.load_seen = max(c.load_seen, load)
+        c.cpu_seen = max(c.cpu_seen, cores)
 
 
 class Schedule:
@@ -64,6 +77,13 @@ class Schedule:
         # No run starts beside a tail at all (the sweep's --view: the run in its tail still
         # serves the live page on the one port).
         self.tails_wait = False
+        # Pre-start (testbed.sweep.runner): off for the whole sweep with --no-prestart, and
+        # per team size of the run stepping while the next prepares (the policy's rules 3a
+        # and 9a, the same pattern as the overlap's).
+        self.prestart = True
+        self.no_prestart: frozenset[int] = frozenset()
+        self.prestart_clean: dict[int, int] = {}
+        self.prestart_strikes: dict[int, int] = {}
 
     @property
     def limited(self) -> bool:
@@ -156,6 +176,34 @@ class Schedule:
                 return None
         return None
 
+    def prestart_next(self, queue: deque, children: dict) -> tuple[PlannedRun, Any] | None:
+        """The waiting run to pre-start now, taken off `queue`, and the child whose steps'
+        end opens its start gate; None when none is. Only while exactly one run steps and no
+        pre-started run waits, not under --view (tails_wait), not beside a team size that
+        gave pre-start up (policy rule 3a) or a run whose last pre-started neighbour's gate
+        timed out (`no_prestart_beside`), and only a run that fits once that run is in its
+        tail (first fit, as `next_fitting`; a run that waits for tails stops the search)."""
+        if not self.prestart or self.tails_wait or not queue:
+            return None
+        if any(c.gated for c in children.values()):
+            return None
+        stepping = [c for c in children.values() if not c.tail]
+        if len(stepping) != 1:
+            return None
+        ending = stepping[0]
+        if ending.run.config.robots in self.no_prestart or ending.no_prestart_beside:
+            return None
+        # In its tail it counts as in flight for none but a run that waits for tails, which
+        # is then not pre-started (nor overtaken: it would wait for the tail regardless).
+        rest = {rid: c for rid, c in children.items() if c is not ending}
+        for i, run in enumerate(queue):
+            if self.waits_for_tails(run):
+                return None
+            if self.fits(run, rest):
+                del queue[i]
+                return run, ending
+        return None
+
     def policy_state(self) -> sweeppolicy.State:
         return sweeppolicy.State(
             jobs=self.jobs,
@@ -167,6 +215,9 @@ class Schedule:
             no_overlap=self.no_overlap,
             overlap_clean=dict(self.overlap_clean),
             overlap_strikes=dict(self.overlap_strikes),
+            no_prestart=self.no_prestart,
+            prestart_clean=dict(self.prestart_clean),
+            prestart_strikes=dict(self.prestart_strikes),
         )
 
     def apply(self, d: sweeppolicy.Decision, run_id: str) -> None:
@@ -176,6 +227,9 @@ class Schedule:
         self.no_overlap = d.state.no_overlap
         self.overlap_clean = dict(d.state.overlap_clean)
         self.overlap_strikes = dict(d.state.overlap_strikes)
+        self.no_prestart = d.state.no_prestart
+        self.prestart_clean = dict(d.state.prestart_clean)
+        self.prestart_strikes = dict(d.state.prestart_strikes)
         self.scale_factors, self.clean_runs = dict(d.state.scale_factors), dict(d.state.clean_runs)
         self.backoffs += [{"run": run_id, **record} for record in d.backoffs]
 

@@ -21,7 +21,8 @@ from testbed.sweep.rundir import plan_dict, run_argv
 from topology.spec import ROUTINGS
 
 REPO = Path(__file__).resolve().parents[2]
-RUN_ONLY = {"out", "name", "quiet", "replace", "steps_over"}  # where it goes, how it shows
+# Where it goes, how it shows, when it steps (a sweep's steps-over file and start gate).
+RUN_ONLY = {"out", "name", "quiet", "replace", "steps_over", "start_when", "start_timeout"}
 
 
 def parse_run(argv: list[str]) -> RunConfig:

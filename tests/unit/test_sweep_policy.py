@@ -64,6 +64,52 @@ def test_rule3_a_run_late_beside_a_tail_gives_up_the_overlap_first():
     assert alone.state.no_overlap == {3} and "time_scale_factor" in alone.backoffs[0]
 
 
+def test_rule3a_a_run_late_beside_a_prestart_gives_up_prestart_beside_its_team_size():
+    """Late (or unfaithful) while the next run pre-started beside its steps: no run is
+    pre-started beside its team size any more, nothing else changes, and the run is redone
+    once. Rule 3 goes first for a run that had both; once pre-start is off for its team
+    size, the other rules act."""
+    state = State(jobs=1, load_limit=40.0, no_prestart=frozenset({3}))
+    for late in (outcome(0.03, prestarted_beside=True, shared=True),
+                 outcome(0.0, prestarted_beside=True, faithful=False)):  # fmt: skip
+        d = decide(late, state)
+        assert d.state == replace(state, no_prestart=frozenset({3, 5}), prestart_clean={5: 0},
+                                  prestart_strikes={5: 1}) and d.redo  # fmt: skip
+        assert d.backoffs[0]["prestart"] is False and d.backoffs[0]["robots"] == 5
+        assert "no run is pre-started beside teams of 5 any more, redoing it" in d.words
+        assert not decide(replace(late, attempts=2), state).redo
+    both = decide(outcome(0.03, overlapped=True, prestarted_beside=True), state)
+    assert both.state.no_overlap == {5} and both.state.no_prestart == {3}
+    off = decide(outcome(0.03, prestarted_beside=True, shared=True, robots=3), state)
+    assert "load_limit" in off.backoffs[0] and "prestart" not in off.backoffs[0]
+    alone = decide(outcome(0.03), state)
+    assert alone.state.no_prestart == {3} and "time_scale_factor" in alone.backoffs[0]
+
+
+def test_rule9a_clean_runs_take_prestart_up_again_ever_more_slowly():
+    """After rule 3a, CLEAN_RUNS_TO_SPEED_UP clean runs of the team size bring pre-start
+    beside it back (recorded, said); each later firing of rule 3a doubles the clean runs it
+    takes. A late or unfaithful run, or another team size's, does not count."""
+    state = State(jobs=1)
+    for strikes in (1, 2, 3):
+        state = decide(outcome(0.03, prestarted_beside=True), state).state
+        assert state.no_prestart == {5} and state.prestart_strikes == {5: strikes}
+        needed = CLEAN_RUNS_TO_SPEED_UP * 2 ** (strikes - 1)
+        for _ in range(needed - 1):
+            state = decide(outcome(0.0, robots=4), state).state  # another team size
+            d = decide(outcome(0.0), state)
+            assert d.state.no_prestart == {5} and d.backoffs == ()
+            state = d.state
+        unfaithful = decide(outcome(0.0, faithful=False), state)
+        assert unfaithful.state.prestart_clean == state.prestart_clean
+        assert decide(outcome(0.02), state).state.prestart_clean == state.prestart_clean
+        back = decide(outcome(0.001), state)
+        assert back.state.no_prestart == frozenset() and back.state.prestart_clean == {5: 0}
+        assert back.backoffs == ({"robots": 5, "prestart": True},)
+        assert back.words == "; runs are pre-started beside teams of 5 again"
+        state = back.state
+
+
 def test_rule9_clean_runs_take_the_overlap_up_again_ever_more_slowly():
     """After rule 3, CLEAN_RUNS_TO_SPEED_UP clean runs of the team size bring the overlap
     back (recorded, said); each later firing of rule 3 doubles the clean runs it takes. A late

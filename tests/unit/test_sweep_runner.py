@@ -30,9 +30,10 @@ p.add_argument("--routing"); p.add_argument("--map"); p.add_argument("--out")
 p.add_argument("--coordination"); p.add_argument("--start")
 p.add_argument("--capture", action="store_true"); p.add_argument("--quiet", action="store_true")
 p.add_argument("--view"); p.add_argument("--steps-over")
+p.add_argument("--start-when"); p.add_argument("--start-timeout", type=float)
 a = p.parse_args()
 signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-t_start = time.monotonic()
+t_start = t_proc = time.monotonic()
 pids = os.environ.get("STANDIN_PIDS")
 if pids:
     with open(os.path.join(pids, str(os.getpid())), "w") as f:
@@ -47,6 +48,25 @@ cfg = {"robots": a.robots, "comm_range": a.comm_range, "laser_range": a.laser_ra
        "max_steps": a.max_steps, "coordination": a.coordination, "start": a.start}
 with open(os.path.join(a.out, "config.json"), "w") as f:
     json.dump(cfg, f)
+gate_wait = None
+if a.start_when:  # pre-started: set up (config.json), then wait for the gate
+    shut = os.path.basename(a.out) in os.environ.get("STANDIN_GATE_SHUT_IDS", "").split(",")
+    once = os.path.join(os.path.dirname(a.steps_over or a.out), "gate-shut-" +
+                        os.path.basename(a.out))
+    if shut and not os.path.exists(once):  # its gate stays shut (once): as if it timed out
+        open(once, "x").close()
+        res = {"format": 1, "config": cfg, "status": "gate_timeout",
+               "status_detail": f"the start gate {a.start_when} stayed shut for "
+                                f"{a.start_timeout:g} s", "steps": 0}
+        with open(os.path.join(a.out, "result.json"), "w") as f:
+            json.dump(res, f)
+        sys.exit(1)
+    while not os.path.exists(a.start_when):
+        if time.monotonic() - t_proc > a.start_timeout:
+            sys.exit(4)
+        time.sleep(0.002)
+    t_start = time.monotonic()  # its steps start here
+    gate_wait = round(t_start - t_proc, 3)
 if a.view:
     with open(os.path.join(a.out, "view.txt"), "w") as f:
         f.write(f"{a.view} {time.monotonic()}")
@@ -76,6 +96,8 @@ if per_load:
     cores = float(per_load) * (a.robots + 1) * a.time_scale
     res["cpu_s"] = {"robots": cores * wall, "display": 0.0, "world": 0.0, "routing": 0.0}
     res["wall_parts_s"] = {"steps": wall}
+if gate_wait is not None:
+    res["wall_parts_s"] = dict(res.get("wall_parts_s", {}), gate_wait=gate_wait)
 t_steps = time.monotonic()
 tail = os.environ.get("STANDIN_TAIL")  # seconds of teardown after its steps
 if tail and a.steps_over:
@@ -88,7 +110,7 @@ os.replace(tmp, os.path.join(a.out, "result.json"))
 times = os.environ.get("STANDIN_TIMES")
 if times:
     with open(os.path.join(times, str(os.getpid())), "w") as f:
-        f.write(f"{t_start} {time.monotonic()} {a.robots} {a.time_scale} {t_steps}")
+        f.write(f"{t_start} {time.monotonic()} {a.robots} {a.time_scale} {t_steps} {t_proc}")
 """
 
 SWEEP = """
@@ -380,7 +402,9 @@ def test_a_run_late_alone_slows_the_sweep_down(env):
     file assumes, so the time scales go down; a run that missed over 5% is redone (at most
     twice), one that missed less is kept."""
     out = env["tmp"] / "out"
-    r = run_sweep(env, out, "--jobs", "1", STANDIN_MISS="0.08", STANDIN_MISS_ROBOTS="2")
+    r = run_sweep(
+        env, out, "--jobs", "1", "--no-prestart", STANDIN_MISS="0.08", STANDIN_MISS_ROBOTS="2"
+    )
     assert r.returncode == 0, r.stderr
     assert "time scales of teams of 2 down to 85% of the file's" in r.stderr
     state = json.loads((out / "sweep.json").read_text())
@@ -400,7 +424,9 @@ def test_a_run_late_alone_slows_the_sweep_down(env):
 
 def test_a_run_a_little_late_is_kept(env):
     out = env["tmp"] / "out"
-    r = run_sweep(env, out, "--jobs", "1", STANDIN_MISS="0.02", STANDIN_MISS_ROBOTS="2")
+    r = run_sweep(
+        env, out, "--jobs", "1", "--no-prestart", STANDIN_MISS="0.02", STANDIN_MISS_ROBOTS="2"
+    )
     assert r.returncode == 0, r.stderr
     state = json.loads((out / "sweep.json").read_text())
     assert all(x["attempts"] == 1 for x in state["runs"])
@@ -414,8 +440,8 @@ def test_a_team_size_speeds_up_again_after_clean_runs(env):
     sweep_file.write_text(SWEEP.replace("robots = [1, 2, 3]", "robots = [1]").replace(
         "comm_range = [5, 20]", "comm_range = [5, 10, 15, 20, 25]"))  # fmt: skip
     out = env["tmp"] / "out"
-    r = run_sweep(dict(env, file=sweep_file), out, "--jobs", "1", STANDIN_MISS="0.02",
-                  STANDIN_MISS_IDS="n01-c5-l2-k1")  # fmt: skip
+    r = run_sweep(dict(env, file=sweep_file), out, "--jobs", "1", "--no-prestart",
+                  STANDIN_MISS="0.02", STANDIN_MISS_IDS="n01-c5-l2-k1")  # fmt: skip
     assert r.returncode == 0, r.stderr
     scales = {rid: res["config"]["time_scale"] for rid, res in results(out).items()}
     assert scales["n01-c5-l2-k1"] == 5
@@ -430,8 +456,8 @@ def test_misses_in_host_stalls_do_not_slow_the_sweep_down(env):
     """Runs of 2 robots miss 8% of their deadlines, all but 0.2% while the host stalled the
     machine: no time scale changes; each is redone as it was (at most twice), then kept."""
     out = env["tmp"] / "out"
-    r = run_sweep(env, out, "--jobs", "1", STANDIN_MISS="0.08", STANDIN_MISS_ROBOTS="2",
-                  STANDIN_MISS_OURS="0.002")  # fmt: skip
+    r = run_sweep(env, out, "--jobs", "1", "--no-prestart", STANDIN_MISS="0.08",
+                  STANDIN_MISS_ROBOTS="2", STANDIN_MISS_OURS="0.002")  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert "(7.8% in host stalls); the host's stalls, time scale kept, redoing it" in r.stderr
     state = json.loads((out / "sweep.json").read_text())
@@ -470,7 +496,9 @@ def test_an_unfaithful_run_is_redone_once_at_a_lower_scale(env):
     """The lone robot's first run, at the file's scale 5, is in time but not faithful: its
     team size goes down to 85% and the run is redone there (faithful); the next run too."""
     out = env["tmp"] / "out"
-    r = run_sweep(lone_robot_sweep(env), out, "--jobs", "1", STANDIN_UNFAITHFUL_ABOVE="4.5")
+    r = run_sweep(
+        lone_robot_sweep(env), out, "--jobs", "1", "--no-prestart", STANDIN_UNFAITHFUL_ABOVE="4.5"
+    )
     assert r.returncode == 0, r.stderr
     assert (
         "not faithful (12 of 30 plans applied a step or more late (40.0%, limit 1.0%))" in r.stderr
@@ -540,7 +568,7 @@ def tail_spans(env, times: Path) -> list[tuple[float, float, float]]:
     """(start, steps done, end) of every stand-in that ran to its end, by start."""
     spans = []
     for p in times.iterdir():
-        t0, t1, _, _, ts = p.read_text().split()
+        t0, t1, _, _, ts, _ = p.read_text().split()
         spans.append((float(t0), float(ts), float(t1)))
     return sorted(spans)
 
@@ -552,7 +580,7 @@ def test_the_next_run_starts_during_the_tail_of_the_last(env):
     times = env["tmp"] / "times"
     times.mkdir()
     out = env["tmp"] / "out"
-    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.2", STANDIN_TAIL="0.4",
+    r = run_sweep(env, out, "--jobs", "1", "--no-prestart", STANDIN_SLEEP="0.2", STANDIN_TAIL="0.4",
                   STANDIN_TIMES=str(times))  # fmt: skip
     assert r.returncode == 0, r.stderr
     spans = tail_spans(env, times)
@@ -575,7 +603,7 @@ def test_a_run_late_beside_a_tail_turns_the_overlap_off_for_its_team_size(env):
     times = env["tmp"] / "times"
     times.mkdir()
     out = env["tmp"] / "out"
-    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.2", STANDIN_TAIL="0.4",
+    r = run_sweep(env, out, "--jobs", "1", "--no-prestart", STANDIN_SLEEP="0.2", STANDIN_TAIL="0.4",
                   STANDIN_TIMES=str(times), STANDIN_MISS="0.05",
                   STANDIN_MISS_IDS="n01-c20-l2-k1")  # fmt: skip
     assert r.returncode == 0, r.stderr
@@ -592,3 +620,116 @@ def test_a_run_late_beside_a_tail_turns_the_overlap_off_for_its_team_size(env):
     later = [sp for sp in spans if sp[0] > redo]
     assert later and any(prev[1] <= nxt[0] < prev[2] for prev, nxt in
                          zip(spans, spans[1:], strict=False) if nxt[0] > redo)  # fmt: skip
+
+
+def prestart_spans(times: Path) -> list[tuple[float, float, float, float]]:
+    """(process start, steps start, steps done, end) of every stand-in that ran to its end,
+    by steps start."""
+    spans = []
+    for p in times.iterdir():
+        t0, t1, _, _, ts, tp = p.read_text().split()
+        spans.append((float(tp), float(t0), float(ts), float(t1)))
+    return sorted(spans, key=lambda s: s[1])
+
+
+def test_the_next_run_is_prestarted_while_the_last_one_steps(env):
+    """One run at a time: each run after the first starts (sets up) while the one before it
+    steps, and its steps start only once that one's are done (its gate); no two runs step
+    at once, the waits are recorded (result.json's wall_parts_s.gate_wait, sweep.json's
+    gate_wait_s), and no gate or steps-over file is left."""
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.4", STANDIN_TAIL="0.2",
+                  STANDIN_TIMES=str(times))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    spans = prestart_spans(times)
+    assert len(spans) == 6
+    for prev, nxt in zip(spans, spans[1:], strict=False):
+        assert nxt[0] < prev[2]  # set up while the one before stepped
+        assert prev[2] <= nxt[1]  # its steps after that one's
+    state = json.loads((out / "sweep.json").read_text())
+    runs = state["runs"]
+    prestarted = [e for e in runs if e.get("prestarted")]
+    assert len(prestarted) == 5 and all(e["gate_wait_s"] > 0 for e in prestarted)
+    assert sum(bool(e.get("prestarted_beside")) for e in runs) == 5
+    assert not list((out / "logs").glob("*.gate")) and not list((out / "logs").glob("*.steps-over"))
+    assert not state["backoffs"]
+
+
+def test_no_prestart_starts_each_run_when_it_may_step(env):
+    """--no-prestart: no run starts before the steps of the one before it are done."""
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "1", "--no-prestart", STANDIN_SLEEP="0.3",
+                  STANDIN_TAIL="0.2", STANDIN_TIMES=str(times))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    spans = prestart_spans(times)
+    assert len(spans) == 6
+    assert all(prev[2] <= nxt[0] for prev, nxt in zip(spans, spans[1:], strict=False))
+    state = json.loads((out / "sweep.json").read_text())
+    assert not any(e.get("prestarted") or e.get("prestarted_beside") for e in state["runs"])
+
+
+def test_a_run_late_beside_a_prestart_turns_prestart_off_beside_its_team_size(env):
+    """A lone robot's run that missed deadlines while the next run pre-started beside it:
+    no run is pre-started beside lone robots any more (rule 3a) and the run is redone; the
+    run after the redo set up only once the redo's steps were done."""
+    times = env["tmp"] / "times"
+    times.mkdir()
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.3", STANDIN_TIMES=str(times),
+                  STANDIN_MISS="0.05", STANDIN_MISS_IDS="n01-c20-l2-k1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "no run is pre-started beside teams of 1 any more, redoing it" in r.stderr
+    state = json.loads((out / "sweep.json").read_text())
+    assert state["backoffs"][0] == {"run": "n01-c20-l2-k1", "deadline_miss_fraction": 0.05,
+                                    "robots": 1, "prestart": False}  # fmt: skip
+    spans = prestart_spans(times)
+    assert len(spans) == 7  # the late run twice
+    lone = sorted(float(p.read_text().split()[0]) for p in times.iterdir()
+                  if p.read_text().split()[2] == "1")  # fmt: skip
+    redo = next(s for s in spans if s[1] == lone[-1])
+    after = [s for s in spans if s[1] > redo[1]]
+    assert after and after[0][0] >= redo[2]  # not pre-started beside the redo
+    assert any(nxt[0] < prev[2] for prev, nxt in zip(after, after[1:], strict=False))
+
+
+def test_a_prestarted_run_whose_gate_stayed_shut_is_redone(env):
+    """A pre-started run that reports its gate stayed shut (status gate_timeout) is redone,
+    not counted as an attempt, and the sweep ends with every run done."""
+    out = env["tmp"] / "out"
+    r = run_sweep(env, out, "--jobs", "1", STANDIN_SLEEP="0.2",
+                  STANDIN_GATE_SHUT_IDS="n02-c5-l2-k1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "n02-c5-l2-k1: its start gate stayed shut (the start gate" in r.stderr
+    assert "redoing it" in r.stderr
+    assert len(results(out)) == 6
+    assert results(out)["n02-c5-l2-k1"]["status"] == "complete"
+    state = json.loads((out / "sweep.json").read_text())
+    assert {e["id"]: e["attempts"] for e in state["runs"]}["n02-c5-l2-k1"] == 1
+
+
+def test_a_prestarted_run_whose_time_scale_changed_at_its_gate_starts_again(env):
+    """Lone robots, the first run 2% late twice: pre-start beside them goes off (rule 3a),
+    then their time scale down (rule 6); after three clean runs pre-start is back (rule 9a),
+    and the third clean run at 85% takes the scale back up (rule 8) while the last run waits
+    at its gate at 85%: that one is stopped and started again at the file's scale, not
+    counted as an attempt."""
+    sweep_file = env["tmp"] / "ones.toml"
+    sweep_file.write_text(SWEEP.replace("robots = [1, 2, 3]", "robots = [1]").replace(
+        "comm_range = [5, 20]", "comm_range = [5, 10, 15, 20, 25, 30]"))  # fmt: skip
+    out = env["tmp"] / "out"
+    r = run_sweep(dict(env, file=sweep_file), out, "--jobs", "1", STANDIN_SLEEP="0.3",
+                  STANDIN_MISS="0.02", STANDIN_MISS_IDS="n01-c5-l2-k1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "no run is pre-started beside teams of 1 any more, redoing it" in r.stderr
+    assert "time scales of teams of 1 up to 100%" in r.stderr
+    assert "n01-c30-l2-k1: pre-started at a time scale changed since, starting it again" in (
+        r.stderr
+    )
+    scales = {rid: res["config"]["time_scale"] for rid, res in results(out).items()}
+    assert scales["n01-c25-l2-k1"] == 4.25 and scales["n01-c30-l2-k1"] == 5
+    state = json.loads((out / "sweep.json").read_text())
+    assert {e["id"]: e["attempts"] for e in state["runs"]}["n01-c30-l2-k1"] == 1
