@@ -38,7 +38,7 @@ from aodv import daemon, kernel, persist, stats
 from aodv.control import IP_RECVTTL
 from aodv.packet import AODV_PORT
 from aodv.params import MAX_TTL, PROFILES, Params
-from common.cliterals import c_real, c_string
+from common.cliterals import c_real, c_string, write_header
 from common.sched import DEADLINE_PRIORITY
 
 
@@ -227,9 +227,7 @@ def main(argv: list[str]) -> int:
         return 2
     path = Path(argv[-1])
     text = make()
-    if not path.exists() or path.read_text() != text:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
+    write_header(path, text)
     return 0
 
 

@@ -17,7 +17,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from common.cliterals import c_real, c_string
+from common.cliterals import c_real, c_string, write_header
 from node import launch, wire
 from node.messaging.maps import PUBSUB_MIDDLEWARES
 
@@ -123,11 +123,7 @@ def main(argv: list[str]) -> int:
         sys.stderr.write("usage: python -m node.argsgen HEADER\n")
         return 2
     path, text = Path(argv[0]), header()
-    if not path.exists() or path.read_text() != text:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        part = path.with_name(path.name + ".part")
-        part.write_text(text)
-        part.replace(path)
+    write_header(path, text)
     return 0
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from common import sched, timescale
-from common.cliterals import c_real
+from common.cliterals import c_real, write_header
 from node import body, flood, grid, lateness, messaging, motion, rays, robotcore, timing, wire
 from node.messaging import arrivals
 
@@ -153,11 +153,7 @@ def main(argv: list[str]) -> int:
         sys.stderr.write("usage: python -m node.constgen HEADER\n")
         return 2
     path, text = Path(argv[0]), header()
-    if not path.exists() or path.read_text() != text:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        part = path.with_name(path.name + ".part")
-        part.write_text(text)
-        part.replace(path)
+    write_header(path, text)
     return 0
 
 
