@@ -273,7 +273,7 @@ experiment: setup
 	@# The runs that would decide the claims 3 runs a point leave undecided, and how long they
 	@# take here (docs/guide.md, "Deciding the paper's claims"): planned, not run. Advisory:
 	@# a plan that cannot be made is said in one line and does not fail the experiment.
-	-@$(PY) -m testbed.analysis.decide PLAN results/paper --out results/paper-stage2 \
+	-@$(VENV)/bin/testbed decide PLAN results/paper --out results/paper-stage2 \
 		| grep -v '^  stage2-'
 
 # Issue 54: deciding the claims 3 runs a point leave undecided, after `make experiment`
@@ -287,7 +287,7 @@ experiment-decide: setup
 	$(NEED_ROOT)
 	$(VENV)/bin/testbed sweep testbed/experiments/paper-large-teams.toml --out results/paper-large-teams --resume $(SWEEP_OPTIONS)
 	$(VENV)/bin/testbed report results/paper-large-teams
-	$(PY) -m testbed.analysis.decide PLAN results/paper --with results/paper-large-teams \
+	$(VENV)/bin/testbed decide PLAN results/paper --with results/paper-large-teams \
 		--out results/paper-stage2 --budget-minutes $(DECIDE_MINUTES)
 	for f in results/paper-stage2/stage2-*.toml; do \
 		$(VENV)/bin/testbed sweep "$$f" --out "results/paper-stage2/$$(basename "$$f" .toml)" \

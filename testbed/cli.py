@@ -43,6 +43,10 @@ DELEGATED = {
         "two sweeps of the same points side by side "
         "(e.g. time scale 1 against a dilated one): within the noise or not",
     ),
+    "decide": (
+        "testbed.analysis.decidesweep",
+        "plan (PLAN) or judge (JUDGE) the runs that decide the paper's claims after a sweep",
+    ),
 }
 
 

@@ -38,7 +38,7 @@ sweeps. This module decides them in two stages:
    with the smallest added cost first, so that it decides as many comparisons as it can;
    what does not fit is named, with the runs it would need.
 4. **Stage 2** runs only the planned points (a fresh sweep, seeds other than stage 1's:
-   `python -m testbed.analysis.decide PLAN` writes its sweep files, with
+   `testbed decide PLAN` writes its sweep files, with
    testbed.analysis.decidesweep). Each planned
    comparison is judged **on stage-2 runs alone** by Welch's t test, a claim's planned
    comparisons together by Holm at alpha2 (m: those the budget kept). Stage 1's data only
@@ -67,7 +67,7 @@ Verdicts are per comparison (`Decision`: runs, test, p-value, its Holm-adjusted 
 alpha exactly when Holm rejects), the alpha it was judged at after the correction, its
 stage-1 verdict and whether stage 2 changed it); a claim holds when
 every comparison holds, does not hold when none does and all are decided, partly holds when
-decided ones disagree, and is undecided otherwise. `python -m testbed.analysis.decide JUDGE`
+decided ones disagree, and is undecided otherwise. `testbed decide JUDGE`
 prints the verdicts; `testbed report` shows them beside the 3-run ones
 (testbed.analysis.decidereport) and `testbed compare` of two deciding sweeps sets them side
 by side (testbed.analysis.claimcompare).
@@ -80,7 +80,6 @@ from __future__ import annotations
 
 import math
 import statistics
-import sys
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -513,14 +512,3 @@ def claim_verdict(decisions: Sequence[Decision]) -> str:
     if UNDECIDED in finals:
         return f"undecided ({finals.count(UNDECIDED)} of {len(finals)} comparisons)"
     return HOLDS if HOLDS in finals else FAILS
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python -m testbed.analysis.decide PLAN | JUDGE ...` (testbed.analysis.decidesweep)."""
-    from testbed.analysis import decidesweep
-
-    return decidesweep.main(argv)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,7 +1,7 @@
 """The deciding design's sweep directories (testbed.analysis.decide holds the design and its
 statistics; docs/guide.md, "Deciding the paper's claims"): a finished sweep read for
 planning, stage 2's sweep files written, and the command line
-`python -m testbed.analysis.decide PLAN | JUDGE SWEEP_DIR ...`.
+`testbed decide PLAN | JUDGE SWEEP_DIR ...`.
 
 - Reading: stage 1 is the sweep directory and any `--with` directories (sweeps of the same
   design at other team sizes: paper-large-teams.toml), their runs through
@@ -280,7 +280,7 @@ def write_plan_file(
     stage-2 file's points and runs a point."""
     doc = {
         "format": PLAN_FORMAT,
-        "about": "the deciding design's stage 2, planned by testbed.analysis.decide PLAN",
+        "about": "the deciding design's stage 2, planned by testbed decide PLAN",
         "stage1": [os.path.relpath(d.resolve(), out.resolve()) for d in stage1.dirs],
         "alpha": opts.alpha,
         "power": opts.power,
@@ -331,7 +331,7 @@ def _plan_doc(plan_dir: Path) -> dict:
                   and f["file"] == Path(f["file"]).name and f["file"].endswith(".toml")
                   for f in doc["files"]))  # fmt: skip
     if not ok:
-        raise UsageError(f"{path}: not a plan of testbed.analysis.decide (format "
+        raise UsageError(f"{path}: not a plan of testbed decide (format "
                          f"{PLAN_FORMAT})")  # fmt: skip
     return doc
 
@@ -393,11 +393,9 @@ def _minutes(s: float) -> str:
     return f"{m // 60} h {m % 60:02d} min" if m >= 60 else f"{max(m, 1) if s else 0} min"
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m testbed.analysis.decide",
-        description="Plan (PLAN) or judge (JUDGE) the runs that decide the paper's claims.",
-    )
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """`testbed decide`'s arguments (testbed.cli)."""
+    ap.description = "Plan (PLAN) or judge (JUDGE) the runs that decide the paper's claims."
     ap.add_argument("action", choices=("PLAN", "JUDGE"))
     ap.add_argument("sweep_dir", type=Path, help="the finished stage-1 sweep directory")
     ap.add_argument(
@@ -425,10 +423,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--alpha", type=float, default=ALPHA)
     ap.add_argument("--out", type=Path, help="PLAN: where the stage-2 sweep files go "
                     "(default: SWEEP_DIR-stage2 beside it)")  # fmt: skip
-    try:
-        args = ap.parse_args(argv)
-    except SystemExit as e:
-        return int(e.code or 0)
+
+
+def main(argv: list[str] | argparse.Namespace | None = None) -> int:
+    """`testbed decide PLAN | JUDGE ...` (testbed.cli parses and hands over its Namespace;
+    tests hand an argv). A bad directory, option or file is one line and status 2."""
+    if isinstance(argv, argparse.Namespace):
+        args = argv
+    else:
+        ap = argparse.ArgumentParser(prog="testbed decide")
+        add_arguments(ap)
+        try:
+            args = ap.parse_args(argv)
+        except SystemExit as e:
+            return int(e.code or 0)
     try:
         return _run(args)
     except (UsageError, ValueError, OSError) as e:
@@ -550,7 +558,7 @@ def plan_lines(p: Plan, files: Sequence[tuple[Path, list[Point], int]], out: Pat
     if files:
         lines.append(f"Run: for f in {out}/stage2-*.toml; do testbed sweep \"$f\" "
                      f"--out {out}/$(basename \"$f\" .toml); done")  # fmt: skip
-        lines.append(f"Judge: python -m testbed.analysis.decide JUDGE {out} (its plan.json "
+        lines.append(f"Judge: testbed decide JUDGE {out} (its plan.json "
                      "has the options); testbed report shows the verdicts")  # fmt: skip
     return lines
 

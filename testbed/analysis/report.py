@@ -273,7 +273,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--stage2",
         metavar="PLAN_DIR",
-        help="the deciding design's plan directory (python -m testbed.analysis.decide PLAN's "
+        help="the deciding design's plan directory (testbed decide PLAN's "
         "--out, with plan.json and the stage-2 sweeps): the report adds each claim's deciding "
         "verdict; default DIR-stage2 beside DIR when it has a plan.json",
     )

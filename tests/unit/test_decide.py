@@ -184,11 +184,11 @@ def test_a_run_without_sweep_json_is_refused_in_one_line(tmp_path, capsys):
     assert "format 99" in capsys.readouterr().err
 
 
-def test_the_module_runs_as_a_command(tmp_path):
+def test_testbed_decide_runs_it(tmp_path):
     import subprocess
     import sys
 
-    done = subprocess.run([sys.executable, "-m", "testbed.analysis.decide", "PLAN",
+    done = subprocess.run([sys.executable, "-m", "testbed", "decide", "PLAN",
                            str(tmp_path / "none")], capture_output=True, text=True)  # fmt: skip
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert done.stderr.strip() == f"decide: {tmp_path / 'none'}: not a directory"

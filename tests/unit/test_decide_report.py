@@ -1,6 +1,6 @@
 """The deciding design read by the report and by `testbed compare`: synthetic sweep
 directories (result.json and sweep.json as `testbed run` and `testbed sweep` write them, via
-tests.unit.test_decide's writer), stage 2 planned by `python -m testbed.analysis.decide PLAN`
+tests.unit.test_decide's writer), stage 2 planned by `testbed decide PLAN`
 and its sweeps written from the files it planned; then `testbed report` and the claims'
 comparison of two sweeps. The large teams (12, 15, 20) are a second stage-1 sweep, as
 testbed/experiments/paper-large-teams.toml makes one."""

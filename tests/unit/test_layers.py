@@ -300,7 +300,6 @@ FILES_NEVER = {"subprocess", "http", "socketserver", "cv2", "numpy", "matplotlib
 # leave this list too.
 KNOWN_CIRCLES = {
     frozenset({"topology.bringup", "topology.network"}),
-    frozenset({"testbed.analysis.decide", "testbed.analysis.decidesweep"}),
 }
 
 
