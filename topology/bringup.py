@@ -18,7 +18,7 @@ import os
 import shutil
 import subprocess
 import time
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 from common.errors import TestbedError, UsageError
 from common.jsonfile import write_json_atomic
@@ -27,8 +27,25 @@ from topology.kernel import capture, netns
 from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 from topology.spec import NetworkSpec
 
-if TYPE_CHECKING:
-    from topology.network import Network
+
+class Network(Protocol):
+    """What bring-up asks of the network it starts processes for (topology.network.Network,
+    which imports this module: bring-up names the part it uses rather than the class)."""
+
+    spec: NetworkSpec
+
+    @property
+    def timers(self) -> Any: ...
+
+    @property
+    def state_dir(self) -> str: ...
+
+    def robot_ns(self, k: int) -> str: ...
+
+    def spawn(self, k: int, argv: list[str], *, role: str, **popen_kwargs) -> subprocess.Popen: ...
+
+    def adopt(self, k: int, proc, role: str) -> None: ...
+
 
 # The Debian/Ubuntu package of each tool preflight asks for (a routing daemon's: its entry in
 # topology.protocols).

@@ -295,12 +295,9 @@ FILES_MAY_IMPORT = {
 }  # fmt: skip
 # Modules of the standard library and beyond that run things, serve or draw: never in files/.
 FILES_NEVER = {"subprocess", "http", "socketserver", "cv2", "numpy", "matplotlib", "ctypes"}
-# Circles this round leaves to others (issue 56): topology's (its own item) and the decision
-# planner's (in-function import; being edited beside this round). A circle that goes must
-# leave this list too.
-KNOWN_CIRCLES = {
-    frozenset({"topology.bringup", "topology.network"}),
-}
+# Circles known and allowed: none. A circle that must stay a while is named here (a frozenset
+# of its modules), and the test fails when it goes without leaving the list.
+KNOWN_CIRCLES: set[frozenset[str]] = set()
 
 
 def module_name(path: str) -> str:
