@@ -376,8 +376,12 @@ table ip {NFT_TABLE} {{
     }}
 }}
 """
-        self.remove()
-        self._nft(["-f", "-"], self.ruleset)
+        # One nft and one atomic batch: the table added (a no-op when a crashed daemon's is
+        # there) and deleted, so that the ruleset replaces any leftover, then the ruleset. Not
+        # `delete` on its own first: in a fresh namespace it fails, and costs a second nft.
+        self._nft(
+            ["-f", "-"], f"add table ip {NFT_TABLE}\ndelete table ip {NFT_TABLE}\n" + self.ruleset
+        )
 
     @staticmethod
     def _nft(args: list[str], stdin: str | None = None) -> str:
