@@ -209,8 +209,9 @@ def measures(
     """Fold the records into Measures: `robots` are the robots' `lateness` dicts (None: the
     robot left none), `display` the display's, `daemons` the AODV daemons'
     `timer_lateness_ms` dicts (judged within `stepping`, `_late_within`), `channel` the
-    ns3-wifi channel's `relay_lag` (medium.json, read by testbed.files.mediumfile), `done_late` each robot's steps between
-    deciding it was done and the world having it (testbed.run.record)."""
+    ns3-wifi channel's `relay_lag` (medium.json, read by testbed.files.mediumfile),
+    `done_late` each robot's steps between deciding it was done and the world having it
+    (testbed.run.record)."""
     dones = [d for d in done_late if d > 0]
     plans = late_plans = timers = late_timers = 0
     age_max = timer_max = 0.0
