@@ -6,7 +6,8 @@ meaning of two of its options), result.json (resultfile.py: its config, resultco
 checked values, resultvalues.py; its ranges, resultcheck.py), config.json (configfile.py),
 the CSVs (csvfiles.py), robots/rK.json (robotfile.py), sweep.json (sweepstate.py), a Slurm
 sweep's jobs file (slurmjobs.py), medium.json (mediumfile.py), a captured network's
-network.json (networkfile.py), and where the rest of a run
+network.json (networkfile.py), the capture metrics' routing.json and metrics.json
+(routingfile.py), and where the rest of a run
 directory's files are (layout.py: events.jsonl, clock.csv, robots/, display/, pcaps/).
 
 These modules hold data and its checks, nothing that runs a testbed: they import common/,

@@ -307,28 +307,28 @@ def metrics(args) -> int:
         m = pcapmetrics.run_metrics(tmp, use_cache=False, network=(routing, scale))
     if m is None:
         raise UsageError(f"metrics: no captures in {args.dir}")
-    m = {k: v for k, v in m.items() if k not in ("pcaps",)}
-    out = os.path.join(d, "metrics.json")
-    write_json_atomic(out, _finite(m), strict=True)  # never through a link; no NaN or Infinity
+    doc = {k: v for k, v in m.to_json().items() if k not in ("pcaps",)}
+    out = os.path.join(d, "metrics.json")  # routing.json's type (testbed.files.routingfile)
+    write_json_atomic(out, _finite(doc), strict=True)  # never through a link; no NaN or Infinity
 
     def fmt(v, spec: str) -> str:
         return "n/a" if v is None else format(v, spec)
 
     print(
-        f"routing {routing}: {len(m.get('robots', {}))} captures, {fmt(m['duration_s'], '.1f')} s"
+        f"routing {routing}: {len(doc.get('robots') or {})} captures, {fmt(m.duration_s, '.1f')} s"
     )
-    print(f"  PDF (TCP payload bytes delivered): {fmt(m['pdf'], '.4f')}")
+    print(f"  PDF (TCP payload bytes delivered): {fmt(m.pdf, '.4f')}")
     print(
-        f"  delay ms: median {fmt(m['delay_ms_median'], '.2f')}, "
-        f"mean {fmt(m['delay_ms_mean'], '.2f')}, p95 {fmt(m['delay_ms_p95'], '.2f')}"
+        f"  delay ms: median {fmt(m.delay_ms_median, '.2f')}, "
+        f"mean {fmt(m.delay_ms_mean, '.2f')}, p95 {fmt(m.delay_ms_p95, '.2f')}"
     )
     print(
-        f"  control overhead: {m['control_tx_packets']} packets, "
-        f"{fmt(m['overhead_packets'], '.4f')} of frames, {fmt(m['overhead_bytes'], '.4f')} of bytes"
+        f"  control overhead: {m.control_tx_packets} packets, "
+        f"{fmt(m.overhead_packets, '.4f')} of frames, {fmt(m.overhead_bytes, '.4f')} of bytes"
     )
-    if m.get("captures_left_out"):
+    if m.captures_left_out:
         from testbed.analysis.runreport import left_out_text
 
-        print(f"  captures left out (not counted): {left_out_text(m['captures_left_out'])}")
+        print(f"  captures left out (not counted): {left_out_text(m.captures_left_out)}")
     print(f"  written to {out}")
     return 0
