@@ -106,3 +106,17 @@ def test_what_pcapmetrics_writes_reads_back_and_a_bad_cache_is_computed_again(tm
         again = pcapmetrics.run_metrics(run)
     assert again == first and "'tx_packets' is str" in caplog.text
     assert "computed again" in caplog.text
+
+
+def test_testbed_metrics_writes_a_metrics_json_of_the_same_type(tmp_path, capsys):
+    cap = tmp_path / "cap"
+    (cap / "daemons").mkdir(parents=True)
+    for k in (1, 2):
+        (cap / f"r{k}.pcap").write_bytes(hd.udp_pcap(k, 3))
+    (cap / "daemons" / "network.json").write_text(json.dumps({"routing": "aodv",
+                                                               "time_scale": 4.0}))  # fmt: skip
+    status, out, _ = hd.testbed(["metrics", str(cap)], capsys)
+    assert status == 0 and "written to" in out
+    m = routingfile.read(cap / "metrics.json")
+    assert m.pcaps is None and m.emulated is not None and m.emulated.time_scale == 4.0
+    assert m.tx_packets == 6 and m.control_tx_packets == 0
