@@ -4,7 +4,7 @@ they use, the choices of the parameters with a fixed set of values and the rule 
 --maps and --middleware (`maps_refusal`). node.launch's NodeArgs is `Params` with its
 parser and checks across flags; testbed.files.runconfig takes a run option's default and
 bounds from here (`bounds`), so the option table loads no planner, step core, numpy or ctypes
-(tests/unit/test_import_budget.py). What imports this: only the standard library, common/,
+(tests/unit/test_import_budget.py). What this imports: only the standard library, common/,
 topology's constants, node.messaging's registry (data) and node.displaysteps.
 """
 

@@ -2,8 +2,10 @@
 
 `testbed run` builds a `NodeArgs` for each robot and the display and turns it into argv with
 `to_argv()`; `python -m node` parses argv back into a `NodeArgs` with `NodeArgs.parse()`.
-The dataclass's fields are the parser's destinations, one for one (a unit test holds them
-together), so the two sides cannot drift apart. Bad arguments: one line, exit 2.
+The dataclass's fields, declared in node.argsdecl (`Params`, a module that loads no planner
+or step core, which the run option table reads), are the parser's destinations, one for one
+(a unit test holds them together), so the two sides cannot drift apart. Bad arguments: one
+line, exit 2.
 
 The C++ robot (build/tb-robot) reads the same command line: node.argsgen writes NodeArgs'
 flags, types, bounds, defaults, help and the checks' numbers into a header at build time
