@@ -48,10 +48,11 @@ Neither mode is tuned to make a claim of the paper hold or fail.
 
 from __future__ import annotations
 
-from node import planner
+from node import argsdecl, planner
 
-MODES = ("paper", "ours")
-DEFAULT = "ours"
+# Declared with the robot's parameters (node.argsdecl), which the option table reads.
+MODES = argsdecl.COORDINATIONS
+DEFAULT = argsdecl.DEFAULT_COORDINATION
 
 
 def allows_fallback(mode: str) -> bool:

@@ -46,6 +46,7 @@ import time
 from collections import Counter
 
 from node import wire
+from node.argsdecl import FLOODS
 from node.mapstats import MapStats
 
 log = logging.getLogger(__name__)
@@ -56,7 +57,7 @@ WINDOW = 256  # sequence numbers remembered per origin below its highest
 # at most once a step, a run has at most 10,000,000 steps), far less than half the number
 # space, so that wrap-around comparison stays meaningful.
 SEQ_WINDOW = 1 << 24
-MODES = ("pruned", "blind")
+MODES = FLOODS  # declared with the robot's parameters (node.argsdecl)
 TTL = 16  # hops a flood travels at most
 SOCKET_BUFFER = 4 << 20  # the flood socket's receive and send buffers, bytes
 NEW, DUPLICATE, FORGED = "new", "duplicate", "forged"

@@ -21,6 +21,9 @@ import math
 
 import numpy as np
 
+# The longest laser a run may have (30 m, the range class of 2-D lidars): declared with the
+# robot's parameters.
+from node.argsdecl import MAX_RANGE_M as MAX_RANGE_M
 from topology.spec import CELL_M
 
 _BIAS = 4096  # makes cell coordinates positive so truncation is floor
@@ -36,9 +39,6 @@ _BUCKETS = 16
 # marks its scans without them (the way a scan with hits always does). Without the budget a
 # 30 m laser's tables took 370 MB in the world and again in every robot's fork server.
 _TABLE_BUDGET_BYTES = 64 << 20
-# The longest laser a run may have: the range class of 2-D lidars (30 m, e.g. Hokuyo's
-# UTM-30LX); a robot's scan without tables takes about 3 ms here at that range.
-MAX_RANGE_M = 30.0
 
 
 _SHARED_TABLES: dict[tuple[float, int, float], dict] = {}  # geometry -> pose-fraction tables

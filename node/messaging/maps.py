@@ -33,28 +33,21 @@ import time
 from collections import Counter
 
 from node import wire
+from node.argsdecl import MAPS as MAPS
+from node.argsdecl import PUBSUB_MIDDLEWARES as PUBSUB_MIDDLEWARES
+from node.argsdecl import maps_refusal
 from node.mapstats import MapStats
 from node.messaging import DEFAULT_MAPS, REGISTRY
 from node.messaging.inbox import Inbox
 
 log = logging.getLogger(__name__)
 
-MAPS = ("flood", "pubsub")
 DEFAULT = DEFAULT_MAPS
 # The module of each middleware's map topic (what a process may import ahead of using it),
-# from the registry: the middlewares that have one are those `--maps pubsub` can go with.
+# from the registry: the middlewares that have one are those `--maps pubsub` can go with
+# (node.argsdecl's PUBSUB_MIDDLEWARES, and its `maps_refusal`, declared with the parameters).
+refusal = maps_refusal
 MODULES = {name: e.map_topic for name, e in REGISTRY.items() if e.map_topic is not None}
-PUBSUB_MIDDLEWARES = tuple(MODULES)
-
-
-def refusal(maps: str, middleware: str) -> str | None:
-    """Why `--maps maps` cannot go with `--middleware middleware` (one line), or None."""
-    if maps == "pubsub" and middleware not in PUBSUB_MIDDLEWARES:
-        return (
-            f"--maps pubsub needs --middleware {' or '.join(PUBSUB_MIDDLEWARES)} "
-            f"(not {middleware}): maps are published on their topics"
-        )
-    return None
 
 
 class MapTopic:

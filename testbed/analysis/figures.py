@@ -71,6 +71,7 @@ from testbed.analysis.tables import (
     RoutingRun,
     write_table,
 )
+from testbed.files.routingfile import RoutingMetrics
 from testbed.view import served
 
 log = logging.getLogger(__name__)
@@ -131,7 +132,7 @@ class Made:
     left_out: list[str] = field(default_factory=list)
 
 
-def capture_metrics(run: FinishedRun) -> dict | None:
+def capture_metrics(run: FinishedRun) -> RoutingMetrics | None:
     """The run's routing metrics from its captures (None without captures or tshark)."""
     try:
         return pcapmetrics.run_metrics(run.path, run=run)
@@ -203,7 +204,9 @@ def _paper_figures(runs: list[FinishedRun], figdir: Path, made: Made) -> None:
         made.files += ablation.plot_fig4_variants(runs, figdir / "ablation_fig4")
 
 
-def _all_metrics(runs: list[FinishedRun], metrics_of: MetricsOf) -> dict[str, dict | None]:
+def _all_metrics(
+    runs: list[FinishedRun], metrics_of: MetricsOf
+) -> dict[str, RoutingMetrics | None]:
     """Each run's routing metrics. tshark is the slow part: keep the cores busy with one
     run's captures each."""
     with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:

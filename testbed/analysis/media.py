@@ -36,11 +36,13 @@ from __future__ import annotations
 import math
 import re
 import statistics
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 from testbed.analysis import stats
 from testbed.analysis.rows import INLINE, MeanCI, Measures
 from testbed.analysis.runs import FinishedRun
+from testbed.files.routingfile import RoutingMetrics
 from topology.spec import NS3_WIFI as WIFI
 from topology.spec import VETH
 
@@ -178,9 +180,9 @@ class MediaPoint:
 COMPARED_KEYS = tuple(f.name for f in fields(MediaCompared))
 
 
-def _control_airtime_share(run: FinishedRun, metrics: dict) -> float | None:
-    tx_p, tx_b = metrics.get("tx_packets"), metrics.get("tx_bytes")
-    ctl_p, ctl_b = metrics.get("control_tx_packets"), metrics.get("control_tx_bytes")
+def _control_airtime_share(run: FinishedRun, metrics: RoutingMetrics) -> float | None:
+    tx_p, tx_b = metrics.tx_packets, metrics.tx_bytes
+    ctl_p, ctl_b = metrics.control_tx_packets, metrics.control_tx_bytes
     if not tx_p or tx_b is None or ctl_p is None or ctl_b is None:
         return None
     phy = phy_of(run.config.wifi_standard, run.config.wifi_rate)
@@ -188,13 +190,13 @@ def _control_airtime_share(run: FinishedRun, metrics: dict) -> float | None:
     return traffic_airtime_s(ctl_p, ctl_b, *phy) / total if total else None
 
 
-def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
-    """One run's numbers (`metrics`: its pcapmetrics, or None without captures)."""
+def run_row(run: FinishedRun, metrics: RoutingMetrics | None) -> MediaRun:
+    """One run's numbers (`metrics`: its routing.json, or None without captures)."""
     c = run.config
-    m = metrics or {}
+    m = metrics or RoutingMetrics()
     scale = run.time_scale_ran
     ch = run.channel
-    raw = m.get("delay_raw_ms_median")
+    raw, median = m.delay_raw_ms_median, m.delay_ms_median
     return MediaRun(
         run=run.run_id,
         medium=c.medium,
@@ -202,8 +204,8 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
         comm_range=c.comm_range,
         robots=c.robots,
         steps=run.exploration_steps,
-        pdf=m.get("pdf"),
-        delay_ms=m["delay_ms_median"] * scale if m.get("delay_ms_median") is not None else None,
+        pdf=m.pdf,
+        delay_ms=median * scale if median is not None else None,
         control_pkts_per_robot_s=run.captured_per_robot_s(m, "control_tx_packets"),
         control_bytes_per_robot_s=run.captured_per_robot_s(m, "control_tx_bytes"),
         control_airtime_share=_control_airtime_share(run, m) if metrics else None,
@@ -213,7 +215,7 @@ def run_row(run: FinishedRun, metrics: dict | None) -> MediaRun:
         channel_relay_lag_ms=ch.relay_lag_mean_ms if ch else None,
         channel_relay_lag_over_1ms=ch.relay_lag_over_1ms if ch else None,
         delay_raw_ms=raw * scale if raw is not None else None,
-        delay_lag_corrected="relay_lag" in m,
+        delay_lag_corrected=m.relay_lag is not None,
     )
 
 
@@ -241,7 +243,9 @@ def point_rows(per_run: list[MediaRun]) -> list[MediaPoint]:
     return out
 
 
-def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[MediaRun], list[MediaPoint]]:
+def tables(
+    runs: list[FinishedRun], metrics: Mapping[str, RoutingMetrics | None]
+) -> tuple[list[MediaRun], list[MediaPoint]]:
     """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
     id's pcapmetrics (or None)."""
     per_run = [run_row(r, metrics.get(r.run_id)) for r in runs if r.usable]

@@ -47,6 +47,7 @@ it is undecided, or too few runs when a middleware it needs had too few.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 from node.messaging import DEFAULT as DEFAULT_MIDDLEWARE
@@ -56,6 +57,7 @@ from testbed.analysis.rows import INLINE, MeanCI, Measures
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.verdictwords import FAILS, HOLDS, TOO_FEW
 from testbed.files.failures import MIDRUN, NONE
+from testbed.files.routingfile import MiddlewareTraffic, RoutingMetrics
 
 UNDECIDED = "undecided"
 NAIVE = "zeromq-reqrep"
@@ -181,20 +183,20 @@ def _number(x) -> float | None:
     return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else None
 
 
-def _air(run: FinishedRun, metrics: dict | None) -> tuple[float | None, float | None]:
+def _air(run: FinishedRun, metrics: RoutingMetrics | None) -> tuple[float | None, float | None]:
     """(bytes per robot per robot-second, own share) of the middleware's captured traffic;
     (None, None) where the captures have no class for it."""
-    mw = (metrics or {}).get("middleware") or {}
-    tx, own = _number(mw.get("tx_bytes")), _number(mw.get("protocol_bytes"))
+    mw = (metrics.middleware if metrics else None) or MiddlewareTraffic()
+    tx, own = _number(mw.tx_bytes), _number(mw.protocol_bytes)
     if tx is None:
         return None, None
-    wall = _number(metrics.get("duration_s")) if metrics else None
+    wall = _number(metrics.duration_s) if metrics else None
     per_robot_s = run.per_robot_second(tx, wall, run.config.robots)
     return per_robot_s, (own / tx if own is not None and tx else None)
 
 
-def run_row(run: FinishedRun, metrics: dict | None) -> MiddlewareRun:
-    """One run's numbers (`metrics`: its pcapmetrics, or None without captures)."""
+def run_row(run: FinishedRun, metrics: RoutingMetrics | None) -> MiddlewareRun:
+    """One run's numbers (`metrics`: its routing.json, or None without captures)."""
     team = (run.messaging or {}).get("team") or {}
     sent, received = _number(team.get("sent")), _number(team.get("received"))
     counted, wall = _number(team.get("robots")), _number(run.step_loop_wall_s)
@@ -267,7 +269,7 @@ def point_rows(
 
 
 def tables(
-    runs: list[FinishedRun], metrics: dict
+    runs: list[FinishedRun], metrics: Mapping[str, RoutingMetrics | None]
 ) -> tuple[list[MiddlewareRun], list[MiddlewarePoint]]:
     """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
     id's pcapmetrics (or None)."""

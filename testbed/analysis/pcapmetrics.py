@@ -92,12 +92,14 @@ from testbed.analysis.pcapread import _int as _int
 from testbed.analysis.pcapread import _tshark_argv as _tshark_argv
 from testbed.analysis.pcapread import parse_fields as parse_fields
 from testbed.analysis.pcapread import read_pcap as read_pcap
+from testbed.files import routingfile
 from testbed.files.resultconfig import DEFAULT_ROUTING
+from testbed.files.routingfile import RoutingMetrics
 from topology.names import LAG_FILE
 
 log = logging.getLogger(__name__)
 
-CACHE_NAME = "routing.json"
+CACHE_NAME = routingfile.ROUTING_NAME
 # 3: "emulated" and "about"; 4: "tcp_flows"; 5: relay-lag correction, or "middleware";
 # 6: both; 7: the middleware's traffic for zenoh and dds, and by kind
 CACHE_FORMAT = 8
@@ -196,9 +198,10 @@ def run_metrics(
     use_cache: bool = True,
     run: runs.FinishedRun | None = None,
     network: tuple[str, float | None] | None = None,
-) -> dict | None:
+) -> RoutingMetrics | None:
     """Routing metrics of one run directory (None if it has no captures), cached in its
-    routing.json. `run` (its routing says whose control port to count, its time scale turns
+    routing.json (its type: testbed.files.routingfile; a cache that is not one is computed
+    again). `run` (its routing says whose control port to count, its time scale turns
     delays into emulated time) is read from the directory when not given; `network`, the
     (routing, time scale) of a `net up --capture` network, stands in for a run that has none."""
     run_dir = Path(run_dir)
@@ -212,14 +215,16 @@ def run_metrics(
     stamp = capturefiles.content_stamp(stamped)  # content, not sizes and mtimes
     if use_cache:
         try:
-            doc = boundedfile.load_json(cache)
-            if doc.get("format") == CACHE_FORMAT and doc.get("pcaps") == stamp:
-                why = capturefiles.cache_refusal(doc)
-                if why is None:
-                    return doc
-                log.warning("%s: not taken (%s): computed again", cache, why)
-        except (boundedfile.Refused, AttributeError):
-            pass
+            cached = routingfile.read(cache) if boundedfile.regular(cache) else None
+        except routingfile.ResultError as e:
+            log.warning("%s: computed again", e)
+            cached = None
+        if (cached is not None and cached.format == CACHE_FORMAT
+                and dict(cached.pcaps or {}) == stamp):  # fmt: skip
+            why = capturefiles.cache_refusal(dict(cached.doc))
+            if why is None:
+                return cached
+            log.warning("%s: not taken (%s): computed again", cache, why)
     found = capturefiles.checked(found)  # what tshark is given: whose each is, bounded
     pcaps = found.paths
     if not pcaps:
@@ -265,13 +270,15 @@ def run_metrics(
         write_json_atomic(cache, metrics)
     except OSError as e:
         log.warning("cannot cache routing metrics in %s: %s", run_dir, e)
-    return metrics
+    try:
+        return routingfile.parse(metrics)
+    except routingfile.ResultError as e:
+        raise runs.ResultError(f"{run_dir}: routing metrics: {e}") from None
 
 
 if __name__ == "__main__":
     logging.basicConfig(level=logging.INFO)
     for d in sys.argv[1:]:
         m = run_metrics(d, use_cache=False)
-        if m:
-            m = {k: v for k, v in m.items() if k != "robots"}
-        print(json.dumps({"run": d, "metrics": m}, indent=1))
+        shown = {k: v for k, v in m.to_json().items() if k != "robots"} if m else None
+        print(json.dumps({"run": d, "metrics": shown}, indent=1))

@@ -17,6 +17,7 @@ choice holds, by the rule in `CHOICE_RULE` (fixed before any sweep was run).
 from __future__ import annotations
 
 import statistics
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from aodv.statsfile import DaemonStats, StatsError, run_stats_files
 from testbed.analysis import stats
 from testbed.analysis.rows import INLINE, Measures
 from testbed.analysis.runs import FinishedRun
+from testbed.files.routingfile import RoutingMetrics
 from topology.protocols import REGISTRY
 from topology.spec import ROUTINGS, VETH
 
@@ -126,10 +128,10 @@ def _discovery_ms(run_dir: Path) -> float | None:
     return statistics.median(lat) if lat else None
 
 
-def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> ProtocolRun:
-    """One run's numbers (`metrics`: its pcapmetrics, or None)."""
+def run_row(run: FinishedRun, steps: float | None, metrics: RoutingMetrics | None) -> ProtocolRun:
+    """One run's numbers (`metrics`: its routing.json, or None)."""
     c = run.config
-    m = metrics or {}
+    m = metrics or RoutingMetrics()
     return ProtocolRun(
         run=run.run_id,
         routing=c.routing,
@@ -141,12 +143,12 @@ def run_row(run: FinishedRun, steps: float | None, metrics: dict | None) -> Prot
             steps=steps,
             control_pkts_per_robot_s=run.captured_per_robot_s(m, "control_tx_packets"),
             control_bytes_per_robot_s=run.captured_per_robot_s(m, "control_tx_bytes"),
-            pdf=m.get("pdf"),
-            delay_ms=m.get("delay_ms_median"),
+            pdf=m.pdf,
+            delay_ms=m.delay_ms_median,
             map_delivery=_map_delivery(run),
             discovery_ms=_discovery_ms(run.path),
         ),
-        daemon_difference=(m.get("daemon_comparison") or {}).get("relative_difference"),
+        daemon_difference=m.daemon_comparison.relative_difference if m.daemon_comparison else None,
     )
 
 
@@ -176,7 +178,9 @@ def point_rows(per_run: list[ProtocolRun]) -> list[ProtocolPoint]:
     return out
 
 
-def tables(runs: list[FinishedRun], metrics: dict) -> tuple[list[ProtocolRun], list[ProtocolPoint]]:
+def tables(
+    runs: list[FinishedRun], metrics: Mapping[str, RoutingMetrics | None]
+) -> tuple[list[ProtocolRun], list[ProtocolPoint]]:
     """(per-run rows of the usable runs, point rows) of a sweep's runs; `metrics`: each run
     id's pcapmetrics (or None)."""
     per_run = [run_row(r, r.exploration_steps, metrics.get(r.run_id)) for r in runs if r.usable]

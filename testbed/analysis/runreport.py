@@ -14,6 +14,7 @@ against segment delivery, mean delay against median); for a run on the ns3-wifi 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 from common.jsonfile import write_atomic
@@ -21,6 +22,7 @@ from testbed.analysis import capturefiles, pcapmetrics
 from testbed.analysis.runs import FinishedRun
 from testbed.analysis.sweepinfo import seconds
 from testbed.files.resultvalues import one_line
+from testbed.files.routingfile import RoutingMetrics
 from topology.spec import VETH
 
 SUMMARY_NAME = "summary.md"
@@ -71,80 +73,79 @@ def _timing(run: FinishedRun) -> list[str]:
     return out
 
 
-def _routing_table(m: dict) -> list[str]:
-    emu = m.get("emulated") or {}
-    scale = emu.get("time_scale")
+def _routing_table(m: RoutingMetrics) -> list[str]:
+    emu = m.emulated
+    scale = emu.time_scale if emu else None
     rows = [
         "| metric | wall clock | emulated"
         + (f" (x {scale:g})" if scale else " (time scale unknown)")
         + " |",
         "|---|---|---|",
-        f"| routing overhead (control / all packets) | {_num(m.get('overhead_packets'), '.3f')}"
-        " | same |",
+        f"| routing overhead (control / all packets) | {_num(m.overhead_packets, '.3f')} | same |",
         f"| packet delivery fraction (bytes, retransmissions included) | "
-        f"{_num(m.get('pdf'), '.3f')} | same |",
-        f"| segment delivery (unique segments) | {_num(m.get('segment_delivery'), '.3f')} | same |",
+        f"{_num(m.pdf, '.3f')} | same |",
+        f"| segment delivery (unique segments) | {_num(m.segment_delivery, '.3f')} | same |",
     ]
-    corrected = "relay_lag" in m  # ns3-wifi: the medium's relay lag taken out
+    corrected = m.relay_lag is not None  # ns3-wifi: the medium's relay lag taken out
     for key, name in (("mean", "mean"), ("median", "median"), ("p95", "95th percentile")):
         for k, what in (
             (f"delay_ms_{key}", ", corrected for the relay lag" if corrected else ""),
             *([(f"delay_raw_ms_{key}", ", raw")] if corrected else []),
         ):
             rows.append(
-                f"| delay, {name}{what} (ms) | {_num(m.get(k), '.3f')} | "
-                f"{_num(emu.get(k), '.3f')} |"
+                f"| delay, {name}{what} (ms) | {_num(m.delay(k), '.3f')} | "
+                f"{_num(emu.get(k) if emu else None, '.3f')} |"
             )
-    bps = m.get("throughput_bps")
+    bps, emu_bps = m.throughput_bps, emu.throughput_bps if emu else None
     rows.append(
         f"| throughput (kbit/s) | {_num(bps and bps / 1000, '.2f')} | "
-        f"{_num(emu.get('throughput_bps') and emu['throughput_bps'] / 1000, '.2f')} |"
+        f"{_num(emu_bps and emu_bps / 1000, '.2f')} |"
     )
     return rows
 
 
-def _explanations(m: dict) -> list[str]:
+def _explanations(m: RoutingMetrics) -> list[str]:
     """The two explanations, with this run's numbers."""
     out = []
-    pdf, seg = m.get("pdf"), m.get("segment_delivery")
+    pdf, seg = m.pdf, m.segment_delivery
     if pdf is not None and seg is not None:
         out.append(
             f"PDF {pdf:.3f} against segment delivery {seg:.3f}: of the "
-            f"{m.get('tcp_segments_sent')} TCP segments the robots sent, "
-            f"{m.get('tcp_segments_delivered')} reached their destination at least once, in "
-            f"{m.get('tcp_transmissions')} transmissions (retransmissions included); PDF counts "
+            f"{m.tcp_segments_sent} TCP segments the robots sent, "
+            f"{m.tcp_segments_delivered} reached their destination at least once, in "
+            f"{m.tcp_transmissions} transmissions (retransmissions included); PDF counts "
             "every transmission's bytes, so lost or repeated transmissions lower it even when "
             "every segment arrived in the end."
         )
-    lag = m.get("relay_lag")
+    lag = m.relay_lag
     if lag:
-        taken = lag.get("subtracted_ms_mean")
+        taken = lag.subtracted_ms_mean
         out.append(
             "The delays are corrected for the ns3-wifi medium's relay lag (the wall time its "
             "relaying of each frame added, beyond the channel's emulated time): "
-            f"{lag['segments_corrected']} segments had the lag of their hop frames taken out"
+            f"{lag.segments_corrected} segments had the lag of their hop frames taken out"
             + (f" ({taken:.3f} ms of wall time on average)" if taken is not None else "")
-            + f", {lag['segments_uncorrected']} could not be matched with the channel's "
+            + f", {lag.segments_uncorrected} could not be matched with the channel's "
             "records and keep their raw delay; the raw delays are in the rows marked raw."
         )
-    mean, median = m.get("delay_ms_mean"), m.get("delay_ms_median")
+    mean, median = m.delay_ms_mean, m.delay_ms_median
     if mean is not None and median is not None:
         out.append(
             f"Mean delay {mean:.3f} ms against median {median:.3f} ms (wall clock): most "
             "segments cross a link that is up at once; a few wait for a route discovery or a "
             "TCP retransmission timeout, and those waits pull the mean far above the median "
-            f"(95th percentile {_num(m.get('delay_ms_p95'), '.3f')} ms)."
+            f"(95th percentile {_num(m.delay_ms_p95, '.3f')} ms)."
         )
     return out
 
 
-def left_out_text(left_out: dict) -> str:
+def left_out_text(left_out: Mapping[str, str]) -> str:
     """ "r1.pcap (empty ...), r3.pcap (missing)": the captures a run's metrics left out."""
     shown = [f"{one_line(str(k), 80)} ({one_line(str(v), 120)})" for k, v in left_out.items()]
     return ", ".join(shown[:10]) + (f" and {len(shown) - 10} more" if len(shown) > 10 else "")
 
 
-def _routing(m: dict | None, run_dir: Path | None = None) -> list[str]:
+def _routing(m: RoutingMetrics | None, run_dir: Path | None = None) -> list[str]:
     if not m:
         left_out = {}
         if run_dir is not None:  # captures there, but none that could be read
@@ -154,24 +155,23 @@ def _routing(m: dict | None, run_dir: Path | None = None) -> list[str]:
                     f"{left_out_text(left_out)}."]  # fmt: skip
         return ["No packet captures in this run (`testbed run --capture`): no routing metrics."]
     out = _routing_table(m)
-    left_out = m.get("captures_left_out") or {}
-    if left_out:
+    if m.captures_left_out:
         out += ["", f"**Captures left out** (no frame of theirs is counted, nor credited to "
-                f"another robot): {left_out_text(left_out)}."]  # fmt: skip
+                f"another robot): {left_out_text(m.captures_left_out)}."]  # fmt: skip
     for line in _explanations(m):
         out += ["", line]
-    cmp = m.get("daemon_comparison")
-    if cmp and cmp.get("relative_difference") is not None:
+    cmp = m.daemon_comparison
+    if cmp and cmp.relative_difference is not None:
         out += [
             "",
-            f"AODV control packets in the captures: {cmp['pcap_control_tx_packets']}; the "
-            f"daemons counted {cmp['daemon_tx_packets']} sent "
-            f"(difference {cmp['relative_difference']:.2%}).",
+            f"AODV control packets in the captures: {cmp.pcap_control_tx_packets}; the "
+            f"daemons counted {cmp.daemon_tx_packets} sent "
+            f"(difference {cmp.relative_difference:.2%}).",
         ]
     return out + ["", "All numbers and what each means: `routing.json` (its `about`)."]
 
 
-def _channel(run: FinishedRun, metrics: dict | None = None) -> list[str]:
+def _channel(run: FinishedRun, metrics: RoutingMetrics | None = None) -> list[str]:
     """The 802.11 channel's counters (medium.json), for a run on ns3-wifi."""
     ch = run.channel
     if ch is None:
@@ -191,7 +191,7 @@ def _channel(run: FinishedRun, metrics: dict | None = None) -> list[str]:
         "percent: the host did not keep up with the time scale). "
         + (
             "The routing delays above have each frame's relay lag taken out."
-            if metrics and "relay_lag" in metrics
+            if metrics and metrics.relay_lag is not None
             else "The routing delays include the relay lag: this run did not record it "
             "per frame (relay-lag.bin)."
         ),
@@ -207,7 +207,7 @@ def _channel(run: FinishedRun, metrics: dict | None = None) -> list[str]:
     return lines + [""]
 
 
-def summary(run: FinishedRun, metrics: dict | None) -> str:
+def summary(run: FinishedRun, metrics: RoutingMetrics | None) -> str:
     out = [f"# Run {run.run_id}", ""]
     for line in _outcome(run) + _timing(run):
         out += [line, ""]
@@ -217,7 +217,7 @@ def summary(run: FinishedRun, metrics: dict | None) -> str:
     return "\n".join(out) + "\n"
 
 
-def write(run: FinishedRun) -> tuple[Path, dict | None]:
+def write(run: FinishedRun) -> tuple[Path, RoutingMetrics | None]:
     """routing.json (when the run has captures) and summary.md; returns the summary's path
     and the metrics."""
     metrics = pcapmetrics.run_metrics(run.path, run=run)

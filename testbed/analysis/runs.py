@@ -35,9 +35,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from common import boundedfile
 from testbed.files import mediumfile
@@ -45,6 +45,9 @@ from testbed.files.mediumfile import ChannelRecord
 from testbed.files.resultconfig import DEFAULT_VARIANT
 from testbed.files.resultfile import RESULT_NAME, ResultError, RunResult
 from testbed.files.resultvalues import one_line
+
+if TYPE_CHECKING:  # only named: reading a result loads no routing.json type
+    from testbed.files.routingfile import RoutingMetrics
 
 log = logging.getLogger(__name__)
 
@@ -67,10 +70,10 @@ class FinishedRun(RunResult):
     def usable(self) -> bool:
         return self.status in USABLE and (self.faithful is not False or self.count_unfaithful)
 
-    def captured_per_robot_s(self, metrics: Mapping, key: str) -> float | None:
-        """A count of the run's capture metrics (pcapmetrics' `key`) per transmitting robot
+    def captured_per_robot_s(self, metrics: RoutingMetrics, key: str) -> float | None:
+        """A count of the run's capture metrics (routing.json's `key`) per transmitting robot
         (the display robot transmits too) per second of robot time; None when missing."""
-        total, wall = metrics.get(key), metrics.get("duration_s")
+        total, wall = metrics.count(key), metrics.duration_s
         return self.per_robot_second(total, wall, self.config.robots + 1)
 
     @classmethod

@@ -47,6 +47,7 @@ from common.jsonfile import write_atomic
 from testbed.analysis import claimcompare, media, pcapmetrics, stats
 from testbed.analysis.rows import named
 from testbed.analysis.runs import FinishedRun, ResultError, load_runs
+from testbed.files.routingfile import RoutingMetrics
 
 # (key, name, format)
 MEASURES = (
@@ -113,22 +114,24 @@ class ScalePoint:
 MEASURE_KEYS = tuple(k for k, _, _ in MEASURES)
 
 
-def run_row(run: FinishedRun, metrics: dict | None) -> ScaleRun:
+def run_row(run: FinishedRun, metrics: RoutingMetrics | None) -> ScaleRun:
     """One run's measures."""
     row = media.run_row(run, metrics)
     counted = run.counted_robots  # a robot stopped on purpose (--kill) is not averaged
     plans = [p for r in counted for p in r.plans]
     requests = sum(1 for p in plans if p.cause == "request") / len(counted) if counted else None
     scale = run.time_scale_ran
-    m = metrics or {}
-    mean = m.get("delay_ms_mean")
-    flows, tx, segments = m.get("tcp_flows"), m.get("tcp_transmissions"), m.get("tcp_segments_sent")
+    m = metrics or RoutingMetrics()
+    mean = m.delay_ms_mean
+    flows, tx, segments = m.tcp_flows, m.tcp_transmissions, m.tcp_segments_sent
     return ScaleRun(
         routing=row.routing, laser_range=run.config.laser_range, comm_range=row.comm_range,
         robots=row.robots, time_scale=scale, tcp_emulated=run.tcp_in_emulated_time,
         steps=row.steps, requests=requests, pdf=row.pdf, delay_ms=row.delay_ms,
         delay_mean_ms=None if mean is None else mean * (scale or 1.0),
-        retrans_per_flow=(tx - segments) / flows if flows and tx is not None else None,
+        retrans_per_flow=(
+            (tx - segments) / flows if flows and tx is not None and segments is not None else None
+        ),
         control_pkts_per_robot_s=row.control_pkts_per_robot_s,
         control_bytes_per_robot_s=row.control_bytes_per_robot_s,
     )  # fmt: skip

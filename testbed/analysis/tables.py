@@ -33,6 +33,7 @@ from typing import Any, TypeVar
 from common.jsonfile import write_atomic
 from testbed.analysis.rows import INLINE, MeanRange, Measures, Spread, columns, named
 from testbed.analysis.runs import DEFAULT_VARIANT, FinishedRun
+from testbed.files.routingfile import DaemonComparison, RoutingMetrics
 from topology.spec import VETH
 
 FIG4_TEAMS = (1, 2, 5, 10)
@@ -48,7 +49,7 @@ ROUTING_METRICS = (
 
 log = logging.getLogger(__name__)
 
-MetricsOf = Callable[[FinishedRun], "dict | None"]
+MetricsOf = Callable[[FinishedRun], "RoutingMetrics | None"]
 USUAL_CAUSES = ("start", "timer", "request")
 
 
@@ -133,11 +134,11 @@ class RoutingRun:
     delay_ms_median: float | None
     throughput_bps: float | None
     delay_ms_median_emulated: float | None
-    control_tx_packets: int | None
-    tx_packets: int | None
-    daemon_tx_packets: int | None
+    control_tx_packets: float | None  # a count (routingfile: a number, not negative)
+    tx_packets: float | None
+    daemon_tx_packets: float | None
     daemon_relative_difference: float | None
-    capture_dropped_packets: int | None
+    capture_dropped_packets: float | None
 
 
 @dataclass(frozen=True)
@@ -306,19 +307,19 @@ def routing_per_run(runs: list[FinishedRun], metrics_of: MetricsOf) -> list[Rout
         if not m:
             continue
         c = run.config
-        cmp = m.get("daemon_comparison") or {}
+        cmp = m.daemon_comparison or DaemonComparison()
         rows.append(RoutingRun(
             run=run.run_id, robots=c.robots, comm_range=c.comm_range,
             laser_range=c.laser_range, loss_pct=c.loss_pct, delay_ms=c.delay_ms,
             time_scale=run.time_scale_requested or c.time_scale,
             tcp_emulated=run.tcp_in_emulated_time,
-            overhead_packets=m.get("overhead_packets"), pdf=m.get("pdf"),
-            delay_ms_median=m.get("delay_ms_median"), throughput_bps=m.get("throughput_bps"),
-            delay_ms_median_emulated=(m.get("emulated") or {}).get("delay_ms_median"),
-            control_tx_packets=m.get("control_tx_packets"), tx_packets=m.get("tx_packets"),
-            daemon_tx_packets=cmp.get("daemon_tx_packets"),
-            daemon_relative_difference=cmp.get("relative_difference"),
-            capture_dropped_packets=(m.get("capture_dropped") or {}).get("packets"),
+            overhead_packets=m.overhead_packets, pdf=m.pdf,
+            delay_ms_median=m.delay_ms_median, throughput_bps=m.throughput_bps,
+            delay_ms_median_emulated=m.emulated.delay_ms_median if m.emulated else None,
+            control_tx_packets=m.control_tx_packets, tx_packets=m.tx_packets,
+            daemon_tx_packets=cmp.daemon_tx_packets,
+            daemon_relative_difference=cmp.relative_difference,
+            capture_dropped_packets=m.capture_dropped_packets,
         ))  # fmt: skip
     return rows
 

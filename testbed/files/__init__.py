@@ -5,7 +5,9 @@ The option table (runconfig.py, in options.py's terms; failures.py and isolation
 meaning of two of its options), result.json (resultfile.py: its config, resultconfig.py; its
 checked values, resultvalues.py; its ranges, resultcheck.py), config.json (configfile.py),
 the CSVs (csvfiles.py), robots/rK.json (robotfile.py), sweep.json (sweepstate.py), a Slurm
-sweep's jobs file (slurmjobs.py), medium.json (mediumfile.py), and where the rest of a run
+sweep's jobs file (slurmjobs.py), medium.json (mediumfile.py), a captured network's
+network.json (networkfile.py), the capture metrics' routing.json and metrics.json
+(routingfile.py), and where the rest of a run
 directory's files are (layout.py: events.jsonl, clock.csv, robots/, display/, pcaps/).
 
 These modules hold data and its checks, nothing that runs a testbed: they import common/,

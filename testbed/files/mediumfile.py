@@ -6,7 +6,10 @@ reads (testbed.analysis.runs: `FinishedRun.channel`).
 when the run has none (a veth run, or one made before the file existed); a file that is
 there but not what the channel writes is a ResultError of one line naming the file and the
 key, as a bad result.json is. Each robot's counters are whole numbers (0 when absent), its
-airtime a number; `now_s`, the channel's emulated seconds, is required.
+airtime a number; `now_s`, the channel's emulated seconds, is required. `relay_lag` (how late
+the channel relayed frames: `RelayLag`, which the run's fidelity verdict judges,
+testbed.run.results) has whole, non-negative counts, no more frames over 1 ms than frames,
+and a non-negative mean.
 """
 
 from __future__ import annotations
@@ -41,6 +44,42 @@ class ChannelRobot:
 
 
 @dataclass(frozen=True)
+class RelayLag:
+    """medium.json's `relay_lag`: how late (emulated ms) the channel relayed frames."""
+
+    frames: int  # frames relayed
+    mean_ms: float | None  # None: the file has no mean
+    over_1ms: int = 0  # frames relayed more than 1 ms late
+    max_ms: float | None = None
+
+    @property
+    def over_1ms_share(self) -> float | None:
+        """The share of relayed frames over 1 ms late (None when none was relayed)."""
+        return self.over_1ms / self.frames if self.frames else None
+
+
+def parse_relay_lag(doc: Mapping[str, object]) -> RelayLag | None:
+    """medium.json's `relay_lag` (None when absent); ResultError when malformed."""
+    lag = get_mapping(doc, "relay_lag")
+    if not lag:
+        return None
+    out = RelayLag(
+        frames=get_value(lag, "frames", (int,), 0),
+        mean_ms=get_value(lag, "mean_ms", _NUM),
+        over_1ms=get_value(lag, "over_1ms", (int,), 0),
+        max_ms=get_value(lag, "max_ms", _NUM),
+    )
+    for key in ("frames", "mean_ms", "over_1ms", "max_ms"):
+        value = getattr(out, key)
+        if value is not None and value < 0:
+            raise ResultError(f"'relay_lag': {key!r} is negative ({value})")
+    if out.over_1ms > out.frames:
+        raise ResultError(f"'relay_lag': more frames over 1 ms ({out.over_1ms}) than relayed "
+                          f"({out.frames})")  # fmt: skip
+    return out
+
+
+@dataclass(frozen=True)
 class ChannelRecord:
     """The 802.11 channel's counters at the end of a run (medium.json)."""
 
@@ -49,6 +88,7 @@ class ChannelRecord:
     relay_lag_mean_ms: float | None = None  # emulated ms; how late frames were relayed
     relay_lag_over_1ms: float | None = None  # share of relayed frames over 1 ms late
     lateness_max_ms: float | None = None
+    relay_lag: RelayLag | None = None
 
     def total(self, key: str) -> float:
         """The sum over robots of one ChannelRobot field."""
@@ -99,15 +139,14 @@ def parse_channel(doc: object) -> ChannelRecord:
         except ResultError as e:
             raise ResultError(f"robot {k}: {e}") from None
         out.append(ChannelRobot(name=f"r{k}", airtime_s=airtime, **counts))
-    lag, late = get_mapping(doc, "relay_lag"), get_mapping(doc, "lateness")
-    frames = get_value(lag, "frames", (int,), 0)
-    over = get_value(lag, "over_1ms", (int,), 0)
+    lag = parse_relay_lag(doc)
     return ChannelRecord(
         duration_s=get_value(doc, "now_s", _NUM, required=True),
         robots=tuple(out),
-        relay_lag_mean_ms=get_value(lag, "mean_ms", _NUM),
-        relay_lag_over_1ms=over / frames if frames else None,
-        lateness_max_ms=get_value(late, "max_ms", _NUM),
+        relay_lag_mean_ms=lag.mean_ms if lag else None,
+        relay_lag_over_1ms=lag.over_1ms_share if lag else None,
+        lateness_max_ms=get_value(get_mapping(doc, "lateness"), "max_ms", _NUM),
+        relay_lag=lag,
     )
 
 

@@ -21,10 +21,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from common.argtypes import checked
-from node.launch import MAX_LASER_CELLS
-from node.launch import bounds as robot
-from node.messaging.maps import refusal as maps_refusal
-from node.rays import MAX_RANGE_M as MAX_LASER_RANGE_M
+from node.argsdecl import MAX_LASER_CELLS, maps_refusal
+from node.argsdecl import MAX_RANGE_M as MAX_LASER_RANGE_M
+from node.argsdecl import bounds as robot
 from node.timing import STEP_S
 from testbed.files import failures, resultconfig
 from testbed.files import options as runoptions
@@ -277,7 +276,7 @@ class RunConfig:
         str, "serve a live view of the run at [HOST:]PORT (127.0.0.1 unless a host is given)",
         None, metavar="[HOST:]PORT", default_text="none",
     )  # fmt: skip
-    # Last: its name would shadow `robot` (node.launch.bounds) for the fields after it.
+    # Last: its name would shadow `robot` (node.argsdecl.bounds) for the fields after it.
     robot: str = option(
         str, "the robot program: auto (the C++ robot where it was built and carries the "
         "run's middleware, else the Python robot), cpp, or python (the reference); "
@@ -334,7 +333,7 @@ def refusal(cfg: RunConfig) -> tuple[str, str] | None:
             f"a laser range of {cfg.laser_range:g} m is shorter than a map cell "
             f"({cell:g} m): the robots would see nothing"
         )
-    if cfg.laser_range / cell > MAX_LASER_CELLS:  # the robots refuse it (node.launch)
+    if cfg.laser_range / cell > MAX_LASER_CELLS:  # the robots refuse it (node.argsdecl)
         return "laser_range", (
             f"a laser range of {cfg.laser_range:g} m is over {MAX_LASER_CELLS:,} map cells of "
             f"{cell:g} m: use a coarser --map-cell or a shorter laser"

@@ -15,7 +15,6 @@ import subprocess
 import sys
 import time
 
-from common import timescale
 from common.argtypes import number
 from common.errors import TestbedError, UsageError
 from topology.inputs.mobility import LIMITS_TEXT, MIN_TICK_S
@@ -263,25 +262,16 @@ def _feed_client(path: str) -> int:
 
 def network_of(path: str) -> tuple[str, float | None]:
     """(routing, time scale) of a capture directory's daemons/network.json (`net up`
-    wrote it): ("aodv", None) where it is missing; UsageError, one line naming the file
-    and the key, where it is there but not one (a FIFO is refused, not waited on)."""
-    from common import boundedfile
-    from topology.spec import ROUTINGS
+    wrote it; its type is testbed.files.networkfile): ("aodv", None) where it is missing;
+    UsageError, one line naming the file and the key, where it is there but not one (a FIFO
+    is refused, not waited on)."""
+    from testbed.files import networkfile
 
-    if not os.path.lexists(path):
-        return "aodv", None
     try:
-        net = boundedfile.load_json(path)
-    except boundedfile.Refused as r:
-        raise UsageError(f"metrics: {path}: {boundedfile.describe(r)}") from None
-    if not isinstance(net, dict):
-        raise UsageError(f"metrics: {path}: not a JSON object")
-    routing, scale = net.get("routing", "aodv"), net.get("time_scale")
-    if routing not in ROUTINGS:
-        raise UsageError(f"metrics: {path}: 'routing' is not one of {', '.join(ROUTINGS)}")
-    if scale is not None and not timescale.valid(scale):
-        raise UsageError(f"metrics: {path}: 'time_scale': {timescale.refusal(scale)}")
-    return routing, scale
+        net = networkfile.read(path) or networkfile.NetworkRecord()
+    except networkfile.ResultError as e:
+        raise UsageError(f"metrics: {e}") from None
+    return net.routing, net.time_scale
 
 
 def _finite(value):
@@ -309,34 +299,36 @@ def metrics(args) -> int:
         raise UsageError(f"metrics: {args.dir} is not a directory")
     if not any(re.fullmatch(r"r\d+\.pcap", e) for e in os.listdir(d)):
         raise UsageError(f"metrics: {args.dir} has no rK.pcap (made by `net up --capture DIR`)")
-    routing, scale = network_of(os.path.join(d, "daemons", "network.json"))
+    from testbed.files.networkfile import network_path
+
+    routing, scale = network_of(network_path(d))
     with tempfile.TemporaryDirectory(prefix="tb-metrics-") as tmp:
         os.symlink(d, os.path.join(tmp, "pcaps"))  # laid out as a run's directory
         m = pcapmetrics.run_metrics(tmp, use_cache=False, network=(routing, scale))
     if m is None:
         raise UsageError(f"metrics: no captures in {args.dir}")
-    m = {k: v for k, v in m.items() if k not in ("pcaps",)}
-    out = os.path.join(d, "metrics.json")
-    write_json_atomic(out, _finite(m), strict=True)  # never through a link; no NaN or Infinity
+    doc = {k: v for k, v in m.to_json().items() if k not in ("pcaps",)}
+    out = os.path.join(d, "metrics.json")  # routing.json's type (testbed.files.routingfile)
+    write_json_atomic(out, _finite(doc), strict=True)  # never through a link; no NaN or Infinity
 
     def fmt(v, spec: str) -> str:
         return "n/a" if v is None else format(v, spec)
 
     print(
-        f"routing {routing}: {len(m.get('robots', {}))} captures, {fmt(m['duration_s'], '.1f')} s"
+        f"routing {routing}: {len(doc.get('robots') or {})} captures, {fmt(m.duration_s, '.1f')} s"
     )
-    print(f"  PDF (TCP payload bytes delivered): {fmt(m['pdf'], '.4f')}")
+    print(f"  PDF (TCP payload bytes delivered): {fmt(m.pdf, '.4f')}")
     print(
-        f"  delay ms: median {fmt(m['delay_ms_median'], '.2f')}, "
-        f"mean {fmt(m['delay_ms_mean'], '.2f')}, p95 {fmt(m['delay_ms_p95'], '.2f')}"
+        f"  delay ms: median {fmt(m.delay_ms_median, '.2f')}, "
+        f"mean {fmt(m.delay_ms_mean, '.2f')}, p95 {fmt(m.delay_ms_p95, '.2f')}"
     )
     print(
-        f"  control overhead: {m['control_tx_packets']} packets, "
-        f"{fmt(m['overhead_packets'], '.4f')} of frames, {fmt(m['overhead_bytes'], '.4f')} of bytes"
+        f"  control overhead: {m.control_tx_packets} packets, "
+        f"{fmt(m.overhead_packets, '.4f')} of frames, {fmt(m.overhead_bytes, '.4f')} of bytes"
     )
-    if m.get("captures_left_out"):
+    if m.captures_left_out:
         from testbed.analysis.runreport import left_out_text
 
-        print(f"  captures left out (not counted): {left_out_text(m['captures_left_out'])}")
+        print(f"  captures left out (not counted): {left_out_text(m.captures_left_out)}")
     print(f"  written to {out}")
     return 0

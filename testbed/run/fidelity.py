@@ -108,6 +108,7 @@ from typing import Any
 
 from aodv.params import Params as AodvParams
 from node.timing import STEP_S
+from testbed.files.mediumfile import RelayLag
 from topology.kernel.nettimers import NetworkTimers
 
 DEADLINE_MISS_LIMIT = 0.01
@@ -201,15 +202,16 @@ def measures(
     robots: Iterable[dict | None],
     display: dict | None = None,
     daemons: Iterable[Mapping[str, Any] | None] = (),
-    channel: dict | None = None,
+    channel: RelayLag | None = None,
     stepping: tuple[float, float] | None = None,
     done_late: Iterable[int] = (),
 ) -> Measures:
     """Fold the records into Measures: `robots` are the robots' `lateness` dicts (None: the
     robot left none), `display` the display's, `daemons` the AODV daemons'
     `timer_lateness_ms` dicts (judged within `stepping`, `_late_within`), `channel` the
-    ns3-wifi channel's `relay_lag` (medium.json), `done_late` each robot's steps between
-    deciding it was done and the world having it (testbed.run.record)."""
+    ns3-wifi channel's `relay_lag` (medium.json, read by testbed.files.mediumfile),
+    `done_late` each robot's steps between deciding it was done and the world having it
+    (testbed.run.record)."""
     dones = [d for d in done_late if d > 0]
     plans = late_plans = timers = late_timers = 0
     age_max = timer_max = 0.0
@@ -235,8 +237,8 @@ def measures(
     if f:
         frames, late_frames = f.get("n", 0), _late_over(f.get("hist", {}), DISPLAY_LATE_MS)
     relayed, lag = 0, None
-    if isinstance(channel, dict) and isinstance(channel.get("mean_ms"), (int, float)):
-        relayed, lag = int(channel.get("frames") or 0), round(float(channel["mean_ms"]), 3)
+    if channel is not None and channel.mean_ms is not None:
+        relayed, lag = channel.frames, round(float(channel.mean_ms), 3)
     return Measures(
         deadline_miss_fraction=miss_fraction, plans=plans, late_plans=late_plans,
         plan_age_max_steps=age_max, timers=timers, late_timers=late_timers,

@@ -20,9 +20,8 @@ import cv2
 import numpy as np
 
 from aodv.statsfile import DaemonStats, StatsError, run_stats_path
-from common.jsonfile import read_json
 from node import events, render, stepcore
-from testbed.files import isolation, layout, robotfile
+from testbed.files import isolation, layout, mediumfile, robotfile
 from testbed.files.resultfile import HostStalls, Plan, RobotResult, RunResult
 from testbed.run import fidelity, twin
 from testbed.world.world import World
@@ -236,10 +235,16 @@ def cpu_seconds(
     return out
 
 
-def channel_relay_lag(out: str) -> dict | None:
-    """The ns3-wifi channel's `relay_lag` counters (medium.json), None without that channel."""
-    counters = read_json(layout.medium_path(out))
-    return counters.get("relay_lag") if isinstance(counters, dict) else None
+def channel_relay_lag(out: str) -> mediumfile.RelayLag | None:
+    """The ns3-wifi channel's `relay_lag` counters (medium.json), None without that channel; a
+    medium.json that is not what the channel writes is named in a warning and not judged
+    (the run's results are written all the same)."""
+    try:
+        channel = mediumfile.read(out)
+    except mediumfile.ResultError as e:
+        log.warning("%s: the channel's relay lag not judged", e)
+        return None
+    return channel.relay_lag if channel is not None else None
 
 
 def display_summary(out: str) -> dict:

@@ -52,8 +52,8 @@ def test_a_short_exploration_runs_on_ns3_wifi_and_keeps_the_channel_counters(tb_
     # frames in flight when the captures stopped and those the kernel dropped from them.
     metrics = figures.capture_metrics(rec)
     assert metrics is not None
-    sent, seen = ch.total("frames_sent"), metrics["tx_packets"]
-    lost = (metrics.get("capture_dropped") or {}).get("packets", 0)
+    sent, seen = ch.total("frames_sent"), metrics.tx_packets
+    lost = metrics.capture_dropped_packets or 0
     assert abs(seen - sent) <= max(5, 0.02 * sent) + lost, (seen, sent, lost)
     row = media.run_row(rec, metrics)
     assert row.medium == "ns3-wifi" and 0 < row.control_airtime_share < 1

@@ -183,13 +183,14 @@ def test_hello_limit_is_half_the_lateness_that_breaks_a_link_in_every_aodv_profi
 
 
 def test_the_channels_mean_relay_lag_is_judged_against_one_percent_of_a_step():
+    from testbed.files.mediumfile import RelayLag
     from testbed.run.fidelity import CHANNEL_LAG_LIMIT_MS, measures, verdict
 
     assert CHANNEL_LAG_LIMIT_MS == 1.0  # a frame d ms late lands a step late with odds d/100
-    on_time = measures(0.0, [], None, [], {"frames": 900, "mean_ms": 0.45, "max_ms": 30.0})
+    on_time = measures(0.0, [], None, [], RelayLag(frames=900, mean_ms=0.45, max_ms=30.0))
     assert (on_time.channel_frames, on_time.channel_lag_mean_ms) == (900, 0.45)
     assert verdict(on_time)["ok"] is True
-    behind = verdict(measures(0.0, [], None, [], {"frames": 900, "mean_ms": 2.03}))
+    behind = verdict(measures(0.0, [], None, [], RelayLag(frames=900, mean_ms=2.03)))
     assert behind["ok"] is False
     assert behind["reason"] == (
         "2.03 ms: the 802.11 channel relayed frames that late on average (limit 1)"
@@ -197,10 +198,12 @@ def test_the_channels_mean_relay_lag_is_judged_against_one_percent_of_a_step():
     assert behind["measures"]["channel_lag_mean_ms"] == 2.03
 
 
-def test_a_run_without_the_channel_or_with_a_malformed_counter_is_not_judged_on_it():
+def test_a_run_without_the_channel_or_its_mean_is_not_judged_on_it():
+    # A malformed relay_lag is mediumfile's ResultError (tests/unit/test_medium_file.py).
+    from testbed.files.mediumfile import RelayLag
     from testbed.run.fidelity import measures, verdict
 
-    for channel in (None, {}, {"frames": 3, "mean_ms": "late"}, ["x"]):
+    for channel in (None, RelayLag(frames=3, mean_ms=None)):
         m = measures(0.0, [], None, [], channel)
         assert (m.channel_frames, m.channel_lag_mean_ms) == (0, None)
         assert verdict(m)["ok"] is True

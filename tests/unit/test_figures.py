@@ -13,6 +13,7 @@ from testbed.analysis import figures, pathsfig, plots, tables
 from testbed.analysis.rows import MeanRange, Spread
 from testbed.analysis.runs import DEFAULT_VARIANT, load_runs
 from testbed.analysis.tables import Fig2Row, RoutingMeans, RoutingRow
+from testbed.files import routingfile
 from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import make_sweep, result_doc, timer_plans, write_run
 
@@ -139,7 +140,7 @@ def test_routing_and_impairment_tables(tmp_path):
         }
         for r in runs
     }
-    m = figures.make_all(tmp_path, metrics_of=lambda run: fake[run.run_id])
+    m = figures.make_all(tmp_path, metrics_of=lambda run: routingfile.parse(fake[run.run_id]))
     routing = m.tables.routing
     assert len(routing) == 1  # the unimpaired point only
     assert routing[0].n == 2

@@ -261,11 +261,11 @@ def test_a_shipped_routing_cache_is_checked_not_trusted(tmp_path):
     doc = json.loads((run / "routing.json").read_text())
     doc.update(pdf=7.5, delay_ms_median=-1e9)  # the captures' own stamp kept
     (run / "routing.json").write_text(json.dumps(doc))
-    assert pcapmetrics.run_metrics(run)["pdf"] == first["pdf"]
+    assert pcapmetrics.run_metrics(run).pdf == first.pdf
     other = dict(doc, pdf=0.5)  # plausible, but for other captures: their hashes differ
     other["pcaps"] = {name: "0" * 64 for name in doc["pcaps"]}
     (run / "routing.json").write_text(json.dumps(other))
-    assert pcapmetrics.run_metrics(run)["pdf"] == first["pdf"]
+    assert pcapmetrics.run_metrics(run).pdf == first.pdf
 
 
 def test_a_capture_linked_out_of_the_run_is_left_out(tmp_path):

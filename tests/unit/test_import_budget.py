@@ -61,3 +61,24 @@ def test_reading_one_result_loads_a_handful_of_modules(reader, run_dir):
     got = loaded(READERS[reader], run_dir)
     assert not got["heavy"], f"reading a result.json loads {got['heavy']}"
     assert len(got["modules"]) <= BUDGET[reader], got["modules"]
+
+
+# The option table: options.py's terms, and runconfig.py's RunConfig with the robot's own
+# declarations of its parameters (node.argsdecl), never node.launch's planner and step core
+# (30 modules, numpy and ctypes before node.argsdecl). runconfig's 18: itself, options,
+# failures, isolation, result.json's config and its four (resultconfig's), common's four,
+# topology's three constants, node.argsdecl with displaysteps and timing.
+OPTION_TABLE = {"testbed.files.options": 3, "testbed.files.runconfig": 18}
+NEVER_IN_OPTIONS = ("numpy", "ctypes", "cv2")
+
+
+@pytest.mark.parametrize("module", sorted(OPTION_TABLE))
+def test_the_option_table_loads_no_planner_numpy_or_ctypes(module):
+    code = PROBE.format(read=f"import {module}", project=PROJECT, heavy=NEVER_IN_OPTIONS)
+    env = dict(os.environ, PYTHONPATH=PROJECT_ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       cwd=PROJECT_ROOT, timeout=60, check=True)  # fmt: skip
+    got = json.loads(p.stdout)
+    assert not got["heavy"], f"importing {module} loads {got['heavy']}"
+    assert "node.launch" not in got["modules"], got["modules"]
+    assert len(got["modules"]) <= OPTION_TABLE[module], got["modules"]

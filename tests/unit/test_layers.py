@@ -279,13 +279,12 @@ def test_no_module_over_600_lines_and_no_class_over_400():
 PROJECT = ("common", "node", "topology", "aodv", "testbed")
 # What testbed/files, the ground floor of testbed/ (docs/architecture.md), takes from the
 # project beyond common/ and itself: named constants, and the robot's own declarations of
-# the parameters a run option sets (node.launch.bounds) and of the rule joining --maps and
-# --middleware (node.messaging.maps.refusal), and a position's check. Nothing that runs.
+# the parameters a run option sets and of the rule joining --maps and --middleware
+# (node.argsdecl: bounds, maps_refusal; a module that loads no planner, step core or numpy),
+# and a position's check. Nothing that runs.
 FILES_MAY_IMPORT = {
+    "node.argsdecl": {"MAX_LASER_CELLS", "MAX_RANGE_M", "bounds", "maps_refusal"},
     "node.events": {"EVENTS_SUFFIX"},
-    "node.launch": {"MAX_LASER_CELLS", "bounds"},
-    "node.messaging.maps": {"refusal"},
-    "node.rays": {"MAX_RANGE_M"},
     "node.timing": {"STEP_S"},
     "topology.names": {"MAX_ROBOTS"},
     "topology.spec": {

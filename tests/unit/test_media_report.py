@@ -7,6 +7,7 @@ import json
 import pytest
 
 from testbed.analysis import figures, media, protocols, report
+from testbed.files import routingfile
 from testbed.sweep import file as sweepfile
 from tests.unit.test_analysis_runs import channel_doc
 from tests.unit.test_sweep_synthetic import result_doc, write_run
@@ -41,7 +42,7 @@ def sweep(tmp_path, runs=3, routing=()):
             "pdf": 0.99 - 0.001 * run.index,
             "delay_ms_median": DELAY_MS[c.medium] + 0.01 * run.index,
         }  # fmt: skip
-    return lambda run: metrics.get(run.run_id)
+    return lambda run: routingfile.parse(m) if (m := metrics.get(run.run_id)) else None
 
 
 def test_rows_per_medium_with_intervals_and_emulated_delay(tmp_path):
@@ -143,7 +144,8 @@ def test_the_channel_table_gives_the_raw_delay_of_runs_corrected_for_the_relay_l
     def corrected(run):
         m = metrics_of(run)
         if m is not None and run.config.medium == "ns3-wifi" and not run.run_id.endswith("k1"):
-            m = {**m, "delay_raw_ms_median": m["delay_ms_median"] + 0.25, "relay_lag": {}}
+            raw = m.delay_ms_median + 0.25
+            m = routingfile.parse({**m.to_json(), "delay_raw_ms_median": raw, "relay_lag": {}})
         return m
 
     made = figures.make_all(tmp_path, metrics_of=corrected)

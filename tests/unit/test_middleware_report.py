@@ -6,6 +6,7 @@ import pytest
 
 from testbed.analysis import figures, middlewares, report, stats
 from testbed.analysis.verdicts import FAILS, HOLDS, TOO_FEW
+from testbed.files import routingfile
 from testbed.sweep import file as sweepfile
 from testbed.sweep.rundir import plan_dict
 from tests.unit.test_sweep_synthetic import result_doc, write_run
@@ -58,7 +59,7 @@ def sweep(tmp_path, runs=2, mws=("nanomsg", "zeromq-reqrep", "dds"), stuck="zero
             robot_s = c.robots * DURATION_S * c.time_scale
             mw.update(tx_bytes=500.0 * robot_s, protocol_bytes=50.0 * robot_s)
         metrics[run.run_id] = {"duration_s": DURATION_S, "middleware": mw}
-    return lambda run: metrics.get(run.run_id)
+    return lambda run: routingfile.parse(m) if (m := metrics.get(run.run_id)) else None
 
 
 def rows_by(made):

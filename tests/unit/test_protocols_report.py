@@ -4,6 +4,7 @@ the paper's choice of AODV, on a synthetic protocols sweep with known numbers.""
 from dataclasses import replace
 
 from testbed.analysis import figures, protocols, report
+from testbed.files import routingfile
 from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
@@ -28,7 +29,7 @@ def sweep(tmp_path):
             "control_tx_bytes": 1000.0, "pdf": 0.9 if c.routing != "oracle" else 1.0,
             "delay_ms_median": 2.0,
         }  # fmt: skip
-    return lambda run: metrics.get(run.run_id)
+    return lambda run: routingfile.parse(m) if (m := metrics.get(run.run_id)) else None
 
 
 def test_protocol_rows_per_point_with_steps_intervals(tmp_path):

@@ -11,6 +11,7 @@ import pytest
 
 from testbed.analysis import pcapmetrics, routingnotes, runreport
 from testbed.analysis.runs import load_run
+from testbed.files import routingfile
 from testbed.sweep import file as sweepfile
 from tests.unit import test_pcapmetrics as tp
 from tests.unit.hostile_dirs import EMPTY_PCAP
@@ -59,10 +60,10 @@ def test_routing_json_says_what_its_numbers_mean_and_gives_emulated_time(tmp_pat
     assert "0.957 against 1.0" in doc["about"]["segment_delivery"]
     assert "mean far above the median" in doc["about"]["delay"]
     assert doc["emulated"]["time_scale"] == 12.0
-    assert doc["emulated"]["delay_ms_median"] == pytest.approx(12.0 * m["delay_ms_median"])
+    assert doc["emulated"]["delay_ms_median"] == pytest.approx(12.0 * m.delay_ms_median)
     text = runreport.summary(load_run(d), m)
     assert "| delay, median (ms) |" in text and "emulated (x 12)" in text
-    assert f"PDF {m['pdf']:.3f} against segment delivery {m['segment_delivery']:.3f}" in text
+    assert f"PDF {m.pdf:.3f} against segment delivery {m.segment_delivery:.3f}" in text
     assert "Mean delay" in text and "against median" in text
 
 
@@ -127,7 +128,7 @@ def test_a_run_whose_delays_were_corrected_for_the_relay_lag_says_so(tmp_path):
          "relay_lag": {"records": 900, "segments_corrected": 95, "segments_uncorrected": 5,
                        "subtracted_ms_mean": 0.3, "subtracted_ms_median": 0.3}}  # fmt: skip
     m["emulated"] = routingnotes.emulated(m, 2.0)
-    text = runreport.summary(load_run(d), m)
+    text = runreport.summary(load_run(d), routingfile.parse(m))
     assert "| delay, median, corrected for the relay lag (ms) | 0.200 | 0.400 |" in text
     assert "| delay, median, raw (ms) | 0.500 | 1.000 |" in text
     assert "95 segments had the lag of their hop frames taken out (0.300 ms" in text
@@ -135,6 +136,6 @@ def test_a_run_whose_delays_were_corrected_for_the_relay_lag_says_so(tmp_path):
     assert "The routing delays above have each frame's relay lag taken out." in text
     # an ns3-wifi run that did not record the lag: its delays say they include it
     old = {k: v for k, v in m.items() if not k.startswith("delay_raw") and k != "relay_lag"}
-    text = runreport.summary(load_run(d), old)
+    text = runreport.summary(load_run(d), routingfile.parse(old))
     assert "| delay, median (ms) | 0.200 |" in text and "raw" not in text
     assert "The routing delays include the relay lag" in text

@@ -4,6 +4,7 @@ import dataclasses
 
 from testbed.analysis import scalecompare as sc
 from testbed.analysis.runs import load_run
+from testbed.files import routingfile
 from testbed.sweep import file as sweepfile
 from tests.unit.test_sweep_synthetic import result_doc, write_run
 
@@ -79,7 +80,7 @@ def test_a_runs_mean_delay_is_emulated_and_its_retransmissions_are_counted_per_f
     run = load_run(write_run(tmp_path, planned, result_doc(c, [90, 100], 100)))
     metrics = {"pdf": 0.9, "delay_ms_median": 0.01, "delay_ms_mean": 0.5, "tcp_flows": 4,
                "tcp_transmissions": 130, "tcp_segments_sent": 100}  # fmt: skip
-    row = sc.run_row(run, metrics)
+    row = sc.run_row(run, routingfile.parse(metrics))
     assert row.delay_mean_ms == 0.5 * 6  # wall ms x the time scale
     assert row.retrans_per_flow == 30 / 4
     assert sc.run_row(run, None).retrans_per_flow is None
