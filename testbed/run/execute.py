@@ -261,6 +261,7 @@ class Run:
         if self.gate is None:
             return
         path, timeout = self.gate
+        log.info("at the start gate: waiting for %s", path)  # -v: tests wait for this line
         deadline = time.monotonic() + timeout
         while not os.path.exists(path):
             if time.monotonic() > deadline:
