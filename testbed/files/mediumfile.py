@@ -19,9 +19,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from common import boundedfile
 from testbed.files import layout
-from testbed.files.resultvalues import ResultError, get_mapping, get_value
+from testbed.files.resultvalues import ResultError, get_mapping, get_value, read_json_as
 
 _NUM = (int, float)
 
@@ -157,11 +156,4 @@ def read(run_dir: str | os.PathLike[str]) -> ChannelRecord | None:
     path = Path(layout.medium_path(run_dir))
     if not os.path.lexists(path):
         return None
-    try:
-        doc = boundedfile.load_json(path)
-    except boundedfile.Refused as r:
-        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
-    try:
-        return parse_channel(doc)
-    except ResultError as e:
-        raise ResultError(f"{path}: {e}") from None
+    return read_json_as(path, parse_channel)

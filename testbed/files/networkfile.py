@@ -16,8 +16,8 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from common import boundedfile, timescale
-from testbed.files.resultvalues import NUM, ResultError, get_value
+from common import timescale
+from testbed.files.resultvalues import NUM, ResultError, get_value, read_json_as
 from topology.spec import ROUTINGS
 
 NETWORK_NAME = os.path.join("daemons", "network.json")
@@ -55,11 +55,4 @@ def read(path: str | os.PathLike[str]) -> NetworkRecord | None:
     file) when it is there but unreadable or not one (a FIFO is refused, not waited on)."""
     if not os.path.lexists(path):
         return None
-    try:
-        doc = boundedfile.load_json(path)
-    except boundedfile.Refused as r:
-        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
-    try:
-        return parse(doc)
-    except ResultError as e:
-        raise ResultError(f"{path}: {e}") from None
+    return read_json_as(path, parse)

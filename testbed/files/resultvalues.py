@@ -5,9 +5,12 @@ string as markup; and `plain`, a record's values as JSON holds them."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import os
+from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import Any
+from typing import Any, TypeVar
+
+from common import boundedfile
 
 EMPTY: Mapping[str, Any] = MappingProxyType({})
 NUM = (int, float)
@@ -84,3 +87,19 @@ def plain(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [plain(v) for v in value]
     return value
+
+
+T = TypeVar("T")
+
+
+def read_json_as(path: str | os.PathLike[str], parse: Callable[[Any], T]) -> T:
+    """The JSON file at `path` (read bounded, a FIFO refused) through `parse`; ResultError,
+    one line naming the file, when it cannot be read or `parse` refuses it."""
+    try:
+        doc = boundedfile.load_json(path)
+    except boundedfile.Refused as r:
+        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
+    try:
+        return parse(doc)
+    except ResultError as e:
+        raise ResultError(f"{path}: {e}") from None

@@ -25,8 +25,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from common import boundedfile, timescale
-from testbed.files.resultvalues import EMPTY, NUM, ResultError, get_mapping, get_value
+from common import timescale
+from testbed.files.resultvalues import EMPTY, NUM, ResultError, get_mapping, get_value, read_json_as
 
 ROUTING_NAME = "routing.json"
 _WHOLE = (int,)
@@ -233,11 +233,4 @@ def parse(doc: object) -> RoutingMetrics:
 def read(path: str | os.PathLike[str]) -> RoutingMetrics:
     """The routing.json (or metrics.json) at `path`; ResultError (one line, naming the file)
     when it is missing, unreadable or not one."""
-    try:
-        doc = boundedfile.load_json(path)
-    except boundedfile.Refused as r:
-        raise ResultError(f"{path}: {boundedfile.describe(r)}") from None
-    try:
-        return parse(doc)
-    except ResultError as e:
-        raise ResultError(f"{path}: {e}") from None
+    return read_json_as(path, parse)
