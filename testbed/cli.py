@@ -6,6 +6,7 @@ failure while working is one line and status 1. Tracebacks are for bugs only.
 """
 
 import argparse
+import faulthandler
 import importlib
 import importlib.util
 import logging
@@ -89,6 +90,9 @@ def _stop_on_sigterm(signum, frame) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    # SIGQUIT (Ctrl-\) prints every thread's stack and the command goes on: where a run
+    # that seems stuck is waiting.
+    faulthandler.register(signal.SIGQUIT, all_threads=True)
     try:
         args = build_parser(argv).parse_args(argv)
         envswitch.check()  # TESTBED_REALTIME=false is refused, not taken as the default

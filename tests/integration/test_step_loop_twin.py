@@ -12,10 +12,12 @@
   here in 4 runs of 4, two with each loop. So the team is run with both loops, each run must
   end by itself with every robot finished and pass the same checks of its files (a row of
   positions a step, in the map, no move longer than a step allows, coverage never falling),
-  and the two positions.csv must be the same. Where they differ, the Python loop is run
-  again: if it repeats its own path, the compiled loop's differs and the test fails; if it
-  does not, timing decided (not the loop), and the pair is tried again (three pairs at
-  most, then the test is skipped saying so). tests/unit/test_step_loop_replay.py holds the
+  and a compiled run must write a positions.csv a Python run wrote. Timing can decide with either loop: in CI a
+  compiled run, faithful with no late plan, took 636 steps where both Python runs beside it
+  took 617 (the paths parted at step 479). So up to three pairs are run: a compiled run
+  must take a path a Python run took. If it never does while the Python loop repeated its
+  own path, the test fails; if no two Python runs agreed, timing decided every run and the
+  test is skipped saying so. tests/unit/test_step_loop_replay.py holds the
   two loops equal on a scripted team, whatever the timing.
 
 Namespaces are prefixed `tcs`; each run's network is destroyed whatever happens."""
@@ -111,10 +113,12 @@ def _team_run(tmp_path, monkeypatch, loop: str, attempt: int) -> str:
 
 @pytest.mark.slow
 def test_a_team_of_five_takes_the_same_path_with_either_loop(tmp_path, monkeypatch):
+    python_paths, compiled_paths = [], []
     for attempt in range(3):
-        reference = _team_run(tmp_path, monkeypatch, "python", 2 * attempt)
-        if _team_run(tmp_path, monkeypatch, "compiled", 2 * attempt) == reference:
+        python_paths.append(_team_run(tmp_path, monkeypatch, "python", attempt))
+        compiled_paths.append(_team_run(tmp_path, monkeypatch, "compiled", attempt))
+        if set(python_paths) & set(compiled_paths):
             return
-        again = _team_run(tmp_path, monkeypatch, "python", 2 * attempt + 1)
-        assert again != reference, "the Python loop repeats its path; the compiled loop's differs"
-    pytest.skip("the team's run did not repeat itself with the Python loop (timing decided)")
+    if len(set(python_paths)) == len(python_paths):
+        pytest.skip("the team's run did not repeat itself with the Python loop (timing decided)")
+    pytest.fail("the Python loop repeats its path; none of three compiled runs took it")
