@@ -55,7 +55,7 @@ TB_ROBOT_CONSTS := build/gen/robot_consts.h
 TB_ROBOT_CONSTS_FROM := node/constgen.py node/timing.py node/robotcore.py node/motion.py \
 	node/grid.py node/flood.py node/wire.py node/body.py node/rays.py node/lateness.py \
 	node/messaging/__init__.py node/messaging/arrivals.py common/sched.py common/timescale.py \
-	common/cliterals.py
+	common/cliterals.py topology/names.py
 TB_ROBOT_DEPS := $(TB_ROBOT_SRC) $(wildcard native/robot/*.h) native/stepcore/stepcore.h \
 	$(TB_ROBOT_ARGS) $(TB_ROBOT_CONSTS)
 TB_ROBOT_UNBUILT := build/tb-robot.unbuilt
@@ -90,7 +90,7 @@ TB_AODV_SRC := $(wildcard native/aodv/daemon/*.cc) $(filter-out native/aodv/tb-a
 TB_AODV_CONSTS := build/gen/aodv_consts.h
 TB_AODV_CONSTS_FROM := aodv/constgen.py aodv/__main__.py aodv/kernel.py aodv/daemon.py \
 	aodv/control.py aodv/packet.py aodv/params.py aodv/persist.py aodv/stats.py common/sched.py \
-	common/cliterals.py
+	common/cliterals.py topology/names.py
 TB_AODV_DEPS := $(TB_AODV_SRC) $(wildcard native/aodv/daemon/*.h) $(wildcard native/aodv/*.h) \
 	$(TB_AODV_CONSTS)
 TB_AODV_UNBUILT := build/tb-aodv.unbuilt

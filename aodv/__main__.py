@@ -24,6 +24,7 @@ from aodv.params import PROFILES, Params, profile
 from aodv.stats import STATS_PERIOD
 from common.argtypes import checked, number
 from common.errors import EXIT_FAILURE, EXIT_USAGE
+from topology.names import NETWORK
 
 
 class RobotFormatter(logging.Formatter):
@@ -115,8 +116,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--net",
         type=_network,
-        default="10.0.0.0/16",
-        help="the ad hoc network (default 10.0.0.0/16)",
+        default=NETWORK,
+        help=f"the ad hoc network (default {NETWORK})",
     )
     p.add_argument(
         "--netns",

@@ -63,6 +63,7 @@ from aodv.sim import warm_up
 from aodv.stats import STATS_PERIOD, Stats
 from aodv.statswriter import StatsWriter
 from common.sched import DEADLINE_PRIORITY, deadline_priority
+from topology.names import NETWORK
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +89,7 @@ class Daemon:
         iface: str,
         params: Params,
         stats_path: str | None,
-        net: str = "10.0.0.0/16",
+        net: str = NETWORK,
         state_path: str | None = None,
         stats_period: float = STATS_PERIOD,
     ) -> None:

@@ -18,7 +18,9 @@ at its next build instead of drifting:
   (node.flood), the flood and map headers' sizes, kinds and neighbour bound, the messages'
   nesting bound (node.wire), the body link's message sizes (node.body);
 - the laser's table constants (node.rays), the lateness histograms' bounds (node.lateness),
-  when a message arrived late (node.messaging.arrivals), the deadline priority (common.sched).
+  when a message arrived late (node.messaging.arrivals), the deadline priority (common.sched);
+- the robots' address plan (topology.names: `tb-robot --addr K` prints robot K's address,
+  which the test holds equal to topology.names.robot_addr).
 
 tests/unit/test_robot_consts.py holds the built header to these values and the C++ sources
 to using it. The file is rewritten only when its text changes, so that make rebuilds tb-robot
@@ -36,6 +38,7 @@ from common import sched, timescale
 from common.cliterals import c_real, write_header
 from node import body, flood, grid, lateness, messaging, motion, rays, robotcore, timing, wire
 from node.messaging import arrivals
+from topology import names
 
 # (C++ type, name, value, where it comes from), in the header's order.
 Const = tuple[str, str, object, str]
@@ -102,6 +105,9 @@ def constants() -> list[Const]:
         ("int", "SEND_QUEUE", messaging.SEND_QUEUE, "node.messaging"),
         ("int", "DEADLINE_RT", sched.DEADLINE_PRIORITY[0], "common.sched.DEADLINE_PRIORITY"),
         ("int", "DEADLINE_NICE", sched.DEADLINE_PRIORITY[1], "common.sched.DEADLINE_PRIORITY"),
+        ("int", "NET_OCTET_A", names.NET_OCTETS[0], "topology.names.NET_OCTETS"),
+        ("int", "NET_OCTET_B", names.NET_OCTETS[1], "topology.names.NET_OCTETS"),
+        ("int", "ADDRS_PER_OCTET", names.ADDRS_PER_OCTET, "topology.names"),
     ]
     # fmt: on
 

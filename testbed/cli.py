@@ -90,6 +90,10 @@ def _stop_on_sigterm(signum, frame) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    # SIGINT raises KeyboardInterrupt whatever was inherited. A command a shell script starts
+    # with `&` inherits SIGINT ignored, and Python then installs no handler for it: a run
+    # set up that way ignored the SIGINT a test or a script sent to end it, and stayed up.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     # SIGQUIT (Ctrl-\) prints every thread's stack and the command goes on: where a run
     # that seems stuck is waiting.
     faulthandler.register(signal.SIGQUIT, all_threads=True)

@@ -28,8 +28,9 @@ def main() -> int:
         # Python reports it as "Exception ignored" and goes on, and the Ctrl-C is lost.
         noted: list[int] = []
         python_handler = signal.getsignal(signal.SIGINT)
-        # A launcher that ignores it keeps it ignored (None: a handler not set from Python).
-        noting = python_handler not in (signal.SIG_IGN, None)
+        # Noted even where the launcher left it ignored (a script's `&` does): testbed.cli
+        # takes SIGINT whatever was inherited (None: a handler not set from Python).
+        noting = python_handler is not None
         if noting:
             signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
@@ -45,7 +46,7 @@ def main() -> int:
             from testbed.cli import main as cli_main
         finally:
             if noting:
-                signal.signal(signal.SIGINT, python_handler)
+                signal.signal(signal.SIGINT, signal.default_int_handler)
         if noted:
             raise KeyboardInterrupt
         return cli_main()

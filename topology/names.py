@@ -15,8 +15,11 @@ NAME_PATTERN = re.compile(r"[a-z][a-z0-9]{0,9}")
 NAMESPACE_PATTERN = re.compile(rf"{PREFIX}-(?P<name>[a-z][a-z0-9]{{0,9}})-(?P<role>m|r[0-9]+)")
 MAX_ROBOTS = 1000
 
-# The ad hoc network every robot address is in (robot_addr).
-NETWORK = "10.0.0.0/16"
+# The ad hoc network every robot address is in (robot_addr): NET_OCTETS.hi.lo, with lo from 1
+# to ADDRS_PER_OCTET. The C++ robot takes both from here (node.constgen).
+NET_OCTETS = (10, 0)
+ADDRS_PER_OCTET = 254
+NETWORK = f"{NET_OCTETS[0]}.{NET_OCTETS[1]}.0.0/16"
 
 # Inside a robot namespace.
 ROBOT_IFACE = "wlan0"
@@ -65,22 +68,22 @@ def robot_addr(k: int) -> str:
     """Robot k (1-based) is 10.0.0.k; past 254 the third octet counts up (10.0.1.1, ...)."""
     if not 1 <= k <= MAX_ROBOTS:
         raise ValueError(f"robot number {k} out of range 1..{MAX_ROBOTS}")
-    hi, lo = divmod(k - 1, 254)
-    return f"10.0.{hi}.{lo + 1}"
+    hi, lo = divmod(k - 1, ADDRS_PER_OCTET)
+    return f"{NET_OCTETS[0]}.{NET_OCTETS[1]}.{hi}.{lo + 1}"
 
 
 def robot_of_addr(addr: str) -> int | None:
     """Inverse of robot_addr, None if addr is not a robot address."""
     parts = addr.split(".")
-    if len(parts) != 4 or parts[:2] != ["10", "0"]:
+    if len(parts) != 4 or parts[:2] != [str(o) for o in NET_OCTETS]:
         return None
     try:
         hi, lo = int(parts[2]), int(parts[3])
     except ValueError:
         return None
-    if not 1 <= lo <= 254 or hi < 0:
+    if not 1 <= lo <= ADDRS_PER_OCTET or hi < 0:
         return None
-    k = hi * 254 + lo
+    k = hi * ADDRS_PER_OCTET + lo
     return k if k <= MAX_ROBOTS else None
 
 

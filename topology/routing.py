@@ -62,7 +62,7 @@ def babel_argv(k: int, run_dir: str, spec) -> list[str]:
         "-I", f"{run_dir}/r{k}.babeld.pid",
         "-S", f"{run_dir}/r{k}.babeld.state",
         "-C", f"interface {names.ROBOT_IFACE} type wireless hello-interval {hello:.2f}",
-        "-C", "redistribute local ip 10.0.0.0/16 ge 32 allow",
+        "-C", f"redistribute local ip {names.NETWORK} ge 32 allow",
         "-C", "redistribute local deny",
         names.ROBOT_IFACE,
     ]  # fmt: skip

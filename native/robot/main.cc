@@ -9,8 +9,8 @@
 // Exit statuses as the Python robot's: 0 the run ended, 1 cannot start (a socket), 2 bad
 // arguments or a middleware it does not carry, 3 a part failed.
 //
-// `tb-robot --decode KIND`, `--encode KIND` and `--timings SCALE MAP_PERIOD` are the
-// contract's self-test (selftest.cc).
+// `tb-robot --decode KIND`, `--encode KIND`, `--timings SCALE MAP_PERIOD` and `--addr K` are
+// the contract's self-test (selftest.cc).
 // Otherwise the command line is NodeArgs' (args.cc): `--help` prints its listing and
 // `--check-args` checks it, each with exit 0 and nothing run.
 #include <csignal>
@@ -119,7 +119,8 @@ int display_main(const tb::Args& a, const char* program) {
 int main(int argc, char** argv) {
     std::vector<std::string> args(argv + 1, argv + argc);
     if (!args.empty() && (args[0] == "--decode" || args[0] == "--encode" ||
-                          args[0] == "--laser-tables" || args[0] == "--timings"))
+                          args[0] == "--laser-tables" || args[0] == "--timings" ||
+                          args[0] == "--addr"))
         try {
             return tb::selftest_main(args);
         } catch (const std::exception& e) {  // an input asking for more than the machine has

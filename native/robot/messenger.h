@@ -40,7 +40,7 @@ std::unique_ptr<Messenger> make_messenger(const std::string& middleware, int me,
 // The middlewares this build carries, space-separated ("nanomsg zeromq").
 std::string carried_middlewares();
 
-// Robot k's address (topology.names.robot_addr): 10.0.hi.lo+1.
+// Robot k's address (topology.names.robot_addr; its numbers from robot_consts.h).
 std::string robot_addr(int k);
 
 }  // namespace tb

@@ -128,8 +128,9 @@ private:
 }  // namespace
 
 std::string robot_addr(int k) {
-    int hi = (k - 1) / 254, lo = (k - 1) % 254;
-    return "10.0." + std::to_string(hi) + "." + std::to_string(lo + 1);
+    int hi = (k - 1) / gen::ADDRS_PER_OCTET, lo = (k - 1) % gen::ADDRS_PER_OCTET;
+    return std::to_string(gen::NET_OCTET_A) + "." + std::to_string(gen::NET_OCTET_B) + "." +
+           std::to_string(hi) + "." + std::to_string(lo + 1);
 }
 
 std::unique_ptr<Messenger> make_messenger(const std::string& middleware, int me,

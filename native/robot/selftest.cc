@@ -230,6 +230,16 @@ int timings(const std::vector<std::string>& argv) {
 
 int selftest_main(const std::vector<std::string>& argv) {
     if (argv[0] == "--timings") return timings(argv);
+    if (argv[0] == "--addr") {  // robot K's address (tests/unit/test_robot_consts.py)
+        char* e = nullptr;
+        long k = argv.size() == 2 ? strtol(argv[1].c_str(), &e, 10) : 0;
+        if (argv.size() != 2 || *e || k < 1 || k > gen::WHOLE_MAX) {
+            fprintf(stderr, "node: --addr K: K >= 1\n");
+            return 2;
+        }
+        printf("%s\n", robot_addr(static_cast<int>(k)).c_str());
+        return 0;
+    }
     if (argv[0] == "--laser-tables") {
         if (argv.size() != 4) {
             fprintf(stderr, "node: --laser-tables RANGE RAYS CELL\n");

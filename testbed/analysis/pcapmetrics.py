@@ -95,7 +95,7 @@ from testbed.analysis.pcapread import read_pcap as read_pcap
 from testbed.files import routingfile
 from testbed.files.resultconfig import DEFAULT_ROUTING
 from testbed.files.routingfile import RoutingMetrics
-from topology.names import LAG_FILE
+from topology.names import LAG_FILE, robot_addr
 
 log = logging.getLogger(__name__)
 
@@ -184,15 +184,6 @@ def compare_with_daemons(metrics: dict, daemons: dict[str, dict] | None) -> dict
 # ---------------------------------------------------------------- a run directory
 
 
-def robot_address(k: int) -> str:
-    try:
-        from topology.names import robot_addr
-    except ImportError:  # the topology package is optional for reading results
-        hi, lo = divmod(k - 1, 254)
-        return f"10.0.{hi}.{lo + 1}"
-    return robot_addr(k)
-
-
 def run_metrics(
     run_dir: str | Path,
     use_cache: bool = True,
@@ -256,7 +247,7 @@ def run_metrics(
         log.warning("%s: routing %r is not a registered protocol: no control traffic counted",
                     run_dir, routing)  # fmt: skip
     metrics = compute(
-        captures, {k: robot_address(k) for k in pcaps}, port or 0,
+        captures, {k: robot_addr(k) for k in pcaps}, port or 0,
         lags=lags, middleware=middleware,
     )  # fmt: skip
     metrics["pcaps"] = stamp

@@ -38,6 +38,7 @@ import pytest
 from node import messaging
 from testbed import PROJECT_ROOT
 from testbed.analysis import pcapmetrics
+from topology.names import robot_addr
 from topology.network import Network, destroy
 from topology.spec import NetworkSpec
 
@@ -336,7 +337,7 @@ def test_a_captured_team_run_counts_as_many_messages_as_the_robots_sent(tmp_path
     datagrams = 0
     for k in (1, 2):
         pcap = os.path.join(out, "pcaps", f"r{k}.pcap")
-        for ids, payload in _tshark_submessages(pcap, pcapmetrics.robot_address(k)):
+        for ids, payload in _tshark_submessages(pcap, robot_addr(k)):
             subs, walked = rtps.submessages(payload)
             assert [s[0] for s in subs] == ids and walked == len(payload)
             datagrams += 1

@@ -22,6 +22,7 @@ from common.paths import PROJECT_ROOT
 from node import constgen
 from node.native import TB_ROBOT, unbuilt_reason
 from node.timing import RobotTimings
+from topology import names
 
 HEADER = Path(PROJECT_ROOT) / "build" / "gen" / "robot_consts.h"
 SOURCES = sorted((Path(PROJECT_ROOT) / "native" / "robot").glob("*.[ch]*"))
@@ -119,3 +120,16 @@ def test_time_scale_bounds_are_one_rule():
     assert timescale.valid(timescale.MIN) and timescale.valid(timescale.MAX)
     for bad in (True, "1", None, 0, -1, float("nan"), float("inf"), timescale.MAX + 1e-9):
         assert not timescale.valid(bad) and timescale.refusal(bad) is not None
+
+
+@needs_binary
+def test_cpp_robot_addresses_are_the_address_plans():
+    """Robot k's address in the C++ robot (gen:: numbers) is topology.names.robot_addr(k),
+    across the third octet's turns; k = 0 is refused as the plan refuses it."""
+    for k in (1, 2, 253, 254, 255, 508, 509, 999, 1000):
+        out = subprocess.run([str(TB_ROBOT), "--addr", str(k)],
+                             capture_output=True, text=True, timeout=30, check=True)  # fmt: skip
+        assert out.stdout.strip() == names.robot_addr(k), k
+    refused = subprocess.run([str(TB_ROBOT), "--addr", "0"], capture_output=True, text=True,
+                             timeout=30)  # fmt: skip
+    assert refused.returncode == 2 and "--addr K" in refused.stderr

@@ -52,7 +52,7 @@ def test_routing_json_says_what_its_numbers_mean_and_gives_emulated_time(tmp_pat
     for k in (1, 2, 3):
         (d / "pcaps" / f"r{k}.pcap").write_bytes(EMPTY_PCAP)  # a header (an empty file is left out)
     monkeypatch.setattr(pcapmetrics, "read_pcaps", lambda paths: tp.chain_captures())
-    monkeypatch.setattr(pcapmetrics, "robot_address", lambda k: tp.ADDRS[k])
+    monkeypatch.setattr(pcapmetrics, "robot_addr", lambda k: tp.ADDRS[k])
     m = pcapmetrics.run_metrics(d)
     doc = json.loads((d / "routing.json").read_text())
     assert doc["format"] == pcapmetrics.CACHE_FORMAT == 8
