@@ -6,6 +6,7 @@ failure while working is one line and status 1. Tracebacks are for bugs only.
 """
 
 import argparse
+import contextlib
 import faulthandler
 import importlib
 import importlib.util
@@ -96,7 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     # SIGQUIT (Ctrl-\) prints every thread's stack and the command goes on: where a run
     # that seems stuck is waiting.
-    faulthandler.register(signal.SIGQUIT, all_threads=True)
+    # (Not where stderr is no file, as under a test's capture.)
+    with contextlib.suppress(ValueError, OSError):
+        faulthandler.register(signal.SIGQUIT, all_threads=True)
     try:
         args = build_parser(argv).parse_args(argv)
         envswitch.check()  # TESTBED_REALTIME=false is refused, not taken as the default

@@ -83,6 +83,7 @@ from testbed.run.started import Started
 from testbed.run.stepclock import no_clock
 from testbed.run.steploop import StepLoop, loop_kind
 from testbed.world.bodylink import BodyServer
+from topology.kernel import neightable
 from topology.kernel.forkserver import Forked, ForkServer, ForkServerError, python_env
 
 if TYPE_CHECKING:  # imported where they are needed: the view's web server is not light
@@ -230,14 +231,19 @@ class Run:
         loop: StepLoop | None = None
         priority = None
         network_timers = None
+        table_fulls = None
         try:
             with contextlib.ExitStack() as stack:  # routing logs kept, network down, closed
                 started = self.start(stack)
                 network_timers = started.network_timers
                 self._wait_at_gate()
+                fulls_before = neightable.table_fulls()
                 with deadline_priority(*CLOCK_PRIORITY) as priority:
                     loop = StepLoop(self.prep, started, self.robots, self.progress)
                     status = loop.run()
+                fulls_after = neightable.table_fulls()
+                if fulls_before is not None and fulls_after is not None:
+                    table_fulls = fulls_after - fulls_before
                 self.parts.mark("steps")
                 # Of those, the wait for the robots' first answers (steploop's warm-up).
                 self.parts.parts["steps_warmup"] = round(loop.clock.warmup_s, 3)
@@ -251,7 +257,7 @@ class Run:
             log.info("run failed: %s", status[1])  # `testbed run` prints the status
         except KeyboardInterrupt:
             status = ("interrupted", "interrupted (SIGINT or SIGTERM) before the end")
-        return self.finish(status, loop, priority, network_timers)
+        return self.finish(status, loop, priority, network_timers, table_fulls)
 
     # -- start --------------------------------------------------------------------------------
 
@@ -443,7 +449,12 @@ class Run:
             net.medium.keep_lag_file(self.prep.path(LAG_FILE))
 
     def finish(
-        self, status: tuple[str, str], loop: StepLoop | None, priority, network_timers=None
+        self,
+        status: tuple[str, str],
+        loop: StepLoop | None,
+        priority,
+        network_timers=None,
+        table_fulls: int | None = None,
     ) -> RunRecord:
         """The run's frozen record, for testbed.run.results to write."""
         return RunRecord(
@@ -457,6 +468,7 @@ class Run:
             network_timers=network_timers, outages=self.cfg.isolate,
             robot=self.robot_impl, robot_reason=self.robot_reason,
             aodv_daemon=self.aodv_daemon, aodv_daemon_reason=self.aodv_daemon_reason,
+            neighbour_table_fulls=table_fulls,
         )  # fmt: skip
 
 

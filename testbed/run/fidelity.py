@@ -312,6 +312,23 @@ def with_twin(verdict: dict, twin: dict | str) -> dict:
     return out
 
 
+def with_neighbour_table(verdict: dict, fulls: int | None, limit: int | None) -> dict:
+    """`verdict` with the host's ARP table over the steps under `neighbour_table` ({fulls,
+    limit}; topology.kernel.neightable): a table that was full while the robots stepped made
+    the kernel drop sends that needed a new entry, silently for UDP (AODV's messages, the
+    map floods), so the run is not faithful, whatever else it measured. None: not read."""
+    out = dict(verdict)
+    out["neighbour_table"] = {"fulls": fulls, "limit": limit}
+    if fulls:
+        why = (
+            f"the host's neighbour (ARP) table was full {fulls} times during the steps "
+            f"(limit {limit}, net.ipv4.neigh.default.gc_thresh3): the kernel dropped sends"
+        )
+        out["ok"] = False
+        out["reason"] = "; ".join(r for r in (verdict.get("reason"), why) if r)
+    return out
+
+
 def network_verdict(timers: dict | None, time_scale: float) -> dict:
     """result.json's `fidelity.network` from its `network_timers` (topology.kernel.nettimers'
     record): {ok, reason (when not ok)}. At time scale 1 the network is in emulated time by

@@ -156,6 +156,8 @@ class RunRecord:
     robot_reason: str = ""  # why that one
     aodv_daemon: str | None = None  # the AODV daemon: "cpp", "python"; None: the routing has none
     aodv_daemon_reason: str = ""  # why that one
+    # The host's ARP table overflows during the steps (topology.kernel.neightable); None: not read
+    neighbour_table_fulls: int | None = None
 
     @property
     def steps(self) -> int:

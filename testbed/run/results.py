@@ -25,6 +25,7 @@ from testbed.files import isolation, layout, mediumfile, robotfile
 from testbed.files.resultfile import HostStalls, Plan, RobotResult, RunResult
 from testbed.run import fidelity, twin
 from testbed.world.world import World
+from topology.kernel import neightable
 
 if TYPE_CHECKING:
     from testbed.run.record import RobotOutcome, RunRecord
@@ -116,6 +117,8 @@ def contents(rec: RunRecord) -> RunResult:
     # A lone robot's path against its in-process twin (testbed.run.twin): a changed path is
     # not faithful, however few steps were late.
     verdict = fidelity.with_twin(verdict, twin.check(rec.out, rec.config.to_dict(), rec.status))
+    # Sends the kernel dropped for want of a neighbour entry (topology.kernel.neightable).
+    verdict = fidelity.with_neighbour_table(verdict, rec.neighbour_table_fulls, neightable.limit())
     # Whether TCP kept emulated time, from the robots' network timers (topology.kernel.nettimers).
     verdict["network"] = fidelity.network_verdict(rec.network_timers, rec.time_scale)
     config = rec.config.result_config()
