@@ -49,7 +49,10 @@ MAX_STEPS = 10_000_000  # 11 days of emulated time at a step of 0.1 s
 # The largest team `testbed run` takes: the largest that ran faithful at K = 1 in 3 runs of 3
 # (seeds 5, 6, 7) on the 2-core development machine, with the C++ robot and the compiled AODV
 # daemon: 80 (90 was faithful in 2 of 3, 100 in 3 of 6: docs/measurements.md, "The compiled
-# AODV daemon's benchmarks").
+# AODV daemon's benchmarks"). Those verdicts predate the check of the host's ARP table
+# (topology.kernel.neightable): at 100 robots it was full and dropped about four sends in
+# five; on a host with the default limit a team past about 30 is now judged not faithful
+# when it overflows.
 MAX_TEAM = 80
 MAX_LASER_RAYS = 10_000  # a ray every 0.036 degrees; the paper's robots have 360
 MAX_SNAPSHOTS = 100

@@ -87,6 +87,11 @@ seed 1 beside host stalls missed 9 deadlines (4 outside the stalls, 0.1%; no pla
 and left its twin at step 1523 for the rest of its run (the same 1901 steps), judged
 faithful without the twin.
 
+A run during whose steps the host's ARP table was full (topology.kernel.neightable) is not
+faithful either (`with_neighbour_table`): the kernel dropped sends that needed an entry,
+silently for UDP, so AODV's messages and the map floods were lost at the sender, which no
+lateness measure sees.
+
 `measures(...)` folds the per-process records (node.lateness dicts, the AODV daemons'
 `timer_lateness_ms`) into one `Measures`; `verdict(...)` judges them; both are pure.
 
