@@ -12,13 +12,13 @@
   here in 4 runs of 4, two with each loop. So the team is run with both loops, each run must
   end by itself with every robot finished and pass the same checks of its files (a row of
   positions a step, in the map, no move longer than a step allows, coverage never falling),
-  and a compiled run must write a positions.csv a Python run wrote. Timing can decide with either loop: in CI a
-  compiled run, faithful with no late plan, took 636 steps where both Python runs beside it
-  took 617 (the paths parted at step 479). So up to three pairs are run: a compiled run
-  must take a path a Python run took. If it never does while the Python loop repeated its
-  own path, the test fails; if no two Python runs agreed, timing decided every run and the
-  test is skipped saying so. tests/unit/test_step_loop_replay.py holds the
-  two loops equal on a scripted team, whatever the timing.
+  and a compiled run must write a positions.csv a Python run wrote. Timing can decide with
+  either loop: in CI a compiled run, faithful with no late plan, took 636 steps where both
+  Python runs beside it took 617 (the paths parted at step 479). So up to three pairs are
+  run: a compiled run must take a path a Python run took. If it never does while the Python
+  loop repeated its own path, the test fails; if no two Python runs agreed, timing decided
+  every run and the test is skipped saying so. tests/unit/test_step_loop_replay.py holds
+  the two loops equal on a scripted team, whatever the timing.
 
 Namespaces are prefixed `tcs`; each run's network is destroyed whatever happens."""
 
