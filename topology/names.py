@@ -20,6 +20,7 @@ MAX_ROBOTS = 1000
 NET_OCTETS = (10, 0)
 ADDRS_PER_OCTET = 254
 NETWORK = f"{NET_OCTETS[0]}.{NET_OCTETS[1]}.0.0/16"
+_NET_PARTS = [str(o) for o in NET_OCTETS]  # an address's first two parts, as split
 
 # Inside a robot namespace.
 ROBOT_IFACE = "wlan0"
@@ -75,7 +76,7 @@ def robot_addr(k: int) -> str:
 def robot_of_addr(addr: str) -> int | None:
     """Inverse of robot_addr, None if addr is not a robot address."""
     parts = addr.split(".")
-    if len(parts) != 4 or parts[:2] != [str(o) for o in NET_OCTETS]:
+    if len(parts) != 4 or parts[:2] != _NET_PARTS:
         return None
     try:
         hi, lo = int(parts[2]), int(parts[3])
